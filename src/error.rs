@@ -1,0 +1,80 @@
+//! The one error type of the crate.
+//!
+//! Errors say *whose fault* they are, in the SQLite spirit of keeping "your input is bad" apart
+//! from "this program is wrong": [`Error::Input`] and [`Error::Unsupported`] name a file and
+//! what is wrong with it, [`Error::TooLarge`] refuses a size before anything is allocated,
+//! [`Error::InvalidArgument`] is a bad option value, and [`Error::Io`] is the operating system
+//! saying no. Nothing in this crate reports a malformed file by panicking.
+
+use std::path::PathBuf;
+
+/// Everything that can go wrong in fmrh.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// Reading or writing a file failed at the operating-system level.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file involved.
+        path: PathBuf,
+        /// What the operating system said.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The input file is malformed: truncated, inconsistent or not what it claims to be.
+    #[error("{path}: {reason}")]
+    Input {
+        /// The offending file.
+        path: PathBuf,
+        /// What is wrong with it, for a person.
+        reason: String,
+    },
+    /// The input is well formed but uses a feature fmrh does not read (a sample type, a
+    /// compression, a colour model).
+    #[error("{path}: unsupported: {reason}")]
+    Unsupported {
+        /// The offending file.
+        path: PathBuf,
+        /// Which feature, for a person.
+        reason: String,
+    },
+    /// A size beyond fmrh's documented limits; refused before any allocation.
+    #[error("{what} is too large: {detail}")]
+    TooLarge {
+        /// What was too large (a raster, a header field, a threshold list...).
+        what: String,
+        /// The size and the limit.
+        detail: String,
+    },
+    /// An option or argument value that cannot be used.
+    #[error("invalid argument: {0}")]
+    InvalidArgument(String),
+}
+
+impl Error {
+    /// A malformed-input error about `path`.
+    pub fn input(path: impl Into<PathBuf>, reason: impl Into<String>) -> Self {
+        Error::Input {
+            path: path.into(),
+            reason: reason.into(),
+        }
+    }
+
+    /// An unsupported-feature error about `path`.
+    pub fn unsupported(path: impl Into<PathBuf>, reason: impl Into<String>) -> Self {
+        Error::Unsupported {
+            path: path.into(),
+            reason: reason.into(),
+        }
+    }
+
+    /// An I/O error about `path`.
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Error::Io {
+            path: path.into(),
+            source,
+        }
+    }
+}
+
+/// The crate's result type.
+pub type Result<T, E = Error> = std::result::Result<T, E>;

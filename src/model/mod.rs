@@ -1,0 +1,142 @@
+//! The terrain model: a heightfield cut into blocks, organised as an FMRH with measured errors,
+//! grouped into error clusters in multiresolution Hilbert order.
+//!
+//! Read the submodules in order: [`domain`] (blocks, levels, padding), [`raster`] (voids
+//! mended), [`measure`] (the static error), [`tree`] (monotone errors, pruning, Hilbert
+//! pre-order), [`cluster`] (cuts). [`Model::build`] runs them all.
+
+pub mod cluster;
+pub mod domain;
+pub mod measure;
+pub mod raster;
+pub mod tree;
+
+pub use cluster::{Cluster, MAX_CLUSTERS};
+pub use domain::{Domain, SampleRect, DEFAULT_BLOCK_SIZE, MAX_BLOCK_SIZE, MIN_BLOCK_SIZE};
+pub use measure::NodeStats;
+pub use raster::MendedRaster;
+pub use tree::{Fmrh, Measurements, Node, NO_PARENT};
+
+use crate::error::Result;
+use crate::heightfield::Heightfield;
+
+/// Which cluster thresholds to build.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub enum Thresholds {
+    /// The default √2 ladder from the root's error down, plus 0 (see [`cluster`]).
+    #[default]
+    Ladder,
+    /// Exactly these thresholds (any order; duplicates are dropped).
+    Explicit(Vec<f64>),
+}
+
+/// How to build a model.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BuildOptions {
+    /// Samples along a block side: `2^k + 1`, 9 to 1025.
+    pub block_size: u32,
+    /// Cluster thresholds.
+    pub thresholds: Thresholds,
+}
+
+impl Default for BuildOptions {
+    fn default() -> Self {
+        BuildOptions {
+            block_size: DEFAULT_BLOCK_SIZE,
+            thresholds: Thresholds::Ladder,
+        }
+    }
+}
+
+/// A built terrain model: the mended data, the FMRH and its clusters.
+#[derive(Clone, Debug)]
+pub struct Model {
+    raster: MendedRaster,
+    tree: Fmrh,
+    clusters: Vec<Cluster>,
+}
+
+/// A node's grid: the `b × b` point-decimation of the mended raster over its footprint, with
+/// which grid samples stand in for voids or padding.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NodeGrid {
+    /// Samples a side.
+    pub size: u32,
+    /// Row-major heights (north row first); voids and padding carry their mended stand-in.
+    pub heights: Vec<f32>,
+    /// Row-major: `true` where the grid sample is not a real height.
+    pub void: Vec<bool>,
+}
+
+impl Model {
+    /// Builds the model of `heightfield` (consumed: its buffer becomes the mended raster).
+    pub fn build(heightfield: Heightfield, options: &BuildOptions) -> Result<Model> {
+        let domain = Domain::new(heightfield.width(), heightfield.height(), options.block_size)?;
+        let explicit = match &options.thresholds {
+            Thresholds::Explicit(t) => Some(cluster::validate_thresholds(t)?),
+            Thresholds::Ladder => None,
+        };
+        let raster = MendedRaster::new(heightfield);
+        let measured = Measurements::measure(&raster, &domain);
+        let thresholds = explicit.clone().unwrap_or_else(|| {
+            cluster::default_ladder(measured.root_error(), measured.min_positive_error())
+        });
+        let tree = Fmrh::prune(domain, &measured, thresholds[0]);
+        drop(measured);
+        let mut clusters = cluster::build_clusters(&tree, &thresholds);
+        if explicit.is_none() {
+            clusters = cluster::merge_identical_cuts(clusters);
+        }
+        Ok(Model {
+            raster,
+            tree,
+            clusters,
+        })
+    }
+
+    /// The geometry.
+    pub fn domain(&self) -> &Domain {
+        self.tree.domain()
+    }
+
+    /// The mended data.
+    pub fn raster(&self) -> &MendedRaster {
+        &self.raster
+    }
+
+    /// The FMRH.
+    pub fn tree(&self) -> &Fmrh {
+        &self.tree
+    }
+
+    /// The clusters, ascending by threshold.
+    pub fn clusters(&self) -> &[Cluster] {
+        &self.clusters
+    }
+
+    /// The largest static error anywhere: the root's `e*`.
+    pub fn max_error(&self) -> f64 {
+        self.tree.nodes()[0].monotone_error
+    }
+
+    /// The grid of node `index` (see [`NodeGrid`]).
+    pub fn node_grid(&self, index: u32) -> NodeGrid {
+        let fp = self.tree.footprint(index);
+        let level = self.tree.node(index).level;
+        let (b, s) = (self.domain().block_size(), self.domain().stride(level));
+        let mut heights = Vec::with_capacity(b as usize * b as usize);
+        let mut void = Vec::with_capacity(b as usize * b as usize);
+        for j in 0..u64::from(b) {
+            for i in 0..u64::from(b) {
+                let (col, row) = (fp.col0 + i * s, fp.row0 + j * s);
+                heights.push(self.raster.value(col, row));
+                void.push(!self.raster.is_valid(col, row));
+            }
+        }
+        NodeGrid {
+            size: b,
+            heights,
+            void,
+        }
+    }
+}
