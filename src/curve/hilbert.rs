@@ -284,7 +284,13 @@ mod tests {
 
     #[test]
     fn order_thirty_two_round_trips() {
-        for &(x, y) in &[(0, 0), (u32::MAX, 0), (0, u32::MAX), (u32::MAX, u32::MAX), (123_456_789, 987_654_321)] {
+        for &(x, y) in &[
+            (0, 0),
+            (u32::MAX, 0),
+            (0, u32::MAX),
+            (u32::MAX, u32::MAX),
+            (123_456_789, 987_654_321),
+        ] {
             assert_eq!(hilbert_decode(32, hilbert_encode(32, x, y)), (x, y));
         }
     }

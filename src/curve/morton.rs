@@ -146,7 +146,11 @@ impl MortonKey {
     /// fmrh's domain it is `2^L · (b - 1)` cells).
     pub fn bounds(&self, side: u64) -> MortonBounds {
         let block = side >> self.level;
-        debug_assert_eq!(block << self.level, side, "side must be a multiple of 2^level");
+        debug_assert_eq!(
+            block << self.level,
+            side,
+            "side must be a multiple of 2^level"
+        );
         let left = u64::from(gather(self.code >> 1)) * block;
         let bottom = u64::from(gather(self.code)) * block;
         MortonBounds {
@@ -181,7 +185,12 @@ mod tests {
     #[test]
     fn paper_strings_round_trip() {
         for s in ["00", "0010", "001000", "00101101", "0011111111"] {
-            assert_eq!(MortonKey::from_paper_str(s).map(|k| k.to_paper_string()).as_deref(), Some(s));
+            assert_eq!(
+                MortonKey::from_paper_str(s)
+                    .map(|k| k.to_paper_string())
+                    .as_deref(),
+                Some(s)
+            );
         }
         for bad in ["", "0", "01", "10", "0012", "001", "00ab"] {
             assert!(MortonKey::from_paper_str(bad).is_none(), "{bad:?}");

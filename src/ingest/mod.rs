@@ -1,1 +1,233 @@
-//! Readers.
+//! Readers: every supported heightfield format in, one [`Heightfield`] out.
+//!
+//! Each format is a small module with one `read` function. They share three promises:
+//!
+//! * **Voids are voids.** A format's nodata (SRTM's -32768, GDAL_NODATA, an `.asc`
+//!   `NODATA_value`, a transparent pixel, USGS's -32767 and cells outside every profile)
+//!   becomes `NaN`, never a magic height.
+//! * **Sizes are checked before allocation.** A header is checked against
+//!   [`heightfield::check_dimensions`](crate::heightfield::check_dimensions) and against what
+//!   the file can actually hold before any buffer is sized from it.
+//! * **Malformed input is an error.** Truncated, inconsistent or unsupported input returns
+//!   [`Error::Input`] or [`Error::Unsupported`] naming the file. It never panics.
+//!
+//! Integer-coded formats (grey PNG, JPEG, integer GeoTIFF, `.hgt`) map a raw value `r` to the
+//! height `(r · z_scale + z_offset)`, computed in `f64` and rounded once to `f32`. The defaults
+//! 1 and 0 leave raw values unchanged.
+
+mod esri_ascii;
+mod geotiff;
+mod jpeg;
+mod png;
+mod raw_f32;
+mod srtm;
+mod usgs_dem;
+
+use std::fs::File;
+use std::io::Read;
+use std::path::Path;
+
+use crate::error::{Error, Result};
+use crate::heightfield::{Heightfield, Metadata};
+
+/// The input formats fmrh reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Format {
+    /// Raw little-endian `f32` + `.json` sidecar, the form of `../shared/data` (either file).
+    F32,
+    /// SRTM `.hgt` or `.hgt.gz`: 1201² or 3601² big-endian `i16`, -32768 void.
+    Hgt,
+    /// GeoTIFF, one band of 8/16/32-bit integers or 32/64-bit floats, GDAL_NODATA honoured.
+    Geotiff,
+    /// PNG: 8/16-bit grey or grey palette, or Terrain-RGB / Terrarium colour.
+    Png,
+    /// Baseline JPEG, grey or R=G=B colour (lossy: for throughput tests, not precision).
+    Jpeg,
+    /// ESRI ASCII grid (`.asc`).
+    Asc,
+    /// USGS ASCII DEM (`.dem`), 1024-byte records, UTM or geographic profiles.
+    UsgsDem,
+}
+
+impl Format {
+    /// The name used in output.
+    pub fn name(self) -> &'static str {
+        match self {
+            Format::F32 => "f32",
+            Format::Hgt => "srtm-hgt",
+            Format::Geotiff => "geotiff",
+            Format::Png => "png",
+            Format::Jpeg => "jpeg",
+            Format::Asc => "esri-ascii",
+            Format::UsgsDem => "usgs-dem",
+        }
+    }
+}
+
+/// How the colour channels of an 8-bit RGB(A) PNG encode height.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ColorEncoding {
+    /// Mapbox Terrain-RGB: `h = -10000 + (R·65536 + G·256 + B) · 0.1`.
+    TerrainRgb,
+    /// Terrarium: `h = R·256 + G + B/256 - 32768`.
+    Terrarium,
+}
+
+/// Options that say how to read an input.
+#[derive(Clone, Debug, PartialEq)]
+pub struct IngestOptions {
+    /// The format; detected from the file name and contents when `None`.
+    pub format: Option<Format>,
+    /// How an RGB(A) PNG encodes heights; required for such files.
+    pub color_encoding: Option<ColorEncoding>,
+    /// Multiplier applied to raw values (see the module docs).
+    pub z_scale: f64,
+    /// Offset added after scaling.
+    pub z_offset: f64,
+    /// A raw value that marks a void, in addition to the format's own.
+    pub nodata: Option<f64>,
+}
+
+impl Default for IngestOptions {
+    fn default() -> Self {
+        IngestOptions {
+            format: None,
+            color_encoding: None,
+            z_scale: 1.0,
+            z_offset: 0.0,
+            nodata: None,
+        }
+    }
+}
+
+impl IngestOptions {
+    /// The height of raw value `raw`, or `NaN` if `raw` is the user's nodata value.
+    #[inline]
+    fn height(&self, raw: f64) -> f32 {
+        if self.nodata == Some(raw) {
+            return f32::NAN;
+        }
+        (raw * self.z_scale + self.z_offset) as f32
+    }
+
+    fn check(&self) -> Result<()> {
+        if !self.z_scale.is_finite() || self.z_scale == 0.0 || !self.z_offset.is_finite() {
+            return Err(Error::InvalidArgument(format!(
+                "z-scale {} and z-offset {} must be finite, and the scale non-zero",
+                self.z_scale, self.z_offset
+            )));
+        }
+        if self.nodata.is_some_and(f64::is_nan) {
+            return Err(Error::InvalidArgument("nodata must be a number".into()));
+        }
+        Ok(())
+    }
+}
+
+/// Reads the heightfield at `path`.
+pub fn load(path: &Path, options: &IngestOptions) -> Result<Heightfield> {
+    options.check()?;
+    let format = match options.format {
+        Some(f) => f,
+        None => detect(path)?,
+    };
+    let mut hf = match format {
+        Format::F32 => raw_f32::read(path)?,
+        Format::Hgt => srtm::read(path, options)?,
+        Format::Geotiff => geotiff::read(path, options)?,
+        Format::Png => png::read(path, options)?,
+        Format::Jpeg => jpeg::read(path, options)?,
+        Format::Asc => esri_ascii::read(path, options)?,
+        Format::UsgsDem => usgs_dem::read(path, options)?,
+    };
+    hf.metadata.source_format = format.name().to_string();
+    Ok(hf)
+}
+
+/// Guesses the format from the file name, then from the first bytes.
+pub fn detect(path: &Path) -> Result<Format> {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    let by_name = [
+        (".f32", Format::F32),
+        (".json", Format::F32),
+        (".hgt", Format::Hgt),
+        (".hgt.gz", Format::Hgt),
+        (".tif", Format::Geotiff),
+        (".tiff", Format::Geotiff),
+        (".png", Format::Png),
+        (".jpg", Format::Jpeg),
+        (".jpeg", Format::Jpeg),
+        (".asc", Format::Asc),
+        (".dem", Format::UsgsDem),
+    ];
+    if let Some(&(_, f)) = by_name.iter().find(|(ext, _)| name.ends_with(ext)) {
+        return Ok(f);
+    }
+    let mut head = [0u8; 8];
+    let n = File::open(path)
+        .and_then(|mut f| f.read(&mut head))
+        .map_err(|e| Error::io(path, e))?;
+    let head = &head[..n];
+    if head.starts_with(b"\x89PNG") {
+        Ok(Format::Png)
+    } else if head.starts_with(b"II*\0") || head.starts_with(b"MM\0*") {
+        Ok(Format::Geotiff)
+    } else if head.starts_with(&[0xFF, 0xD8]) {
+        Ok(Format::Jpeg)
+    } else {
+        Err(Error::input(
+            path,
+            "cannot tell the format from the name or contents; give --format",
+        ))
+    }
+}
+
+/// Reads at most `limit` bytes of `path`; more is an error (the caller's size check failed).
+fn read_limited(path: &Path, limit: u64) -> Result<Vec<u8>> {
+    let file = File::open(path).map_err(|e| Error::io(path, e))?;
+    let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
+    if len > limit {
+        return Err(Error::input(
+            path,
+            format!("file is {len} bytes, more than the {limit} this format can need"),
+        ));
+    }
+    let mut bytes = Vec::with_capacity(len as usize);
+    file.take(limit)
+        .read_to_end(&mut bytes)
+        .map_err(|e| Error::io(path, e))?;
+    Ok(bytes)
+}
+
+/// Builds the heightfield, turning a rejected sample (an infinite height) into an input error
+/// that names the file.
+fn finish(
+    path: &Path,
+    width: u32,
+    height: u32,
+    samples: Vec<f32>,
+    metadata: Metadata,
+) -> Result<Heightfield> {
+    Heightfield::new(width, height, samples)
+        .map(|hf| hf.with_metadata(metadata))
+        .map_err(|e| match e {
+            Error::InvalidArgument(reason) => Error::input(path, reason),
+            other => other,
+        })
+}
+
+/// Metres per degree of latitude on the WGS 84 equatorial sphere, used to turn geographic
+/// sample spacing into ground distance at the grid's centre latitude.
+const METRES_PER_DEGREE: f64 = 6_378_137.0 * std::f64::consts::PI / 180.0;
+
+/// Ground spacing `[east, south]` in metres for a geographic grid of `step_deg` degrees at
+/// latitude `lat`.
+fn geographic_spacing(step_deg: [f64; 2], lat: f64) -> [f64; 2] {
+    [
+        step_deg[0].abs() * METRES_PER_DEGREE * lat.to_radians().cos(),
+        step_deg[1].abs() * METRES_PER_DEGREE,
+    ]
+}

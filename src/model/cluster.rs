@@ -50,7 +50,9 @@ pub struct Cluster {
 /// ascending without duplicates.
 pub fn validate_thresholds(thresholds: &[f64]) -> Result<Vec<f64>> {
     if thresholds.is_empty() {
-        return Err(Error::InvalidArgument("at least one threshold is needed".into()));
+        return Err(Error::InvalidArgument(
+            "at least one threshold is needed".into(),
+        ));
     }
     if let Some(bad) = thresholds.iter().find(|t| !t.is_finite() || **t < 0.0) {
         return Err(Error::InvalidArgument(format!(
@@ -178,7 +180,10 @@ mod tests {
         assert!(validate_thresholds(&[1.0, f64::NAN]).is_err());
         assert!(validate_thresholds(&[-1.0]).is_err());
         assert!(validate_thresholds(&[1.0, f64::INFINITY]).is_err());
-        assert_eq!(validate_thresholds(&[3.0, 0.0, 3.0, 1.0]).unwrap(), vec![0.0, 1.0, 3.0]);
+        assert_eq!(
+            validate_thresholds(&[3.0, 0.0, 3.0, 1.0]).unwrap(),
+            vec![0.0, 1.0, 3.0]
+        );
         let many: Vec<f64> = (0..300).map(f64::from).collect();
         assert!(validate_thresholds(&many).is_err());
     }

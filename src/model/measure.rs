@@ -113,7 +113,13 @@ pub fn measure_level(raster: &MendedRaster, domain: &Domain, level: u8) -> Vec<N
 }
 
 /// Measures node `(x, y)` of `level` on its own.
-pub fn measure_node(raster: &MendedRaster, domain: &Domain, level: u8, x: u32, y: u32) -> NodeStats {
+pub fn measure_node(
+    raster: &MendedRaster,
+    domain: &Domain,
+    level: u8,
+    x: u32,
+    y: u32,
+) -> NodeStats {
     (0..u64::from(domain.block_size() - 1))
         .map(|band| measure_band(raster, domain, level, x, y, band))
         .fold(NodeStats::EMPTY, NodeStats::merge)
@@ -137,7 +143,12 @@ fn measure_band(
     if gy0 >= h {
         return NodeStats::EMPTY;
     }
-    let row_end = if band == last_band { gy0 + s } else { gy0 + s - 1 }.min(h - 1);
+    let row_end = if band == last_band {
+        gy0 + s
+    } else {
+        gy0 + s - 1
+    }
+    .min(h - 1);
     let (col0, col1) = (fp.col0, fp.col1.min(w - 1));
     let mut stats = NodeStats::EMPTY;
 
@@ -146,7 +157,9 @@ fn measure_band(
         let vals = &raster.row(row)[col0 as usize..=col1 as usize];
         let (lo, hi) = vals
             .iter()
-            .fold((stats.min_height, stats.max_height), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+            .fold((stats.min_height, stats.max_height), |(lo, hi), &v| {
+                (lo.min(v), hi.max(v))
+            });
         stats.min_height = lo;
         stats.max_height = hi;
         stats.valid_samples += raster.count_valid(row, col0, col1);
@@ -157,8 +170,12 @@ fn measure_band(
 
     // The band's grid rows: north and south edges of its cells, clamped into the data.
     let b = domain.block_size() as usize;
-    let north: Vec<f32> = (0..b as u64).map(|i| raster.value(fp.col0 + i * s, gy0)).collect();
-    let south: Vec<f32> = (0..b as u64).map(|i| raster.value(fp.col0 + i * s, gy0 + s)).collect();
+    let north: Vec<f32> = (0..b as u64)
+        .map(|i| raster.value(fp.col0 + i * s, gy0))
+        .collect();
+    let south: Vec<f32> = (0..b as u64)
+        .map(|i| raster.value(fp.col0 + i * s, gy0 + s))
+        .collect();
     let shift = s.trailing_zeros();
     let last_cell = b as u64 - 2;
     let mut error = 0.0f64;
@@ -170,7 +187,11 @@ fn measure_band(
             while col <= last {
                 let cell = ((col - fp.col0) >> shift).min(last_cell);
                 let cx0 = fp.col0 + cell * s;
-                let cell_last = if cell == last_cell { cx0 + s } else { cx0 + s - 1 };
+                let cell_last = if cell == last_cell {
+                    cx0 + s
+                } else {
+                    cx0 + s - 1
+                };
                 let end = cell_last.min(last);
                 let c = cell as usize;
                 let (nw, ne, sw, se) = (north[c], north[c + 1], south[c], south[c + 1]);

@@ -71,7 +71,11 @@ pub struct NodeGrid {
 impl Model {
     /// Builds the model of `heightfield` (consumed: its buffer becomes the mended raster).
     pub fn build(heightfield: Heightfield, options: &BuildOptions) -> Result<Model> {
-        let domain = Domain::new(heightfield.width(), heightfield.height(), options.block_size)?;
+        let domain = Domain::new(
+            heightfield.width(),
+            heightfield.height(),
+            options.block_size,
+        )?;
         let explicit = match &options.thresholds {
             Thresholds::Explicit(t) => Some(cluster::validate_thresholds(t)?),
             Thresholds::Ladder => None,

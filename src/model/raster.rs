@@ -50,7 +50,13 @@ impl MendedRaster {
             }
         }
         if void_count > 0 {
-            mend(&mut values, &valid, width as usize, height as usize, void_count);
+            mend(
+                &mut values,
+                &valid,
+                width as usize,
+                height as usize,
+                void_count,
+            );
         }
         MendedRaster {
             width,
@@ -124,7 +130,11 @@ impl MendedRaster {
             let word = self.valid[i / 64] >> off;
             if word & 1 == 0 {
                 // Void at i: jump to the next valid bit of this word, or to the next word.
-                i += if word == 0 { 64 - off } else { word.trailing_zeros() as usize };
+                i += if word == 0 {
+                    64 - off
+                } else {
+                    word.trailing_zeros() as usize
+                };
                 continue;
             }
             let run_start = i;
@@ -151,7 +161,11 @@ impl MendedRaster {
         while i < end {
             let off = i % 64;
             let take = (64 - off).min(end - i);
-            let mask = if take == 64 { u64::MAX } else { (1u64 << take) - 1 };
+            let mask = if take == 64 {
+                u64::MAX
+            } else {
+                (1u64 << take) - 1
+            };
             n += u64::from(((self.valid[i / 64] >> off) & mask).count_ones());
             i += take;
         }

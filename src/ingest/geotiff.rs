@@ -1,0 +1,168 @@
+//! GeoTIFF: one band of integers (8/16/32-bit, signed or not) or floats (32/64-bit).
+//!
+//! Voids are `NaN` samples and samples equal to the `GDAL_NODATA` tag (tag 42113, ASCII). The
+//! georeference comes from `ModelPixelScale` (33550) and `ModelTiepoint` (33922). The
+//! `GeoKeyDirectory` (34735) supplies the EPSG code and whether a pixel is an area (the tie
+//! point is a corner, the default) or a point (the tie point is a sample centre). Decoding
+//! (strips, tiles, compression) is the `tiff` crate's, bounded by its limits.
+
+use std::fs::File;
+use std::io::BufReader;
+use std::path::Path;
+
+use tiff::decoder::{Decoder, DecodingResult, Limits};
+use tiff::tags::Tag;
+use tiff::ColorType;
+
+use super::{finish, geographic_spacing, IngestOptions};
+use crate::error::{Error, Result};
+use crate::heightfield::{check_dimensions, Georeference, Heightfield, Metadata, MAX_SAMPLES};
+
+/// GeoKey: 1 = geographic, 2 = projected model.
+const GT_MODEL_TYPE: u16 = 1024;
+/// GeoKey: 1 = pixel is area, 2 = pixel is point.
+const GT_RASTER_TYPE: u16 = 1025;
+const GEOGRAPHIC_TYPE: u16 = 2048;
+const PROJECTED_CS_TYPE: u16 = 3072;
+
+fn tiff_error(path: &Path, e: tiff::TiffError) -> Error {
+    match e {
+        tiff::TiffError::UnsupportedError(u) => Error::unsupported(path, u.to_string()),
+        tiff::TiffError::IoError(io) => {
+            Error::input(path, format!("truncated or unreadable: {io}"))
+        }
+        tiff::TiffError::LimitsExceeded => Error::TooLarge {
+            what: path.display().to_string(),
+            detail: "the TIFF needs more memory than fmrh allows".into(),
+        },
+        other => Error::input(path, other.to_string()),
+    }
+}
+
+/// Reads a single-band GeoTIFF.
+pub fn read(path: &Path, options: &IngestOptions) -> Result<Heightfield> {
+    let file = File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut limits = Limits::default();
+    limits.decoding_buffer_size = usize::try_from(MAX_SAMPLES * 8).unwrap_or(usize::MAX);
+    let mut dec = Decoder::new(BufReader::new(file))
+        .map_err(|e| tiff_error(path, e))?
+        .with_limits(limits);
+    let (width, height) = dec.dimensions().map_err(|e| tiff_error(path, e))?;
+    check_dimensions(u64::from(width), u64::from(height))
+        .map_err(|e| Error::input(path, e.to_string()))?;
+    match dec.colortype().map_err(|e| tiff_error(path, e))? {
+        ColorType::Gray(_) => {}
+        other => {
+            return Err(Error::unsupported(
+                path,
+                format!("colour type {other:?}: a heightfield GeoTIFF has one grey band"),
+            ))
+        }
+    }
+    let nodata: Option<f64> = match dec.get_tag_ascii_string(Tag::GdalNodata) {
+        Ok(s) => Some(
+            s.trim_matches(|c: char| c == '\0' || c.is_whitespace())
+                .parse()
+                .map_err(|_| Error::input(path, format!("GDAL_NODATA {s:?} is not a number")))?,
+        ),
+        Err(_) => None,
+    };
+    let metadata = georeference(path, &mut dec, height)?;
+    let image = dec.read_image().map_err(|e| tiff_error(path, e))?;
+
+    let convert = |raw: f64| -> f32 {
+        if raw.is_nan() || nodata == Some(raw) {
+            f32::NAN
+        } else {
+            options.height(raw)
+        }
+    };
+    let samples: Vec<f32> = match image {
+        DecodingResult::U8(v) => v.into_iter().map(|r| convert(f64::from(r))).collect(),
+        DecodingResult::I8(v) => v.into_iter().map(|r| convert(f64::from(r))).collect(),
+        DecodingResult::U16(v) => v.into_iter().map(|r| convert(f64::from(r))).collect(),
+        DecodingResult::I16(v) => v.into_iter().map(|r| convert(f64::from(r))).collect(),
+        DecodingResult::U32(v) => v.into_iter().map(|r| convert(f64::from(r))).collect(),
+        DecodingResult::I32(v) => v.into_iter().map(|r| convert(f64::from(r))).collect(),
+        DecodingResult::F32(v) => v.into_iter().map(|r| convert(f64::from(r))).collect(),
+        DecodingResult::F64(v) => v.into_iter().map(convert).collect(),
+        other => {
+            return Err(Error::unsupported(
+                path,
+                format!(
+                    "sample type {}: fmrh reads 8/16/32-bit integers and 32/64-bit floats",
+                    sample_type_name(&other)
+                ),
+            ))
+        }
+    };
+    if samples.len() as u64 != u64::from(width) * u64::from(height) {
+        return Err(Error::unsupported(
+            path,
+            "more than one sample per pixel: a heightfield GeoTIFF has one band",
+        ));
+    }
+    finish(path, width, height, samples, metadata)
+}
+
+fn sample_type_name(r: &DecodingResult) -> &'static str {
+    match r {
+        DecodingResult::U64(_) => "u64",
+        DecodingResult::I64(_) => "i64",
+        DecodingResult::F16(_) => "f16",
+        _ => "other",
+    }
+}
+
+fn georeference<R: std::io::Read + std::io::Seek>(
+    path: &Path,
+    dec: &mut Decoder<R>,
+    height: u32,
+) -> Result<Metadata> {
+    let mut metadata = Metadata::default();
+    let (Ok(scale), Ok(tie)) = (
+        dec.get_tag_f64_vec(Tag::ModelPixelScaleTag),
+        dec.get_tag_f64_vec(Tag::ModelTiepointTag),
+    ) else {
+        return Ok(metadata);
+    };
+    if scale.len() < 2 || tie.len() < 6 || scale[0] <= 0.0 || scale[1] <= 0.0 {
+        return Err(Error::input(
+            path,
+            "malformed ModelPixelScale or ModelTiepoint tag",
+        ));
+    }
+    let keys = dec
+        .get_tag_u16_vec(Tag::GeoKeyDirectoryTag)
+        .unwrap_or_default();
+    let key = |id: u16| -> Option<u16> {
+        keys.get(4..)?
+            .chunks_exact(4)
+            .find(|k| k[0] == id && k[1] == 0)
+            .map(|k| k[3])
+    };
+    // Pixel-is-area: the tie point is the corner of pixel (i, j), half a pixel from its centre.
+    let half = if key(GT_RASTER_TYPE) == Some(2) {
+        0.0
+    } else {
+        0.5
+    };
+    let origin = [
+        tie[3] + (half - tie[0]) * scale[0],
+        tie[4] - (half - tie[1]) * scale[1],
+    ];
+    let step = [scale[0], -scale[1]];
+    let (crs, geographic) = match (key(PROJECTED_CS_TYPE), key(GEOGRAPHIC_TYPE)) {
+        (Some(code), _) if code != 32767 => (Some(format!("EPSG:{code}")), false),
+        (_, Some(code)) if code != 32767 => (Some(format!("EPSG:{code}")), true),
+        _ => (None, key(GT_MODEL_TYPE) == Some(2)),
+    };
+    metadata.spacing_m = Some(if geographic {
+        let centre_lat = origin[1] + step[1] * f64::from(height - 1) / 2.0;
+        geographic_spacing([scale[0], scale[1]], centre_lat)
+    } else {
+        [scale[0], scale[1]]
+    });
+    metadata.georeference = Some(Georeference { crs, origin, step });
+    Ok(metadata)
+}

@@ -1,0 +1,104 @@
+//! The `.f32` + `.json` pair of `../shared/data`: raw little-endian `f32`, row-major, row 0
+//! north, `NaN` for voids, with a JSON sidecar giving at least `width` and `height`.
+//!
+//! Given either file, the reader finds the other. It first tries the sidecar's `f32_file`, then
+//! the same name with the other extension. The `.f32` length must be exactly
+//! `width · height · 4`, checked before reading. `spacing_m` and `units` are taken when present.
+
+use std::fs::File;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+use super::{finish, read_limited};
+use crate::error::{Error, Result};
+use crate::heightfield::{check_dimensions, Heightfield, Metadata};
+
+/// Sidecars larger than this are not sidecars.
+const MAX_SIDECAR_BYTES: u64 = 16 << 20;
+
+#[derive(Deserialize)]
+struct Sidecar {
+    width: u64,
+    height: u64,
+    f32_file: Option<String>,
+    spacing_m: Option<[f64; 2]>,
+    units: Option<String>,
+}
+
+fn with_extension(path: &Path, ext: &str) -> PathBuf {
+    path.with_extension(ext)
+}
+
+/// Reads the pair, given either file.
+pub fn read(path: &Path) -> Result<Heightfield> {
+    let is_json = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("json"));
+    let json_path = if is_json {
+        path.to_path_buf()
+    } else {
+        with_extension(path, "json")
+    };
+    if !json_path.exists() {
+        return Err(Error::input(
+            path,
+            format!(
+                "raw f32 needs its JSON sidecar (width, height), looked for {}",
+                json_path.display()
+            ),
+        ));
+    }
+    let text = read_limited(&json_path, MAX_SIDECAR_BYTES)?;
+    let sidecar: Sidecar = serde_json::from_slice(&text)
+        .map_err(|e| Error::input(&json_path, format!("not a valid sidecar: {e}")))?;
+    check_dimensions(sidecar.width, sidecar.height)
+        .map_err(|e| Error::input(&json_path, e.to_string()))?;
+    let f32_path = if is_json {
+        match &sidecar.f32_file {
+            Some(name) => json_path.with_file_name(name),
+            None => with_extension(path, "f32"),
+        }
+    } else {
+        path.to_path_buf()
+    };
+
+    let expected = sidecar.width * sidecar.height * 4;
+    let mut file = File::open(&f32_path).map_err(|e| Error::io(&f32_path, e))?;
+    let len = file.metadata().map_err(|e| Error::io(&f32_path, e))?.len();
+    if len != expected {
+        return Err(Error::input(
+            &f32_path,
+            format!(
+                "{len} bytes, but {} x {} samples of f32 need {expected}",
+                sidecar.width, sidecar.height
+            ),
+        ));
+    }
+    let count = (sidecar.width * sidecar.height) as usize;
+    let mut samples = Vec::with_capacity(count);
+    let mut chunk = vec![0u8; 1 << 20];
+    while samples.len() < count {
+        let want = ((count - samples.len()) * 4).min(chunk.len());
+        file.read_exact(&mut chunk[..want])
+            .map_err(|e| Error::io(&f32_path, e))?;
+        samples.extend(
+            chunk[..want]
+                .chunks_exact(4)
+                .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+        );
+    }
+    let metadata = Metadata {
+        spacing_m: sidecar.spacing_m,
+        units: sidecar.units,
+        ..Metadata::default()
+    };
+    finish(
+        &f32_path,
+        sidecar.width as u32,
+        sidecar.height as u32,
+        samples,
+        metadata,
+    )
+}

@@ -1,0 +1,32 @@
+//! Helpers shared by the integration tests: where the real data lives, and small comparisons.
+
+#![allow(dead_code)]
+
+use std::path::PathBuf;
+
+/// `../shared/data` beside the repository.
+pub fn data_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data")
+}
+
+/// A file of the shared data set, by path inside `../shared/data`. Panics with a clear message
+/// when the data set is missing: the real-data tests must not pass vacuously.
+pub fn data(rel: &str) -> PathBuf {
+    let p = data_dir().join(rel);
+    assert!(
+        p.exists(),
+        "real data {} is missing: clone the project with ../shared beside it",
+        p.display()
+    );
+    p
+}
+
+/// The index and values of the first sample where two grids differ (NaN equals NaN).
+pub fn first_difference(a: &[f32], b: &[f32]) -> Option<(usize, f32, f32)> {
+    assert_eq!(a.len(), b.len(), "grids differ in size");
+    a.iter()
+        .zip(b)
+        .enumerate()
+        .find(|(_, (x, y))| !(x.to_bits() == y.to_bits() || (x.is_nan() && y.is_nan())))
+        .map(|(i, (x, y))| (i, *x, *y))
+}
