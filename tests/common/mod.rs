@@ -30,3 +30,6 @@ pub fn first_difference(a: &[f32], b: &[f32]) -> Option<(usize, f32, f32)> {
         .find(|(_, (x, y))| !(x.to_bits() == y.to_bits() || (x.is_nan() && y.is_nan())))
         .map(|(i, (x, y))| (i, *x, *y))
 }
+
+pub mod fields;
+pub mod oracle;
