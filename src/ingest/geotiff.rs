@@ -42,6 +42,7 @@ fn tiff_error(path: &Path, e: tiff::TiffError) -> Error {
 /// Reads a single-band GeoTIFF.
 pub fn read(path: &Path, options: &IngestOptions) -> Result<Heightfield> {
     let file = File::open(path).map_err(|e| Error::io(path, e))?;
+    let file_len = file.metadata().map_err(|e| Error::io(path, e))?.len();
     let mut limits = Limits::default();
     limits.decoding_buffer_size = usize::try_from(MAX_SAMPLES * 8).unwrap_or(usize::MAX);
     let mut dec = Decoder::new(BufReader::new(file))
@@ -67,6 +68,7 @@ pub fn read(path: &Path, options: &IngestOptions) -> Result<Heightfield> {
         ),
         Err(_) => None,
     };
+    check_data_extent(path, &mut dec, width, height, file_len)?;
     let metadata = georeference(path, &mut dec, height)?;
     let image = dec.read_image().map_err(|e| tiff_error(path, e))?;
 
@@ -103,6 +105,69 @@ pub fn read(path: &Path, options: &IngestOptions) -> Result<Heightfield> {
         ));
     }
     finish(path, width, height, samples, metadata)
+}
+
+/// The strips (or tiles) must lie inside the file, and for an uncompressed image they must hold
+/// every sample. The decoder would otherwise pad a short image silently.
+fn check_data_extent<R: std::io::Read + std::io::Seek>(
+    path: &Path,
+    dec: &mut Decoder<R>,
+    width: u32,
+    height: u32,
+    file_len: u64,
+) -> Result<()> {
+    let mut tags = |a: Tag, b: Tag| -> Vec<u64> {
+        match dec.find_tag_unsigned_vec::<u64>(a) {
+            Ok(Some(v)) => v,
+            _ => dec
+                .find_tag_unsigned_vec::<u64>(b)
+                .ok()
+                .flatten()
+                .unwrap_or_default(),
+        }
+    };
+    let offsets = tags(Tag::StripOffsets, Tag::TileOffsets);
+    let counts = tags(Tag::StripByteCounts, Tag::TileByteCounts);
+    if offsets.len() != counts.len() {
+        return Err(Error::input(
+            path,
+            "strip offsets and byte counts differ in number",
+        ));
+    }
+    for (&o, &c) in offsets.iter().zip(&counts) {
+        if o.checked_add(c).is_none_or(|end| end > file_len) {
+            return Err(Error::input(
+                path,
+                format!(
+                    "image data at bytes {o}..{} lies past the end of the {file_len}-byte file",
+                    o.saturating_add(c)
+                ),
+            ));
+        }
+    }
+    let compression: u16 = dec
+        .find_tag_unsigned(Tag::Compression)
+        .ok()
+        .flatten()
+        .unwrap_or(1);
+    if compression != 1 {
+        return Ok(());
+    }
+    let bits: u64 = dec
+        .find_tag_unsigned_vec::<u64>(Tag::BitsPerSample)
+        .ok()
+        .flatten()
+        .map(|v| v.iter().sum())
+        .unwrap_or(1);
+    let have: u64 = counts.iter().fold(0u64, |a, &c| a.saturating_add(c));
+    let need = (u64::from(width) * bits).div_ceil(8) * u64::from(height);
+    if have < need {
+        return Err(Error::input(
+            path,
+            format!("uncompressed image data is {have} bytes, the image needs {need}"),
+        ));
+    }
+    Ok(())
 }
 
 fn sample_type_name(r: &DecodingResult) -> &'static str {

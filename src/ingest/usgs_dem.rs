@@ -157,7 +157,7 @@ pub fn read(path: &Path, options: &IngestOptions) -> Result<Heightfield> {
     let top = with_data
         .map(|p| p.y + (p.count - 1) as f64 * res[1])
         .fold(f64::NEG_INFINITY, f64::max);
-    if !(top >= bottom) {
+    if top.is_nan() || bottom.is_nan() || top < bottom {
         return Err(Error::input(path, "no profile holds an elevation"));
     }
     let rows_f = ((top - bottom) / res[1]).round() + 1.0;

@@ -77,7 +77,7 @@ pub fn default_ladder(root_error: f64, min_positive_error: Option<f64>) -> Vec<f
     let Some(floor) = min_positive_error else {
         return rungs;
     };
-    if !(root_error > 0.0) {
+    if root_error.is_nan() || root_error <= 0.0 {
         return rungs;
     }
     let mut k = 0;

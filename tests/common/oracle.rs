@@ -198,6 +198,8 @@ pub fn hilbert_by_rotation(order: u32, mut x: u64, mut y: u64) -> u64 {
     d
 }
 
+/// The paper's Roman numerals, kept as printed.
+#[allow(clippy::upper_case_acronyms)]
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 pub enum PaperType {
     I,

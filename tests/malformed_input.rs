@@ -1,0 +1,269 @@
+//! Malformed input never panics, never allocates from an unchecked size, and always names the
+//! file. Crafted headers claim absurd sizes. Real files are truncated at every kind of place,
+//! and property tests flip, cut and replace bytes of real files of every format.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::data;
+use fmrh::ingest::{load, ColorEncoding, IngestOptions};
+use fmrh::Error;
+use proptest::prelude::*;
+
+fn write(dir: &Path, name: &str, bytes: &[u8]) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, bytes).unwrap();
+    p
+}
+
+fn load_default(p: &Path) -> Result<fmrh::Heightfield, Error> {
+    load(p, &IngestOptions::default())
+}
+
+/// An input error that names `file` (malformed, unsupported or too large).
+fn assert_input_error(result: Result<fmrh::Heightfield, Error>, file: &Path) {
+    match result {
+        Err(Error::Input { path, .. } | Error::Unsupported { path, .. }) => {
+            assert_eq!(path.file_name(), file.file_name())
+        }
+        Err(Error::TooLarge { .. }) => {}
+        Err(e) => panic!("{}: expected an input error, got {e:?}", file.display()),
+        Ok(_) => panic!("{}: malformed input was accepted", file.display()),
+    }
+}
+
+#[test]
+fn raw_f32_pairs() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write(d, "a.json", br#"{"width": 10, "height": 10}"#);
+    let f = write(d, "a.f32", &[0u8; 399]);
+    assert_input_error(load_default(&f), &f);
+    // Absurd size: refused from the sidecar, before touching the .f32.
+    let j = write(
+        d,
+        "b.json",
+        br#"{"width": 1000000000, "height": 1000000000}"#,
+    );
+    write(d, "b.f32", &[0u8; 4]);
+    assert_input_error(load_default(&j), &j);
+    let j = write(d, "c.json", br#"{"width": "ten"}"#);
+    assert_input_error(load_default(&j), &j);
+    let f = write(d, "lonely.f32", &[0u8; 16]);
+    assert_input_error(load_default(&f), &f);
+    write(d, "inf.json", br#"{"width": 2, "height": 1}"#);
+    let mut bytes = 1.0f32.to_le_bytes().to_vec();
+    bytes.extend(f32::INFINITY.to_le_bytes());
+    let f = write(d, "inf.f32", &bytes);
+    assert_input_error(load_default(&f), &f);
+}
+
+#[test]
+fn srtm_tiles() {
+    let dir = tempfile::tempdir().unwrap();
+    let f = write(dir.path(), "N00E000.hgt", &[0u8; 1201 * 1201 * 2 - 2]);
+    assert_input_error(load_default(&f), &f);
+    let f = write(dir.path(), "N00E000.hgt.gz", b"\x1f\x8b\x08\x00garbage");
+    assert_input_error(load_default(&f), &f);
+    // A gzip bomb: far more than a tile decompresses, and is cut off at one tile's size.
+    let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    std::io::Write::write_all(&mut enc, &vec![0u8; 40 << 20]).unwrap();
+    let f = write(dir.path(), "N01E000.hgt.gz", &enc.finish().unwrap());
+    assert_input_error(load_default(&f), &f);
+}
+
+fn tiff_header(width: u32, height: u32, bits: u16, samples: u16) -> Vec<u8> {
+    // Little-endian TIFF with one IFD: width, length, bits per sample, compression 1,
+    // photometric 1, strip offset 0, samples per pixel, rows per strip, strip byte count 0.
+    let entries: [(u16, u16, u32); 9] = [
+        (256, 4, width),
+        (257, 4, height),
+        (258, 3, u32::from(bits)),
+        (259, 3, 1),
+        (262, 3, 1),
+        (273, 4, 200),
+        (277, 3, u32::from(samples)),
+        (278, 4, height),
+        (279, 4, 0),
+    ];
+    let mut b = b"II*\0\x08\0\0\0".to_vec();
+    b.extend((entries.len() as u16).to_le_bytes());
+    for (tag, kind, value) in entries {
+        b.extend(tag.to_le_bytes());
+        b.extend(kind.to_le_bytes());
+        b.extend(1u32.to_le_bytes());
+        if kind == 3 {
+            b.extend((value as u16).to_le_bytes());
+            b.extend([0, 0]);
+        } else {
+            b.extend(value.to_le_bytes());
+        }
+    }
+    b.extend(0u32.to_le_bytes());
+    b.resize(256, 0);
+    b
+}
+
+#[test]
+fn geotiffs() {
+    let dir = tempfile::tempdir().unwrap();
+    let f = write(
+        dir.path(),
+        "huge.tif",
+        &tiff_header(1_000_000, 1_000_000, 16, 1),
+    );
+    assert_input_error(load_default(&f), &f);
+    let f = write(dir.path(), "rgb.tif", &tiff_header(4, 4, 8, 3));
+    assert_input_error(load_default(&f), &f);
+    let f = write(dir.path(), "empty.tif", &tiff_header(4, 4, 16, 1));
+    assert_input_error(load_default(&f), &f);
+    let real = std::fs::read(data("pysheds-dem/dem.tif")).unwrap();
+    for cut in [8, 100, 1000, real.len() / 2, real.len() - 1] {
+        let f = write(dir.path(), "cut.tif", &real[..cut]);
+        assert_input_error(load_default(&f), &f);
+    }
+}
+
+fn png_chunk(kind: &[u8; 4], body: &[u8]) -> Vec<u8> {
+    let mut c = (body.len() as u32).to_be_bytes().to_vec();
+    c.extend(kind);
+    c.extend(body);
+    let mut h = crc32fast::Hasher::new();
+    h.update(kind);
+    h.update(body);
+    c.extend(h.finalize().to_be_bytes());
+    c
+}
+
+fn png_header(width: u32, height: u32, depth: u8, color: u8) -> Vec<u8> {
+    let mut ihdr = width.to_be_bytes().to_vec();
+    ihdr.extend(height.to_be_bytes());
+    ihdr.extend([depth, color, 0, 0, 0]);
+    let mut b = b"\x89PNG\r\n\x1a\n".to_vec();
+    b.extend(png_chunk(b"IHDR", &ihdr));
+    b
+}
+
+#[test]
+fn pngs() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut huge = png_header(1_000_000, 1_000_000, 16, 0);
+    huge.extend(png_chunk(b"IEND", &[]));
+    let f = write(dir.path(), "huge.png", &huge);
+    assert_input_error(load_default(&f), &f);
+    let real = std::fs::read(data("puget-sound-east-512/ps-e.lg.png")).unwrap();
+    for cut in [8, 33, 1000, real.len() / 2, real.len() - 13] {
+        let f = write(dir.path(), "cut.png", &real[..cut]);
+        assert_input_error(load_default(&f), &f);
+    }
+    // 16-bit RGB is no heightfield coding.
+    let enc_path = dir.path().join("rgb16.png");
+    let file = std::fs::File::create(&enc_path).unwrap();
+    let mut enc = png::Encoder::new(file, 2, 2);
+    enc.set_color(png::ColorType::Rgb);
+    enc.set_depth(png::BitDepth::Sixteen);
+    enc.write_header()
+        .unwrap()
+        .write_image_data(&[0u8; 24])
+        .unwrap();
+    let options = IngestOptions {
+        color_encoding: Some(ColorEncoding::TerrainRgb),
+        ..IngestOptions::default()
+    };
+    assert_input_error(load(&enc_path, &options), &enc_path);
+}
+
+#[test]
+fn esri_ascii_grids() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let header = "ncols 3\nnrows 2\nxllcorner 0\nyllcorner 0\ncellsize 1\nNODATA_value -9999\n";
+    let ok = write(
+        d,
+        "ok.asc",
+        format!("{header}1 2 3\n4 -9999 6\n").as_bytes(),
+    );
+    let hf = load_default(&ok).unwrap();
+    assert_eq!((hf.width(), hf.height(), hf.void_count()), (3, 2, 1));
+    let cases: [(&str, String); 6] = [
+        ("short.asc", format!("{header}1 2 3\n4 5\n")),
+        ("long.asc", format!("{header}1 2 3\n4 5 6 7\n")),
+        ("text.asc", format!("{header}1 2 3\n4 five 6\n")),
+        (
+            "huge.asc",
+            "ncols 1000000\nnrows 1000000\ncellsize 1\n1 2 3\n".to_string(),
+        ),
+        ("nokey.asc", "nrows 2\ncellsize 1\n1 2\n".to_string()),
+        ("odd.asc", format!("{header}colour blue\n1 2 3\n4 5 6\n")),
+    ];
+    for (name, text) in cases {
+        let f = write(d, name, text.as_bytes());
+        assert_input_error(load_default(&f), &f);
+    }
+}
+
+#[test]
+fn usgs_dems() {
+    let dir = tempfile::tempdir().unwrap();
+    let real = std::fs::read(data("mount-st-helens-usgs/SainteHelens.dem")).unwrap();
+    for cut in [0, 500, 1024, 1100, 5000, real.len() / 2] {
+        let f = write(dir.path(), "cut.dem", &real[..cut]);
+        assert_input_error(load_default(&f), &f);
+    }
+    let mut bad = real.clone();
+    bad[858..864].copy_from_slice(b"999999"); // more profiles than the file holds
+    let f = write(dir.path(), "profiles.dem", &bad);
+    assert_input_error(load_default(&f), &f);
+}
+
+#[test]
+fn undetectable_format() {
+    let dir = tempfile::tempdir().unwrap();
+    let f = write(dir.path(), "mystery.bin", b"hello");
+    assert_input_error(load_default(&f), &f);
+}
+
+/// Real files of every format, each in its own extension.
+fn real_files() -> Vec<(PathBuf, &'static str)> {
+    vec![
+        (data("gdal-rs-dem-hills/dem-hills.tiff"), "x.tiff"),
+        (data("puget-sound-east-512/ps-e.lg.png"), "x.png"),
+        (data("mount-st-helens-usgs/SainteHelens.dem"), "x.dem"),
+        (data("pysheds-dem/pysheds_dem.f32"), "x.f32"),
+        (data("srtm1-asmyasnikov/S46W066.hgt.gz"), "N00E000.hgt.gz"),
+    ]
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+
+    /// Damaged real files load or fail cleanly; they never panic.
+    #[test]
+    fn damaged_files_never_panic(which in 0usize..5, edits in prop::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 1..8), cut in prop::option::of(any::<prop::sample::Index>())) {
+        let dir = tempfile::tempdir().unwrap();
+        let (source, name) = &real_files()[which];
+        let mut bytes = std::fs::read(source).unwrap();
+        for (at, value) in edits {
+            let i = at.index(bytes.len());
+            bytes[i] = value;
+        }
+        if let Some(c) = cut {
+            let len = c.index(bytes.len());
+            bytes.truncate(len);
+        }
+        if name.ends_with(".f32") {
+            std::fs::copy(source.with_extension("json"), dir.path().join("x.json")).unwrap();
+        }
+        let f = write(dir.path(), name, &bytes);
+        let _ = load_default(&f);
+    }
+
+    /// Arbitrary bytes under every extension load or fail cleanly.
+    #[test]
+    fn arbitrary_bytes_never_panic(bytes in prop::collection::vec(any::<u8>(), 0..4096), ext in prop::sample::select(vec!["hgt", "hgt.gz", "tif", "png", "jpg", "asc", "dem", "json"])) {
+        let dir = tempfile::tempdir().unwrap();
+        let f = write(dir.path(), &format!("N10E010.{ext}"), &bytes);
+        let _ = load_default(&f);
+    }
+}
