@@ -7,7 +7,7 @@
 
 mod common;
 
-use common::oracle::{check_model, cover_counts, NaiveModel};
+use common::oracle::{assert_cut_covers, assert_measured_exactly, check_model, NaiveModel};
 use common::{data, fields::Rng};
 use fmrh::ingest::{load, IngestOptions};
 use fmrh::model::{BuildOptions, Model, NO_PARENT};
@@ -64,34 +64,13 @@ fn check_large(model: &Model, source: &Heightfield, samples: usize, seed: u64) {
         assert!(n.monotone_error <= nodes[n.parent as usize].monotone_error);
     }
     for c in model.clusters() {
-        for &i in &c.nodes {
-            let n = &nodes[i as usize];
-            assert!(n.monotone_error <= c.threshold);
-            assert!(n.parent == NO_PARENT || nodes[n.parent as usize].monotone_error > c.threshold);
-        }
-        assert!(
-            cover_counts(model, &c.nodes).iter().all(|&k| k == 1),
-            "cover at {}",
-            c.threshold
-        );
+        assert_cut_covers(model, c);
     }
     let naive = NaiveModel::new(source, *model.domain());
     let mut rng = Rng::new(seed);
     for _ in 0..samples {
         let n = &nodes[(rng.next_u64() % nodes.len() as u64) as usize];
-        let (err, lo, hi, count) = naive.stats(n.level, n.x, n.y);
-        assert_eq!(
-            n.static_error.to_bits(),
-            err.to_bits(),
-            "level {} ({}, {})",
-            n.level,
-            n.x,
-            n.y
-        );
-        assert_eq!(
-            (n.min_height, n.max_height, n.valid_samples),
-            (lo, hi, count)
-        );
+        assert_measured_exactly(&naive, n);
     }
 }
 

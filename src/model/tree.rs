@@ -152,11 +152,6 @@ impl Fmrh {
         tree
     }
 
-    /// Measures and prunes in one go.
-    pub fn build(raster: &MendedRaster, domain: Domain, delta_min: f64) -> Fmrh {
-        Fmrh::prune(domain, &Measurements::measure(raster, &domain), delta_min)
-    }
-
     fn visit(&mut self, measured: &Measurements, level: u8, x: u32, y: u32, parent: u32) {
         let m = &measured.levels[usize::from(level)];
         let i = m.index(x, y);

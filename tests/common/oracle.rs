@@ -16,7 +16,7 @@
 
 use std::collections::{HashMap, HashSet};
 
-use fmrh::model::{cluster, Domain, Model, NO_PARENT};
+use fmrh::model::{cluster, Cluster, Domain, Model, Node, NO_PARENT};
 use fmrh::Heightfield;
 
 /// The mended field and per-node measurements, computed naively.
@@ -315,6 +315,51 @@ pub fn cover_counts(model: &Model, nodes: &[u32]) -> Vec<u32> {
     counts
 }
 
+/// Asserts that node `n` carries exactly the naive oracle's error, height range and valid
+/// count (bit for bit).
+pub fn assert_measured_exactly(naive: &NaiveModel, n: &Node) {
+    let (err, lo, hi, count) = naive.stats(n.level, n.x, n.y);
+    assert_eq!(
+        n.static_error.to_bits(),
+        err.to_bits(),
+        "node level {} ({}, {}): static error {} vs naive {err}",
+        n.level,
+        n.x,
+        n.y,
+        n.static_error
+    );
+    assert_eq!(
+        (n.min_height, n.max_height, n.valid_samples),
+        (lo, hi, count),
+        "node level {} ({}, {}): range and count",
+        n.level,
+        n.x,
+        n.y
+    );
+}
+
+/// Asserts bound (`e* <= δ`), minimality (the parent's `e* > δ`) and cover (every unit in
+/// exactly one node) for cluster `c`.
+pub fn assert_cut_covers(model: &Model, c: &Cluster) {
+    let nodes = model.tree().nodes();
+    for &i in &c.nodes {
+        let n = &nodes[i as usize];
+        assert!(n.monotone_error <= c.threshold, "bound at {}", c.threshold);
+        assert!(
+            n.parent == NO_PARENT || nodes[n.parent as usize].monotone_error > c.threshold,
+            "minimality at {}",
+            c.threshold
+        );
+    }
+    let counts = cover_counts(model, &c.nodes);
+    if let Some(bad) = counts.iter().position(|&k| k != 1) {
+        panic!(
+            "cluster {}: unit {bad} covered {} times",
+            c.threshold, counts[bad]
+        );
+    }
+}
+
 /// Asserts every invariant of `model`, built from `source`.
 pub fn check_model(model: &Model, source: &Heightfield) {
     let tree = model.tree();
@@ -362,26 +407,11 @@ pub fn check_model(model: &Model, source: &Heightfield) {
             );
         }
         assert!(n.monotone_error >= n.static_error);
-        // Exactness against the naive measurement.
-        let (err, lo, hi, count) = naive.stats(n.level, n.x, n.y);
-        assert_eq!(
-            n.static_error.to_bits(),
-            err.to_bits(),
-            "node {i} (level {} x {} y {}): static error {} vs naive {err}",
-            n.level,
-            n.x,
-            n.y,
-            n.static_error
-        );
+        assert_measured_exactly(&naive, n);
         assert_eq!(
             n.monotone_error.to_bits(),
             monotone[&(n.level, n.x, n.y)].to_bits(),
             "node {i}: e*"
-        );
-        assert_eq!(
-            (n.min_height, n.max_height, n.valid_samples),
-            (lo, hi, count),
-            "node {i}: range and count"
         );
         if n.level == finest {
             assert_eq!(n.static_error, 0.0, "finest nodes are the data");
@@ -418,16 +448,7 @@ pub fn check_model(model: &Model, source: &Heightfield) {
     for c in clusters {
         let members: HashSet<u32> = c.nodes.iter().copied().collect();
         assert_eq!(members.len(), c.nodes.len(), "no node twice");
-        for &i in &c.nodes {
-            let n = &nodes[i as usize];
-            assert!(n.monotone_error <= c.threshold, "bound");
-            if n.parent != NO_PARENT {
-                assert!(
-                    nodes[n.parent as usize].monotone_error > c.threshold,
-                    "minimality"
-                );
-            }
-        }
+        assert_cut_covers(model, c);
         assert!(
             c.nodes
                 .windows(2)
@@ -439,13 +460,6 @@ pub fn check_model(model: &Model, source: &Heightfield) {
             cluster::cut(tree, c.threshold),
             "the cut's definition"
         );
-        let counts = cover_counts(model, &c.nodes);
-        if let Some(bad) = counts.iter().position(|&k| k != 1) {
-            panic!(
-                "cluster {}: unit {bad} covered {} times",
-                c.threshold, counts[bad]
-            );
-        }
         assert_eq!(
             algorithm2(model, &c.nodes),
             c.nodes,
