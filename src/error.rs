@@ -48,9 +48,33 @@ pub enum Error {
     /// An option or argument value that cannot be used.
     #[error("invalid argument: {0}")]
     InvalidArgument(String),
+    /// A container breaks one of the numbered invariants of `format-spec/container.md`: the
+    /// file is damaged (or was written by a buggy writer), which is never a bug of the reader.
+    #[error("corrupt container: {invariant} violated at {location}: {detail}")]
+    Corrupt {
+        /// The invariant, as the spec numbers it (`I-7`).
+        invariant: &'static str,
+        /// Where: a page number, a byte offset, a node index.
+        location: String,
+        /// What was found, for a person.
+        detail: String,
+    },
 }
 
 impl Error {
+    /// A broken invariant of a container.
+    pub fn corrupt(
+        invariant: &'static str,
+        location: impl Into<String>,
+        detail: impl Into<String>,
+    ) -> Self {
+        Error::Corrupt {
+            invariant,
+            location: location.into(),
+            detail: detail.into(),
+        }
+    }
+
     /// A malformed-input error about `path`.
     pub fn input(path: impl Into<PathBuf>, reason: impl Into<String>) -> Self {
         Error::Input {

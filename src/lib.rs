@@ -33,10 +33,13 @@
 
 pub mod curve;
 pub mod error;
+pub mod format;
 pub mod heightfield;
 pub mod ingest;
 pub mod model;
+pub mod store;
 
 pub use error::{Error, Result};
 pub use heightfield::Heightfield;
 pub use model::{BuildOptions, Model, Thresholds};
+pub use store::Store;

@@ -27,6 +27,7 @@
 //! budget, and the lower rung is always the right pick there too, so nothing is lost. Thresholds
 //! given by the user are kept exactly as given.
 
+use super::domain::{Domain, SampleRect};
 use super::tree::{Fmrh, NO_PARENT};
 use crate::error::{Error, Result};
 
@@ -153,6 +154,45 @@ pub fn merge_identical_cuts(clusters: Vec<Cluster>) -> Vec<Cluster> {
         }
     }
     out
+}
+
+/// The edges of the data rectangle, in the order adjacency lists are stored.
+pub const EDGES: [&str; 4] = ["north", "east", "south", "west"];
+
+/// For each edge of the data rectangle (north, east, south, west), the nodes of `cut` whose
+/// footprint touches it, in order along it: west to east for north and south, north to south
+/// for east and west. Multi-file stitching walks these lists side by side.
+pub fn edge_nodes(tree: &Fmrh, cut: &[u32]) -> [Vec<u32>; 4] {
+    edge_nodes_by(tree.domain(), cut, |i| tree.footprint(i))
+}
+
+/// [`edge_nodes`] for nodes known only by their footprints.
+pub fn edge_nodes_by(
+    domain: &Domain,
+    cut: &[u32],
+    footprint: impl Fn(u32) -> SampleRect,
+) -> [Vec<u32>; 4] {
+    let data = domain.data_rect();
+    let mut edges: [Vec<(u64, u32)>; 4] = Default::default();
+    for &i in cut {
+        let fp = footprint(i);
+        if fp.row0 == data.row0 {
+            edges[0].push((fp.col0, i));
+        }
+        if fp.col0 <= data.col1 && data.col1 <= fp.col1 {
+            edges[1].push((fp.row0, i));
+        }
+        if fp.row0 <= data.row1 && data.row1 <= fp.row1 {
+            edges[2].push((fp.col0, i));
+        }
+        if fp.col0 == data.col0 {
+            edges[3].push((fp.row0, i));
+        }
+    }
+    edges.map(|mut e| {
+        e.sort_unstable();
+        e.into_iter().map(|(_, i)| i).collect()
+    })
 }
 
 #[cfg(test)]

@@ -28,7 +28,7 @@ pub const MIN_BLOCK_SIZE: u32 = 9;
 pub const MAX_BLOCK_SIZE: u32 = 1025;
 
 /// An inclusive rectangle of sample coordinates: columns `col0..=col1`, rows `row0..=row1`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize)]
 pub struct SampleRect {
     /// West column.
     pub col0: u64,

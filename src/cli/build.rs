@@ -1,0 +1,246 @@
+//! `fmrh build`: DEM in, container out (or a dry-run report).
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Instant;
+
+use serde::Serialize;
+
+use fmrh::format::DEFAULT_PAGE_SIZE;
+use fmrh::ingest::{self, ColorEncoding, Format, IngestOptions};
+use fmrh::model::{BuildOptions, Model, Thresholds, DEFAULT_BLOCK_SIZE};
+use fmrh::store::{write_file, WriteOptions, WriteSummary};
+use fmrh::Error;
+
+#[derive(clap::Args)]
+pub struct BuildArgs {
+    /// The DEM to read.
+    input: PathBuf,
+    /// The container to write. It appears only once complete (temporary file, fsync,
+    /// rename); an existing file is kept unless --force.
+    #[arg(short, long, required_unless_present = "dry_run", conflicts_with = "dry_run")]
+    output: Option<PathBuf>,
+    /// Build the model in memory and report on it without writing anything.
+    #[arg(long)]
+    dry_run: bool,
+    /// Replace OUTPUT if it exists (atomically: the old file stays whole until the new one is
+    /// complete).
+    #[arg(long)]
+    force: bool,
+    /// Samples along a block side: 2^k + 1, from 9 to 1025.
+    #[arg(long, default_value_t = DEFAULT_BLOCK_SIZE)]
+    block_size: u32,
+    /// Cluster thresholds in height units, comma-separated (e.g. 0,1,5,20). Default: a √2
+    /// ladder from the largest error down, plus 0 (lossless).
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
+    thresholds: Option<Vec<f64>>,
+    /// Bytes per page of the container: a power of two from 1024 to 65536.
+    #[arg(long, default_value_t = DEFAULT_PAGE_SIZE)]
+    page_size: u32,
+    /// No progress bar.
+    #[arg(long, short)]
+    quiet: bool,
+    /// Print the report as JSON.
+    #[arg(long)]
+    json: bool,
+    #[command(flatten)]
+    ingest: IngestArgs,
+}
+
+#[derive(clap::Args)]
+struct IngestArgs {
+    /// Input format; guessed from the name and contents when absent.
+    #[arg(long, value_enum)]
+    format: Option<Format>,
+    /// How an RGB(A) PNG encodes heights.
+    #[arg(long, value_enum)]
+    color_encoding: Option<ColorEncoding>,
+    /// Multiply raw values by this (e.g. 0.1 for a decimetre 16-bit PNG).
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
+    z_scale: f64,
+    /// Add this to scaled values.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    z_offset: f64,
+    /// A raw value that marks a void, besides the format's own nodata.
+    #[arg(long, allow_negative_numbers = true)]
+    nodata: Option<f64>,
+}
+
+impl IngestArgs {
+    fn options(&self) -> IngestOptions {
+        IngestOptions {
+            format: self.format,
+            color_encoding: self.color_encoding,
+            z_scale: self.z_scale,
+            z_offset: self.z_offset,
+            nodata: self.nodata,
+        }
+    }
+}
+
+#[derive(Serialize)]
+struct ClusterReport {
+    threshold: f64,
+    nodes: usize,
+    max_error: f64,
+}
+
+#[derive(Serialize)]
+struct BuildReport {
+    input: String,
+    format: String,
+    width: u32,
+    height: u32,
+    block_size: u32,
+    levels: u8,
+    finest_level: u8,
+    padded_side: u64,
+    padding_samples: u64,
+    valid_samples: u64,
+    void_samples: u64,
+    units: Option<String>,
+    spacing_m: Option<[f64; 2]>,
+    nodes: usize,
+    nodes_per_level: Vec<u64>,
+    max_error: f64,
+    clusters: Vec<ClusterReport>,
+    ingest_time_ms: f64,
+    build_time_ms: f64,
+    /// Present when a container was written.
+    output: Option<OutputReport>,
+    peak_memory_bytes: Option<u64>,
+}
+
+#[derive(Serialize)]
+struct OutputReport {
+    path: String,
+    /// Bytes of the samples as raw f32 (width x height x 4).
+    raw_f32_bytes: u64,
+    /// File length over raw f32 bytes.
+    size_ratio: f64,
+    write_time_ms: f64,
+    #[serde(flatten)]
+    summary: WriteSummary,
+}
+
+/// Peak resident memory of this process (Linux `VmHWM`), if the system tells.
+fn peak_memory_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
+
+/// Runs `fmrh build`.
+pub fn run(args: &BuildArgs) -> Result<ExitCode, Error> {
+    let t0 = Instant::now();
+    let heightfield = ingest::load(&args.input, &args.ingest.options())?;
+    let ingest_time = t0.elapsed();
+    let metadata = heightfield.metadata.clone();
+    let options = BuildOptions {
+        block_size: args.block_size,
+        thresholds: match &args.thresholds {
+            Some(t) => Thresholds::Explicit(t.clone()),
+            None => Thresholds::Ladder,
+        },
+    };
+    let t1 = Instant::now();
+    let model = Model::build(heightfield, &options)?;
+    let build_time = t1.elapsed();
+    let output = match &args.output {
+        Some(path) if !args.dry_run => {
+            let t2 = Instant::now();
+            let options = WriteOptions {
+                page_size: args.page_size,
+                progress: !args.quiet && !args.json,
+            };
+            let summary = write_file(&model, &metadata, path, &options, args.force)?;
+            let raw = 4 * u64::from(model.domain().width()) * u64::from(model.domain().height());
+            Some(OutputReport {
+                path: path.display().to_string(),
+                raw_f32_bytes: raw,
+                size_ratio: summary.file_length as f64 / raw as f64,
+                write_time_ms: t2.elapsed().as_secs_f64() * 1e3,
+                summary,
+            })
+        }
+        _ => None,
+    };
+    let domain = model.domain();
+    let report = BuildReport {
+        input: args.input.display().to_string(),
+        format: metadata.source_format.clone(),
+        width: domain.width(),
+        height: domain.height(),
+        block_size: domain.block_size(),
+        levels: domain.levels(),
+        finest_level: domain.finest_level(),
+        padded_side: domain.side(),
+        padding_samples: domain.padding_samples(),
+        valid_samples: model.raster().valid_count(),
+        void_samples: model.raster().void_count(),
+        units: metadata.units,
+        spacing_m: metadata.spacing_m,
+        nodes: model.tree().nodes().len(),
+        nodes_per_level: model.tree().nodes_per_level(),
+        max_error: model.max_error(),
+        clusters: model
+            .clusters()
+            .iter()
+            .map(|c| ClusterReport {
+                threshold: c.threshold,
+                nodes: c.nodes.len(),
+                max_error: c.max_error,
+            })
+            .collect(),
+        ingest_time_ms: ingest_time.as_secs_f64() * 1e3,
+        build_time_ms: build_time.as_secs_f64() * 1e3,
+        output,
+        peak_memory_bytes: peak_memory_bytes(),
+    };
+    if args.json {
+        super::print_json(&report)?;
+    } else {
+        print_report(&report);
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn print_report(r: &BuildReport) {
+    println!("{} ({})", r.input, r.format);
+    println!(
+        "  grid        {} x {} samples, {} valid, {} void",
+        r.width, r.height, r.valid_samples, r.void_samples
+    );
+    println!(
+        "  blocks      {} samples a side; {} levels; domain padded to {} ({} padding samples)",
+        r.block_size, r.levels, r.padded_side, r.padding_samples
+    );
+    println!(
+        "  nodes       {} (per level: {:?})",
+        r.nodes, r.nodes_per_level
+    );
+    println!("  max error   {}", r.max_error);
+    println!("  clusters    {}", r.clusters.len());
+    println!("      threshold        nodes    max error");
+    for c in &r.clusters {
+        println!(
+            "  {:>13.6} {:>12} {:>12.6}",
+            c.threshold, c.nodes, c.max_error
+        );
+    }
+    println!(
+        "  time        ingest {:.1} ms, model {:.1} ms",
+        r.ingest_time_ms, r.build_time_ms
+    );
+    if let Some(o) = &r.output {
+        println!(
+            "  written     {}: {} bytes = {:.3} x raw f32, in {:.1} ms",
+            o.path, o.summary.file_length, o.size_ratio, o.write_time_ms
+        );
+    }
+    if let Some(bytes) = r.peak_memory_bytes {
+        println!("  peak memory {:.1} MiB", bytes as f64 / (1 << 20) as f64);
+    }
+}
+

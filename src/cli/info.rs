@@ -1,0 +1,248 @@
+//! `fmrh info`: what a container holds and where its bytes go.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use serde::Serialize;
+
+use fmrh::heightfield::Georeference;
+use fmrh::store::Layout;
+use fmrh::Error;
+
+#[derive(clap::Args)]
+pub struct InfoArgs {
+    /// The container.
+    file: PathBuf,
+    /// Print JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+/// What `info --json` prints. The golden vectors in `format-spec/vectors/` pin it.
+#[derive(Serialize)]
+struct Info {
+    format_version: String,
+    txn_id: u64,
+    commit_slot: u8,
+    page_size: u32,
+    file_length: u64,
+    width: u32,
+    height: u32,
+    block_size: u32,
+    levels: u8,
+    finest_level: u8,
+    padded_side: u64,
+    padding_samples: u64,
+    valid_samples: u64,
+    void_samples: u64,
+    spacing_m: Option<[f64; 2]>,
+    georeference: Option<GeoInfo>,
+    units: Option<String>,
+    source_format: String,
+    delta_min: f64,
+    max_error: f64,
+    nodes: u64,
+    nodes_per_level: Vec<u64>,
+    physical_blocks: u64,
+    clusters: Vec<ClusterInfo>,
+    sections: Sections,
+}
+
+#[derive(Serialize)]
+struct GeoInfo {
+    crs: Option<String>,
+    origin: [f64; 2],
+    step: [f64; 2],
+}
+
+impl From<&Georeference> for GeoInfo {
+    fn from(g: &Georeference) -> Self {
+        GeoInfo {
+            crs: g.crs.clone(),
+            origin: g.origin,
+            step: g.step,
+        }
+    }
+}
+
+#[derive(Serialize)]
+struct ClusterInfo {
+    threshold: f64,
+    max_error: f64,
+    nodes: u64,
+    index_depth: u16,
+    index_pages: u64,
+    edge_nodes: [usize; 4],
+}
+
+/// Bytes per section.
+#[derive(Serialize)]
+struct Sections {
+    commit_slots: u64,
+    dataset_header: u64,
+    cluster_directory: u64,
+    node_table: u64,
+    block_table: u64,
+    free_list: u64,
+    cluster_indexes: u64,
+    adjacency_lists: u64,
+    block_payloads: u64,
+    grid_payloads: u64,
+    payload_padding: u64,
+}
+
+impl Sections {
+    fn of(l: &Layout) -> Sections {
+        let p = u64::from(l.page_size);
+        let index: u64 = l.cluster_index_pages.iter().sum();
+        let adjacency = l.adjacency_pages;
+        let metadata_pages = l.commit_pages
+            + l.dataset_header_pages
+            + l.cluster_directory_pages
+            + l.node_table_pages
+            + l.block_table_pages
+            + l.free_list_pages
+            + index
+            + adjacency;
+        Sections {
+            commit_slots: l.commit_pages * p,
+            dataset_header: l.dataset_header_pages * p,
+            cluster_directory: l.cluster_directory_pages * p,
+            node_table: l.node_table_pages * p,
+            block_table: l.block_table_pages * p,
+            free_list: l.free_list_pages * p,
+            cluster_indexes: index * p,
+            adjacency_lists: adjacency * p,
+            block_payloads: l.block_bytes,
+            grid_payloads: l.grid_bytes,
+            payload_padding: l
+                .file_length
+                .saturating_sub(metadata_pages * p + l.block_bytes + l.grid_bytes),
+        }
+    }
+}
+
+/// Runs `fmrh info`.
+pub fn run(args: &InfoArgs) -> Result<ExitCode, Error> {
+    let store = super::open(&args.file)?;
+    let h = store.header();
+    let d = h.domain;
+    let nodes = store.nodes()?;
+    let mut per_level = vec![0u64; usize::from(d.levels())];
+    for n in &nodes {
+        if let Some(c) = per_level.get_mut(usize::from(n.level)) {
+            *c += 1;
+        }
+    }
+    let layout = store.layout()?;
+    let mut clusters = Vec::new();
+    for (i, c) in store.clusters().iter().enumerate() {
+        let mut edge_nodes = [0usize; 4];
+        for (e, slot) in edge_nodes.iter_mut().enumerate() {
+            *slot = store.adjacency(i, e)?.len();
+        }
+        clusters.push(ClusterInfo {
+            threshold: c.threshold,
+            max_error: c.max_error,
+            nodes: c.nodes(),
+            index_depth: c.index.depth.get(),
+            index_pages: layout.cluster_index_pages[i],
+            edge_nodes,
+        });
+    }
+    let r = store.commit_record();
+    let info = Info {
+        format_version: format!("{}.{}", r.major.get(), r.minor.get()),
+        txn_id: store.txn_id(),
+        commit_slot: store.commit_slot(),
+        page_size: store.page_size(),
+        file_length: r.file_length.get(),
+        width: d.width(),
+        height: d.height(),
+        block_size: d.block_size(),
+        levels: d.levels(),
+        finest_level: d.finest_level(),
+        padded_side: d.side(),
+        padding_samples: d.padding_samples(),
+        valid_samples: h.valid_samples,
+        void_samples: h.void_samples,
+        spacing_m: h.metadata.spacing_m,
+        georeference: h.metadata.georeference.as_ref().map(GeoInfo::from),
+        units: h.metadata.units.clone(),
+        source_format: h.metadata.source_format.clone(),
+        delta_min: h.delta_min,
+        max_error: h.max_error,
+        nodes: h.node_count,
+        nodes_per_level: per_level,
+        physical_blocks: h.block_count,
+        clusters,
+        sections: Sections::of(&layout),
+    };
+    if args.json {
+        super::print_json(&info)?;
+    } else {
+        print_info(&args.file, &info);
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn print_info(path: &std::path::Path, i: &Info) {
+    println!(
+        "{}: fmrh {} container, txn {}, {} bytes in {}-byte pages",
+        path.display(),
+        i.format_version,
+        i.txn_id,
+        i.file_length,
+        i.page_size
+    );
+    println!(
+        "  grid        {} x {} samples ({} valid, {} void), from {}",
+        i.width, i.height, i.valid_samples, i.void_samples, i.source_format
+    );
+    if let Some(s) = i.spacing_m {
+        println!("  spacing     {} m x {} m", s[0], s[1]);
+    }
+    if let Some(g) = &i.georeference {
+        println!(
+            "  georef      {} origin {:?} step {:?}",
+            g.crs.as_deref().unwrap_or("(no CRS)"),
+            g.origin,
+            g.step
+        );
+    }
+    println!(
+        "  blocks      {} a side, {} levels, {} physical blocks, padded to {}",
+        i.block_size, i.levels, i.physical_blocks, i.padded_side
+    );
+    println!("  nodes       {} (per level {:?})", i.nodes, i.nodes_per_level);
+    println!("  max error   {} (delta_min {})", i.max_error, i.delta_min);
+    println!("  clusters    {}", i.clusters.len());
+    println!("      threshold    max error      nodes  index pages (depth)");
+    for c in &i.clusters {
+        println!(
+            "  {:>13.6} {:>12.6} {:>10} {:>8} ({})",
+            c.threshold, c.max_error, c.nodes, c.index_pages, c.index_depth
+        );
+    }
+    let s = &i.sections;
+    let total = i.file_length.max(1) as f64;
+    println!("  bytes per section");
+    for (name, bytes) in [
+        ("block payloads", s.block_payloads),
+        ("grid payloads", s.grid_payloads),
+        ("payload padding", s.payload_padding),
+        ("node table", s.node_table),
+        ("block table", s.block_table),
+        ("cluster indexes", s.cluster_indexes),
+        ("adjacency lists", s.adjacency_lists),
+        ("cluster directory", s.cluster_directory),
+        ("dataset header", s.dataset_header),
+        ("commit slots", s.commit_slots),
+        ("free list", s.free_list),
+    ] {
+        println!(
+            "    {name:<18} {bytes:>12}  {:>6.2}%",
+            100.0 * bytes as f64 / total
+        );
+    }
+}

@@ -1,0 +1,61 @@
+//! The subcommands, one module each, and the few helpers they share.
+
+pub mod build;
+pub mod extract;
+pub mod info;
+pub mod scan;
+pub mod verify;
+
+use std::path::Path;
+
+use serde::Serialize;
+
+use fmrh::store::FileSource;
+use fmrh::{Error, Store};
+
+/// Prints `value` as pretty JSON.
+pub fn print_json<T: Serialize>(value: &T) -> Result<(), Error> {
+    let text = serde_json::to_string_pretty(value)
+        .map_err(|e| Error::InvalidArgument(format!("cannot format the report: {e}")))?;
+    println!("{text}");
+    Ok(())
+}
+
+/// Opens a container for the read-only commands. Positioned reads, not a mapping: a command
+/// line tool cannot promise that nobody else touches the file (see `Store::open`).
+pub fn open(path: &Path) -> Result<Store<FileSource>, Error> {
+    Store::open_read(path)
+}
+
+/// Parses `a,b,c,d` into four integers.
+pub fn parse_quad(text: &str, what: &str) -> Result<[u64; 4], Error> {
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    let values: Option<Vec<u64>> = parts.iter().map(|p| p.parse().ok()).collect();
+    match values {
+        Some(v) if v.len() == 4 => Ok([v[0], v[1], v[2], v[3]]),
+        _ => Err(Error::InvalidArgument(format!(
+            "{what} `{text}`: expected four non-negative integers c0,r0,c1,r1"
+        ))),
+    }
+}
+
+/// Parses a Rust-style range of integers into an inclusive one: `a..b` (b excluded) or
+/// `a..=b` (b included). `None` when the range is empty.
+pub fn parse_range(text: &str, what: &str) -> Result<Option<(u64, u64)>, Error> {
+    let bad = || {
+        Error::InvalidArgument(format!(
+            "{what} `{text}`: expected A..B (B excluded) or A..=B (B included)"
+        ))
+    };
+    let (a, b, inclusive) = if let Some((a, b)) = text.split_once("..=") {
+        (a, b, true)
+    } else if let Some((a, b)) = text.split_once("..") {
+        (a, b, false)
+    } else {
+        return Err(bad());
+    };
+    let a: u64 = a.trim().parse().map_err(|_| bad())?;
+    let b: u64 = b.trim().parse().map_err(|_| bad())?;
+    let last = if inclusive { Some(b) } else { b.checked_sub(1) };
+    Ok(last.filter(|&l| l >= a).map(|l| (a, l)))
+}

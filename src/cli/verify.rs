@@ -1,0 +1,69 @@
+//! `fmrh verify`: the validator on the command line.
+
+use std::fs::File;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use fmrh::store::{verify, CheckStatus, FileSource};
+use fmrh::Error;
+
+#[derive(clap::Args)]
+pub struct VerifyArgs {
+    /// The container.
+    file: PathBuf,
+    /// Also recompute every error from the physical blocks, and check every cut and
+    /// adjacency list.
+    #[arg(long)]
+    full: bool,
+    /// Print the report as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Runs `fmrh verify`: exit 0 valid, 1 invalid, 2 unusable.
+pub fn run(args: &VerifyArgs) -> Result<ExitCode, Error> {
+    let path = &args.file;
+    let file = File::open(path).map_err(|e| Error::input(path, e.to_string()))?;
+    let src = FileSource::new(file, path)?;
+    let report = match verify(src, args.full) {
+        Ok(r) => r,
+        Err(Error::Input { reason, .. }) => return Err(Error::input(path, reason)),
+        Err(Error::Unsupported { reason, .. }) => return Err(Error::unsupported(path, reason)),
+        Err(e) => return Err(e),
+    };
+    if args.json {
+        super::print_json(&report)?;
+    } else {
+        println!(
+            "{}: {} ({} check, txn {})",
+            path.display(),
+            if report.valid { "valid" } else { "INVALID" },
+            report.mode,
+            report
+                .txn_id
+                .map_or_else(|| "none".to_string(), |t| t.to_string())
+        );
+        for c in &report.checks {
+            let status = match c.status {
+                CheckStatus::Passed => "ok",
+                CheckStatus::Failed => "FAILED",
+                CheckStatus::Skipped => "skipped",
+            };
+            println!("  {:<5} {:<26} {status}", c.id, c.name);
+            for f in &c.failures {
+                println!("        {f}");
+            }
+            if c.failure_count > c.failures.len() as u64 {
+                println!(
+                    "        ... and {} more",
+                    c.failure_count - c.failures.len() as u64
+                );
+            }
+        }
+    }
+    Ok(if report.valid {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(1)
+    })
+}

@@ -1,0 +1,157 @@
+//! Where a store's bytes come from: a memory map, a file read with `pread`, or bytes in memory.
+//!
+//! Every parser works on `&[u8]`. A [`Source`] only hands out byte ranges: borrowed from a
+//! mapping or a buffer (zero-copy), or owned after a read. The store asks a source whether
+//! its bytes can change after they were checked (`stable`). A file read with `pread` can be
+//! rewritten by another process, so every page read from it is checked again.
+
+use std::borrow::Cow;
+use std::fs::File;
+use std::io;
+use std::path::Path;
+
+use memmap2::Mmap;
+
+use crate::error::{Error, Result};
+
+/// A readable, fixed-length run of bytes.
+pub trait Source: Send + Sync {
+    /// Total bytes.
+    fn len(&self) -> u64;
+
+    /// Whether the source is empty.
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Bytes `offset .. offset + len`. Callers check the range against [`Source::len`]
+    /// first; a range beyond it is an error, never a panic.
+    fn read_at(&self, offset: u64, len: usize) -> io::Result<Cow<'_, [u8]>>;
+
+    /// Whether bytes once checked stay as they were, so pages validated at open need no
+    /// second check (true for a mapping under the [`super::Store::open`] contract, and for
+    /// memory).
+    fn stable(&self) -> bool;
+}
+
+fn slice_at(bytes: &[u8], offset: u64, len: usize) -> io::Result<&[u8]> {
+    usize::try_from(offset)
+        .ok()
+        .and_then(|o| Some(o..o.checked_add(len)?))
+        .and_then(|r| bytes.get(r))
+        .ok_or_else(|| {
+            io::Error::new(
+                io::ErrorKind::UnexpectedEof,
+                format!("{len} bytes at offset {offset} lie past the end"),
+            )
+        })
+}
+
+/// Bytes in memory.
+#[derive(Clone, Debug)]
+pub struct Bytes<T>(pub T);
+
+impl<T: AsRef<[u8]> + Send + Sync> Source for Bytes<T> {
+    fn len(&self) -> u64 {
+        self.0.as_ref().len() as u64
+    }
+
+    fn read_at(&self, offset: u64, len: usize) -> io::Result<Cow<'_, [u8]>> {
+        slice_at(self.0.as_ref(), offset, len).map(Cow::Borrowed)
+    }
+
+    fn stable(&self) -> bool {
+        true
+    }
+}
+
+/// A read-only memory map of a file (see [`super::Store::open`] for the contract).
+#[derive(Debug)]
+pub struct MmapSource(Mmap);
+
+impl MmapSource {
+    /// Maps `file`.
+    ///
+    /// # Safety
+    /// The caller promises what [`super::Store::open`] documents: nobody modifies or
+    /// truncates the file while the mapping lives.
+    pub unsafe fn new(file: &File, path: &Path) -> Result<MmapSource> {
+        // SAFETY: forwarded to our caller's contract (no concurrent modification or
+        // truncation of the file for the mapping's lifetime).
+        let map = unsafe { Mmap::map(file) }.map_err(|e| Error::io(path, e))?;
+        Ok(MmapSource(map))
+    }
+}
+
+impl Source for MmapSource {
+    fn len(&self) -> u64 {
+        self.0.len() as u64
+    }
+
+    fn read_at(&self, offset: u64, len: usize) -> io::Result<Cow<'_, [u8]>> {
+        slice_at(&self.0, offset, len).map(Cow::Borrowed)
+    }
+
+    fn stable(&self) -> bool {
+        true
+    }
+}
+
+/// A file read with positioned reads: safe whatever other processes do to the file (a
+/// changed page fails its checksum instead of crashing the reader).
+#[derive(Debug)]
+pub struct FileSource {
+    file: File,
+    len: u64,
+}
+
+impl FileSource {
+    /// Wraps an open file; its length is read once.
+    pub fn new(file: File, path: &Path) -> Result<FileSource> {
+        let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
+        Ok(FileSource { file, len })
+    }
+}
+
+impl Source for FileSource {
+    fn len(&self) -> u64 {
+        self.len
+    }
+
+    fn read_at(&self, offset: u64, len: usize) -> io::Result<Cow<'_, [u8]>> {
+        if offset.checked_add(len as u64).is_none_or(|end| end > self.len) {
+            return Err(io::Error::new(
+                io::ErrorKind::UnexpectedEof,
+                format!("{len} bytes at offset {offset} lie past the end"),
+            ));
+        }
+        let mut buf = vec![0u8; len];
+        read_exact_at(&self.file, &mut buf, offset)?;
+        Ok(Cow::Owned(buf))
+    }
+
+    fn stable(&self) -> bool {
+        false
+    }
+}
+
+#[cfg(unix)]
+fn read_exact_at(file: &File, buf: &mut [u8], offset: u64) -> io::Result<()> {
+    std::os::unix::fs::FileExt::read_exact_at(file, buf, offset)
+}
+
+#[cfg(windows)]
+fn read_exact_at(file: &File, mut buf: &mut [u8], mut offset: u64) -> io::Result<()> {
+    while !buf.is_empty() {
+        match std::os::windows::fs::FileExt::seek_read(file, buf, offset) {
+            Ok(0) => return Err(io::ErrorKind::UnexpectedEof.into()),
+            Ok(n) => {
+                buf = &mut buf[n..];
+                offset += n as u64;
+            }
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(())
+}
