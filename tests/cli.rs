@@ -179,7 +179,7 @@ fn bad_input_is_a_clear_error() {
         "threshold -1",
     );
     fails_with(&["build", hgt, "--dry-run", "--z-scale", "0"], 2, "z-scale");
-    fails_with(&["build", hgt], 2, "--dry-run");
+    fails_with(&["build", hgt], 2, "--output");
     fails_with(
         &["build", fuji.to_str().unwrap(), "--dry-run"],
         2,

@@ -8,10 +8,14 @@
 //! Mending is not local (a void takes the nearest valid sample in its row or column, which may
 //! lie blocks away), so the stand-ins are what lets a reader draw a block alone.
 //!
-//! A **coarse grid** (a node above the finest level) holds `b × b` little-endian `f32` of
-//! mended heights, the node's point decimation. If the node record's
-//! [`super::NODE_GRID_HAS_VOIDS`] flag is set, a bitmap of `ceil(b² / 8)` bytes follows (bit
-//! `i % 8` of byte `i / 8` set when grid sample `i` is a void or padding).
+//! A **coarse grid** (a node above the finest level) holds the node's `b × b` point
+//! decimation of mended heights, *clipped to the data*: [`grid_dims`] gives the `gw × gh`
+//! samples stored, row-major little-endian `f32`. A grid column lies east of the data
+//! when its sample column is past `width - 1`. All such columns repeat the data's east edge
+//! (padding clamps), so only the first of them is stored, and grid column `i` reads stored
+//! column `min(i, gw - 1)`. Rows likewise. If the node record's
+//! [`super::NODE_GRID_HAS_VOIDS`] flag is set, a bitmap of `ceil(gw·gh / 8)` bytes follows
+//! (bit `k % 8` of byte `k / 8` set when stored sample `k` stands for a void or for padding).
 //!
 //! Payloads start on multiples of [`super::PAYLOAD_ALIGN`] bytes, and the bytes between them
 //! are zero.
@@ -19,14 +23,40 @@
 use zerocopy::byteorder::little_endian::F32;
 use zerocopy::FromBytes;
 
+use crate::model::Domain;
+
 /// Bytes of a physical block's payload.
 pub fn block_len(width: u32, height: u32, void_count: u32) -> u64 {
     4 * (u64::from(width) * u64::from(height) + u64::from(void_count))
 }
 
-/// Bytes of a coarse grid's payload.
-pub fn grid_len(block_size: u32, has_voids: bool) -> u64 {
-    let n = u64::from(block_size) * u64::from(block_size);
+/// The stored columns and rows `(gw, gh)` of the grid of node `(x, y)` at `level`.
+pub fn grid_dims(domain: &Domain, level: u8, x: u32, y: u32) -> (u32, u32) {
+    let fp = domain.footprint(level, x, y);
+    let s = domain.stride(level);
+    let b = domain.block_size();
+    let dim = |start: u64, last_data: u64| -> u32 {
+        // Grid samples at start + i * s inside the data, plus one clamp sample if any lie past.
+        let inside = if start > last_data {
+            0
+        } else {
+            ((last_data - start) / s + 1).min(u64::from(b)) as u32
+        };
+        if inside < b {
+            inside + 1
+        } else {
+            b
+        }
+    };
+    (
+        dim(fp.col0, u64::from(domain.width() - 1)),
+        dim(fp.row0, u64::from(domain.height() - 1)),
+    )
+}
+
+/// Bytes of a coarse grid's payload of `gw × gh` stored samples.
+pub fn grid_len(gw: u32, gh: u32, has_voids: bool) -> u64 {
+    let n = u64::from(gw) * u64::from(gh);
     4 * n + if has_voids { n.div_ceil(8) } else { 0 }
 }
 
@@ -94,35 +124,64 @@ impl<'a> BlockView<'a> {
 /// A coarse grid's payload, read in place.
 #[derive(Clone, Copy, Debug)]
 pub struct GridView<'a> {
-    /// Samples a side (`b`).
+    /// Samples a side of the full grid (`b`).
     pub size: u32,
+    /// Stored columns.
+    pub stored_width: u32,
+    /// Stored rows.
+    pub stored_height: u32,
     heights: &'a [F32],
     void_bitmap: Option<&'a [u8]>,
 }
 
 impl<'a> GridView<'a> {
-    /// Views `bytes` as a `size × size` grid; `None` if the length disagrees.
-    pub fn new(bytes: &'a [u8], size: u32, has_voids: bool) -> Option<Self> {
-        if bytes.len() as u64 != grid_len(size, has_voids) {
+    /// Views `bytes` as a `b × b` grid stored as `gw × gh`; `None` if the length disagrees.
+    pub fn new(bytes: &'a [u8], size: u32, (gw, gh): (u32, u32), has_voids: bool) -> Option<Self> {
+        if gw == 0 || gh == 0 || gw > size || gh > size || bytes.len() as u64 != grid_len(gw, gh, has_voids) {
             return None;
         }
-        let n = size as usize * size as usize;
+        let n = gw as usize * gh as usize;
         let (h, rest) = bytes.split_at(4 * n);
         Some(GridView {
             size,
+            stored_width: gw,
+            stored_height: gh,
             heights: <[F32]>::ref_from_bytes(h).ok()?,
             void_bitmap: has_voids.then_some(rest),
         })
     }
 
-    /// The mended heights, row-major from the north-west. Zero-copy.
-    pub fn heights(&self) -> &'a [F32] {
+    /// The stored heights, row-major from the north-west. Zero-copy.
+    pub fn stored(&self) -> &'a [F32] {
         self.heights
     }
 
-    /// Whether grid sample `i` (row-major) stands in for a void or padding.
-    pub fn is_void(&self, i: usize) -> bool {
-        self.void_bitmap
-            .is_some_and(|b| b.get(i / 8).is_some_and(|byte| byte >> (i % 8) & 1 == 1))
+    fn stored_index(&self, i: u32, j: u32) -> usize {
+        let (c, r) = (i.min(self.stored_width - 1), j.min(self.stored_height - 1));
+        r as usize * self.stored_width as usize + c as usize
+    }
+
+    /// The height at grid sample `(i, j)` of the full `b × b` grid.
+    pub fn height(&self, i: u32, j: u32) -> f32 {
+        self.heights[self.stored_index(i, j)].get()
+    }
+
+    /// Whether grid sample `(i, j)` of the full grid stands in for a void or padding.
+    pub fn is_void(&self, i: u32, j: u32) -> bool {
+        let k = self.stored_index(i, j);
+        i >= self.stored_width
+            || j >= self.stored_height
+            || self
+                .void_bitmap
+                .is_some_and(|b| b.get(k / 8).is_some_and(|byte| byte >> (k % 8) & 1 == 1))
+    }
+
+    /// The full `b × b` grid of heights, row-major.
+    pub fn expanded(&self) -> Vec<f32> {
+        let b = self.size;
+        (0..b)
+            .flat_map(|j| (0..b).map(move |i| (i, j)))
+            .map(|(i, j)| self.height(i, j))
+            .collect()
     }
 }

@@ -43,7 +43,7 @@ pub use write::{write_file, write_to, SectionBytes, WriteOptions, WriteSummary};
 use btree::{PageSet, Pages, Seek, TreeSpec};
 use crate::curve::HilbertKey;
 use crate::error::{Error, Result};
-use crate::format::payload::{BlockView, GridView};
+use crate::format::payload::{self, BlockView, GridView};
 use crate::format::{
     self, invariant, is_zero, tag, AdjacencyEntry, BlobRef, BlockRecord, ClusterRecord,
     CommitRecord, DatasetHeader, EdgeRange, FreeEntry, IndexEntry, NodeRecord, TreeRef,
@@ -770,7 +770,16 @@ impl<S: Source> Store<S> {
         )?;
         let has_voids = node.flags.get() & NODE_GRID_HAS_VOIDS != 0;
         let size = self.domain().block_size();
-        if GridView::new(&bytes, size, has_voids).is_none() {
+        let d = self.domain();
+        if !d.exists(node.level, node.x.get(), node.y.get()) {
+            return Err(Error::corrupt(
+                invariant::NODE_TABLE,
+                format!("node at level {} ({}, {})", node.level, node.x.get(), node.y.get()),
+                "not a node of the domain",
+            ));
+        }
+        let dims = payload::grid_dims(d, node.level, node.x.get(), node.y.get());
+        if GridView::new(&bytes, size, dims, has_voids).is_none() {
             return Err(Error::corrupt(
                 invariant::PAYLOAD,
                 format!("grid at byte {}", node.payload_offset.get()),
@@ -779,6 +788,7 @@ impl<S: Source> Store<S> {
         }
         Ok(Grid {
             size,
+            dims,
             has_voids,
             bytes,
         })
@@ -1016,6 +1026,7 @@ impl Block<'_> {
 #[derive(Clone, Debug)]
 pub struct Grid<'a> {
     size: u32,
+    dims: (u32, u32),
     has_voids: bool,
     bytes: Cow<'a, [u8]>,
 }
@@ -1023,7 +1034,7 @@ pub struct Grid<'a> {
 impl Grid<'_> {
     /// The heights and void flags, in place.
     pub fn view(&self) -> GridView<'_> {
-        GridView::new(&self.bytes, self.size, self.has_voids)
+        GridView::new(&self.bytes, self.size, self.dims, self.has_voids)
             .unwrap_or_else(|| unreachable!("the length was checked when the grid was read"))
     }
 

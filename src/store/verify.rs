@@ -21,7 +21,7 @@ use crate::curve::HilbertKey;
 use crate::error::{Error, Result};
 use crate::format::payload::{self, BlockView, GridView};
 use crate::format::{
-    invariant as inv, is_zero, BlockRecord, IndexEntry, NodeRecord,
+    invariant as inv, is_zero, BlockRecord, COMMIT_RECORD_LEN, IndexEntry, NodeRecord,
     NODE_GRID_HAS_VOIDS, PAYLOAD_ALIGN, VOID_BITS,
 };
 use crate::heightfield::Heightfield;
@@ -212,6 +212,18 @@ pub fn verify<S: Source>(src: S, full: bool) -> Result<VerifyReport> {
             format!("commit slot {}: neither zero nor a valid record ({e})", 1 - slot),
         ),
     }
+    // The rest of each slot page, after the record, is zero.
+    let p = u64::from(record.page_size.get());
+    for s in 0..2u64 {
+        let tail = p - COMMIT_RECORD_LEN as u64;
+        match src.read_at(s * p + COMMIT_RECORD_LEN as u64, tail as usize) {
+            Ok(b) if is_zero(&b) => {}
+            _ => checks.fail(
+                if s == u64::from(slot) { inv::COMMIT_RECORD } else { inv::INACTIVE_SLOT },
+                format!("commit slot {s}: the page after the record is not zero"),
+            ),
+        }
+    }
     if file_length < record.file_length.get() {
         return Ok(checks.finish(mode, Some(txn), file_length));
     }
@@ -401,7 +413,8 @@ fn check_nodes<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Checks) {
                 }
             }
         } else {
-            let want = payload::grid_len(d.block_size(), flags & NODE_GRID_HAS_VOIDS != 0);
+            let (gw, gh) = payload::grid_dims(d, level, x, y);
+            let want = payload::grid_len(gw, gh, flags & NODE_GRID_HAS_VOIDS != 0);
             if u64::from(n.payload_len.get()) != want {
                 checks.fail(id, format!("{at}: grid payload of {} bytes, expected {want}", n.payload_len.get()));
             }
@@ -722,13 +735,20 @@ fn check_measured<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Checks) 
             continue;
         }
         if n.level < finest {
-            let grid = model.node_grid(i as u32);
+            let full = model.node_grid(i as u32);
+            let (clipped, gw, _) = super::write::clipped_grid(&model, i as u32);
+            let b = full.size;
             let ok = store.grid(s).is_ok_and(|g| {
                 let v: GridView<'_> = g.view();
                 let has = s.flags.get() & NODE_GRID_HAS_VOIDS != 0;
-                has == grid.void.iter().any(|&x| x)
-                    && v.heights().iter().zip(&grid.heights).all(|(a, b)| a.get().to_bits() == b.to_bits())
-                    && (0..grid.void.len()).all(|k| v.is_void(k) == grid.void[k])
+                has == clipped.void.iter().any(|&x| x)
+                    && v.stored_width == gw
+                    && v.stored().iter().zip(&clipped.heights).all(|(a, b)| a.get().to_bits() == b.to_bits())
+                    && (0..b * b).all(|k| {
+                        let (gi, gj) = (k % b, k / b);
+                        v.is_void(gi, gj) == full.void[k as usize]
+                            && v.height(gi, gj).to_bits() == full.heights[k as usize].to_bits()
+                    })
             });
             if !ok {
                 checks.fail(id, format!("node {i}: its grid is not the decimation of the blocks"));

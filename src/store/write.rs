@@ -195,9 +195,12 @@ pub fn write_to<W: Write + Seek>(
     let shapes = block_shapes(model);
     let grid_voids = grid_void_flags(model);
     let items = payload_order(model);
-    let b = domain.block_size();
     let len_of = |item: &Item| match *item {
-        Item::Grid { node } => payload::grid_len(b, grid_voids[node as usize]),
+        Item::Grid { node } => {
+            let n = tree.node(node);
+            let (gw, gh) = payload::grid_dims(&domain, n.level, n.x, n.y);
+            payload::grid_len(gw, gh, grid_voids[node as usize])
+        }
         Item::Block { x, y } => {
             let s = &shapes[(y * cols + x) as usize];
             payload::block_len(
@@ -547,12 +550,11 @@ fn block_shapes(model: &Model) -> Vec<BlockShape> {
         .collect()
 }
 
-/// Per node: whether its coarse grid has a void or padding sample.
+/// Per node: whether its stored (clipped) coarse grid has a void or padding sample.
 fn grid_void_flags(model: &Model) -> Vec<bool> {
     let d = model.domain();
     let tree = model.tree();
     let data = d.data_rect();
-    let b = u64::from(d.block_size());
     (0..tree.nodes().len() as u32)
         .into_par_iter()
         .map(|i| {
@@ -565,8 +567,10 @@ fn grid_void_flags(model: &Model) -> Vec<bool> {
                 return false;
             }
             let s = d.stride(n.level);
-            (0..b).any(|j| {
-                (0..b).any(|k| !model.raster().is_valid(fp.col0 + k * s, fp.row0 + j * s))
+            let (gw, gh) = payload::grid_dims(d, n.level, n.x, n.y);
+            (0..u64::from(gh)).any(|j| {
+                (0..u64::from(gw))
+                    .any(|k| !model.raster().is_valid(fp.col0 + k * s, fp.row0 + j * s))
             })
         })
         .collect()
@@ -610,15 +614,15 @@ fn blocks_under(d: &crate::model::Domain, level: u8, x: u32, y: u32, items: &mut
     }
 }
 
+/// The stored (clipped) grid of `node`: the top-left `gw × gh` of its `b × b` grid.
 fn encode_grid(model: &Model, node: u32, has_voids: bool) -> Vec<u8> {
-    let g = model.node_grid(node);
-    let n = g.heights.len();
-    let mut bytes = Vec::with_capacity(payload::grid_len(g.size, has_voids) as usize);
+    let (g, gw, gh) = clipped_grid(model, node);
+    let mut bytes = Vec::with_capacity(payload::grid_len(gw, gh, has_voids) as usize);
     for h in &g.heights {
         bytes.extend_from_slice(&h.to_le_bytes());
     }
     if has_voids {
-        let mut bitmap = vec![0u8; n.div_ceil(8)];
+        let mut bitmap = vec![0u8; g.heights.len().div_ceil(8)];
         for (i, &v) in g.void.iter().enumerate() {
             if v {
                 bitmap[i / 8] |= 1 << (i % 8);
@@ -627,6 +631,26 @@ fn encode_grid(model: &Model, node: u32, has_voids: bool) -> Vec<u8> {
         bytes.extend_from_slice(&bitmap);
     }
     bytes
+}
+
+/// The grid of `node` clipped to its stored `gw × gh` (see [`payload::grid_dims`]).
+pub(crate) fn clipped_grid(model: &Model, node: u32) -> (crate::model::NodeGrid, u32, u32) {
+    let n = model.tree().node(node);
+    let (gw, gh) = payload::grid_dims(model.domain(), n.level, n.x, n.y);
+    let mut g = model.node_grid(node);
+    let b = g.size as usize;
+    let inside = |k: usize| k % b < gw as usize && k / b < gh as usize;
+    let mut k = 0;
+    g.heights.retain(|_| {
+        k += 1;
+        inside(k - 1)
+    });
+    k = 0;
+    g.void.retain(|_| {
+        k += 1;
+        inside(k - 1)
+    });
+    (g, gw, gh)
 }
 
 fn encode_block(model: &Model, shape: &BlockShape) -> Vec<u8> {
