@@ -1,0 +1,106 @@
+//! The format is pinned: the small containers in `format-spec/vectors/` are rebuilt from the
+//! fixed heightfields below and must come out byte for byte identical, and `fmrh info --json`
+//! on each stored file must print exactly the stored `.info.json`. A change to the writer, the
+//! layout, the model or the reader makes this fail. If the change is deliberate, it is a
+//! format change: bump the version per the policy in `format-spec/container.md`, then
+//! regenerate with `FMRH_BLESS=1 cargo test --release --test golden_vectors`.
+
+use std::io::Cursor;
+use std::path::PathBuf;
+use std::process::Command;
+
+use fmrh::heightfield::{Georeference, Metadata};
+use fmrh::model::{BuildOptions, Model, Thresholds};
+use fmrh::store::{write_to, WriteOptions};
+use fmrh::Heightfield;
+
+struct Vector {
+    name: &'static str,
+    field: Heightfield,
+    block_size: u32,
+    thresholds: Thresholds,
+}
+
+fn vectors() -> Vec<Vector> {
+    let ramp = Heightfield::from_fn(9, 9, |x, y| (x + 2 * y) as f32).unwrap();
+    let mut hills = Heightfield::from_fn(20, 13, |x, y| {
+        if (x, y) == (3, 4) || (x, y) == (15, 0) || (x, y) == (19, 12) {
+            f32::NAN
+        } else {
+            ((x as f32 * 0.7).sin() * 40.0 + (y as f32 * 0.45).cos() * 25.0).round()
+        }
+    })
+    .unwrap();
+    hills.metadata = Metadata {
+        spacing_m: Some([30.0, 30.0]),
+        georeference: Some(Georeference {
+            crs: Some("EPSG:4326".into()),
+            origin: [-160.0, 23.0],
+            step: [0.001, -0.001],
+        }),
+        units: Some("metres".into()),
+        source_format: "test".into(),
+    };
+    let cliff = Heightfield::from_fn(33, 33, |x, _| if x < 11 { 10.0 } else { 500.0 }).unwrap();
+    vec![
+        Vector { name: "ramp-9x9", field: ramp, block_size: 9, thresholds: Thresholds::Ladder },
+        Vector { name: "hills-20x13-voids", field: hills, block_size: 9, thresholds: Thresholds::Ladder },
+        Vector { name: "cliff-33x33", field: cliff, block_size: 9, thresholds: Thresholds::Explicit(vec![0.0, 1.0, 10.0]) },
+    ]
+}
+
+fn build(v: &Vector) -> Vec<u8> {
+    let model = Model::build(v.field.clone(), &BuildOptions { block_size: v.block_size, thresholds: v.thresholds.clone() }).unwrap();
+    let mut out = Cursor::new(Vec::new());
+    write_to(&model, &v.field.metadata, &WriteOptions { page_size: 1024, progress: false }, &mut out).unwrap();
+    out.into_inner()
+}
+
+fn dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("format-spec/vectors")
+}
+
+#[test]
+fn vectors_are_byte_exact_and_read_as_recorded() {
+    let bless = std::env::var_os("FMRH_BLESS").is_some();
+    for v in vectors() {
+        let bytes = build(&v);
+        let file = dir().join(format!("{}.fmrh", v.name));
+        let info_file = dir().join(format!("{}.info.json", v.name));
+        if bless {
+            std::fs::write(&file, &bytes).unwrap();
+        }
+        let stored = std::fs::read(&file).unwrap_or_else(|e| panic!("{}: {e} (bless to create)", file.display()));
+        assert!(stored == bytes, "{}: the writer's bytes drifted from the vector", v.name);
+        let out = Command::new(env!("CARGO_BIN_EXE_fmrh")).args(["info", "--json", file.to_str().unwrap()]).output().unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        if bless {
+            std::fs::write(&info_file, &out.stdout).unwrap();
+        }
+        let want: serde_json::Value = serde_json::from_slice(&std::fs::read(&info_file).unwrap()).unwrap();
+        let got: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(got, want, "{}: the reading drifted", v.name);
+        let verify = Command::new(env!("CARGO_BIN_EXE_fmrh")).args(["verify", "--full", file.to_str().unwrap()]).output().unwrap();
+        assert!(verify.status.success(), "{}", String::from_utf8_lossy(&verify.stdout));
+    }
+}
+
+#[test]
+fn vector_commit_record_fields_sit_where_the_spec_says() {
+    // Spot checks against the byte table of format-spec/container.md §2.
+    let bytes = build(&vectors()[1]);
+    assert_eq!(&bytes[0..8], b"FMRH\r\n\x1a\n");
+    assert_eq!(u16::from_le_bytes([bytes[8], bytes[9]]), 1); // major
+    assert_eq!(u32::from_le_bytes(bytes[12..16].try_into().unwrap()), 1024); // page size
+    assert_eq!(u64::from_le_bytes(bytes[16..24].try_into().unwrap()), 1); // txn id
+    assert_eq!(u64::from_le_bytes(bytes[24..32].try_into().unwrap()), bytes.len() as u64);
+    let crc = crc32fast::hash(&bytes[..252]);
+    assert_eq!(u32::from_le_bytes(bytes[252..256].try_into().unwrap()), crc);
+    assert!(bytes[1024..2048].iter().all(|&b| b == 0), "slot 1 of a fresh file is zero");
+    // The dataset header blob starts at page 2: tag, then width and height.
+    assert_eq!(&bytes[2048..2052], b"FMHD");
+    let h = 2048 + 24;
+    assert_eq!(u32::from_le_bytes(bytes[h..h + 4].try_into().unwrap()), 20);
+    assert_eq!(u32::from_le_bytes(bytes[h + 4..h + 8].try_into().unwrap()), 13);
+    assert_eq!(u32::from_le_bytes(bytes[h + 8..h + 12].try_into().unwrap()), 9);
+}
