@@ -51,18 +51,32 @@ fn brute_scan(model: &Model, cluster: usize, lo: u64, hi: u64) -> Vec<ScanEntry>
         .collect()
 }
 
-fn check_store<S: Source>(store: &Store<S>, model: &Model, field: &Heightfield, ranges: &[(u64, u64)]) {
+fn check_store<S: Source>(
+    store: &Store<S>,
+    model: &Model,
+    field: &Heightfield,
+    ranges: &[(u64, u64)],
+) {
     // Samples, bit for bit.
     let back = store.read_window(store.domain().data_rect()).unwrap();
-    assert_eq!((back.width(), back.height()), (field.width(), field.height()));
+    assert_eq!(
+        (back.width(), back.height()),
+        (field.width(), field.height())
+    );
     for (a, b) in back.samples().iter().zip(field.samples()) {
-        assert!(a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan() && a.to_bits() == f32::NAN.to_bits()));
+        assert!(
+            a.to_bits() == b.to_bits()
+                || (a.is_nan() && b.is_nan() && a.to_bits() == f32::NAN.to_bits())
+        );
     }
     // Nodes.
     let nodes = store.nodes().unwrap();
     assert_eq!(nodes.len(), model.tree().nodes().len());
     for (r, n) in nodes.iter().zip(model.tree().nodes()) {
-        assert_eq!((r.key.get(), r.level, r.x.get(), r.y.get()), (n.key.0, n.level, n.x, n.y));
+        assert_eq!(
+            (r.key.get(), r.level, r.x.get(), r.y.get()),
+            (n.key.0, n.level, n.x, n.y)
+        );
         assert_eq!(r.monotone_error.get().to_bits(), n.monotone_error.to_bits());
         assert_eq!(r.static_error.get().to_bits(), n.static_error.to_bits());
     }
@@ -79,22 +93,45 @@ fn check_store<S: Source>(store: &Store<S>, model: &Model, field: &Heightfield, 
     assert_eq!(store.clusters().len(), model.clusters().len());
     let span = HilbertKey::span(finest, 0);
     for (c, cluster) in model.clusters().iter().enumerate() {
-        let all: Vec<ScanEntry> = store.scan_codes(c, 0..u64::MAX).unwrap().map(Result::unwrap).collect();
+        let all: Vec<ScanEntry> = store
+            .scan_codes(c, 0..u64::MAX)
+            .unwrap()
+            .map(Result::unwrap)
+            .collect();
         let want: Vec<u32> = cluster.nodes.clone();
         assert_eq!(all.iter().map(|e| e.node).collect::<Vec<_>>(), want);
-        assert_eq!(store.scan_hilbert(c, 0..=span - 1).unwrap().count(), want.len());
+        assert_eq!(
+            store.scan_hilbert(c, 0..=span - 1).unwrap().count(),
+            want.len()
+        );
         for &(a, b) in ranges {
             let (lo, hi) = (a % span, b % span);
             let (lo, hi) = (lo.min(hi), lo.max(hi));
-            let got: Vec<ScanEntry> = store.scan_hilbert(c, lo..=hi).unwrap().map(Result::unwrap).collect();
-            assert_eq!(got, brute_scan(model, c, lo, hi), "cluster {c} range {lo}..={hi}");
+            let got: Vec<ScanEntry> = store
+                .scan_hilbert(c, lo..=hi)
+                .unwrap()
+                .map(Result::unwrap)
+                .collect();
+            assert_eq!(
+                got,
+                brute_scan(model, c, lo, hi),
+                "cluster {c} range {lo}..={hi}"
+            );
             let n = want.len() as u64;
             let (x, y) = ((a % (n + 2)), (b % (n + 2)));
             let (x, y) = (x.min(y), x.max(y));
-            let codes: Vec<u32> = store.scan_codes(c, x..y).unwrap().map(|e| e.unwrap().node).collect();
+            let codes: Vec<u32> = store
+                .scan_codes(c, x..y)
+                .unwrap()
+                .map(|e| e.unwrap().node)
+                .collect();
             let end = (y as usize).min(want.len());
             let start = (x as usize).min(end);
-            assert_eq!(codes, want[start..end].to_vec(), "cluster {c} codes {x}..{y}");
+            assert_eq!(
+                codes,
+                want[start..end].to_vec(),
+                "cluster {c} codes {x}..{y}"
+            );
         }
         // Adjacency lists: every listed node is in the cut and touches its edge.
         for edge in 0..4 {
@@ -156,6 +193,8 @@ fn a_deep_index_is_searched_correctly() {
     let store = Store::from_bytes(&bytes).unwrap();
     assert!(store.clusters()[0].index.depth.get() >= 3);
     let span = HilbertKey::span(model.domain().finest_level(), 0);
-    let ranges: Vec<(u64, u64)> = (0..40u64).map(|i| (i * 409 % span, (i * 409 + i * i * 31) % span)).collect();
+    let ranges: Vec<(u64, u64)> = (0..40u64)
+        .map(|i| (i * 409 % span, (i * 409 + i * i * 31) % span))
+        .collect();
     check_store(&store, &model, &field, &ranges);
 }

@@ -26,7 +26,11 @@ fn datasets() -> Vec<std::path::PathBuf> {
         }
     }
     out.sort();
-    assert!(out.len() >= 15, "expected the 15 shared DEMs, found {}", out.len());
+    assert!(
+        out.len() >= 15,
+        "expected the 15 shared DEMs, found {}",
+        out.len()
+    );
     out
 }
 
@@ -34,7 +38,14 @@ fn roundtrip(source: &Path, dir: &Path) {
     let field = fmrh::ingest::load(source, &Default::default()).unwrap();
     let model = Model::build(field.clone(), &BuildOptions::default()).unwrap();
     let path = dir.join("out.fmrh");
-    let summary = write_file(&model, &field.metadata, &path, &WriteOptions::default(), true).unwrap();
+    let summary = write_file(
+        &model,
+        &field.metadata,
+        &path,
+        &WriteOptions::default(),
+        true,
+    )
+    .unwrap();
     let raw = 4 * u64::from(field.width()) * u64::from(field.height());
     let ratio = summary.file_length as f64 / raw as f64;
     // Blocks repeat their shared edges (a few %), coarse grids add at most a third, tables
@@ -50,7 +61,11 @@ fn roundtrip(source: &Path, dir: &Path) {
     for v in back.samples() {
         bytes.extend_from_slice(&v.to_le_bytes());
     }
-    assert!(bytes == original, "{}: extraction differs from the source", source.display());
+    assert!(
+        bytes == original,
+        "{}: extraction differs from the source",
+        source.display()
+    );
 }
 
 #[test]

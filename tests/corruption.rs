@@ -44,7 +44,10 @@ fn rejected(bytes: &[u8], full: bool) -> bool {
 fn the_small_container_is_valid() {
     let bytes = small_container();
     assert!(!rejected(&bytes, true));
-    assert!(bytes.len() >= 8 * 1024, "the test container should span several pages");
+    assert!(
+        bytes.len() >= 8 * 1024,
+        "the test container should span several pages"
+    );
 }
 
 #[test]
@@ -79,7 +82,10 @@ fn truncation_at_every_page_boundary_is_detected() {
     for pages in 0..bytes.len() / 1024 {
         let cut = &bytes[..pages * 1024];
         assert!(rejected(cut, false), "truncated to {pages} pages");
-        assert!(Store::from_bytes(cut).is_err(), "opened a file truncated to {pages} pages");
+        assert!(
+            Store::from_bytes(cut).is_err(),
+            "opened a file truncated to {pages} pages"
+        );
     }
     // And at a few points inside pages.
     for cut in [1, 255, 256, 1023, 1025, bytes.len() - 1] {
@@ -108,7 +114,10 @@ fn random_bit_flips_in_a_real_container_are_detected() {
         let i = (rng.next_u64() % bytes.len() as u64) as usize;
         let bit = rng.next_u64() % 8;
         bytes[i] ^= 1 << bit;
-        assert!(rejected(&bytes, false), "flip of bit {bit} of byte {i} went undetected");
+        assert!(
+            rejected(&bytes, false),
+            "flip of bit {bit} of byte {i} went undetected"
+        );
         bytes[i] ^= 1 << bit;
     }
     assert!(!rejected(&bytes, false));

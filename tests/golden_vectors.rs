@@ -43,16 +43,47 @@ fn vectors() -> Vec<Vector> {
     };
     let cliff = Heightfield::from_fn(33, 33, |x, _| if x < 11 { 10.0 } else { 500.0 }).unwrap();
     vec![
-        Vector { name: "ramp-9x9", field: ramp, block_size: 9, thresholds: Thresholds::Ladder },
-        Vector { name: "hills-20x13-voids", field: hills, block_size: 9, thresholds: Thresholds::Ladder },
-        Vector { name: "cliff-33x33", field: cliff, block_size: 9, thresholds: Thresholds::Explicit(vec![0.0, 1.0, 10.0]) },
+        Vector {
+            name: "ramp-9x9",
+            field: ramp,
+            block_size: 9,
+            thresholds: Thresholds::Ladder,
+        },
+        Vector {
+            name: "hills-20x13-voids",
+            field: hills,
+            block_size: 9,
+            thresholds: Thresholds::Ladder,
+        },
+        Vector {
+            name: "cliff-33x33",
+            field: cliff,
+            block_size: 9,
+            thresholds: Thresholds::Explicit(vec![0.0, 1.0, 10.0]),
+        },
     ]
 }
 
 fn build(v: &Vector) -> Vec<u8> {
-    let model = Model::build(v.field.clone(), &BuildOptions { block_size: v.block_size, thresholds: v.thresholds.clone() }).unwrap();
+    let model = Model::build(
+        v.field.clone(),
+        &BuildOptions {
+            block_size: v.block_size,
+            thresholds: v.thresholds.clone(),
+        },
+    )
+    .unwrap();
     let mut out = Cursor::new(Vec::new());
-    write_to(&model, &v.field.metadata, &WriteOptions { page_size: 1024, progress: false }, &mut out).unwrap();
+    write_to(
+        &model,
+        &v.field.metadata,
+        &WriteOptions {
+            page_size: 1024,
+            progress: false,
+        },
+        &mut out,
+    )
+    .unwrap();
     out.into_inner()
 }
 
@@ -70,18 +101,38 @@ fn vectors_are_byte_exact_and_read_as_recorded() {
         if bless {
             std::fs::write(&file, &bytes).unwrap();
         }
-        let stored = std::fs::read(&file).unwrap_or_else(|e| panic!("{}: {e} (bless to create)", file.display()));
-        assert!(stored == bytes, "{}: the writer's bytes drifted from the vector", v.name);
-        let out = Command::new(env!("CARGO_BIN_EXE_fmrh")).args(["info", "--json", file.to_str().unwrap()]).output().unwrap();
-        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let stored = std::fs::read(&file)
+            .unwrap_or_else(|e| panic!("{}: {e} (bless to create)", file.display()));
+        assert!(
+            stored == bytes,
+            "{}: the writer's bytes drifted from the vector",
+            v.name
+        );
+        let out = Command::new(env!("CARGO_BIN_EXE_fmrh"))
+            .args(["info", "--json", file.to_str().unwrap()])
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
         if bless {
             std::fs::write(&info_file, &out.stdout).unwrap();
         }
-        let want: serde_json::Value = serde_json::from_slice(&std::fs::read(&info_file).unwrap()).unwrap();
+        let want: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(&info_file).unwrap()).unwrap();
         let got: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
         assert_eq!(got, want, "{}: the reading drifted", v.name);
-        let verify = Command::new(env!("CARGO_BIN_EXE_fmrh")).args(["verify", "--full", file.to_str().unwrap()]).output().unwrap();
-        assert!(verify.status.success(), "{}", String::from_utf8_lossy(&verify.stdout));
+        let verify = Command::new(env!("CARGO_BIN_EXE_fmrh"))
+            .args(["verify", "--full", file.to_str().unwrap()])
+            .output()
+            .unwrap();
+        assert!(
+            verify.status.success(),
+            "{}",
+            String::from_utf8_lossy(&verify.stdout)
+        );
     }
 }
 
@@ -93,14 +144,26 @@ fn vector_commit_record_fields_sit_where_the_spec_says() {
     assert_eq!(u16::from_le_bytes([bytes[8], bytes[9]]), 1); // major
     assert_eq!(u32::from_le_bytes(bytes[12..16].try_into().unwrap()), 1024); // page size
     assert_eq!(u64::from_le_bytes(bytes[16..24].try_into().unwrap()), 1); // txn id
-    assert_eq!(u64::from_le_bytes(bytes[24..32].try_into().unwrap()), bytes.len() as u64);
+    assert_eq!(
+        u64::from_le_bytes(bytes[24..32].try_into().unwrap()),
+        bytes.len() as u64
+    );
     let crc = crc32fast::hash(&bytes[..252]);
     assert_eq!(u32::from_le_bytes(bytes[252..256].try_into().unwrap()), crc);
-    assert!(bytes[1024..2048].iter().all(|&b| b == 0), "slot 1 of a fresh file is zero");
+    assert!(
+        bytes[1024..2048].iter().all(|&b| b == 0),
+        "slot 1 of a fresh file is zero"
+    );
     // The dataset header blob starts at page 2: tag, then width and height.
     assert_eq!(&bytes[2048..2052], b"FMHD");
     let h = 2048 + 24;
     assert_eq!(u32::from_le_bytes(bytes[h..h + 4].try_into().unwrap()), 20);
-    assert_eq!(u32::from_le_bytes(bytes[h + 4..h + 8].try_into().unwrap()), 13);
-    assert_eq!(u32::from_le_bytes(bytes[h + 8..h + 12].try_into().unwrap()), 9);
+    assert_eq!(
+        u32::from_le_bytes(bytes[h + 4..h + 8].try_into().unwrap()),
+        13
+    );
+    assert_eq!(
+        u32::from_le_bytes(bytes[h + 8..h + 12].try_into().unwrap()),
+        9
+    );
 }

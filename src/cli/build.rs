@@ -18,7 +18,12 @@ pub struct BuildArgs {
     input: PathBuf,
     /// The container to write. It appears only once complete (temporary file, fsync,
     /// rename); an existing file is kept unless --force.
-    #[arg(short, long, required_unless_present = "dry_run", conflicts_with = "dry_run")]
+    #[arg(
+        short,
+        long,
+        required_unless_present = "dry_run",
+        conflicts_with = "dry_run"
+    )]
     output: Option<PathBuf>,
     /// Build the model in memory and report on it without writing anything.
     #[arg(long)]
@@ -243,4 +248,3 @@ fn print_report(r: &BuildReport) {
         println!("  peak memory {:.1} MiB", bytes as f64 / (1 << 20) as f64);
     }
 }
-

@@ -214,7 +214,10 @@ fn print_info(path: &std::path::Path, i: &Info) {
         "  blocks      {} a side, {} levels, {} physical blocks, padded to {}",
         i.block_size, i.levels, i.physical_blocks, i.padded_side
     );
-    println!("  nodes       {} (per level {:?})", i.nodes, i.nodes_per_level);
+    println!(
+        "  nodes       {} (per level {:?})",
+        i.nodes, i.nodes_per_level
+    );
     println!("  max error   {} (delta_min {})", i.max_error, i.delta_min);
     println!("  clusters    {}", i.clusters.len());
     println!("      threshold    max error      nodes  index pages (depth)");

@@ -106,7 +106,9 @@ pub fn run(args: &ScanArgs) -> Result<ExitCode, Error> {
             report.threshold,
             report.entries.len()
         );
-        println!("        node          key  level      x      y   samples (c0,r0 .. c1,r1)        e*");
+        println!(
+            "        node          key  level      x      y   samples (c0,r0 .. c1,r1)        e*"
+        );
         for e in &report.entries {
             println!(
                 "  {:>10} {:>12} {:>6} {:>6} {:>6}   {},{} .. {},{}  {:>12.6}",

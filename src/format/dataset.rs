@@ -157,9 +157,14 @@ impl DatasetHeader {
 
     /// Parses and checks a blob (invariant I-6).
     pub fn decode(bytes: &[u8]) -> Result<DatasetHeader> {
-        let bad = |detail: String| Error::corrupt(invariant::DATASET_HEADER, "dataset header", detail);
-        let (f, rest) = Fixed::read_from_prefix(bytes)
-            .map_err(|_| bad(format!("{} bytes, shorter than the fixed part", bytes.len())))?;
+        let bad =
+            |detail: String| Error::corrupt(invariant::DATASET_HEADER, "dataset header", detail);
+        let (f, rest) = Fixed::read_from_prefix(bytes).map_err(|_| {
+            bad(format!(
+                "{} bytes, shorter than the fixed part",
+                bytes.len()
+            ))
+        })?;
         let flags = f.flags.get();
         if flags & !KNOWN_FLAGS != 0 {
             return Err(bad(format!("unknown flags {flags:#x}")));
@@ -172,11 +177,23 @@ impl DatasetHeader {
         let (cols, rows) = domain.nodes_across(domain.finest_level());
         let samples = u64::from(domain.width()) * u64::from(domain.height());
         let checks: [(&str, u64, u64); 6] = [
-            ("finest level", u64::from(f.finest_level), u64::from(domain.finest_level())),
+            (
+                "finest level",
+                u64::from(f.finest_level),
+                u64::from(domain.finest_level()),
+            ),
             ("levels", u64::from(f.levels), u64::from(domain.levels())),
             ("padded side", f.padded_side.get(), domain.side()),
-            ("padding samples", f.padding_samples.get(), domain.padding_samples()),
-            ("block count", f.block_count.get(), u64::from(cols) * u64::from(rows)),
+            (
+                "padding samples",
+                f.padding_samples.get(),
+                domain.padding_samples(),
+            ),
+            (
+                "block count",
+                f.block_count.get(),
+                u64::from(cols) * u64::from(rows),
+            ),
             (
                 "valid + void samples",
                 f.valid_samples.get().saturating_add(f.void_samples.get()),
@@ -185,7 +202,9 @@ impl DatasetHeader {
         ];
         for (what, stored, implied) in checks {
             if stored != implied {
-                return Err(bad(format!("{what} is {stored}, the geometry implies {implied}")));
+                return Err(bad(format!(
+                    "{what} is {stored}, the geometry implies {implied}"
+                )));
             }
         }
         let (delta_min, max_error) = (f.delta_min.get(), f.max_error.get());
@@ -200,9 +219,15 @@ impl DatasetHeader {
         if f.node_count.get() == 0 {
             return Err(bad("no nodes".into()));
         }
-        let lens = [f.crs_len.get(), f.units_len.get(), f.source_format_len.get()];
+        let lens = [
+            f.crs_len.get(),
+            f.units_len.get(),
+            f.source_format_len.get(),
+        ];
         if lens.iter().any(|&l| l > MAX_STRING_LEN) {
-            return Err(bad(format!("string lengths {lens:?} exceed {MAX_STRING_LEN}")));
+            return Err(bad(format!(
+                "string lengths {lens:?} exceed {MAX_STRING_LEN}"
+            )));
         }
         let total: usize = lens.iter().map(|&l| l as usize).sum();
         if rest.len() != total {

@@ -137,7 +137,12 @@ pub struct GridView<'a> {
 impl<'a> GridView<'a> {
     /// Views `bytes` as a `b × b` grid stored as `gw × gh`; `None` if the length disagrees.
     pub fn new(bytes: &'a [u8], size: u32, (gw, gh): (u32, u32), has_voids: bool) -> Option<Self> {
-        if gw == 0 || gh == 0 || gw > size || gh > size || bytes.len() as u64 != grid_len(gw, gh, has_voids) {
+        if gw == 0
+            || gh == 0
+            || gw > size
+            || gh > size
+            || bytes.len() as u64 != grid_len(gw, gh, has_voids)
+        {
             return None;
         }
         let n = gw as usize * gh as usize;

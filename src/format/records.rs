@@ -11,7 +11,19 @@ use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
 use super::{COMMIT_RECORD_LEN, PAGE_HEADER_LEN};
 
 /// Where a blob lives: pages `first_page ..` holding `length` content bytes.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    FromBytes,
+    IntoBytes,
+    KnownLayout,
+    Immutable,
+    Unaligned,
+)]
 #[repr(C)]
 pub struct BlobRef {
     /// First page of the run.
@@ -22,7 +34,19 @@ pub struct BlobRef {
 
 /// Where a B+-tree lives. An empty tree has root, records and depth zero (and still names
 /// its record size).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    FromBytes,
+    IntoBytes,
+    KnownLayout,
+    Immutable,
+    Unaligned,
+)]
 #[repr(C)]
 pub struct TreeRef {
     /// The root page; 0 for an empty tree.
@@ -114,7 +138,9 @@ pub struct BranchEntry {
 }
 
 /// One node of the FMRH.
-#[derive(Clone, Copy, Debug, PartialEq, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned,
+)]
 #[repr(C)]
 pub struct NodeRecord {
     /// The node's [`crate::curve::HilbertKey`].
@@ -159,7 +185,9 @@ pub const NODE_GRID_HAS_VOIDS: u16 = 1;
 
 /// One physical block: the full-resolution samples of a finest-level footprint, clipped to
 /// the data rectangle.
-#[derive(Clone, Copy, Debug, PartialEq, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned,
+)]
 #[repr(C)]
 pub struct BlockRecord {
     /// Byte offset of the payload.
@@ -179,7 +207,9 @@ pub struct BlockRecord {
 }
 
 /// One node of a cluster, in the cluster's index.
-#[derive(Clone, Copy, Debug, PartialEq, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned,
+)]
 #[repr(C)]
 pub struct IndexEntry {
     /// The node's Hilbert key (the index's sort key; unique within a cut).
@@ -193,7 +223,9 @@ pub struct IndexEntry {
 }
 
 /// One node touching an edge of the data, in the adjacency table.
-#[derive(Clone, Copy, Debug, PartialEq, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned,
+)]
 #[repr(C)]
 pub struct AdjacencyEntry {
     /// The node's index in the node table.
@@ -201,7 +233,9 @@ pub struct AdjacencyEntry {
 }
 
 /// One free page (reserved for copy-on-write updates; a fresh file has none).
-#[derive(Clone, Copy, Debug, PartialEq, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned,
+)]
 #[repr(C)]
 pub struct FreeEntry {
     /// The page.
@@ -211,7 +245,9 @@ pub struct FreeEntry {
 }
 
 /// One cluster in the cluster directory.
-#[derive(Clone, Copy, Debug, PartialEq, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned,
+)]
 #[repr(C)]
 pub struct ClusterRecord {
     /// δ.
@@ -226,7 +262,19 @@ pub struct ClusterRecord {
 }
 
 /// A run of the adjacency table: records `first .. first + count`.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    FromBytes,
+    IntoBytes,
+    KnownLayout,
+    Immutable,
+    Unaligned,
+)]
 #[repr(C)]
 pub struct EdgeRange {
     /// Ordinal of the first record.

@@ -100,7 +100,13 @@ impl<'a, S: Source + ?Sized> Pages<'a, S> {
         let bytes = self
             .src
             .read_at(page * u64::from(self.page_size), self.page_size as usize)
-            .map_err(|e| Error::corrupt(invariant::FILE_LENGTH, format!("page {page}"), e.to_string()))?;
+            .map_err(|e| {
+                Error::corrupt(
+                    invariant::FILE_LENGTH,
+                    format!("page {page}"),
+                    e.to_string(),
+                )
+            })?;
         if self.check {
             check_page(&bytes, page, tag)?;
         }
@@ -332,7 +338,10 @@ fn walk_page<S: Source + ?Sized>(
     }
     let count = h.count.get() as usize;
     let (item, capacity) = if level == 0 {
-        (spec.record_size, leaf_capacity(pages.page_size, spec.record_size))
+        (
+            spec.record_size,
+            leaf_capacity(pages.page_size, spec.record_size),
+        )
     } else {
         (BRANCH_ENTRY_LEN, branch_capacity(pages.page_size))
     };
@@ -543,7 +552,11 @@ impl<'a> Cursor<'a> {
                 }
                 self.path.pop();
             }
-            let (page, idx) = self.path.last().map(|(p, i)| (p.clone(), *i)).unwrap_or_default();
+            let (page, idx) = self
+                .path
+                .last()
+                .map(|(p, i)| (p.clone(), *i))
+                .unwrap_or_default();
             let mut child = branch_entry(&page, idx).child.get();
             for _ in 0..depth_below {
                 let p = pages.get(child, tag)?;

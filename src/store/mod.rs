@@ -40,18 +40,18 @@ pub use source::{Bytes, FileSource, MmapSource, Source};
 pub use verify::{verify, CheckReport, CheckStatus, VerifyReport};
 pub use write::{write_file, write_to, SectionBytes, WriteOptions, WriteSummary};
 
-use btree::{PageSet, Pages, Seek, TreeSpec};
 use crate::curve::HilbertKey;
 use crate::error::{Error, Result};
 use crate::format::payload::{self, BlockView, GridView};
 use crate::format::{
     self, invariant, is_zero, tag, AdjacencyEntry, BlobRef, BlockRecord, ClusterRecord,
     CommitRecord, DatasetHeader, EdgeRange, FreeEntry, IndexEntry, NodeRecord, TreeRef,
-    CLUSTER_DIRECTORY_PREFIX, COMMIT_RECORD_LEN, FORMAT_MAJOR, FORMAT_MINOR, MAGIC,
-    MAX_PAGE_SIZE, MAX_STRING_LEN, MIN_PAGE_SIZE, NODE_GRID_HAS_VOIDS, PAGE_HEADER_LEN,
+    CLUSTER_DIRECTORY_PREFIX, COMMIT_RECORD_LEN, FORMAT_MAJOR, FORMAT_MINOR, MAGIC, MAX_PAGE_SIZE,
+    MAX_STRING_LEN, MIN_PAGE_SIZE, NODE_GRID_HAS_VOIDS, PAGE_HEADER_LEN,
 };
 use crate::heightfield::Heightfield;
 use crate::model::{Domain, SampleRect, MAX_CLUSTERS};
+use btree::{PageSet, Pages, Seek, TreeSpec};
 
 /// What the specs of the tables are.
 pub(crate) mod specs {
@@ -264,12 +264,14 @@ pub(crate) fn parse_commit(bytes: &[u8], slot: u8) -> Result<CommitRecord> {
     }
     let len = r.file_length.get();
     if len % u64::from(p) != 0 || len < 2 * u64::from(p) {
-        return Err(bad(format!("file length {len} is not two or more whole pages")));
+        return Err(bad(format!(
+            "file length {len} is not two or more whole pages"
+        )));
     }
     if r.txn_id.get() == 0 {
         return Err(bad("transaction id 0".into()));
     }
-    if r.minor.get() <= FORMAT_MINOR
+    if !newer_minor(r.minor.get())
         && (r.flags.get() != 0 || r.reserved0.get() != 0 || !is_zero(&r.reserved))
     {
         return Err(bad("reserved fields are not zero".into()));
@@ -277,11 +279,19 @@ pub(crate) fn parse_commit(bytes: &[u8], slot: u8) -> Result<CommitRecord> {
     Ok(r)
 }
 
+/// Whether a file's minor version is newer than this reader's: then reserved fields may hold
+/// additions this reader does not know (see the versioning policy).
+fn newer_minor(minor: u16) -> bool {
+    minor > FORMAT_MINOR
+}
+
 /// Reads both commit slots. Slot 1 sits one page in; when slot 0 cannot say the page size,
 /// every allowed size is tried.
 pub(crate) fn read_slots<S: Source + ?Sized>(src: &S) -> Result<[Slot; 2]> {
     let read = |offset: u64| -> Option<Vec<u8>> {
-        src.read_at(offset, COMMIT_RECORD_LEN).ok().map(|c| c.into_owned())
+        src.read_at(offset, COMMIT_RECORD_LEN)
+            .ok()
+            .map(|c| c.into_owned())
     };
     let classify = |bytes: Option<Vec<u8>>, slot: u8| match bytes {
         None => Slot::Invalid(Error::corrupt(
@@ -439,9 +449,27 @@ impl<S: Source> Store<S> {
         expect(&commit.node_table, store.header.node_count, "node table")?;
         expect(&commit.block_table, store.header.block_count, "block table")?;
         let mut ignore = |_: u64, _: &[u8]| Ok(());
-        btree::walk(&pages, &commit.node_table, specs::NODES, &mut seen, &mut ignore)?;
-        btree::walk(&pages, &commit.block_table, specs::BLOCKS, &mut seen, &mut ignore)?;
-        btree::walk(&pages, &commit.free_list, specs::FREE, &mut seen, &mut ignore)?;
+        btree::walk(
+            &pages,
+            &commit.node_table,
+            specs::NODES,
+            &mut seen,
+            &mut ignore,
+        )?;
+        btree::walk(
+            &pages,
+            &commit.block_table,
+            specs::BLOCKS,
+            &mut seen,
+            &mut ignore,
+        )?;
+        btree::walk(
+            &pages,
+            &commit.free_list,
+            specs::FREE,
+            &mut seen,
+            &mut ignore,
+        )?;
         for c in &store.clusters {
             if c.index.records.get() == 0 {
                 return Err(Error::corrupt(
@@ -452,7 +480,13 @@ impl<S: Source> Store<S> {
             }
             btree::walk(&pages, &c.index, specs::INDEX, &mut seen, &mut ignore)?;
         }
-        btree::walk(&pages, &commit.adjacency, specs::ADJACENCY, &mut seen, &mut ignore)?;
+        btree::walk(
+            &pages,
+            &commit.adjacency,
+            specs::ADJACENCY,
+            &mut seen,
+            &mut ignore,
+        )?;
         store.metadata_pages = seen;
         Ok(store)
     }
@@ -488,8 +522,7 @@ impl<S: Source> Store<S> {
         let per_page = (self.page_size as usize - PAGE_HEADER_LEN) as u64;
         let first = blob.first_page.get();
         let pages = len.div_ceil(per_page);
-        if len == 0 || len > max_len || first < 2 || first.saturating_add(pages) > self.page_count
-        {
+        if len == 0 || len > max_len || first < 2 || first.saturating_add(pages) > self.page_count {
             return Err(Error::corrupt(
                 invariant::DATASET_HEADER,
                 name.to_owned(),
@@ -705,7 +738,11 @@ impl<S: Source> Store<S> {
             ));
         }
         let bytes = self.src.read_at(offset, len as usize).map_err(|e| {
-            Error::corrupt(invariant::FILE_LENGTH, format!("byte {offset}"), e.to_string())
+            Error::corrupt(
+                invariant::FILE_LENGTH,
+                format!("byte {offset}"),
+                e.to_string(),
+            )
         })?;
         let actual = format::crc32(&bytes);
         if actual != crc {
@@ -732,7 +769,11 @@ impl<S: Source> Store<S> {
             .footprint(d.finest_level(), x, y)
             .intersect(&d.data_rect())
             .ok_or_else(|| {
-                Error::corrupt(invariant::BLOCK_TABLE, format!("block ({x}, {y})"), "outside the data")
+                Error::corrupt(
+                    invariant::BLOCK_TABLE,
+                    format!("block ({x}, {y})"),
+                    "outside the data",
+                )
             })?;
         let (w, h) = (record.width.get(), record.height.get());
         if u64::from(w) != rect.col1 - rect.col0 + 1 || u64::from(h) != rect.row1 - rect.row0 + 1 {
@@ -774,7 +815,12 @@ impl<S: Source> Store<S> {
         if !d.exists(node.level, node.x.get(), node.y.get()) {
             return Err(Error::corrupt(
                 invariant::NODE_TABLE,
-                format!("node at level {} ({}, {})", node.level, node.x.get(), node.y.get()),
+                format!(
+                    "node at level {} ({}, {})",
+                    node.level,
+                    node.x.get(),
+                    node.y.get()
+                ),
                 "not a node of the domain",
             ));
         }
@@ -881,8 +927,16 @@ impl<S: Source> Store<S> {
                 let view = block.view();
                 // The samples this block is the first (by x, y) to hold.
                 let own = SampleRect {
-                    col0: if x == bx(window.col0) { window.col0 } else { block.rect.col0 + 1 },
-                    row0: if y == by(window.row0) { window.row0 } else { block.rect.row0 + 1 },
+                    col0: if x == bx(window.col0) {
+                        window.col0
+                    } else {
+                        block.rect.col0 + 1
+                    },
+                    row0: if y == by(window.row0) {
+                        window.row0
+                    } else {
+                        block.rect.row0 + 1
+                    },
                     col1: window.col1.min(block.rect.col1),
                     row1: window.row1.min(block.rect.row1),
                 };
@@ -1012,8 +1066,13 @@ impl Block<'_> {
     /// The samples and stand-ins, in place.
     pub fn view(&self) -> BlockView<'_> {
         let r = &self.record;
-        BlockView::new(&self.bytes, r.width.get(), r.height.get(), r.void_count.get())
-            .unwrap_or_else(|| unreachable!("the length was checked when the block was read"))
+        BlockView::new(
+            &self.bytes,
+            r.width.get(),
+            r.height.get(),
+            r.void_count.get(),
+        )
+        .unwrap_or_else(|| unreachable!("the length was checked when the block was read"))
     }
 
     /// The payload bytes.
@@ -1102,7 +1161,10 @@ impl<S: Source> Iterator for CodeScan<'_, S> {
             return None;
         }
         self.left -= 1;
-        match self.cursor.next_record::<S, IndexEntry>(&self.pages, specs::INDEX.tag) {
+        match self
+            .cursor
+            .next_record::<S, IndexEntry>(&self.pages, specs::INDEX.tag)
+        {
             Ok(Some(e)) => Some(Ok(ScanEntry {
                 key: HilbertKey(e.key.get()),
                 level: e.level,

@@ -21,7 +21,7 @@ use crate::curve::HilbertKey;
 use crate::error::{Error, Result};
 use crate::format::payload::{self, BlockView, GridView};
 use crate::format::{
-    invariant as inv, is_zero, BlockRecord, COMMIT_RECORD_LEN, IndexEntry, NodeRecord,
+    invariant as inv, is_zero, BlockRecord, IndexEntry, NodeRecord, COMMIT_RECORD_LEN,
     NODE_GRID_HAS_VOIDS, PAYLOAD_ALIGN, VOID_BITS,
 };
 use crate::heightfield::Heightfield;
@@ -147,10 +147,7 @@ impl Checks {
     }
 
     fn finish(self, mode: &'static str, txn_id: Option<u64>, file_length: u64) -> VerifyReport {
-        let valid = self
-            .reports
-            .iter()
-            .all(|r| r.status != CheckStatus::Failed)
+        let valid = self.reports.iter().all(|r| r.status != CheckStatus::Failed)
             && self.reports.iter().any(|r| r.status == CheckStatus::Passed);
         VerifyReport {
             mode,
@@ -209,7 +206,10 @@ pub fn verify<S: Source>(src: S, full: bool) -> Result<VerifyReport> {
         ),
         Slot::Invalid(e) => checks.fail(
             inv::INACTIVE_SLOT,
-            format!("commit slot {}: neither zero nor a valid record ({e})", 1 - slot),
+            format!(
+                "commit slot {}: neither zero nor a valid record ({e})",
+                1 - slot
+            ),
         ),
     }
     // The rest of each slot page, after the record, is zero.
@@ -219,7 +219,11 @@ pub fn verify<S: Source>(src: S, full: bool) -> Result<VerifyReport> {
         match src.read_at(s * p + COMMIT_RECORD_LEN as u64, tail as usize) {
             Ok(b) if is_zero(&b) => {}
             _ => checks.fail(
-                if s == u64::from(slot) { inv::COMMIT_RECORD } else { inv::INACTIVE_SLOT },
+                if s == u64::from(slot) {
+                    inv::COMMIT_RECORD
+                } else {
+                    inv::INACTIVE_SLOT
+                },
                 format!("commit slot {s}: the page after the record is not zero"),
             ),
         }
@@ -235,7 +239,12 @@ pub fn verify<S: Source>(src: S, full: bool) -> Result<VerifyReport> {
             return Ok(checks.finish(mode, Some(txn), file_length));
         }
     };
-    for id in [inv::PAGE, inv::DATASET_HEADER, inv::TREE_SHAPE, inv::CLUSTER_DIRECTORY] {
+    for id in [
+        inv::PAGE,
+        inv::DATASET_HEADER,
+        inv::TREE_SHAPE,
+        inv::CLUSTER_DIRECTORY,
+    ] {
         checks.pass(id);
     }
     let loaded = match Loaded::read(&store) {
@@ -251,7 +260,12 @@ pub fn verify<S: Source>(src: S, full: bool) -> Result<VerifyReport> {
     let payload_pages = check_payloads(&store, &loaded, &mut checks);
     check_ownership(&store, &loaded, &payload_pages, &mut checks);
     check_index_entries(&store, &loaded, &mut checks);
-    if full && !checks.reports.iter().any(|r| r.status == CheckStatus::Failed) {
+    if full
+        && !checks
+            .reports
+            .iter()
+            .any(|r| r.status == CheckStatus::Failed)
+    {
         check_cuts(&store, &loaded, &mut checks);
         check_adjacency(&store, &loaded, &mut checks);
         check_measured(&store, &loaded, &mut checks);
@@ -304,10 +318,16 @@ fn check_free_list<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Checks)
     let mut prev = None;
     for &(page, txn) in &l.free {
         if page < 2 || page >= store.page_count() || prev.is_some_and(|p| page <= p) {
-            checks.fail(inv::FREE_LIST, format!("free page {page}: out of order or outside the file"));
+            checks.fail(
+                inv::FREE_LIST,
+                format!("free page {page}: out of order or outside the file"),
+            );
         }
         if txn > store.txn_id() {
-            checks.fail(inv::FREE_LIST, format!("free page {page}: freed by future transaction {txn}"));
+            checks.fail(
+                inv::FREE_LIST,
+                format!("free page {page}: freed by future transaction {txn}"),
+            );
         }
         prev = Some(page);
     }
@@ -326,12 +346,18 @@ fn check_nodes<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Checks) {
         let at = format!("node {i}");
         let (level, x, y) = (n.level, n.x.get(), n.y.get());
         if level > finest || !d.exists(level, x, y) {
-            checks.fail(id, format!("{at}: ({level}, {x}, {y}) is not a node of the domain"));
+            checks.fail(
+                id,
+                format!("{at}: ({level}, {x}, {y}) is not a node of the domain"),
+            );
             continue;
         }
         let key = HilbertKey::of_node(finest, level, x, y).0;
         if n.key.get() != key {
-            checks.fail(id, format!("{at}: key {} but (level, x, y) gives {key}", n.key.get()));
+            checks.fail(
+                id,
+                format!("{at}: key {} but (level, x, y) gives {key}", n.key.get()),
+            );
         }
         if i > 0 {
             let p = &nodes[i - 1];
@@ -341,7 +367,10 @@ fn check_nodes<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Checks) {
         }
         let sub = u64::from(n.subtree_len.get());
         if sub == 0 || i as u64 + sub > count {
-            checks.fail(id, format!("{at}: subtree of {sub} nodes overruns the table"));
+            checks.fail(
+                id,
+                format!("{at}: subtree of {sub} nodes overruns the table"),
+            );
             continue;
         }
         let parent = n.parent.get();
@@ -354,7 +383,11 @@ fn check_nodes<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Checks) {
         } else {
             let p = &nodes[parent as usize];
             let end = parent as u64 + u64::from(p.subtree_len.get());
-            if p.level + 1 != level || p.x.get() != x / 2 || p.y.get() != y / 2 || i as u64 + sub > end {
+            if p.level + 1 != level
+                || p.x.get() != x / 2
+                || p.y.get() != y / 2
+                || i as u64 + sub > end
+            {
                 checks.fail(id, format!("{at}: not a child of its parent {parent}"));
             }
         }
@@ -367,11 +400,20 @@ fn check_nodes<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Checks) {
             checks.fail(id, format!("{at}: height range {lo}..{hi}"));
         }
         if n.valid_samples.get() > d.footprint(level, x, y).samples() {
-            checks.fail(id, format!("{at}: more valid samples than its footprint holds"));
+            checks.fail(
+                id,
+                format!("{at}: more valid samples than its footprint holds"),
+            );
         }
         let flags = n.flags.get();
-        if flags & !NODE_GRID_HAS_VOIDS != 0 || (level == finest && flags != 0) || n.reserved.get() != 0 {
-            checks.fail(id, format!("{at}: unknown flags {flags:#x} or reserved bits set"));
+        if flags & !NODE_GRID_HAS_VOIDS != 0
+            || (level == finest && flags != 0)
+            || n.reserved.get() != 0
+        {
+            checks.fail(
+                id,
+                format!("{at}: unknown flags {flags:#x} or reserved bits set"),
+            );
         }
         // Children: those kept are exactly the mask's, each right after its elder sibling's
         // subtree.
@@ -381,7 +423,10 @@ fn check_nodes<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Checks) {
         while c < end {
             let ch = &nodes[c as usize];
             if ch.parent.get() as usize != i {
-                checks.fail(id, format!("{at}: node {c} lies in its subtree but is not its child"));
+                checks.fail(
+                    id,
+                    format!("{at}: node {c} lies in its subtree but is not its child"),
+                );
                 break;
             }
             mask |= 1 << ((ch.y.get() & 1) * 2 + (ch.x.get() & 1));
@@ -391,24 +436,38 @@ fn check_nodes<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Checks) {
             c += u64::from(ch.subtree_len.get().max(1));
         }
         if mask != n.child_mask {
-            checks.fail(id, format!("{at}: child mask {:#06b}, children found {mask:#06b}", n.child_mask));
+            checks.fail(
+                id,
+                format!(
+                    "{at}: child mask {:#06b}, children found {mask:#06b}",
+                    n.child_mask
+                ),
+            );
         }
         if sub > 1 {
             let existing = (0..4u32)
                 .filter(|q| d.exists(level + 1, 2 * x + (q & 1), 2 * y + (q >> 1)))
                 .fold(0u8, |acc, q| acc | 1 << q);
             if m <= delta_min || mask != existing {
-                checks.fail(id, format!("{at}: subdivided though e* {m} <= delta_min, or a child is missing"));
+                checks.fail(
+                    id,
+                    format!("{at}: subdivided though e* {m} <= delta_min, or a child is missing"),
+                );
             }
         } else if level < finest && m > delta_min {
-            checks.fail(id, format!("{at}: a leaf above the finest level with e* {m} > delta_min {delta_min}"));
+            checks.fail(
+                id,
+                format!("{at}: a leaf above the finest level with e* {m} > delta_min {delta_min}"),
+            );
         }
         if level == finest {
             if m != 0.0 {
                 checks.fail(id, format!("{at}: a physical block with error {m}"));
             }
             if let Some(b) = l.blocks.get((y * cols + x) as usize) {
-                if (n.payload_offset, n.payload_len, n.payload_crc) != (b.payload_offset, b.payload_len, b.payload_crc) {
+                if (n.payload_offset, n.payload_len, n.payload_crc)
+                    != (b.payload_offset, b.payload_len, b.payload_crc)
+                {
                     checks.fail(id, format!("{at}: payload is not its block's"));
                 }
             }
@@ -416,7 +475,13 @@ fn check_nodes<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Checks) {
             let (gw, gh) = payload::grid_dims(d, level, x, y);
             let want = payload::grid_len(gw, gh, flags & NODE_GRID_HAS_VOIDS != 0);
             if u64::from(n.payload_len.get()) != want {
-                checks.fail(id, format!("{at}: grid payload of {} bytes, expected {want}", n.payload_len.get()));
+                checks.fail(
+                    id,
+                    format!(
+                        "{at}: grid payload of {} bytes, expected {want}",
+                        n.payload_len.get()
+                    ),
+                );
             }
         }
     }
@@ -435,12 +500,21 @@ fn check_blocks<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Checks) {
             .unwrap_or_default();
         let (w, h, v) = (b.width.get(), b.height.get(), b.void_count.get());
         if u64::from(w) != rect.col1 - rect.col0 + 1 || u64::from(h) != rect.row1 - rect.row0 + 1 {
-            checks.fail(id, format!("block ({x}, {y}): {w} x {h}, its data footprint is {rect:?}"));
+            checks.fail(
+                id,
+                format!("block ({x}, {y}): {w} x {h}, its data footprint is {rect:?}"),
+            );
         } else if u64::from(v) > rect.samples()
             || u64::from(b.payload_len.get()) != payload::block_len(w, h, v)
             || b.reserved.get() != 0
         {
-            checks.fail(id, format!("block ({x}, {y}): {v} voids, {} payload bytes", b.payload_len.get()));
+            checks.fail(
+                id,
+                format!(
+                    "block ({x}, {y}): {v} voids, {} payload bytes",
+                    b.payload_len.get()
+                ),
+            );
         }
     }
     checks.pass(id);
@@ -456,13 +530,24 @@ fn check_payloads<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Checks) 
     let p = u64::from(store.page_size());
     let mut pages = PageSet::new(store.page_count());
     // (offset, len, crc, what)
-    let mut runs: Vec<(u64, u32, u32, Payload)> = Vec::with_capacity(l.nodes.len() + l.blocks.len());
+    let mut runs: Vec<(u64, u32, u32, Payload)> =
+        Vec::with_capacity(l.nodes.len() + l.blocks.len());
     for (i, b) in l.blocks.iter().enumerate() {
-        runs.push((b.payload_offset.get(), b.payload_len.get(), b.payload_crc.get(), Payload::Block(i)));
+        runs.push((
+            b.payload_offset.get(),
+            b.payload_len.get(),
+            b.payload_crc.get(),
+            Payload::Block(i),
+        ));
     }
     for (i, n) in l.nodes.iter().enumerate() {
         if n.level < finest {
-            runs.push((n.payload_offset.get(), n.payload_len.get(), n.payload_crc.get(), Payload::Grid(i)));
+            runs.push((
+                n.payload_offset.get(),
+                n.payload_len.get(),
+                n.payload_crc.get(),
+                Payload::Grid(i),
+            ));
         }
     }
     runs.sort_unstable_by_key(|r| r.0);
@@ -498,7 +583,9 @@ fn check_payloads<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Checks) 
         if let Payload::Block(i) = what {
             let b = &l.blocks[i];
             let (x, y) = (i as u32 % cols, i as u32 / cols);
-            let Some(view) = BlockView::new(&bytes, b.width.get(), b.height.get(), b.void_count.get()) else {
+            let Some(view) =
+                BlockView::new(&bytes, b.width.get(), b.height.get(), b.void_count.get())
+            else {
                 continue; // the length was reported under I-11
             };
             let mut voids = 0u32;
@@ -512,7 +599,11 @@ fn check_payloads<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Checks) 
                     bad += u64::from(!v.is_finite());
                 }
             }
-            bad += view.stand_ins().iter().filter(|s| !s.get().is_finite()).count() as u64;
+            bad += view
+                .stand_ins()
+                .iter()
+                .filter(|s| !s.get().is_finite())
+                .count() as u64;
             if voids != b.void_count.get() || bad > 0 {
                 checks.fail(id, format!("block ({x}, {y}): {voids} NaN samples for {} recorded voids, {bad} non-canonical or infinite values", b.void_count.get()));
             }
@@ -556,25 +647,40 @@ fn zero_gap<S: Source>(store: &Store<S>, from: u64, to: u64, p: u64, checks: &mu
     for (a, b) in ranges {
         match store.source().read_at(a, (b - a) as usize) {
             Ok(bytes) if is_zero(&bytes) => {}
-            Ok(_) => checks.fail(inv::PAYLOAD, format!("bytes {a}..{b} between payloads are not zero")),
+            Ok(_) => checks.fail(
+                inv::PAYLOAD,
+                format!("bytes {a}..{b} between payloads are not zero"),
+            ),
             Err(e) => checks.fail(inv::FILE_LENGTH, format!("bytes {a}..{b}: {e}")),
         }
     }
 }
 
-fn check_ownership<S: Source>(store: &Store<S>, l: &Loaded, payload: &PageSet, checks: &mut Checks) {
+fn check_ownership<S: Source>(
+    store: &Store<S>,
+    l: &Loaded,
+    payload: &PageSet,
+    checks: &mut Checks,
+) {
     let id = inv::PAGE_OWNERSHIP;
     let meta = store.metadata_pages();
     let mut free = PageSet::new(store.page_count());
     for &(page, _) in &l.free {
         if !free.insert(page) {
-            checks.fail(id, format!("page {page} is listed free twice or lies outside the file"));
+            checks.fail(
+                id,
+                format!("page {page} is listed free twice or lies outside the file"),
+            );
         }
     }
     let mut orphans = 0u64;
     let mut first_orphan = None;
     for page in 2..store.page_count() {
-        let owners = [meta.contains(page), payload.contains(page), free.contains(page)];
+        let owners = [
+            meta.contains(page),
+            payload.contains(page),
+            free.contains(page),
+        ];
         let n = owners.iter().filter(|&&o| o).count();
         if n > 1 {
             checks.fail(id, format!("page {page} is claimed by {n} structures (metadata, payload, free: {owners:?})"));
@@ -584,7 +690,10 @@ fn check_ownership<S: Source>(store: &Store<S>, l: &Loaded, payload: &PageSet, c
         }
     }
     if let Some(first) = first_orphan {
-        checks.fail(id, format!("{orphans} pages belong to no structure (first: page {first})"));
+        checks.fail(
+            id,
+            format!("{orphans} pages belong to no structure (first: page {first})"),
+        );
     }
     checks.pass(id);
 }
@@ -598,15 +707,33 @@ fn check_index_entries<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Che
                 Some(n) if n.key == e.key && n.level == e.level && e.reserved == [0; 3] => {
                     max = max.max(n.monotone_error.get());
                 }
-                _ => checks.fail(inv::CLUSTER_INDEX, format!("{at}: names node {} with another key or level", e.node.get())),
+                _ => checks.fail(
+                    inv::CLUSTER_INDEX,
+                    format!(
+                        "{at}: names node {} with another key or level",
+                        e.node.get()
+                    ),
+                ),
             }
         }
         if max != info.max_error {
-            checks.fail(inv::CLUSTER_DIRECTORY, format!("cluster {c}: max error {} recorded, {max} found", info.max_error));
+            checks.fail(
+                inv::CLUSTER_DIRECTORY,
+                format!(
+                    "cluster {c}: max error {} recorded, {max} found",
+                    info.max_error
+                ),
+            );
         }
         for (edge, list) in l.adjacency[c].iter().enumerate() {
             if let Some(&bad) = list.iter().find(|&&n| n as usize >= l.nodes.len()) {
-                checks.fail(inv::ADJACENCY, format!("cluster {c} {} edge: node {bad} does not exist", cluster::EDGES[edge]));
+                checks.fail(
+                    inv::ADJACENCY,
+                    format!(
+                        "cluster {c} {} edge: node {bad} does not exist",
+                        cluster::EDGES[edge]
+                    ),
+                );
             }
         }
     }
@@ -625,10 +752,15 @@ fn check_cuts<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Checks) {
         let mut prev_end = 0u64;
         for (k, e) in entries.iter().enumerate() {
             let at = format!("cluster {c} entry {k}");
-            let Some(n) = l.nodes.get(e.node.get() as usize) else { continue };
+            let Some(n) = l.nodes.get(e.node.get() as usize) else {
+                continue;
+            };
             let (key, level) = (n.key.get(), n.level);
             if key < prev_end {
-                checks.fail(id, format!("{at}: overlaps the node before it (no overlap)"));
+                checks.fail(
+                    id,
+                    format!("{at}: overlaps the node before it (no overlap)"),
+                );
             }
             prev_end = key.saturating_add(HilbertKey::span(finest, level));
             let side = 1u64 << (finest - level);
@@ -637,15 +769,28 @@ fn check_cuts<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Checks) {
                 * ((y0 + side).min(u64::from(rows)) - y0.min(u64::from(rows)));
             let m = n.monotone_error.get();
             if m > delta {
-                checks.fail(id, format!("{at}: e* {m} exceeds the threshold {delta} (bound)"));
+                checks.fail(
+                    id,
+                    format!("{at}: e* {m} exceeds the threshold {delta} (bound)"),
+                );
             }
             let parent = n.parent.get();
-            if parent != NO_PARENT && l.nodes.get(parent as usize).is_some_and(|p| p.monotone_error.get() <= delta) {
-                checks.fail(id, format!("{at}: its parent already meets {delta} (minimality)"));
+            if parent != NO_PARENT
+                && l.nodes
+                    .get(parent as usize)
+                    .is_some_and(|p| p.monotone_error.get() <= delta)
+            {
+                checks.fail(
+                    id,
+                    format!("{at}: its parent already meets {delta} (minimality)"),
+                );
             }
         }
         if covered != total {
-            checks.fail(id, format!("cluster {c}: covers {covered} of {total} physical blocks (cover)"));
+            checks.fail(
+                id,
+                format!("cluster {c}: covers {covered} of {total} physical blocks (cover)"),
+            );
         }
     }
 }
@@ -660,7 +805,15 @@ fn check_adjacency<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Checks)
         });
         for (edge, (stored, want)) in l.adjacency[c].iter().zip(want).enumerate() {
             if *stored != want {
-                checks.fail(inv::ADJACENCY, format!("cluster {c} {} edge: {} nodes stored, {} touch it (or the order differs)", cluster::EDGES[edge], stored.len(), want.len()));
+                checks.fail(
+                    inv::ADJACENCY,
+                    format!(
+                        "cluster {c} {} edge: {} nodes stored, {} touch it (or the order differs)",
+                        cluster::EDGES[edge],
+                        stored.len(),
+                        want.len()
+                    ),
+                );
             }
         }
     }
@@ -691,7 +844,9 @@ fn check_measured<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Checks) 
         let mut disagree = 0u64;
         for row in r.row0..=r.row1 {
             for col in r.col0..=r.col1 {
-                let v = view.samples()[((row - r.row0) * u64::from(b.width.get()) + col - r.col0) as usize].get();
+                let v = view.samples()
+                    [((row - r.row0) * u64::from(b.width.get()) + col - r.col0) as usize]
+                    .get();
                 let slot = &mut samples[(row * w + col) as usize];
                 let shared = (col == r.col0 && x > 0) || (row == r.row0 && y > 0);
                 if shared && slot.to_bits() != v.to_bits() {
@@ -701,7 +856,10 @@ fn check_measured<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Checks) 
             }
         }
         if disagree > 0 {
-            checks.fail(id, format!("block ({x}, {y}): {disagree} samples differ from its neighbours' copies"));
+            checks.fail(
+                id,
+                format!("block ({x}, {y}): {disagree} samples differ from its neighbours' copies"),
+            );
         }
     }
     let hf = match Heightfield::new(d.width(), d.height(), samples) {
@@ -718,7 +876,14 @@ fn check_measured<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Checks) 
     };
     let tree = model.tree();
     if tree.nodes().len() != l.nodes.len() {
-        checks.fail(id, format!("{} nodes stored, the blocks give {}", l.nodes.len(), tree.nodes().len()));
+        checks.fail(
+            id,
+            format!(
+                "{} nodes stored, the blocks give {}",
+                l.nodes.len(),
+                tree.nodes().len()
+            ),
+        );
         return;
     }
     for (i, (s, n)) in l.nodes.iter().zip(tree.nodes()).enumerate() {
@@ -743,7 +908,10 @@ fn check_measured<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Checks) 
                 let has = s.flags.get() & NODE_GRID_HAS_VOIDS != 0;
                 has == clipped.void.iter().any(|&x| x)
                     && v.stored_width == gw
-                    && v.stored().iter().zip(&clipped.heights).all(|(a, b)| a.get().to_bits() == b.to_bits())
+                    && v.stored()
+                        .iter()
+                        .zip(&clipped.heights)
+                        .all(|(a, b)| a.get().to_bits() == b.to_bits())
                     && (0..b * b).all(|k| {
                         let (gi, gj) = (k % b, k / b);
                         v.is_void(gi, gj) == full.void[k as usize]
@@ -751,13 +919,25 @@ fn check_measured<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Checks) 
                     })
             });
             if !ok {
-                checks.fail(id, format!("node {i}: its grid is not the decimation of the blocks"));
+                checks.fail(
+                    id,
+                    format!("node {i}: its grid is not the decimation of the blocks"),
+                );
             }
         }
     }
     for (c, (mine, entries)) in model.clusters().iter().zip(&l.indexes).enumerate() {
-        if mine.nodes.len() != entries.len() || mine.nodes.iter().zip(entries).any(|(a, e)| *a != e.node.get()) {
-            checks.fail(id, format!("cluster {c}: the stored cut differs from the rebuilt one"));
+        if mine.nodes.len() != entries.len()
+            || mine
+                .nodes
+                .iter()
+                .zip(entries)
+                .any(|(a, e)| *a != e.node.get())
+        {
+            checks.fail(
+                id,
+                format!("cluster {c}: the stored cut differs from the rebuilt one"),
+            );
         }
     }
     // Stand-ins: each void's mended height.
@@ -767,7 +947,9 @@ fn check_measured<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Checks) 
             continue;
         }
         let (x, y) = (i as u32 % cols, i as u32 / cols);
-        let Ok(block) = store.block(x, y) else { continue };
+        let Ok(block) = store.block(x, y) else {
+            continue;
+        };
         let view = block.view();
         let r: SampleRect = block.rect;
         let mut k = 0usize;
@@ -782,7 +964,10 @@ fn check_measured<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Checks) 
             }
         }
         if wrong > 0 {
-            checks.fail(id, format!("block ({x}, {y}): {wrong} void stand-ins are not the mended heights"));
+            checks.fail(
+                id,
+                format!("block ({x}, {y}): {wrong} void stand-ins are not the mended heights"),
+            );
         }
     }
     checks.pass(id);

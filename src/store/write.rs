@@ -24,9 +24,9 @@ use crate::curve::HilbertKey;
 use crate::error::{Error, Result};
 use crate::format::{
     self, payload, tag, AdjacencyEntry, BlobRef, BlockRecord, ClusterRecord, CommitRecord,
-    DatasetHeader, EdgeRange, FreeEntry, IndexEntry, NodeRecord, PageHeader, TreeRef, CLUSTER_DIRECTORY_PREFIX,
-    DEFAULT_PAGE_SIZE, FORMAT_MAJOR, FORMAT_MINOR, MAGIC, NODE_GRID_HAS_VOIDS, PAGE_HEADER_LEN,
-    PAYLOAD_ALIGN, VOID_BITS,
+    DatasetHeader, EdgeRange, FreeEntry, IndexEntry, NodeRecord, PageHeader, TreeRef,
+    CLUSTER_DIRECTORY_PREFIX, DEFAULT_PAGE_SIZE, FORMAT_MAJOR, FORMAT_MINOR, MAGIC,
+    NODE_GRID_HAS_VOIDS, PAGE_HEADER_LEN, PAYLOAD_ALIGN, VOID_BITS,
 };
 use crate::heightfield::Metadata;
 use crate::model::{cluster, Model, SampleRect};
@@ -293,7 +293,15 @@ pub fn write_to<W: Write + Seek>(
         node_records.extend_from_slice(rec.as_bytes());
     }
     let before = out.written;
-    let node_table = write_tree(&mut out, &node_records, size_of::<NodeRecord>(), false, tag::NODE_TABLE, &mut next_page, p)?;
+    let node_table = write_tree(
+        &mut out,
+        &node_records,
+        size_of::<NodeRecord>(),
+        false,
+        tag::NODE_TABLE,
+        &mut next_page,
+        p,
+    )?;
     sections.node_table = out.written - before;
 
     // Block table.
@@ -312,7 +320,15 @@ pub fn write_to<W: Write + Seek>(
     }
     debug_assert_eq!(shapes.len() as u64, u64::from(cols) * u64::from(rows));
     let before = out.written;
-    let block_table = write_tree(&mut out, &block_records, size_of::<BlockRecord>(), false, tag::BLOCK_TABLE, &mut next_page, p)?;
+    let block_table = write_tree(
+        &mut out,
+        &block_records,
+        size_of::<BlockRecord>(),
+        false,
+        tag::BLOCK_TABLE,
+        &mut next_page,
+        p,
+    )?;
     sections.block_table = out.written - before;
 
     // Clusters: one index each; their edge lists go into the one adjacency table.
@@ -346,10 +362,14 @@ pub fn write_to<W: Write + Seek>(
         )?;
         sections.cluster_index += out.written - before;
         let mut adjacency = [EdgeRange::default(); 4];
-        for (range, list) in adjacency.iter_mut().zip(cluster::edge_nodes(tree, &c.nodes)) {
+        for (range, list) in adjacency
+            .iter_mut()
+            .zip(cluster::edge_nodes(tree, &c.nodes))
+        {
             let first = (adjacency_entries.len() / size_of::<AdjacencyEntry>()) as u64;
             for i in list {
-                adjacency_entries.extend_from_slice(AdjacencyEntry { node: U32::new(i) }.as_bytes());
+                adjacency_entries
+                    .extend_from_slice(AdjacencyEntry { node: U32::new(i) }.as_bytes());
             }
             let end = (adjacency_entries.len() / size_of::<AdjacencyEntry>()) as u64;
             *range = EdgeRange {
@@ -377,8 +397,13 @@ pub fn write_to<W: Write + Seek>(
     )?;
     sections.adjacency = out.written - before;
     let before = out.written;
-    let cluster_directory =
-        write_blob(&mut out, &directory, tag::CLUSTER_DIRECTORY, &mut next_page, p)?;
+    let cluster_directory = write_blob(
+        &mut out,
+        &directory,
+        tag::CLUSTER_DIRECTORY,
+        &mut next_page,
+        p,
+    )?;
     sections.cluster_directory = out.written - before;
 
     // The commit record, last.
@@ -472,9 +497,15 @@ fn write_tree<W: Write>(
     next_page: &mut u64,
     page_size: u32,
 ) -> Result<TreeRef> {
-    btree::build(records, record_size, keyed, tag, page_size, next_page, &mut |page| {
-        out.write(&page)
-    })
+    btree::build(
+        records,
+        record_size,
+        keyed,
+        tag,
+        page_size,
+        next_page,
+        &mut |page| out.write(&page),
+    )
 }
 
 /// Writes `content` as a blob of consecutive pages.
@@ -534,10 +565,7 @@ fn block_shapes(model: &Model) -> Vec<BlockShape> {
         .into_par_iter()
         .flat_map_iter(|y| {
             (0..cols).map(move |x| {
-                let rect = d
-                    .footprint(finest, x, y)
-                    .intersect(&data)
-                    .unwrap_or(data);
+                let rect = d.footprint(finest, x, y).intersect(&data).unwrap_or(data);
                 let valid: u64 = (rect.row0..=rect.row1)
                     .map(|r| raster.count_valid(r, rect.col0, rect.col1))
                     .sum();
@@ -606,7 +634,13 @@ fn blocks_under(d: &crate::model::Domain, level: u8, x: u32, y: u32, items: &mut
     }
     let mut children: Vec<(HilbertKey, u32, u32)> = (0..4u32)
         .map(|q| (2 * x + (q & 1), 2 * y + (q >> 1)))
-        .map(|(cx, cy)| (HilbertKey::of_node(d.finest_level(), level + 1, cx, cy), cx, cy))
+        .map(|(cx, cy)| {
+            (
+                HilbertKey::of_node(d.finest_level(), level + 1, cx, cy),
+                cx,
+                cy,
+            )
+        })
         .collect();
     children.sort_unstable();
     for (_, cx, cy) in children {
