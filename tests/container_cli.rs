@@ -7,17 +7,10 @@
 
 mod common;
 
-use std::process::{Command, Output};
+use std::process::Output;
 
-use common::data;
+use common::{data, fmrh};
 use serde_json::Value;
-
-fn fmrh(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_fmrh"))
-        .args(args)
-        .output()
-        .expect("the fmrh binary runs")
-}
 
 fn ok_json(out: &Output) -> Value {
     assert!(

@@ -31,5 +31,13 @@ pub fn first_difference(a: &[f32], b: &[f32]) -> Option<(usize, f32, f32)> {
         .map(|(i, (x, y))| (i, *x, *y))
 }
 
+/// Runs the `fmrh` binary built for these tests.
+pub fn fmrh(args: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_fmrh"))
+        .args(args)
+        .output()
+        .expect("the fmrh binary runs")
+}
+
 pub mod fields;
 pub mod oracle;
