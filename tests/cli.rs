@@ -6,24 +6,12 @@
 
 mod common;
 
-use std::process::Output;
-
-use common::{data, fmrh};
-use serde_json::Value;
-
-fn json_of(out: &Output) -> Value {
-    assert!(
-        out.status.success(),
-        "stderr: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).expect("stdout is JSON")
-}
+use common::{data, fmrh, ok_json};
 
 #[test]
 fn build_dry_run_json_on_a_real_dem() {
     let input = data("srtm3-srtmpy/N44W072.hgt");
-    let report = json_of(&fmrh(&[
+    let report = ok_json(&fmrh(&[
         "build",
         input.to_str().unwrap(),
         "--dry-run",
@@ -78,7 +66,7 @@ fn thresholds_and_block_size_are_honoured() {
         "--thresholds",
         "100,0,10",
     ]);
-    let report = json_of(&out);
+    let report = ok_json(&out);
     assert_eq!(report["block_size"], 33);
     let t: Vec<f64> = report["clusters"]
         .as_array()
@@ -89,7 +77,7 @@ fn thresholds_and_block_size_are_honoured() {
     assert_eq!(t, vec![0.0, 10.0, 100.0]);
     // Decimetres scaled to metres: the same model as the .f32 copy (stored in metres).
     let f32_copy = data("puget-sound-1k/ps_height_1k.json");
-    let other = json_of(&fmrh(&[
+    let other = ok_json(&fmrh(&[
         "build",
         f32_copy.to_str().unwrap(),
         "--dry-run",

@@ -7,19 +7,8 @@
 
 mod common;
 
-use std::process::Output;
-
-use common::{data, fmrh};
+use common::{data, fmrh, ok_json};
 use serde_json::Value;
-
-fn ok_json(out: &Output) -> Value {
-    assert!(
-        out.status.success(),
-        "stderr: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).expect("stdout is JSON")
-}
 
 #[test]
 fn build_info_verify_extract_scan() {

@@ -1,13 +1,14 @@
 //! `fmrh extract`: full-resolution samples out of a container, bit for bit as stored, in the
 //! `.f32` + `.json` form of `../shared/data` (so `fmrh build` reads them back).
 
-use std::io::{BufWriter, Write};
-use std::path::{Path, PathBuf};
+use std::io::Write;
+use std::path::PathBuf;
 use std::process::ExitCode;
 
 use serde::Serialize;
 
 use fmrh::model::SampleRect;
+use fmrh::store::write_atomically;
 use fmrh::Error;
 
 #[derive(clap::Args)]
@@ -139,8 +140,11 @@ pub fn run(args: &ExtractArgs) -> Result<ExitCode, Error> {
     for v in samples {
         raw.extend_from_slice(&v.to_le_bytes());
     }
-    write_atomic(&args.output, &raw, args.force)?;
-    write_atomic(&json_path, &json, args.force)?;
+    for (path, bytes) in [(&args.output, &raw), (&json_path, &json)] {
+        write_atomically(path, args.force, |w| {
+            w.write_all(bytes).map_err(|e| Error::io(path, e))
+        })?;
+    }
     eprintln!(
         "fmrh: wrote {} x {} samples ({} void) to {} and {}",
         hf.width(),
@@ -150,31 +154,4 @@ pub fn run(args: &ExtractArgs) -> Result<ExitCode, Error> {
         json_path.display()
     );
     Ok(ExitCode::SUCCESS)
-}
-
-/// Writes `bytes` to `path` through a synced temporary file and a rename.
-fn write_atomic(path: &Path, bytes: &[u8], overwrite: bool) -> Result<(), Error> {
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    let temp = tempfile::Builder::new()
-        .prefix(".fmrh-extract-")
-        .tempfile_in(dir)
-        .map_err(|e| Error::io(dir, e))?;
-    {
-        let mut w = BufWriter::new(temp.as_file());
-        w.write_all(bytes).map_err(|e| Error::io(temp.path(), e))?;
-        w.flush().map_err(|e| Error::io(temp.path(), e))?;
-    }
-    temp.as_file()
-        .sync_all()
-        .map_err(|e| Error::io(temp.path(), e))?;
-    if overwrite {
-        temp.persist(path).map_err(|e| Error::io(path, e.error))?;
-    } else {
-        temp.persist_noclobber(path)
-            .map_err(|e| Error::io(path, e.error))?;
-    }
-    Ok(())
 }

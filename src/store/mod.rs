@@ -38,7 +38,7 @@ use zerocopy::FromBytes;
 
 pub use source::{Bytes, FileSource, MmapSource, Source};
 pub use verify::{verify, CheckReport, CheckStatus, VerifyReport};
-pub use write::{write_file, write_to, SectionBytes, WriteOptions, WriteSummary};
+pub use write::{write_atomically, write_file, write_to, SectionBytes, WriteOptions, WriteSummary};
 
 use crate::curve::HilbertKey;
 use crate::error::{Error, Result};

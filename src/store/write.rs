@@ -107,6 +107,18 @@ pub fn write_file(
     options: &WriteOptions,
     overwrite: bool,
 ) -> Result<WriteSummary> {
+    write_atomically(path, overwrite, |w| write_to(model, metadata, options, w))
+}
+
+/// Creates `path` with what `fill` writes, atomically. The bytes go to a temporary file in the
+/// same directory, which is flushed, synced and renamed into place, then the directory is
+/// synced. On any failure the temporary file is removed and `path` is untouched. An existing
+/// `path` is refused unless `overwrite`, and is then replaced in one rename.
+pub fn write_atomically<T>(
+    path: &Path,
+    overwrite: bool,
+    fill: impl FnOnce(&mut BufWriter<&std::fs::File>) -> Result<T>,
+) -> Result<T> {
     if !overwrite && path.exists() {
         return Err(Error::InvalidArgument(format!(
             "{} exists; pass --force to replace it",
@@ -118,15 +130,15 @@ pub fn write_file(
         _ => Path::new("."),
     };
     let temp = tempfile::Builder::new()
-        .prefix(".fmrh-build-")
+        .prefix(".fmrh-")
         .suffix(".tmp")
         .tempfile_in(dir)
         .map_err(|e| Error::io(dir, e))?;
-    let summary = {
+    let value = {
         let mut w = BufWriter::with_capacity(1 << 20, temp.as_file());
-        let summary = write_to(model, metadata, options, &mut w)?;
+        let value = fill(&mut w)?;
         w.flush().map_err(|e| Error::io(temp.path(), e))?;
-        summary
+        value
     };
     temp.as_file()
         .sync_all()
@@ -139,7 +151,7 @@ pub fn write_file(
     };
     drop(persisted);
     sync_dir(dir)?;
-    Ok(summary)
+    Ok(value)
 }
 
 /// Makes a rename in `dir` durable.

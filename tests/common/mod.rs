@@ -39,5 +39,15 @@ pub fn fmrh(args: &[&str]) -> std::process::Output {
         .expect("the fmrh binary runs")
 }
 
+/// The JSON a successful `fmrh` run printed; fails the test with its stderr otherwise.
+pub fn ok_json(out: &std::process::Output) -> serde_json::Value {
+    assert!(
+        out.status.success(),
+        "stderr: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("stdout is JSON")
+}
+
 pub mod fields;
 pub mod oracle;
