@@ -37,6 +37,7 @@ pub mod format;
 pub mod heightfield;
 pub mod ingest;
 pub mod model;
+pub mod scene;
 pub mod store;
 
 pub use error::{Error, Result};

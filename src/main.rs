@@ -52,6 +52,13 @@ enum Command {
     Extract(cli::extract::ExtractArgs),
     /// Range-scan one cluster by Hilbert keys or by ordinal position.
     Scan(cli::scan::ScanArgs),
+    /// The blocks one view needs: a camera and a tolerance in pixels in, blocks out.
+    ///
+    /// Uniform mode turns the tolerance into one static bound from the nearest terrain
+    /// distance and scans one cluster; view mode gives every block the coarsest level that
+    /// meets the tolerance where it is seen. Prints each block (level, samples, error,
+    /// neighbour levels) and the cost; --reconstruct writes the window as the blocks draw it.
+    Scene(cli::scene::SceneArgs),
 }
 
 fn main() -> ExitCode {
@@ -62,6 +69,7 @@ fn main() -> ExitCode {
         Command::Verify(args) => cli::verify::run(args),
         Command::Extract(args) => cli::extract::run(args),
         Command::Scan(args) => cli::scan::run(args),
+        Command::Scene(args) => cli::scene::run(args),
     };
     match result {
         Ok(code) => code,

@@ -69,6 +69,10 @@ struct IngestArgs {
     /// A raw value that marks a void, besides the format's own nodata.
     #[arg(long, allow_negative_numbers = true)]
     nodata: Option<f64>,
+    /// Ground distance between samples in metres, DX or DX,DY (east, south). Overrides what
+    /// the source says; scenes use it to place the terrain in the world.
+    #[arg(long, value_delimiter = ',')]
+    spacing: Option<Vec<f64>>,
 }
 
 impl IngestArgs {
@@ -136,10 +140,25 @@ fn peak_memory_bytes() -> Option<u64> {
     Some(kb * 1024)
 }
 
+/// `--spacing`: one or two finite positive distances.
+fn parse_spacing(values: &[f64]) -> Result<[f64; 2], Error> {
+    let ok = |v: f64| v.is_finite() && v > 0.0;
+    match values {
+        [d] if ok(*d) => Ok([*d, *d]),
+        [dx, dy] if ok(*dx) && ok(*dy) => Ok([*dx, *dy]),
+        _ => Err(Error::InvalidArgument(format!(
+            "--spacing {values:?}: expected DX or DX,DY, finite metres > 0"
+        ))),
+    }
+}
+
 /// Runs `fmrh build`.
 pub fn run(args: &BuildArgs) -> Result<ExitCode, Error> {
     let t0 = Instant::now();
-    let heightfield = ingest::load(&args.input, &args.ingest.options())?;
+    let mut heightfield = ingest::load(&args.input, &args.ingest.options())?;
+    if let Some(spacing) = &args.ingest.spacing {
+        heightfield.metadata.spacing_m = Some(parse_spacing(spacing)?);
+    }
     let ingest_time = t0.elapsed();
     let metadata = heightfield.metadata.clone();
     let options = BuildOptions {

@@ -4,6 +4,8 @@ pub mod build;
 pub mod extract;
 pub mod info;
 pub mod scan;
+pub mod scene;
+pub mod sidecar;
 pub mod verify;
 
 use std::path::Path;
@@ -35,6 +37,30 @@ pub fn parse_quad(text: &str, what: &str) -> Result<[u64; 4], Error> {
         Some(v) if v.len() == 4 => Ok([v[0], v[1], v[2], v[3]]),
         _ => Err(Error::InvalidArgument(format!(
             "{what} `{text}`: expected four non-negative integers c0,r0,c1,r1"
+        ))),
+    }
+}
+
+/// Parses an inclusive window `c0,r0,c1,r1`.
+pub fn parse_window(text: &str) -> Result<fmrh::model::SampleRect, Error> {
+    let [col0, row0, col1, row1] = parse_quad(text, "window")?;
+    Ok(fmrh::model::SampleRect {
+        col0,
+        row0,
+        col1,
+        row1,
+    })
+}
+
+/// Parses `x,y,z` into a vector of finite numbers.
+pub fn parse_vec3(text: &str, what: &str) -> Result<glam::DVec3, Error> {
+    let parts: Option<Vec<f64>> = text.split(',').map(|p| p.trim().parse().ok()).collect();
+    match parts {
+        Some(v) if v.len() == 3 && v.iter().all(|x| x.is_finite()) => {
+            Ok(glam::DVec3::new(v[0], v[1], v[2]))
+        }
+        _ => Err(Error::InvalidArgument(format!(
+            "{what} `{text}`: expected three finite numbers x,y,z"
         ))),
     }
 }

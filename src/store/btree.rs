@@ -419,6 +419,8 @@ pub(crate) struct Cursor<'a> {
     path: Vec<(Cow<'a, [u8]>, usize)>,
     record_size: usize,
     remaining: u64,
+    /// Pages read so far, the descent included.
+    pub pages_read: u32,
 }
 
 /// How a descent picks a child: by key or by ordinal.
@@ -442,6 +444,7 @@ pub(crate) fn seek<'a, S: Source + ?Sized>(
         path: Vec::with_capacity(usize::from(tree.depth.get())),
         record_size: spec.record_size,
         remaining: tree.records.get(),
+        pages_read: 0,
     };
     if tree.records.get() == 0 {
         return Ok(cursor);
@@ -456,6 +459,7 @@ pub(crate) fn seek<'a, S: Source + ?Sized>(
     let mut base_ordinal = 0u64;
     for _ in 0..tree.depth.get().min(MAX_TREE_DEPTH) {
         let page = pages.get(page_no, spec.tag)?;
+        cursor.pages_read += 1;
         let h = header(&page);
         let count = h.count.get() as usize;
         if h.level.get() == 0 {
@@ -493,6 +497,50 @@ pub(crate) fn seek<'a, S: Source + ?Sized>(
         invariant::TREE_SHAPE,
         spec.name,
         "no leaf within the tree's depth",
+    ))
+}
+
+/// The record with ordinal `ordinal` of `tree`, by one descent that keeps no path (`None`
+/// beyond the end).
+pub(crate) fn get_ordinal<S: Source + ?Sized, R: FromBytes>(
+    pages: &Pages<'_, S>,
+    tree: &TreeRef,
+    spec: TreeSpec,
+    ordinal: u64,
+) -> Result<Option<R>> {
+    if ordinal >= tree.records.get() {
+        return Ok(None);
+    }
+    let mut page_no = tree.root_page.get();
+    let mut base_ordinal = 0u64;
+    for _ in 0..tree.depth.get().min(MAX_TREE_DEPTH) {
+        let page = pages.get(page_no, spec.tag)?;
+        let h = header(&page);
+        let count = h.count.get() as usize;
+        if h.level.get() == 0 {
+            let idx = (ordinal - base_ordinal.min(ordinal)) as usize;
+            if idx >= count.min(leaf_capacity(pages.page_size, spec.record_size)) {
+                break;
+            }
+            let at = PAGE_HEADER_LEN + idx * spec.record_size;
+            return page
+                .get(at..at + size_of::<R>())
+                .and_then(|b| R::read_from_bytes(b).ok())
+                .map(Some)
+                .ok_or_else(|| {
+                    Error::corrupt(invariant::TREE_SHAPE, spec.name, "record past the page")
+                });
+        }
+        let count = count.min(branch_capacity(pages.page_size)).max(1);
+        let above = partition(count, |i| branch_entry(&page, i).first_ordinal.get() <= ordinal);
+        let e = branch_entry(&page, above.saturating_sub(1));
+        page_no = e.child.get();
+        base_ordinal = e.first_ordinal.get();
+    }
+    Err(Error::corrupt(
+        invariant::TREE_SHAPE,
+        spec.name,
+        format!("record {ordinal} is not where the branch pages lead"),
     ))
 }
 
@@ -560,6 +608,7 @@ impl<'a> Cursor<'a> {
             let mut child = branch_entry(&page, idx).child.get();
             for _ in 0..depth_below {
                 let p = pages.get(child, tag)?;
+                self.pages_read += 1;
                 let leaf = header(&p).level.get() == 0;
                 if !leaf {
                     child = branch_entry(&p, 0).child.get();

@@ -668,9 +668,7 @@ impl<S: Source> Store<S> {
     }
 
     fn record<R: FromBytes>(&self, tree: &TreeRef, spec: TreeSpec, ordinal: u64) -> Result<R> {
-        let pages = self.pages();
-        let mut c = btree::seek(&pages, tree, spec, Seek::Ordinal(ordinal))?;
-        c.next_record(&pages, spec.tag)?.ok_or_else(|| {
+        btree::get_ordinal(&self.pages(), tree, spec, ordinal)?.ok_or_else(|| {
             Error::InvalidArgument(format!(
                 "{} has {} records; no record {ordinal}",
                 spec.name,
@@ -1111,6 +1109,13 @@ pub struct HilbertScan<'a, S: Source> {
     hi: u64,
     finest: u8,
     done: bool,
+}
+
+impl<S: Source> HilbertScan<'_, S> {
+    /// Index pages read so far, the seek's descent included.
+    pub fn pages_read(&self) -> u32 {
+        self.cursor.pages_read
+    }
 }
 
 impl<S: Source> Iterator for HilbertScan<'_, S> {

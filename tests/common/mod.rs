@@ -51,3 +51,4 @@ pub fn ok_json(out: &std::process::Output) -> serde_json::Value {
 
 pub mod fields;
 pub mod oracle;
+pub mod views;

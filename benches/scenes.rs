@@ -1,0 +1,130 @@
+//! Scene scheduling cost on Puget Sound 1k (160 m spacing) from a warm mapping, at
+//! tau = 0.5, 1, 2, 4 px: uniform mode, view-dependent mode, and the two naive baselines of
+//! `fmrh::scene::baseline` (every finest block of the view; the FMRH walked from the root
+//! without clusters). Each is timed twice: selection alone (the block list with payload
+//! references), and selection plus loading (every payload read and CRC-checked), which is
+//! what a frame waits for. The harness prints blocks and bytes of each answer first; every
+//! method is measured in the same run so the ratios are side by side.
+
+use std::path::PathBuf;
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use glam::DVec3;
+
+use fmrh::ingest::{load, IngestOptions};
+use fmrh::model::{BuildOptions, Model};
+use fmrh::scene::{baseline, Camera, Mode, SceneBlock, SceneOptions, Terrain};
+use fmrh::store::{write_file, Source, WriteOptions};
+use fmrh::Store;
+
+fn data(rel: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data")
+        .join(rel)
+}
+
+fn load_all<S: Source>(store: &Store<S>, blocks: &[SceneBlock]) -> u64 {
+    blocks
+        .iter()
+        .map(|b| {
+            let p = b.payload;
+            store.payload(p.offset, p.len, p.crc).unwrap().len() as u64
+        })
+        .sum()
+}
+
+/// The cameras: an oblique view across the whole terrain, and a low pass over the
+/// mountains in the south-east.
+fn cameras() -> Vec<(&'static str, Camera)> {
+    vec![
+        (
+            "oblique",
+            Camera::looking_at(
+                DVec3::new(20_000.0, 180_000.0, 6_000.0),
+                DVec3::new(80_000.0, 80_000.0, 500.0),
+            ),
+        ),
+        (
+            "low",
+            Camera::looking_at(
+                DVec3::new(60_000.0, 150_000.0, 2_500.0),
+                DVec3::new(110_000.0, 110_000.0, 1_500.0),
+            ),
+        ),
+    ]
+}
+
+fn bench(c: &mut Criterion) {
+    let mut hf = load(
+        &data("puget-sound-1k/ps_height_1k.f32"),
+        &IngestOptions::default(),
+    )
+    .expect("real data (../shared/data)");
+    hf.metadata.spacing_m = Some([160.0, 160.0]);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("ps1k.fmrh");
+    let model = Model::build(hf.clone(), &BuildOptions::default()).unwrap();
+    write_file(&model, &hf.metadata, &path, &WriteOptions::default(), true).unwrap();
+    // SAFETY: the file is private to this benchmark and never written while mapped.
+    let store = unsafe { Store::open(&path) }.unwrap();
+    let terrain = Terrain::new(&store).unwrap();
+
+    let mut g = c.benchmark_group("scene_puget_1k");
+    for (name, cam) in cameras() {
+        for tau in [0.5, 1.0, 2.0, 4.0] {
+            let uniform = SceneOptions {
+                mode: Mode::Uniform,
+                ..SceneOptions::new(tau)
+            };
+            let view = SceneOptions::new(tau);
+            let answers = [
+                ("uniform", terrain.scene(&cam, &uniform).unwrap().blocks),
+                ("view", terrain.scene(&cam, &view).unwrap().blocks),
+                ("all_finest", baseline::all_finest(&terrain, &cam, None).unwrap()),
+                ("traversal", baseline::traversal(&terrain, &cam, tau, None).unwrap()),
+            ];
+            for (method, blocks) in &answers {
+                eprintln!(
+                    "{name} tau {tau}: {method:>10} {:>4} blocks {:>8} bytes",
+                    blocks.len(),
+                    load_all(&store, blocks)
+                );
+            }
+            let id = |m: &str, what: &str| format!("{name}/tau{tau}/{m}/{what}");
+            g.bench_function(id("uniform", "select"), |b| {
+                b.iter(|| terrain.scene(&cam, &uniform).unwrap().blocks.len())
+            });
+            g.bench_function(id("view", "select"), |b| {
+                b.iter(|| terrain.scene(&cam, &view).unwrap().blocks.len())
+            });
+            g.bench_function(id("all_finest", "select"), |b| {
+                b.iter(|| baseline::all_finest(&terrain, &cam, None).unwrap().len())
+            });
+            g.bench_function(id("traversal", "select"), |b| {
+                b.iter(|| baseline::traversal(&terrain, &cam, tau, None).unwrap().len())
+            });
+            g.bench_function(id("uniform", "load"), |b| {
+                b.iter(|| load_all(&store, &terrain.scene(&cam, &uniform).unwrap().blocks))
+            });
+            g.bench_function(id("view", "load"), |b| {
+                b.iter(|| load_all(&store, &terrain.scene(&cam, &view).unwrap().blocks))
+            });
+            g.bench_function(id("all_finest", "load"), |b| {
+                b.iter(|| load_all(&store, &baseline::all_finest(&terrain, &cam, None).unwrap()))
+            });
+            g.bench_function(id("traversal", "load"), |b| {
+                b.iter(|| {
+                    load_all(&store, &baseline::traversal(&terrain, &cam, tau, None).unwrap())
+                })
+            });
+        }
+    }
+    g.finish();
+}
+
+criterion_group! {
+    name = benches;
+    config = Criterion::default().sample_size(30).measurement_time(std::time::Duration::from_secs(1)).warm_up_time(std::time::Duration::from_millis(300));
+    targets = bench
+}
+criterion_main!(benches);

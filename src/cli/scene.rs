@@ -1,0 +1,227 @@
+//! `fmrh scene`: one camera and a tolerance in pixels, the blocks that view needs out; with
+//! `--reconstruct`, the surface they draw at full resolution.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use serde::Serialize;
+
+use fmrh::model::SampleRect;
+use fmrh::scene::{reconstruct, Camera, Mode, Scene, SceneOptions, Terrain, DEFAULT_GAP};
+use fmrh::Error;
+
+/// The camera options `scene` and `fly` share.
+#[derive(clap::Args, Clone)]
+pub struct ViewArgs {
+    /// Vertical field of view in degrees (strictly between 0 and 180).
+    #[arg(long, default_value_t = fmrh::scene::camera::DEFAULT_FOV_DEG)]
+    pub fov: f64,
+    /// Viewport in pixels, WIDTHxHEIGHT.
+    #[arg(long, default_value = "1024x768")]
+    pub viewport: String,
+    /// Tolerance in pixels.
+    #[arg(long)]
+    pub tau: f64,
+    /// uniform: one static bound for the whole view (one cluster); view: each block meets
+    /// the tolerance where it is seen.
+    #[arg(long, value_enum, default_value = "view")]
+    pub mode: ModeArg,
+    /// Runs of Hilbert keys separated by at most this many keys are scanned as one.
+    #[arg(long, default_value_t = DEFAULT_GAP)]
+    pub gap: u64,
+}
+
+/// `--mode`.
+#[derive(clap::ValueEnum, Clone, Copy)]
+pub enum ModeArg {
+    /// One cluster for the whole view.
+    Uniform,
+    /// View-dependent.
+    View,
+}
+
+impl ViewArgs {
+    /// The viewport as `[width, height]`.
+    pub fn viewport(&self) -> Result<[u32; 2], Error> {
+        let bad = || {
+            Error::InvalidArgument(format!(
+                "viewport `{}`: expected WIDTHxHEIGHT in pixels, e.g. 1024x768",
+                self.viewport
+            ))
+        };
+        let (w, h) = self.viewport.split_once(['x', 'X']).ok_or_else(bad)?;
+        Ok([
+            w.trim().parse().map_err(|_| bad())?,
+            h.trim().parse().map_err(|_| bad())?,
+        ])
+    }
+
+    /// The scene options (without a window).
+    pub fn options(&self) -> SceneOptions {
+        SceneOptions {
+            tau: self.tau,
+            mode: match self.mode {
+                ModeArg::Uniform => Mode::Uniform,
+                ModeArg::View => Mode::View,
+            },
+            window: None,
+            gap: self.gap,
+        }
+    }
+}
+
+#[derive(clap::Args)]
+pub struct SceneArgs {
+    /// The container.
+    file: PathBuf,
+    /// Eye position x,y,z in metres (x = col * dx east, y = row * dy south, z height).
+    #[arg(long, allow_hyphen_values = true)]
+    eye: String,
+    /// The point looked at, x,y,z.
+    #[arg(long, allow_hyphen_values = true)]
+    target: String,
+    /// Up direction on screen, x,y,z.
+    #[arg(long, default_value = "0,0,1", allow_hyphen_values = true)]
+    up: String,
+    #[command(flatten)]
+    view: ViewArgs,
+    /// Restrict the scene to this window, inclusive samples c0,r0,c1,r1 (default: what the
+    /// frustum sees).
+    #[arg(long)]
+    window: Option<String>,
+    /// Write the window at full resolution as the scene's blocks draw it (.f32 + .json).
+    #[arg(long)]
+    reconstruct: Option<PathBuf>,
+    /// Replace existing --reconstruct files.
+    #[arg(long)]
+    force: bool,
+    /// Print the scene as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+/// The JSON report.
+#[derive(Serialize)]
+struct Report<'a> {
+    mode: Mode,
+    tau: f64,
+    /// Uniform mode: the chosen static bound in metres.
+    threshold: Option<f64>,
+    window: Option<SampleRect>,
+    blocks: &'a [fmrh::scene::SceneBlock],
+    stats: &'a fmrh::scene::SceneStats,
+    /// --reconstruct: samples of the window no block owns (written as NaN).
+    uncovered_samples: Option<u64>,
+}
+
+/// Runs `fmrh scene`.
+pub fn run(args: &SceneArgs) -> Result<ExitCode, Error> {
+    let camera = Camera {
+        eye: super::parse_vec3(&args.eye, "--eye")?,
+        target: super::parse_vec3(&args.target, "--target")?,
+        up: super::parse_vec3(&args.up, "--up")?,
+        fov_y_deg: args.view.fov,
+        viewport: args.view.viewport()?,
+    };
+    let mut options = args.view.options();
+    options.window = args.window.as_deref().map(super::parse_window).transpose()?;
+    let output = args
+        .reconstruct
+        .as_deref()
+        .map(|p| super::sidecar::F32Output::new(p, args.force))
+        .transpose()?;
+    let store = super::open(&args.file)?;
+    let terrain = Terrain::new(&store)?;
+    let scene = terrain.scene(&camera, &options)?;
+    let mut uncovered = None;
+    if let Some(out) = &output {
+        let window = scene.window.ok_or_else(|| {
+            Error::InvalidArgument(
+                "the camera sees no terrain: there is no window to reconstruct (give --window)"
+                    .into(),
+            )
+        })?;
+        let rec = reconstruct(&store, &scene, window)?;
+        uncovered = Some(rec.uncovered);
+        let hf = rec.to_heightfield(&store.header().metadata)?;
+        out.write(&hf, window, "fmrh scene --reconstruct", &args.file, &store)?;
+    }
+    if args.json {
+        super::print_json(&Report {
+            mode: scene.mode,
+            tau: scene.tau,
+            threshold: scene.stats.threshold,
+            window: scene.window,
+            blocks: &scene.blocks,
+            stats: &scene.stats,
+            uncovered_samples: uncovered,
+        })?;
+    } else {
+        print_text(&scene, uncovered);
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn print_text(scene: &Scene, uncovered: Option<u64>) {
+    let s = &scene.stats;
+    let mode = match scene.mode {
+        Mode::Uniform => "uniform",
+        Mode::View => "view-dependent",
+    };
+    println!("scene: {mode}, tau {} px", scene.tau);
+    if let (Some(t), Some(e), Some(p)) = (s.threshold, s.allowed_error, s.p_min) {
+        let cluster = s
+            .cluster
+            .map_or("physical blocks".to_string(), |c| format!("cluster {c}"));
+        println!("  P_min {p:.3} m allows {e:.4} m: {cluster}, threshold {t} m");
+    }
+    match scene.window {
+        Some(w) => println!(
+            "  window {},{},{},{} ({} quadrants, {} range scans, {} index pages, {} node reads)",
+            w.col0, w.row0, w.col1, w.row1, s.quadrants, s.ranges, s.index_pages, s.node_reads
+        ),
+        None => println!("  the camera sees no terrain"),
+    }
+    println!(
+        "  {} blocks, {} samples, {} triangles, {} bytes; scheduled in {:.1} us",
+        s.blocks,
+        s.samples,
+        s.triangles,
+        s.bytes,
+        s.schedule_ns as f64 / 1000.0
+    );
+    println!(
+        "  max static error {:.4} m, max screen-space error {:.4} px",
+        s.max_error, s.max_screen_error
+    );
+    if let Some(u) = uncovered {
+        println!("  reconstruction: {u} samples of the window lie outside every block (NaN)");
+    }
+    if scene.blocks.is_empty() {
+        return;
+    }
+    println!(
+        "  {:>5} {:>6} {:>6}  {:>23}  {:>12} {:>9}  neighbours N/E/S/W",
+        "level", "x", "y", "col0,row0..col1,row1", "error m", "px"
+    );
+    let nb = |n: Option<fmrh::scene::NeighbourLevels>| match n {
+        None => "-".to_string(),
+        Some(n) if n.coarsest == n.finest => n.coarsest.to_string(),
+        Some(n) => format!("{}-{}", n.coarsest, n.finest),
+    };
+    for b in &scene.blocks {
+        println!(
+            "  {:>5} {:>6} {:>6}  {:>23}  {:>12.4} {:>9.4}  {}/{}/{}/{}",
+            b.level,
+            b.x,
+            b.y,
+            format!("{},{}..{},{}", b.col0, b.row0, b.col1, b.row1),
+            b.error,
+            b.screen_error,
+            nb(b.neighbours[0]),
+            nb(b.neighbours[1]),
+            nb(b.neighbours[2]),
+            nb(b.neighbours[3]),
+        );
+    }
+}

@@ -1,0 +1,152 @@
+//! The `.f32` + `.json` output of `extract` and `scene --reconstruct`: the form of
+//! `../shared/data`, so `fmrh build` reads it back and anyone can diff it against a source.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use serde::Serialize;
+
+use fmrh::heightfield::Heightfield;
+use fmrh::model::SampleRect;
+use fmrh::store::{write_atomically, Source as StoreSource};
+use fmrh::{Error, Store};
+
+/// The sidecar, with the keys `../shared/data/README.md` promises.
+#[derive(Serialize)]
+struct Sidecar {
+    width: u32,
+    height: u32,
+    f32_file: String,
+    f32_layout: &'static str,
+    nodata_in_f32: &'static str,
+    nodata_count: u64,
+    min: Option<f32>,
+    max: Option<f32>,
+    mean: Option<f64>,
+    units: Option<String>,
+    spacing_m: Option<[f64; 2]>,
+    georeference: Option<Geo>,
+    /// `[c0, r0, c1, r1]` of the container's samples, inclusive.
+    window: [u64; 4],
+    source: Source,
+}
+
+#[derive(Serialize)]
+struct Geo {
+    crs: Option<String>,
+    /// CRS coordinates of the centre of the window's sample (0, 0).
+    origin: [f64; 2],
+    step: [f64; 2],
+}
+
+#[derive(Serialize)]
+struct Source {
+    kind: &'static str,
+    container: String,
+    txn_id: u64,
+    original_format: String,
+}
+
+/// Where a `.f32` and its sidecar go, checked before any work is done.
+pub struct F32Output {
+    f32_path: PathBuf,
+    json_path: PathBuf,
+    force: bool,
+}
+
+impl F32Output {
+    /// Refuses a `.json` output name, and existing files unless `force`.
+    pub fn new(output: &Path, force: bool) -> Result<F32Output, Error> {
+        if output.extension().is_some_and(|e| e == "json") {
+            return Err(Error::InvalidArgument(
+                "the output is the .f32 file; its .json sidecar is written beside it".into(),
+            ));
+        }
+        let json_path = output.with_extension("json");
+        for p in [output, &json_path] {
+            if !force && p.exists() {
+                return Err(Error::InvalidArgument(format!(
+                    "{} exists; pass --force to replace it",
+                    p.display()
+                )));
+            }
+        }
+        Ok(F32Output {
+            f32_path: output.to_path_buf(),
+            json_path,
+            force,
+        })
+    }
+
+    /// Writes `hf` (the container's samples `window`) and its sidecar, each atomically.
+    pub fn write<S: StoreSource>(
+        &self,
+        hf: &Heightfield,
+        window: SampleRect,
+        kind: &'static str,
+        container: &Path,
+        store: &Store<S>,
+    ) -> Result<(), Error> {
+    let samples = hf.samples();
+    let (mut min, mut max, mut sum, mut valid) = (f32::INFINITY, f32::NEG_INFINITY, 0f64, 0u64);
+    for &v in samples {
+        if !v.is_nan() {
+            min = min.min(v);
+            max = max.max(v);
+            sum += f64::from(v);
+            valid += 1;
+        }
+    }
+    let meta = &hf.metadata;
+    let file_name = self
+        .f32_path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let sidecar = Sidecar {
+        width: hf.width(),
+        height: hf.height(),
+        f32_file: file_name,
+        f32_layout: "raw little-endian float32, row-major, width*height values, no header",
+        nodata_in_f32: "NaN",
+        nodata_count: samples.len() as u64 - valid,
+        min: (valid > 0).then_some(min),
+        max: (valid > 0).then_some(max),
+        mean: (valid > 0).then(|| sum / valid as f64),
+        units: meta.units.clone(),
+        spacing_m: meta.spacing_m,
+        georeference: meta.georeference.as_ref().map(|g| Geo {
+            crs: g.crs.clone(),
+            origin: g.origin,
+            step: g.step,
+        }),
+        window: [window.col0, window.row0, window.col1, window.row1],
+        source: Source {
+            kind,
+            container: container.display().to_string(),
+            txn_id: store.txn_id(),
+            original_format: store.header().metadata.source_format.clone(),
+        },
+    };
+    let json = serde_json::to_vec_pretty(&sidecar)
+        .map_err(|e| Error::InvalidArgument(format!("cannot format the sidecar: {e}")))?;
+    let mut raw = Vec::with_capacity(samples.len() * 4);
+    for v in samples {
+        raw.extend_from_slice(&v.to_le_bytes());
+    }
+    for (path, bytes) in [(&self.f32_path, &raw), (&self.json_path, &json)] {
+        write_atomically(path, self.force, |w| {
+            w.write_all(bytes).map_err(|e| Error::io(path, e))
+        })?;
+    }
+    eprintln!(
+        "fmrh: wrote {} x {} samples ({} void) to {} and {}",
+        hf.width(),
+        hf.height(),
+        samples.len() as u64 - valid,
+        self.f32_path.display(),
+        self.json_path.display()
+    );
+        Ok(())
+    }
+}

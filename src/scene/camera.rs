@@ -1,0 +1,415 @@
+//! The camera, and the little geometry a scene needs from it: the view frustum, how many
+//! pixels a metre covers at a distance, and distances to boxes.
+//!
+//! **World frame.** `x = col · dx` (east), `y = row · dy` (south), `z = height`, all in metres;
+//! `dx`, `dy` are the dataset's ground spacing (1 when the source did not say). Sample `(0, 0)`
+//! is the origin; the georeference is not applied, so coordinates stay small and exact. With
+//! `y` growing south and `z` up the frame is left-handed; nothing below depends on handedness
+//! (the image is merely mirrored for a right-handed reader, and culling is symmetric).
+//!
+//! **Screen-space error** (seed 004 eq. 2). A vertical error `e` seen at distance `d` covers
+//! `e · λ / d` pixels, with `λ = S / (2 · tan(fov_y / 2))` and `S` the viewport's height in
+//! pixels. Seed 000's eq. 2 is the same relation solved for the error: `ε = τ / λ · P_min`.
+//!
+//! **Frustum.** The four side planes through the eye (no near or far plane: a terrain viewer
+//! wants everything in front of it). A point is visible when it is on the inner side of all
+//! four, which also puts it in front of the eye because the field of view is below 180°.
+
+use glam::DVec3;
+
+use crate::error::{Error, Result};
+
+/// Vertical field of view used when none is given, in degrees.
+pub const DEFAULT_FOV_DEG: f64 = 60.0;
+/// Viewport used when none is given, in pixels.
+pub const DEFAULT_VIEWPORT: [u32; 2] = [1024, 768];
+/// The largest viewport side accepted, in pixels.
+pub const MAX_VIEWPORT: u32 = 1 << 16;
+
+/// A pinhole camera in the world frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Camera {
+    /// Where the eye is.
+    pub eye: DVec3,
+    /// A point the camera looks at.
+    pub target: DVec3,
+    /// Which way is up on the screen. When it is parallel to the view direction (looking
+    /// straight down with `up = +z`), the world axis least aligned with the view is used
+    /// instead: north (`-y`), then east (`+x`).
+    pub up: DVec3,
+    /// Vertical field of view in degrees, strictly between 0 and 180.
+    pub fov_y_deg: f64,
+    /// Viewport `[width, height]` in pixels.
+    pub viewport: [u32; 2],
+}
+
+impl Camera {
+    /// A camera at `eye` looking at `target`, `+z` up, 60° vertical field of view, 1024 × 768.
+    pub fn looking_at(eye: DVec3, target: DVec3) -> Camera {
+        Camera {
+            eye,
+            target,
+            up: DVec3::Z,
+            fov_y_deg: DEFAULT_FOV_DEG,
+            viewport: DEFAULT_VIEWPORT,
+        }
+    }
+
+    /// Checks the camera and derives its view geometry. Non-finite input, a target equal to
+    /// the eye, a zero up vector, a field of view outside (0°, 180°) or an empty viewport is an
+    /// [`Error::InvalidArgument`].
+    pub fn view(&self) -> Result<View> {
+        let bad = |what: String| Err(Error::InvalidArgument(format!("camera: {what}")));
+        for (name, v) in [("eye", self.eye), ("target", self.target), ("up", self.up)] {
+            if !v.is_finite() {
+                return bad(format!("{name} {v} is not finite"));
+            }
+        }
+        if !self.fov_y_deg.is_finite() || self.fov_y_deg <= 0.0 || self.fov_y_deg >= 180.0 {
+            return bad(format!(
+                "field of view {}° must lie strictly between 0 and 180",
+                self.fov_y_deg
+            ));
+        }
+        let [w, h] = self.viewport;
+        if w == 0 || h == 0 || w > MAX_VIEWPORT || h > MAX_VIEWPORT {
+            return bad(format!(
+                "viewport {w}x{h}: each side must be 1 to {MAX_VIEWPORT} pixels"
+            ));
+        }
+        let forward = (self.target - self.eye).normalize_or_zero();
+        if forward == DVec3::ZERO || !forward.is_finite() {
+            return bad("the target must differ from the eye".into());
+        }
+        if self.up.length_squared() == 0.0 {
+            return bad("the up vector is zero".into());
+        }
+        let right = [self.up, -DVec3::Y, DVec3::X]
+            .into_iter()
+            .map(|up| forward.cross(up.normalize()))
+            .find(|r| r.length() > 1e-9)
+            .map(DVec3::normalize)
+            .unwrap_or(DVec3::X);
+        let screen_up = right.cross(forward);
+        let tan_y = (self.fov_y_deg.to_radians() / 2.0).tan();
+        let tan_x = tan_y * f64::from(w) / f64::from(h);
+        if !(tan_y.is_finite() && tan_x.is_finite() && tan_y > 0.0) {
+            return bad(format!("field of view {}° is degenerate", self.fov_y_deg));
+        }
+        // Corner rays, counter-clockwise seen from behind the eye: top-left, bottom-left,
+        // bottom-right, top-right.
+        let rays = [
+            forward - right * tan_x + screen_up * tan_y,
+            forward - right * tan_x - screen_up * tan_y,
+            forward + right * tan_x - screen_up * tan_y,
+            forward + right * tan_x + screen_up * tan_y,
+        ];
+        let mut planes = [Plane::default(); 4];
+        for (i, plane) in planes.iter_mut().enumerate() {
+            let n = rays[i].cross(rays[(i + 1) % 4]).normalize_or_zero();
+            let n = if n.dot(forward) < 0.0 { -n } else { n };
+            *plane = Plane {
+                normal: n,
+                offset: -n.dot(self.eye),
+            };
+        }
+        // Separating-axis candidates besides the box's own normals: each box edge direction
+        // crossed with each corner ray. Where the cone projects onto a half-line, record which.
+        let mut axes = Vec::with_capacity(12);
+        for e in [DVec3::X, DVec3::Y, DVec3::Z] {
+            for r in &rays {
+                let axis = e.cross(*r);
+                if axis.length_squared() > 0.0 {
+                    axes.push(ConeAxis::new(axis, self.eye, &rays));
+                }
+            }
+        }
+        for e in [DVec3::X, DVec3::Y, DVec3::Z] {
+            axes.push(ConeAxis::new(e, self.eye, &rays));
+        }
+        Ok(View {
+            eye: self.eye,
+            forward,
+            lambda: f64::from(h) / (2.0 * tan_y),
+            planes,
+            rays,
+            axes,
+        })
+    }
+}
+
+/// A plane `normal · p + offset = 0`; the inner side is where the expression is `>= 0`.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Plane {
+    /// Unit normal, pointing inside.
+    pub normal: DVec3,
+    /// `-normal · (a point of the plane)`.
+    pub offset: f64,
+}
+
+/// An axis-aligned box in the world frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Aabb {
+    /// Least corner.
+    pub min: DVec3,
+    /// Greatest corner.
+    pub max: DVec3,
+}
+
+impl Aabb {
+    /// The distance from `p` to the nearest point of the box (0 inside).
+    pub fn distance(&self, p: DVec3) -> f64 {
+        (p - p.clamp(self.min, self.max)).length()
+    }
+
+    /// The distance from `p` to the farthest point of the box.
+    pub fn max_distance(&self, p: DVec3) -> f64 {
+        let far = DVec3::select(
+            (p - self.min).abs().cmpge((p - self.max).abs()),
+            self.min,
+            self.max,
+        );
+        (p - far).length()
+    }
+}
+
+/// How a box lies against the frustum.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Coverage {
+    /// Entirely outside.
+    Outside,
+    /// Partly inside, or possibly so.
+    Partial,
+    /// Entirely inside.
+    Inside,
+}
+
+/// A separating-axis candidate and the frustum's projection onto it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct ConeAxis {
+    axis: DVec3,
+    /// The eye's projection: the cone's end point on this axis.
+    apex: f64,
+    /// +1: the cone projects onto `[apex, +inf)`; -1: onto `(-inf, apex]`; 0: the whole line
+    /// (this axis never separates).
+    side: i8,
+}
+
+impl ConeAxis {
+    fn new(axis: DVec3, eye: DVec3, rays: &[DVec3; 4]) -> ConeAxis {
+        let dirs = rays.map(|r| axis.dot(r));
+        let side = if dirs.iter().all(|&d| d >= 0.0) {
+            1
+        } else if dirs.iter().all(|&d| d <= 0.0) {
+            -1
+        } else {
+            0
+        };
+        ConeAxis {
+            axis,
+            apex: axis.dot(eye),
+            side,
+        }
+    }
+}
+
+/// A checked camera's view geometry.
+#[derive(Clone, Debug, PartialEq)]
+pub struct View {
+    /// The eye.
+    pub eye: DVec3,
+    /// Unit view direction.
+    pub forward: DVec3,
+    /// Pixels covered by one metre at one metre: `S / (2 · tan(fov_y / 2))`.
+    pub lambda: f64,
+    /// The four side planes.
+    pub planes: [Plane; 4],
+    /// The four corner rays (not unit length).
+    pub rays: [DVec3; 4],
+    axes: Vec<ConeAxis>,
+}
+
+impl View {
+    /// Screen-space error in pixels of a static error `error` whose box is at `distance`.
+    /// Zero error is zero pixels at any distance; a positive error at distance 0 is infinite.
+    pub fn screen_error(&self, error: f64, distance: f64) -> f64 {
+        if error == 0.0 {
+            0.0
+        } else {
+            error * self.lambda / distance
+        }
+    }
+
+    /// The largest static error whose screen-space error stays within `tau` pixels at
+    /// `distance` (seed 000 eq. 2: `ε = τ / λ · P_min`).
+    pub fn allowed_error(&self, tau: f64, distance: f64) -> f64 {
+        tau / self.lambda * distance
+    }
+
+    /// A conservative classification of `b` by the plane test: `Outside` is certain,
+    /// `Partial` may be a box that misses the frustum near its edges.
+    pub fn classify(&self, b: &Aabb) -> Coverage {
+        let (centre, half) = ((b.min + b.max) * 0.5, (b.max - b.min) * 0.5);
+        let mut inside_all = true;
+        for p in &self.planes {
+            let s = p.normal.dot(centre) + p.offset;
+            let r = p.normal.abs().dot(half);
+            if s + r < 0.0 {
+                return Coverage::Outside;
+            }
+            inside_all &= s - r >= 0.0;
+        }
+        if inside_all {
+            Coverage::Inside
+        } else {
+            Coverage::Partial
+        }
+    }
+
+    /// Whether `b` meets the frustum, exactly: the separating-axis test between the box and
+    /// the frustum's cone (face normals of both, and every box edge crossed with every corner
+    /// ray). A closed box touching the frustum's boundary meets it.
+    pub fn intersects(&self, b: &Aabb) -> bool {
+        match self.classify(b) {
+            Coverage::Outside => return false,
+            Coverage::Inside => return true,
+            Coverage::Partial => {}
+        }
+        if b.distance(self.eye) == 0.0 {
+            return true;
+        }
+        let (centre, half) = ((b.min + b.max) * 0.5, (b.max - b.min) * 0.5);
+        !self.axes.iter().any(|a| {
+            let c = a.axis.dot(centre);
+            let r = a.axis.abs().dot(half);
+            match a.side {
+                1 => c + r < a.apex,
+                -1 => c - r > a.apex,
+                _ => false,
+            }
+        })
+    }
+}
+
+/// Ground spacing of the world frame, in metres per sample step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WorldFrame {
+    /// Metres from one column to the next (east).
+    pub dx: f64,
+    /// Metres from one row to the next (south).
+    pub dy: f64,
+}
+
+impl WorldFrame {
+    /// The frame of a dataset whose spacing is `spacing_m` (1 m when unknown or unusable).
+    pub fn new(spacing_m: Option<[f64; 2]>) -> WorldFrame {
+        let ok = |v: f64| v.is_finite() && v > 0.0;
+        match spacing_m {
+            Some([dx, dy]) if ok(dx.abs()) && ok(dy.abs()) => WorldFrame {
+                dx: dx.abs(),
+                dy: dy.abs(),
+            },
+            _ => WorldFrame { dx: 1.0, dy: 1.0 },
+        }
+    }
+
+    /// The world point of sample `(col, row)` at height `z`.
+    pub fn point(&self, col: f64, row: f64, z: f64) -> DVec3 {
+        DVec3::new(col * self.dx, row * self.dy, z)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cam(eye: [f64; 3], target: [f64; 3]) -> Camera {
+        Camera::looking_at(DVec3::from(eye), DVec3::from(target))
+    }
+
+    #[test]
+    fn bad_cameras_are_refused() {
+        let ok = cam([0.0, 0.0, 10.0], [1.0, 1.0, 0.0]);
+        assert!(ok.view().is_ok());
+        let mut c = ok;
+        c.eye.x = f64::NAN;
+        assert!(c.view().is_err());
+        c = ok;
+        c.target.z = f64::INFINITY;
+        assert!(c.view().is_err());
+        c = ok;
+        c.target = c.eye;
+        assert!(c.view().is_err());
+        for fov in [0.0, -1.0, 180.0, 200.0, f64::NAN] {
+            c = ok;
+            c.fov_y_deg = fov;
+            assert!(c.view().is_err(), "{fov}");
+        }
+        c = ok;
+        c.viewport = [0, 10];
+        assert!(c.view().is_err());
+        c = ok;
+        c.up = DVec3::ZERO;
+        assert!(c.view().is_err());
+    }
+
+    #[test]
+    fn straight_down_uses_north_up() {
+        let v = cam([5.0, 5.0, 10.0], [5.0, 5.0, 0.0]).view().unwrap();
+        assert!(v.planes.iter().all(|p| p.normal.is_finite()));
+        // The point below the eye is inside, one far to the side is not.
+        let below = Aabb {
+            min: DVec3::new(4.9, 4.9, 0.0),
+            max: DVec3::new(5.1, 5.1, 0.0),
+        };
+        assert_eq!(v.classify(&below), Coverage::Inside);
+        let aside = Aabb {
+            min: DVec3::new(100.0, 100.0, 0.0),
+            max: DVec3::new(101.0, 101.0, 0.0),
+        };
+        assert!(!v.intersects(&aside));
+    }
+
+    #[test]
+    fn screen_error_matches_seed_004() {
+        let v = cam([0.0, 0.0, 0.0], [1.0, 0.0, 0.0]).view().unwrap();
+        // 768 px, 60°: λ = 384 / tan 30° = 665.1
+        assert!((v.lambda - 384.0 / (30f64.to_radians()).tan()).abs() < 1e-9);
+        let e = v.allowed_error(1.0, 100.0);
+        assert!((v.screen_error(e, 100.0) - 1.0).abs() < 1e-12);
+        assert_eq!(v.screen_error(0.0, 0.0), 0.0);
+        assert_eq!(v.screen_error(1.0, 0.0), f64::INFINITY);
+    }
+
+    #[test]
+    fn box_distances() {
+        let b = Aabb {
+            min: DVec3::new(0.0, 0.0, 0.0),
+            max: DVec3::new(2.0, 2.0, 2.0),
+        };
+        assert_eq!(b.distance(DVec3::new(1.0, 1.0, 1.0)), 0.0);
+        assert_eq!(b.distance(DVec3::new(5.0, 1.0, 1.0)), 3.0);
+        assert_eq!(b.max_distance(DVec3::new(1.0, 1.0, 1.0)), 3f64.sqrt());
+        assert_eq!(b.max_distance(DVec3::new(-1.0, 0.0, 0.0)), (9.0f64 + 4.0 + 4.0).sqrt());
+    }
+
+    #[test]
+    fn exact_test_rejects_what_planes_cannot() {
+        // A narrow frustum looking along +x; a box beside it near the eye but across the
+        // diagonal of two side planes' extensions.
+        let mut c = cam([0.0, 0.0, 0.0], [1.0, 0.0, 0.0]);
+        c.fov_y_deg = 10.0;
+        c.viewport = [100, 100];
+        let v = c.view().unwrap();
+        let far_corner = Aabb {
+            min: DVec3::new(-3.0, 2.0, 2.0),
+            max: DVec3::new(-1.0, 3.0, 3.0),
+        };
+        assert!(!v.intersects(&far_corner));
+        let ahead = Aabb {
+            min: DVec3::new(10.0, -0.1, -0.1),
+            max: DVec3::new(11.0, 0.1, 0.1),
+        };
+        assert!(v.intersects(&ahead));
+    }
+}

@@ -1,0 +1,24 @@
+//! Scenes: a camera and a pixel tolerance in, exactly the blocks the view needs out.
+//!
+//! Read in order: [`camera`] (the view, the frustum, pixels per metre), [`ranges`] (a region
+//! of the terrain as maximal aligned quadrants, then Hilbert key ranges), [`select`] (the
+//! uniform and view-dependent cuts, found through the clusters), [`reconstruct`] (the
+//! surface a scene draws, sampled back at full resolution).
+//!
+//! A scene is always a *cover*: every point of its region lies in exactly one block (blocks
+//! share edges, nothing more). In uniform mode every block is within one static bound in
+//! metres; in view-dependent mode every block is within the tolerance in pixels where it is
+//! seen, and no block could be replaced by its parent without breaking that.
+
+pub mod baseline;
+pub mod camera;
+pub mod ranges;
+pub mod reconstruct;
+pub mod select;
+
+pub use camera::{Aabb, Camera, Coverage, View, WorldFrame};
+pub use reconstruct::{reconstruct, Reconstruction};
+pub use select::{
+    Mode, NeighbourLevels, PayloadRef, Scene, SceneBlock, SceneOptions, SceneStats, Terrain,
+    DEFAULT_GAP,
+};
