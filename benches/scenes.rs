@@ -80,8 +80,14 @@ fn bench(c: &mut Criterion) {
             let answers = [
                 ("uniform", terrain.scene(&cam, &uniform).unwrap().blocks),
                 ("view", terrain.scene(&cam, &view).unwrap().blocks),
-                ("all_finest", baseline::all_finest(&terrain, &cam, None).unwrap()),
-                ("traversal", baseline::traversal(&terrain, &cam, tau, None).unwrap()),
+                (
+                    "all_finest",
+                    baseline::all_finest(&terrain, &cam, None).unwrap(),
+                ),
+                (
+                    "traversal",
+                    baseline::traversal(&terrain, &cam, tau, None).unwrap(),
+                ),
             ];
             for (method, blocks) in &answers {
                 eprintln!(
@@ -101,7 +107,11 @@ fn bench(c: &mut Criterion) {
                 b.iter(|| baseline::all_finest(&terrain, &cam, None).unwrap().len())
             });
             g.bench_function(id("traversal", "select"), |b| {
-                b.iter(|| baseline::traversal(&terrain, &cam, tau, None).unwrap().len())
+                b.iter(|| {
+                    baseline::traversal(&terrain, &cam, tau, None)
+                        .unwrap()
+                        .len()
+                })
             });
             g.bench_function(id("uniform", "load"), |b| {
                 b.iter(|| load_all(&store, &terrain.scene(&cam, &uniform).unwrap().blocks))
@@ -114,7 +124,10 @@ fn bench(c: &mut Criterion) {
             });
             g.bench_function(id("traversal", "load"), |b| {
                 b.iter(|| {
-                    load_all(&store, &baseline::traversal(&terrain, &cam, tau, None).unwrap())
+                    load_all(
+                        &store,
+                        &baseline::traversal(&terrain, &cam, tau, None).unwrap(),
+                    )
                 })
             });
         }

@@ -59,6 +59,12 @@ enum Command {
     /// meets the tolerance where it is seen. Prints each block (level, samples, error,
     /// neighbour levels) and the cost; --reconstruct writes the window as the blocks draw it.
     Scene(cli::scene::SceneArgs),
+    /// Replay a camera path: per frame, blocks loaded, evicted and resident, and the cost.
+    ///
+    /// Each frame loads only what its scene needs and is not already resident (seed 000
+    /// Algorithm 3). --memory-radius keeps blocks that left the view; --prefetch with
+    /// --cache-radius warms the blocks of the extrapolated next camera on a second thread.
+    Fly(cli::fly::FlyArgs),
 }
 
 fn main() -> ExitCode {
@@ -70,6 +76,7 @@ fn main() -> ExitCode {
         Command::Extract(args) => cli::extract::run(args),
         Command::Scan(args) => cli::scan::run(args),
         Command::Scene(args) => cli::scene::run(args),
+        Command::Fly(args) => cli::fly::run(args),
     };
     match result {
         Ok(code) => code,

@@ -18,7 +18,7 @@ use proptest::prelude::*;
 use common::fields::Rng;
 use common::views::{self, Fixture};
 use fmrh::model::{BuildOptions, SampleRect, Thresholds};
-use fmrh::scene::{reconstruct, ranges, Camera, Mode, Scene, SceneOptions, Terrain};
+use fmrh::scene::{ranges, reconstruct, Camera, Mode, Scene, SceneOptions, Terrain};
 
 fn puget() -> &'static Fixture {
     static F: OnceLock<Fixture> = OnceLock::new();
@@ -26,7 +26,12 @@ fn puget() -> &'static Fixture {
 }
 
 /// Every terrain sample on a coarse lattice that the frustum sees must lie in a block.
-fn assert_visible_points_covered(f: &Fixture, terrain: &Terrain<'_, impl fmrh::store::Source>, cam: &Camera, scene: &Scene) {
+fn assert_visible_points_covered(
+    f: &Fixture,
+    terrain: &Terrain<'_, impl fmrh::store::Source>,
+    cam: &Camera,
+    scene: &Scene,
+) {
     let view = cam.view().unwrap();
     let d = f.model.domain();
     let keys: Vec<_> = scene.blocks.iter().map(|b| b.keys(d)).collect();
@@ -39,7 +44,11 @@ fn assert_visible_points_covered(f: &Fixture, terrain: &Terrain<'_, impl fmrh::s
         for col in (0..u64::from(d.width())).step_by(step) {
             let z = f64::from(f.model.raster().value(col, row));
             let p = frame.point(col as f64, row as f64, z);
-            if view.planes.iter().any(|pl| pl.normal.dot(p) + pl.offset < 0.0) {
+            if view
+                .planes
+                .iter()
+                .any(|pl| pl.normal.dot(p) + pl.offset < 0.0)
+            {
                 continue;
             }
             let (bx, by) = ranges::owner_block(d, col, row);
@@ -73,6 +82,16 @@ proptest! {
         let scene = terrain.scene(&cam, &opts(tau, Mode::View, None)).unwrap();
         let oracle = views::ideal_cut(&f.model, terrain.frame(), &cam.view().unwrap(), tau);
         prop_assert_eq!(views::node_indexes(&scene.blocks), oracle);
+        // The top-down walk without clusters finds the same cut.
+        let walked = fmrh::scene::baseline::traversal(&terrain, &cam, tau, None).unwrap();
+        prop_assert_eq!(&walked, &scene.blocks);
+        // Every scene block lies over physical blocks of the region.
+        let finest = fmrh::scene::baseline::all_finest(&terrain, &cam, None).unwrap();
+        let d = f.model.domain();
+        for b in &scene.blocks {
+            let r = b.keys(d);
+            prop_assert!(finest.iter().any(|p| r.lo <= p.key && p.key <= r.hi), "{:?}", b);
+        }
         for b in &scene.blocks {
             prop_assert!(b.screen_error <= tau, "{:?} misses tau {}", b, tau);
         }
@@ -198,7 +217,11 @@ fn neighbour_levels_match_adjacent_blocks() {
                     .collect();
                 levels.sort_unstable();
                 let want = levels.first().map(|&c| (c, *levels.last().unwrap()));
-                assert_eq!(got.map(|n| (n.coarsest, n.finest)), want, "block {b:?} edge {e}");
+                assert_eq!(
+                    got.map(|n| (n.coarsest, n.finest)),
+                    want,
+                    "block {b:?} edge {e}"
+                );
             }
         }
     }
@@ -219,12 +242,23 @@ fn leaves_above_the_finest_level_fall_back_to_physical_blocks() {
         DVec3::new(500.0 * 160.0, 500.0 * 160.0, z + 50.0),
         DVec3::new(600.0 * 160.0, 520.0 * 160.0, z),
     );
-    let window = SampleRect { col0: 300, row0: 300, col1: 700, row1: 700 };
+    let window = SampleRect {
+        col0: 300,
+        row0: 300,
+        col1: 700,
+        row1: 700,
+    };
     for mode in [Mode::View, Mode::Uniform] {
         let scene = terrain.scene(&cam, &opts(1.0, mode, Some(window))).unwrap();
-        assert!(scene.blocks.iter().any(|b| b.node.is_none()), "{mode:?}: no physical block");
+        assert!(
+            scene.blocks.iter().any(|b| b.node.is_none()),
+            "{mode:?}: no physical block"
+        );
         views::assert_window_cover(&f.model, &scene.blocks, &window);
-        assert!(scene.blocks.iter().all(|b| b.screen_error <= 1.0 || mode == Mode::Uniform));
+        assert!(scene
+            .blocks
+            .iter()
+            .all(|b| b.screen_error <= 1.0 || mode == Mode::Uniform));
         let rec = reconstruct(&f.store, &scene, window).unwrap();
         let w = (window.col1 - window.col0 + 1) as usize;
         for (i, (v, bound)) in rec.values.iter().zip(&rec.bound).enumerate() {
@@ -234,10 +268,15 @@ fn leaves_above_the_finest_level_fall_back_to_physical_blocks() {
         }
     }
     // Uniform at a bound below every threshold: all physical, error 0.
-    let scene = terrain.scene(&cam, &opts(1.0, Mode::Uniform, Some(window))).unwrap();
+    let scene = terrain
+        .scene(&cam, &opts(1.0, Mode::Uniform, Some(window)))
+        .unwrap();
     assert_eq!(scene.stats.cluster, None);
     assert_eq!(scene.stats.threshold, Some(0.0));
-    assert!(scene.blocks.iter().all(|b| b.node.is_none() && b.error == 0.0));
+    assert!(scene
+        .blocks
+        .iter()
+        .all(|b| b.node.is_none() && b.error == 0.0));
 }
 
 fn view_scene(cam: &Camera, tau: f64) -> Scene {
@@ -266,9 +305,14 @@ fn eye_on_the_ground_needs_full_resolution_at_the_eye() {
     for b in scene.blocks.iter().filter(|b| b.distance == 0.0) {
         assert_eq!(b.error, 0.0, "{b:?}");
     }
-    assert!(scene.blocks.iter().any(|b| b.level == finest && (b.x, b.y) == (bx, by)));
+    assert!(scene
+        .blocks
+        .iter()
+        .any(|b| b.level == finest && (b.x, b.y) == (bx, by)));
     let terrain = Terrain::new(&puget().store).unwrap();
-    let u = terrain.scene(&cam, &opts(1.0, Mode::Uniform, None)).unwrap();
+    let u = terrain
+        .scene(&cam, &opts(1.0, Mode::Uniform, None))
+        .unwrap();
     assert_eq!(u.stats.p_min, Some(0.0));
     assert_eq!(u.stats.threshold, Some(0.0));
 }
@@ -294,7 +338,10 @@ fn eye_very_far_sees_one_block() {
 #[test]
 fn extreme_fields_of_view() {
     for fov in [1e-4, 0.5, 179.0, 179.999] {
-        let mut cam = Camera::looking_at(ground(100, 100) + DVec3::new(0.0, 0.0, 2000.0), ground(600, 700));
+        let mut cam = Camera::looking_at(
+            ground(100, 100) + DVec3::new(0.0, 0.0, 2000.0),
+            ground(600, 700),
+        );
         cam.fov_y_deg = fov;
         let scene = view_scene(&cam, 1.0);
         assert!(!scene.blocks.is_empty(), "fov {fov}");
@@ -343,9 +390,18 @@ fn non_finite_cameras_and_tolerances_are_errors() {
         let err = terrain.scene(&c, &opts(1.0, Mode::View, None)).unwrap_err();
         assert!(err.to_string().contains("not finite"), "{err}");
         for tau in [bad, -1.0] {
-            assert!(terrain.scene(&good, &opts(tau, Mode::Uniform, None)).is_err());
+            assert!(terrain
+                .scene(&good, &opts(tau, Mode::Uniform, None))
+                .is_err());
         }
     }
-    let outside = SampleRect { col0: 0, row0: 0, col1: 1025, row1: 10 };
-    assert!(terrain.scene(&good, &opts(1.0, Mode::View, Some(outside))).is_err());
+    let outside = SampleRect {
+        col0: 0,
+        row0: 0,
+        col1: 1025,
+        row1: 10,
+    };
+    assert!(terrain
+        .scene(&good, &opts(1.0, Mode::View, Some(outside)))
+        .is_err());
 }

@@ -2,6 +2,7 @@
 
 pub mod build;
 pub mod extract;
+pub mod fly;
 pub mod info;
 pub mod scan;
 pub mod scene;

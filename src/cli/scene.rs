@@ -14,13 +14,13 @@ use fmrh::Error;
 #[derive(clap::Args, Clone)]
 pub struct ViewArgs {
     /// Vertical field of view in degrees (strictly between 0 and 180).
-    #[arg(long, default_value_t = fmrh::scene::camera::DEFAULT_FOV_DEG)]
+    #[arg(long, default_value_t = fmrh::scene::camera::DEFAULT_FOV_DEG, allow_negative_numbers = true)]
     pub fov: f64,
     /// Viewport in pixels, WIDTHxHEIGHT.
     #[arg(long, default_value = "1024x768")]
     pub viewport: String,
     /// Tolerance in pixels.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub tau: f64,
     /// uniform: one static bound for the whole view (one cluster); view: each block meets
     /// the tolerance where it is seen.
@@ -29,6 +29,11 @@ pub struct ViewArgs {
     /// Runs of Hilbert keys separated by at most this many keys are scanned as one.
     #[arg(long, default_value_t = DEFAULT_GAP)]
     pub gap: u64,
+    /// Map the file instead of reading it page by page: much faster scheduling, but the
+    /// file must not be modified or truncated while fmrh runs (a truncation kills the
+    /// process with SIGBUS). fmrh's own writers never modify a container in place.
+    #[arg(long)]
+    pub mmap: bool,
 }
 
 /// `--mode`.
@@ -124,14 +129,34 @@ pub fn run(args: &SceneArgs) -> Result<ExitCode, Error> {
         viewport: args.view.viewport()?,
     };
     let mut options = args.view.options();
-    options.window = args.window.as_deref().map(super::parse_window).transpose()?;
+    options.window = args
+        .window
+        .as_deref()
+        .map(super::parse_window)
+        .transpose()?;
     let output = args
         .reconstruct
         .as_deref()
         .map(|p| super::sidecar::F32Output::new(p, args.force))
         .transpose()?;
-    let store = super::open(&args.file)?;
-    let terrain = Terrain::new(&store)?;
+    if args.view.mmap {
+        // SAFETY: the --mmap contract, stated in its help: nobody modifies the file while
+        // this command runs.
+        let store = unsafe { fmrh::Store::open(&args.file) }?;
+        run_on(args, &store, camera, options, output)
+    } else {
+        run_on(args, &super::open(&args.file)?, camera, options, output)
+    }
+}
+
+fn run_on<S: fmrh::store::Source>(
+    args: &SceneArgs,
+    store: &fmrh::Store<S>,
+    camera: Camera,
+    options: SceneOptions,
+    output: Option<super::sidecar::F32Output>,
+) -> Result<ExitCode, Error> {
+    let terrain = Terrain::new(store)?;
     let scene = terrain.scene(&camera, &options)?;
     let mut uncovered = None;
     if let Some(out) = &output {
@@ -141,10 +166,10 @@ pub fn run(args: &SceneArgs) -> Result<ExitCode, Error> {
                     .into(),
             )
         })?;
-        let rec = reconstruct(&store, &scene, window)?;
+        let rec = reconstruct(store, &scene, window)?;
         uncovered = Some(rec.uncovered);
         let hf = rec.to_heightfield(&store.header().metadata)?;
-        out.write(&hf, window, "fmrh scene --reconstruct", &args.file, &store)?;
+        out.write(&hf, window, "fmrh scene --reconstruct", &args.file, store)?;
     }
     if args.json {
         super::print_json(&Report {

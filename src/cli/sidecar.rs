@@ -87,66 +87,66 @@ impl F32Output {
         container: &Path,
         store: &Store<S>,
     ) -> Result<(), Error> {
-    let samples = hf.samples();
-    let (mut min, mut max, mut sum, mut valid) = (f32::INFINITY, f32::NEG_INFINITY, 0f64, 0u64);
-    for &v in samples {
-        if !v.is_nan() {
-            min = min.min(v);
-            max = max.max(v);
-            sum += f64::from(v);
-            valid += 1;
+        let samples = hf.samples();
+        let (mut min, mut max, mut sum, mut valid) = (f32::INFINITY, f32::NEG_INFINITY, 0f64, 0u64);
+        for &v in samples {
+            if !v.is_nan() {
+                min = min.min(v);
+                max = max.max(v);
+                sum += f64::from(v);
+                valid += 1;
+            }
         }
-    }
-    let meta = &hf.metadata;
-    let file_name = self
-        .f32_path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let sidecar = Sidecar {
-        width: hf.width(),
-        height: hf.height(),
-        f32_file: file_name,
-        f32_layout: "raw little-endian float32, row-major, width*height values, no header",
-        nodata_in_f32: "NaN",
-        nodata_count: samples.len() as u64 - valid,
-        min: (valid > 0).then_some(min),
-        max: (valid > 0).then_some(max),
-        mean: (valid > 0).then(|| sum / valid as f64),
-        units: meta.units.clone(),
-        spacing_m: meta.spacing_m,
-        georeference: meta.georeference.as_ref().map(|g| Geo {
-            crs: g.crs.clone(),
-            origin: g.origin,
-            step: g.step,
-        }),
-        window: [window.col0, window.row0, window.col1, window.row1],
-        source: Source {
-            kind,
-            container: container.display().to_string(),
-            txn_id: store.txn_id(),
-            original_format: store.header().metadata.source_format.clone(),
-        },
-    };
-    let json = serde_json::to_vec_pretty(&sidecar)
-        .map_err(|e| Error::InvalidArgument(format!("cannot format the sidecar: {e}")))?;
-    let mut raw = Vec::with_capacity(samples.len() * 4);
-    for v in samples {
-        raw.extend_from_slice(&v.to_le_bytes());
-    }
-    for (path, bytes) in [(&self.f32_path, &raw), (&self.json_path, &json)] {
-        write_atomically(path, self.force, |w| {
-            w.write_all(bytes).map_err(|e| Error::io(path, e))
-        })?;
-    }
-    eprintln!(
-        "fmrh: wrote {} x {} samples ({} void) to {} and {}",
-        hf.width(),
-        hf.height(),
-        samples.len() as u64 - valid,
-        self.f32_path.display(),
-        self.json_path.display()
-    );
+        let meta = &hf.metadata;
+        let file_name = self
+            .f32_path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let sidecar = Sidecar {
+            width: hf.width(),
+            height: hf.height(),
+            f32_file: file_name,
+            f32_layout: "raw little-endian float32, row-major, width*height values, no header",
+            nodata_in_f32: "NaN",
+            nodata_count: samples.len() as u64 - valid,
+            min: (valid > 0).then_some(min),
+            max: (valid > 0).then_some(max),
+            mean: (valid > 0).then(|| sum / valid as f64),
+            units: meta.units.clone(),
+            spacing_m: meta.spacing_m,
+            georeference: meta.georeference.as_ref().map(|g| Geo {
+                crs: g.crs.clone(),
+                origin: g.origin,
+                step: g.step,
+            }),
+            window: [window.col0, window.row0, window.col1, window.row1],
+            source: Source {
+                kind,
+                container: container.display().to_string(),
+                txn_id: store.txn_id(),
+                original_format: store.header().metadata.source_format.clone(),
+            },
+        };
+        let json = serde_json::to_vec_pretty(&sidecar)
+            .map_err(|e| Error::InvalidArgument(format!("cannot format the sidecar: {e}")))?;
+        let mut raw = Vec::with_capacity(samples.len() * 4);
+        for v in samples {
+            raw.extend_from_slice(&v.to_le_bytes());
+        }
+        for (path, bytes) in [(&self.f32_path, &raw), (&self.json_path, &json)] {
+            write_atomically(path, self.force, |w| {
+                w.write_all(bytes).map_err(|e| Error::io(path, e))
+            })?;
+        }
+        eprintln!(
+            "fmrh: wrote {} x {} samples ({} void) to {} and {}",
+            hf.width(),
+            hf.height(),
+            samples.len() as u64 - valid,
+            self.f32_path.display(),
+            self.json_path.display()
+        );
         Ok(())
     }
 }

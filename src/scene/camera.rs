@@ -390,7 +390,10 @@ mod tests {
         assert_eq!(b.distance(DVec3::new(1.0, 1.0, 1.0)), 0.0);
         assert_eq!(b.distance(DVec3::new(5.0, 1.0, 1.0)), 3.0);
         assert_eq!(b.max_distance(DVec3::new(1.0, 1.0, 1.0)), 3f64.sqrt());
-        assert_eq!(b.max_distance(DVec3::new(-1.0, 0.0, 0.0)), (9.0f64 + 4.0 + 4.0).sqrt());
+        assert_eq!(
+            b.max_distance(DVec3::new(-1.0, 0.0, 0.0)),
+            (9.0f64 + 4.0 + 4.0).sqrt()
+        );
     }
 
     #[test]

@@ -3,7 +3,9 @@
 //! Read in order: [`camera`] (the view, the frustum, pixels per metre), [`ranges`] (a region
 //! of the terrain as maximal aligned quadrants, then Hilbert key ranges), [`select`] (the
 //! uniform and view-dependent cuts, found through the clusters), [`reconstruct`] (the
-//! surface a scene draws, sampled back at full resolution).
+//! surface a scene draws, sampled back at full resolution), [`schedule`] (frames: what to
+//! load, keep and evict as the camera moves, with prefetch), [`path`] (camera paths), and
+//! [`baseline`] (naive answers kept as yardsticks).
 //!
 //! A scene is always a *cover*: every point of its region lies in exactly one block (blocks
 //! share edges, nothing more). In uniform mode every block is within one static bound in
@@ -12,12 +14,15 @@
 
 pub mod baseline;
 pub mod camera;
+pub mod path;
 pub mod ranges;
 pub mod reconstruct;
+pub mod schedule;
 pub mod select;
 
 pub use camera::{Aabb, Camera, Coverage, View, WorldFrame};
 pub use reconstruct::{reconstruct, Reconstruction};
+pub use schedule::{BlockId, Frame, FrameStats, ScheduleOptions, Scheduler};
 pub use select::{
     Mode, NeighbourLevels, PayloadRef, Scene, SceneBlock, SceneOptions, SceneStats, Terrain,
     DEFAULT_GAP,

@@ -145,7 +145,10 @@ pub fn block_key(domain: &Domain, x: u32, y: u32) -> u64 {
 /// Splits the region `classify` describes into maximal aligned quadrants, sorted by key.
 /// `classify` sees each candidate quadrant at most once, coarse to fine; a `Partial`
 /// quadrant at the finest level is kept whole.
-pub fn decompose(domain: &Domain, mut classify: impl FnMut(&Quadrant) -> Coverage) -> Vec<Quadrant> {
+pub fn decompose(
+    domain: &Domain,
+    mut classify: impl FnMut(&Quadrant) -> Coverage,
+) -> Vec<Quadrant> {
     let mut out = Vec::new();
     let mut stack = vec![Quadrant {
         level: 0,
@@ -169,7 +172,12 @@ pub fn window_classifier(domain: &Domain, blocks: [u32; 4]) -> impl Fn(&Quadrant
     move |q| {
         let (xs, ys) = q.blocks(domain);
         let [x0, y0, x1, y1] = blocks;
-        if xs.is_empty() || ys.is_empty() || xs.end <= x0 || xs.start > x1 || ys.end <= y0 || ys.start > y1
+        if xs.is_empty()
+            || ys.is_empty()
+            || xs.end <= x0
+            || xs.start > x1
+            || ys.end <= y0
+            || ys.start > y1
         {
             Coverage::Outside
         } else if xs.start >= x0 && xs.end - 1 <= x1 && ys.start >= y0 && ys.end - 1 <= y1 {

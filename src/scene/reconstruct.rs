@@ -59,7 +59,9 @@ pub fn reconstruct<S: Source>(
 ) -> Result<Reconstruction> {
     let d = *store.domain();
     let data = d.data_rect();
-    if window.col0 > window.col1 || window.row0 > window.row1 || window.intersect(&data) != Some(window)
+    if window.col0 > window.col1
+        || window.row0 > window.row1
+        || window.intersect(&data) != Some(window)
     {
         return Err(crate::Error::InvalidArgument(format!(
             "window {},{},{},{} is not inside the data 0,0,{},{}",

@@ -307,12 +307,15 @@ impl<'s, S: Source> Terrain<'s, S> {
             None => ranges::decompose(&d, |q| view.classify(&self.quadrant_box(q))),
         };
         let span = window.or_else(|| {
-            quadrants.iter().map(|q| q.samples(&d)).reduce(|a, b| SampleRect {
-                col0: a.col0.min(b.col0),
-                row0: a.row0.min(b.row0),
-                col1: a.col1.max(b.col1),
-                row1: a.row1.max(b.row1),
-            })
+            quadrants
+                .iter()
+                .map(|q| q.samples(&d))
+                .reduce(|a, b| SampleRect {
+                    col0: a.col0.min(b.col0),
+                    row0: a.row0.min(b.row0),
+                    col1: a.col1.max(b.col1),
+                    row1: a.row1.max(b.row1),
+                })
         });
         Ok((quadrants, span))
     }
@@ -354,7 +357,14 @@ impl<'s, S: Source> Terrain<'s, S> {
     }
 
     /// Physical block `(x, y)`, exact, its heights bounded by `zmin..=zmax`.
-    pub fn physical_block(&self, view: &View, x: u32, y: u32, zmin: f32, zmax: f32) -> Result<SceneBlock> {
+    pub fn physical_block(
+        &self,
+        view: &View,
+        x: u32,
+        y: u32,
+        zmin: f32,
+        zmax: f32,
+    ) -> Result<SceneBlock> {
         let d = self.domain;
         let rec = self.store.block_record(x, y)?;
         let finest = d.finest_level();
@@ -399,9 +409,10 @@ impl<'s, S: Source> Terrain<'s, S> {
         blocks.sort_unstable_by_key(|b| (b.key, b.level));
         blocks.dedup_by_key(|b| (b.key, b.level));
         if window.is_none() {
-            blocks.retain(|b| view.intersects(&self.rect_box(&b.rect(), b.min_height, b.max_height)));
+            blocks
+                .retain(|b| view.intersects(&self.rect_box(&b.rect(), b.min_height, b.max_height)));
         }
-        set_neighbours(&self.domain, blocks);
+        set_neighbours(&self.domain, blocks, CellMap::CELLS_PER_BLOCK);
     }
 
     /// Selects the blocks `camera` needs at tolerance `options.tau`.
@@ -588,7 +599,12 @@ impl<S: Source> Search<'_, '_, S> {
         };
         let mut pieces: Vec<(Option<usize>, KeyRange)> = quadrants
             .iter()
-            .map(|q| (seed(terrain.quadrant_box(q).max_distance(view.eye)), q.keys(&d)))
+            .map(|q| {
+                (
+                    seed(terrain.quadrant_box(q).max_distance(view.eye)),
+                    q.keys(&d),
+                )
+            })
             .collect();
         // Group by seed cluster, then scan each group's runs.
         pieces.sort_unstable_by_key(|&(c, k)| (c.map_or(usize::MAX, |c| c), k.lo));
@@ -682,7 +698,7 @@ impl CellMap {
     /// The most cells tabulated per block of the scene (and at most 2^20 in all).
     const CELLS_PER_BLOCK: u64 = 64;
 
-    fn new(d: &Domain, blocks: &[SceneBlock]) -> CellMap {
+    fn new(d: &Domain, blocks: &[SceneBlock], cells_per_block: u64) -> CellMap {
         let empty = CellMap {
             x0: 0,
             y0: 0,
@@ -711,14 +727,15 @@ impl CellMap {
         };
         let (width, height) = (x1 - x0, y1 - y0);
         let area = u64::from(width) * u64::from(height);
-        if area > (blocks.len() as u64 * Self::CELLS_PER_BLOCK).min(1 << 20) {
+        if area > (blocks.len() as u64 * cells_per_block).min(1 << 20) {
             return empty;
         }
         let mut cells = vec![0u32; area as usize];
         for (i, (xs, ys)) in spans.iter().enumerate() {
             for y in ys.clone() {
                 let row = ((y - y0) * width) as usize;
-                cells[row + (xs.start - x0) as usize..row + (xs.end - x0) as usize].fill(i as u32 + 1);
+                cells[row + (xs.start - x0) as usize..row + (xs.end - x0) as usize]
+                    .fill(i as u32 + 1);
             }
         }
         CellMap {
@@ -745,10 +762,10 @@ impl CellMap {
 }
 
 /// Fills every block's neighbour levels. `blocks` must be sorted by key and disjoint.
-fn set_neighbours(d: &Domain, blocks: &mut [SceneBlock]) {
+fn set_neighbours(d: &Domain, blocks: &mut [SceneBlock], cells_per_block: u64) {
     let finest = d.finest_level();
     let (cols, rows) = d.nodes_across(finest);
-    let cells = CellMap::new(d, blocks);
+    let cells = CellMap::new(d, blocks, cells_per_block);
     let find = |blocks: &[SceneBlock], x: u32, y: u32| -> Option<usize> {
         if let Some(found) = cells.get(x, y) {
             return found;
@@ -807,6 +824,79 @@ fn set_neighbours(d: &Domain, blocks: &mut [SceneBlock]) {
                 }
             }
             blocks[i].neighbours[e] = levels;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::heightfield::Heightfield;
+    use crate::model::{BuildOptions, Model};
+
+    /// The tabulated and the binary-search neighbour lookups agree on every cluster cut.
+    #[test]
+    fn neighbour_lookups_agree() {
+        let hf = Heightfield::from_fn(300, 200, |x, y| {
+            ((x as f32 * 0.07).sin() * 40.0 + (y as f32 * 0.05).cos() * 30.0) * (x as f32 / 100.0)
+        })
+        .unwrap();
+        let model = Model::build(
+            hf,
+            &BuildOptions {
+                block_size: 9,
+                ..BuildOptions::default()
+            },
+        )
+        .unwrap();
+        let d = *model.domain();
+        for c in model.clusters() {
+            let mut blocks: Vec<SceneBlock> = c
+                .nodes
+                .iter()
+                .map(|&i| {
+                    let n = model.tree().node(i);
+                    let rect = Quadrant {
+                        level: n.level,
+                        x: n.x,
+                        y: n.y,
+                    }
+                    .samples(&d);
+                    SceneBlock {
+                        node: Some(i),
+                        level: n.level,
+                        x: n.x,
+                        y: n.y,
+                        key: n.key.0,
+                        col0: rect.col0,
+                        row0: rect.row0,
+                        col1: rect.col1,
+                        row1: rect.row1,
+                        error: n.monotone_error,
+                        screen_error: 0.0,
+                        distance: 0.0,
+                        min_height: n.min_height,
+                        max_height: n.max_height,
+                        payload: PayloadRef::default(),
+                        neighbours: [None; 4],
+                    }
+                })
+                .collect();
+            // Drop every third block so that some edges face no block.
+            let mut i = 0;
+            blocks.retain(|_| {
+                i += 1;
+                i % 3 != 0
+            });
+            let mut searched = blocks.clone();
+            set_neighbours(&d, &mut blocks, u64::MAX);
+            set_neighbours(&d, &mut searched, 0);
+            assert_eq!(blocks, searched, "cluster {}", c.threshold);
+            if blocks.len() > 2 {
+                assert!(blocks
+                    .iter()
+                    .any(|b| b.neighbours.iter().any(Option::is_some)));
+            }
         }
     }
 }

@@ -532,7 +532,9 @@ pub(crate) fn get_ordinal<S: Source + ?Sized, R: FromBytes>(
                 });
         }
         let count = count.min(branch_capacity(pages.page_size)).max(1);
-        let above = partition(count, |i| branch_entry(&page, i).first_ordinal.get() <= ordinal);
+        let above = partition(count, |i| {
+            branch_entry(&page, i).first_ordinal.get() <= ordinal
+        });
         let e = branch_entry(&page, above.saturating_sub(1));
         page_no = e.child.get();
         base_ordinal = e.first_ordinal.get();

@@ -26,7 +26,13 @@ pub struct Fixture {
 pub fn fixture(source: Heightfield, options: &BuildOptions) -> Fixture {
     let model = Model::build(source.clone(), options).expect("model builds");
     let mut bytes = Cursor::new(Vec::new());
-    write_to(&model, &source.metadata, &WriteOptions::default(), &mut bytes).expect("writes");
+    write_to(
+        &model,
+        &source.metadata,
+        &WriteOptions::default(),
+        &mut bytes,
+    )
+    .expect("writes");
     let store = Store::from_bytes(bytes.into_inner()).expect("opens");
     Fixture {
         source,
@@ -44,7 +50,15 @@ pub fn puget_1k() -> Heightfield {
 }
 
 /// The box of a node: footprint clipped to the data, by its height range.
-pub fn node_box(model: &Model, frame: WorldFrame, level: u8, x: u32, y: u32, zmin: f32, zmax: f32) -> Aabb {
+pub fn node_box(
+    model: &Model,
+    frame: WorldFrame,
+    level: u8,
+    x: u32,
+    y: u32,
+    zmin: f32,
+    zmax: f32,
+) -> Aabb {
     let d = model.domain();
     let fp = d.footprint(level, x, y);
     let data = d.data_rect();

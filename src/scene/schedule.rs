@@ -1,0 +1,475 @@
+//! Frames: the resident set kept across views, loaded incrementally, with prefetch and
+//! phased residency.
+//!
+//! Each frame the [`Scheduler`] selects the scene `D` for the new camera and loads only
+//! `D − (D_old ∩ D)` (seed 000 Algorithm 3, step 7), or rather only `D − R` with `R` every
+//! block still resident, which is never more. Residency follows seed 002's three areas,
+//! measured from the eye to each block's box:
+//!
+//! * **visible**: the blocks of `D`, always resident;
+//! * **memory area** (within `memory_radius`): blocks that left the view stay resident, so
+//!   turning back costs nothing, until the resident bytes exceed `memory_budget`; then the
+//!   least recently visible go first (ties by key, so runs are reproducible);
+//! * **cache area** (within `cache_radius`): the prefetch thread predicts the next camera
+//!   by extrapolating the last two (eye and target move on as they moved), selects that
+//!   scene, and reads the blocks the scheduler lacks into a warm cache (payloads read and
+//!   CRC-checked, what `madvise(WILLNEED)` would only hint). Entries that drift beyond
+//!   `cache_radius` are dropped. The next frame takes its loads from the cache when it can.
+//!
+//! What a frame loads, keeps and evicts depends only on the cameras, never on the prefetch
+//! thread's timing: prefetch changes where bytes come from, not which.
+
+use std::collections::{HashMap, HashSet};
+use std::sync::mpsc::{self, Receiver, Sender};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard};
+use std::thread::JoinHandle;
+use std::time::Instant;
+
+use serde::Serialize;
+
+use crate::error::Result;
+use crate::store::{Source, Store};
+
+use super::camera::Camera;
+use super::select::{Scene, SceneBlock, SceneOptions, Terrain};
+
+/// A block's identity: level and position (a node, or a physical block below a leaf).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
+pub struct BlockId {
+    /// Level.
+    pub level: u8,
+    /// Column among the level's nodes.
+    pub x: u32,
+    /// Row among the level's nodes.
+    pub y: u32,
+}
+
+impl BlockId {
+    /// The id of a scene block.
+    pub fn of(b: &SceneBlock) -> BlockId {
+        BlockId {
+            level: b.level,
+            x: b.x,
+            y: b.y,
+        }
+    }
+}
+
+/// How the scheduler keeps blocks.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ScheduleOptions {
+    /// How each frame's scene is selected.
+    pub scene: SceneOptions,
+    /// Metres: blocks out of view but this close to the eye stay resident.
+    pub memory_radius: f64,
+    /// Metres: the prefetcher warms predicted blocks this close; farther cache entries are
+    /// dropped.
+    pub cache_radius: f64,
+    /// Resident payload bytes beyond which out-of-view blocks are evicted (visible blocks
+    /// never are).
+    pub memory_budget: u64,
+    /// Run the prefetch thread.
+    pub prefetch: bool,
+}
+
+impl ScheduleOptions {
+    /// View-dependent scenes at `tau`, no memory ring, no prefetch, 256 MiB budget.
+    pub fn new(tau: f64) -> ScheduleOptions {
+        ScheduleOptions {
+            scene: SceneOptions::new(tau),
+            memory_radius: 0.0,
+            cache_radius: 0.0,
+            memory_budget: 256 << 20,
+            prefetch: false,
+        }
+    }
+}
+
+/// What one frame changed.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Frame {
+    /// 0 for the first.
+    pub index: u64,
+    /// Blocks loaded for this frame (in view, not resident before), sorted by key.
+    pub load: Vec<BlockId>,
+    /// Blocks in view that were already resident.
+    pub keep: Vec<BlockId>,
+    /// Blocks no longer resident.
+    pub evict: Vec<BlockId>,
+    /// Counts and costs.
+    pub stats: FrameStats,
+}
+
+/// A frame's figures (seed 000 Table 2 and more).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct FrameStats {
+    /// Blocks in view.
+    pub visible: u64,
+    /// Blocks loaded.
+    pub loaded: u64,
+    /// Triangles of the loaded blocks.
+    pub loaded_triangles: u64,
+    /// Payload bytes loaded.
+    pub loaded_bytes: u64,
+    /// Loaded blocks the prefetcher had already read.
+    pub prefetch_hits: u64,
+    /// Blocks evicted.
+    pub evicted: u64,
+    /// Resident blocks after the frame (visible + memory area).
+    pub resident: u64,
+    /// Resident payload bytes after the frame.
+    pub resident_bytes: u64,
+    /// Time to select the scene and work out the difference, in nanoseconds.
+    pub schedule_ns: u64,
+    /// Time to bring the loaded payloads into memory, in nanoseconds.
+    pub load_ns: u64,
+    /// The scene's largest screen-space error, in pixels.
+    pub max_screen_error: f64,
+}
+
+struct Resident {
+    block: SceneBlock,
+    bytes: Arc<[u8]>,
+    last_visible: u64,
+}
+
+/// A prefetch request: its number, the predicted camera, the blocks already resident.
+type Request = (u64, Camera, HashSet<BlockId>);
+
+type WarmCache = Arc<Mutex<HashMap<BlockId, (SceneBlock, Arc<[u8]>)>>>;
+
+/// Keeps the resident set of a moving camera.
+pub struct Scheduler<S: Source + 'static> {
+    store: Arc<Store<S>>,
+    options: ScheduleOptions,
+    resident: HashMap<BlockId, Resident>,
+    resident_bytes: u64,
+    frames: u64,
+    last_cameras: [Option<Camera>; 2],
+    prefetcher: Option<Prefetcher>,
+    last_scene: Option<Scene>,
+}
+
+impl<S: Source + 'static> Scheduler<S> {
+    /// A scheduler over `store`; starts the prefetch thread when asked.
+    pub fn new(store: Arc<Store<S>>, options: ScheduleOptions) -> Result<Self> {
+        for (what, v) in [
+            ("memory radius", options.memory_radius),
+            ("cache radius", options.cache_radius),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(crate::Error::InvalidArgument(format!(
+                    "{what} {v}: must be finite and >= 0"
+                )));
+            }
+        }
+        Terrain::new(&store)?; // the root must be readable
+        let prefetcher = options
+            .prefetch
+            .then(|| Prefetcher::start(Arc::clone(&store), options));
+        Ok(Scheduler {
+            store,
+            options,
+            resident: HashMap::new(),
+            resident_bytes: 0,
+            frames: 0,
+            last_cameras: [None, None],
+            prefetcher,
+            last_scene: None,
+        })
+    }
+
+    /// The payload of a resident block.
+    pub fn payload(&self, id: &BlockId) -> Option<&[u8]> {
+        self.resident.get(id).map(|r| &*r.bytes)
+    }
+
+    /// The resident blocks, in no order.
+    pub fn resident(&self) -> impl Iterator<Item = &SceneBlock> {
+        self.resident.values().map(|r| &r.block)
+    }
+
+    /// Blocks until the prefetch thread has finished every request made so far (for tests
+    /// and for applications that want a deterministic warm cache).
+    pub fn wait_prefetch(&self) {
+        if let Some(p) = &self.prefetcher {
+            p.wait();
+        }
+    }
+
+    /// The scene of the last frame.
+    pub fn last_scene(&self) -> Option<&Scene> {
+        self.last_scene.as_ref()
+    }
+
+    /// Moves to `camera`: selects its scene, loads what is missing, evicts what the areas
+    /// and the budget say.
+    pub fn frame(&mut self, camera: &Camera) -> Result<Frame> {
+        let started = Instant::now();
+        let store = Arc::clone(&self.store);
+        let terrain = Terrain::new(&store)?;
+        let scene = terrain.scene(camera, &self.options.scene)?;
+        let index = self.frames;
+        let visible: HashSet<BlockId> = scene.blocks.iter().map(BlockId::of).collect();
+        let (mut load, mut keep) = (Vec::new(), Vec::new());
+        for b in &scene.blocks {
+            let id = BlockId::of(b);
+            if self.resident.contains_key(&id) {
+                keep.push(id);
+            } else {
+                load.push(*b);
+            }
+        }
+        let schedule_ns = started.elapsed().as_nanos() as u64;
+
+        let loading = Instant::now();
+        let mut stats = FrameStats {
+            visible: scene.blocks.len() as u64,
+            loaded: load.len() as u64,
+            schedule_ns,
+            max_screen_error: scene.stats.max_screen_error,
+            ..FrameStats::default()
+        };
+        let b = u64::from(self.store.domain().block_size());
+        let mut warm = self.prefetcher.as_ref().map(|p| lock(&p.cache));
+        for block in &load {
+            let id = BlockId::of(block);
+            let cached = warm
+                .as_mut()
+                .and_then(|c| c.remove(&id))
+                .filter(|(cb, _)| cb.payload == block.payload);
+            let bytes: Arc<[u8]> = match cached {
+                Some((_, bytes)) => {
+                    stats.prefetch_hits += 1;
+                    bytes
+                }
+                None => {
+                    let p = block.payload;
+                    Arc::from(&*self.store.payload(p.offset, p.len, p.crc)?)
+                }
+            };
+            stats.loaded_bytes += bytes.len() as u64;
+            stats.loaded_triangles += 2 * (b - 1) * (b - 1);
+            self.resident_bytes += bytes.len() as u64;
+            self.resident.insert(
+                id,
+                Resident {
+                    block: *block,
+                    bytes,
+                    last_visible: index,
+                },
+            );
+        }
+        drop(warm);
+        stats.load_ns = loading.elapsed().as_nanos() as u64;
+
+        let evict_started = Instant::now();
+        for id in &keep {
+            if let Some(r) = self.resident.get_mut(id) {
+                r.last_visible = index;
+            }
+        }
+        let evict = self.evict(camera, &visible, &terrain)?;
+        stats.evicted = evict.len() as u64;
+        stats.resident = self.resident.len() as u64;
+        stats.resident_bytes = self.resident_bytes;
+        stats.schedule_ns += evict_started.elapsed().as_nanos() as u64;
+
+        self.last_cameras = [self.last_cameras[1], Some(*camera)];
+        if let (Some(p), [Some(a), Some(b)]) = (&mut self.prefetcher, self.last_cameras) {
+            let predicted = Camera {
+                eye: b.eye + (b.eye - a.eye),
+                target: b.target + (b.target - a.target),
+                ..b
+            };
+            let have: HashSet<BlockId> = self.resident.keys().copied().collect();
+            p.ask(predicted, have);
+        }
+        self.frames += 1;
+        let mut load: Vec<BlockId> = load.iter().map(BlockId::of).collect();
+        load.sort_unstable();
+        keep.sort_unstable();
+        self.last_scene = Some(scene);
+        Ok(Frame {
+            index,
+            load,
+            keep,
+            evict,
+            stats,
+        })
+    }
+
+    /// Drops out-of-view blocks beyond the memory area, then least recently visible ones
+    /// while over budget.
+    fn evict(
+        &mut self,
+        camera: &Camera,
+        visible: &HashSet<BlockId>,
+        terrain: &Terrain<'_, S>,
+    ) -> Result<Vec<BlockId>> {
+        let eye = camera.eye;
+        let radius = self.options.memory_radius;
+        let mut out: Vec<BlockId> = self
+            .resident
+            .iter()
+            .filter(|(id, r)| {
+                !visible.contains(id)
+                    && terrain
+                        .rect_box(&r.block.rect(), r.block.min_height, r.block.max_height)
+                        .distance(eye)
+                        > radius
+            })
+            .map(|(id, _)| *id)
+            .collect();
+        for id in &out {
+            if let Some(r) = self.resident.remove(id) {
+                self.resident_bytes -= r.bytes.len() as u64;
+            }
+        }
+        if self.resident_bytes > self.options.memory_budget {
+            let mut ring: Vec<(u64, u64, BlockId)> = self
+                .resident
+                .iter()
+                .filter(|(id, _)| !visible.contains(id))
+                .map(|(id, r)| (r.last_visible, r.block.key, *id))
+                .collect();
+            ring.sort_unstable();
+            for (_, _, id) in ring {
+                if self.resident_bytes <= self.options.memory_budget {
+                    break;
+                }
+                if let Some(r) = self.resident.remove(&id) {
+                    self.resident_bytes -= r.bytes.len() as u64;
+                    out.push(id);
+                }
+            }
+        }
+        out.sort_unstable();
+        Ok(out)
+    }
+}
+
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    // A panic in the prefetch thread leaves a usable cache: every entry is whole.
+    m.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
+/// The prefetch thread and its warm cache.
+struct Prefetcher {
+    cache: WarmCache,
+    /// Requests sent, and requests finished (with a condition variable to wait on).
+    sent: u64,
+    done: Arc<(Mutex<u64>, Condvar)>,
+    requests: Option<Sender<Request>>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl Prefetcher {
+    fn start<S: Source + 'static>(store: Arc<Store<S>>, options: ScheduleOptions) -> Prefetcher {
+        let cache: WarmCache = Arc::default();
+        let (tx, rx) = mpsc::channel();
+        let thread_cache = Arc::clone(&cache);
+        let done: Arc<(Mutex<u64>, Condvar)> = Arc::default();
+        let thread_done = Arc::clone(&done);
+        let thread = std::thread::Builder::new()
+            .name("fmrh-prefetch".into())
+            .spawn(move || prefetch_loop(&store, options, &thread_cache, &thread_done, rx))
+            .ok();
+        Prefetcher {
+            cache,
+            sent: 0,
+            done,
+            requests: thread.is_some().then_some(tx),
+            thread,
+        }
+    }
+
+    fn ask(&mut self, camera: Camera, have: HashSet<BlockId>) {
+        if let Some(tx) = &self.requests {
+            self.sent += 1;
+            // A closed channel means the thread ended; prefetch is only ever a hint.
+            if tx.send((self.sent, camera, have)).is_err() {
+                self.requests = None;
+            }
+        }
+    }
+
+    fn wait(&self) {
+        if self.requests.is_none() {
+            return;
+        }
+        let (lock_done, cv) = &*self.done;
+        let mut done = lock(lock_done);
+        while *done < self.sent {
+            done = cv.wait(done).unwrap_or_else(|p| p.into_inner());
+        }
+    }
+}
+
+impl Drop for Prefetcher {
+    fn drop(&mut self) {
+        self.requests = None; // ends the loop
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+fn prefetch_loop<S: Source>(
+    store: &Store<S>,
+    options: ScheduleOptions,
+    cache: &WarmCache,
+    done: &(Mutex<u64>, Condvar),
+    rx: Receiver<Request>,
+) {
+    while let Ok(mut request) = rx.recv() {
+        // Only the newest prediction matters.
+        while let Ok(newer) = rx.try_recv() {
+            request = newer;
+        }
+        let number = request.0;
+        warm(store, options, cache, request.1, &request.2);
+        *lock(&done.0) = number;
+        done.1.notify_all();
+    }
+}
+
+/// Reads the blocks of `camera`'s scene that are neither in `have` nor cached.
+fn warm<S: Source>(
+    store: &Store<S>,
+    options: ScheduleOptions,
+    cache: &WarmCache,
+    camera: Camera,
+    have: &HashSet<BlockId>,
+) {
+    {
+        let Ok(terrain) = Terrain::new(store) else {
+            return;
+        };
+        let Ok(scene) = terrain.scene(&camera, &options.scene) else {
+            return;
+        };
+        {
+            let mut c = lock(cache);
+            c.retain(|_, (b, _)| {
+                terrain
+                    .rect_box(&b.rect(), b.min_height, b.max_height)
+                    .distance(camera.eye)
+                    <= options.cache_radius
+            });
+        }
+        for b in &scene.blocks {
+            let id = BlockId::of(b);
+            if have.contains(&id)
+                || b.distance > options.cache_radius
+                || lock(cache).contains_key(&id)
+            {
+                continue;
+            }
+            let p = b.payload;
+            if let Ok(bytes) = store.payload(p.offset, p.len, p.crc) {
+                lock(cache).insert(id, (*b, Arc::from(&*bytes)));
+            }
+        }
+    }
+}
