@@ -29,7 +29,9 @@
 //! ## The API
 //!
 //! [`ingest::load`] reads a heightfield from any supported format. [`model::Model::build`]
-//! turns it into the FMRH and its clusters. The curves in [`curve`] know nothing of terrain.
+//! turns it into the FMRH and its clusters, [`store`] keeps them in one checksummed file, and
+//! [`scene`] answers a camera and a tolerance in pixels with exactly the blocks the view needs,
+//! frame after frame. The curves in [`curve`] know nothing of terrain.
 
 pub mod curve;
 pub mod error;
