@@ -34,12 +34,19 @@ fn container() -> &'static std::path::Path {
 const EYE: &str = "20000,180000,6000";
 const TARGET: &str = "80000,80000,500";
 
+/// `fmrh scene FILE` from the standard camera at tau 1, then `extra`.
+fn standard_view<'a>(file: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
+    let mut args = vec![
+        "scene", file, "--eye", EYE, "--target", TARGET, "--tau", "1",
+    ];
+    args.extend_from_slice(extra);
+    args
+}
+
 #[test]
 fn scene_json_has_the_promised_fields() {
     let file = container().to_str().unwrap();
-    let view = ok_json(&fmrh(&[
-        "scene", file, "--eye", EYE, "--target", TARGET, "--tau", "1", "--json",
-    ]));
+    let view = ok_json(&fmrh(&standard_view(file, &["--json"])));
     assert!(view["threshold"].is_null());
     let blocks = view["blocks"].as_array().unwrap();
     assert!(!blocks.is_empty());
@@ -75,9 +82,7 @@ fn scene_json_has_the_promised_fields() {
     ] {
         assert!(stats[k].is_number(), "{k}");
     }
-    let mapped = ok_json(&fmrh(&[
-        "scene", file, "--eye", EYE, "--target", TARGET, "--tau", "1", "--json", "--mmap",
-    ]));
+    let mapped = ok_json(&fmrh(&standard_view(file, &["--json", "--mmap"])));
     assert_eq!(mapped["blocks"], view["blocks"]);
     let uniform = ok_json(&fmrh(&[
         "scene", file, "--eye", EYE, "--target", TARGET, "--tau", "4", "--mode", "uniform",
@@ -145,20 +150,11 @@ fn reconstruction_is_within_the_threshold_of_the_source() {
     );
     assert!(worst > 0.0);
     // The output is protected like extract's.
-    let again = fmrh(&[
-        "scene",
+    let out = out.to_str().unwrap();
+    let again = fmrh(&standard_view(
         file,
-        "--eye",
-        EYE,
-        "--target",
-        TARGET,
-        "--tau",
-        "1",
-        "--window",
-        "0,0,10,10",
-        "--reconstruct",
-        out.to_str().unwrap(),
-    ]);
+        &["--window", "0,0,10,10", "--reconstruct", out],
+    ));
     assert_eq!(again.status.code(), Some(2));
 }
 
@@ -186,60 +182,34 @@ fn bad_input_is_a_clear_error() {
     let dir = tempfile::tempdir().unwrap();
     let cases: Vec<(Vec<&str>, &str)> = vec![
         (
-            vec!["--eye", "nan,0,0", "--target", TARGET, "--tau", "1"],
+            vec![
+                "scene", file, "--eye", "nan,0,0", "--target", TARGET, "--tau", "1",
+            ],
             "--eye",
         ),
         (
-            vec!["--eye", EYE, "--target", "1,2", "--tau", "1"],
+            vec!["scene", file, "--eye", EYE, "--target", "1,2", "--tau", "1"],
             "--target",
         ),
-        (vec!["--eye", EYE, "--target", EYE, "--tau", "1"], "differ"),
         (
-            vec!["--eye", EYE, "--target", TARGET, "--tau", "-1"],
+            vec!["scene", file, "--eye", EYE, "--target", EYE, "--tau", "1"],
+            "differ",
+        ),
+        (
+            vec![
+                "scene", file, "--eye", EYE, "--target", TARGET, "--tau", "-1",
+            ],
             "tolerance",
         ),
+        (standard_view(file, &["--fov", "180"]), "field of view"),
+        (standard_view(file, &["--viewport", "10x"]), "viewport"),
         (
-            vec![
-                "--eye", EYE, "--target", TARGET, "--tau", "1", "--fov", "180",
-            ],
-            "field of view",
-        ),
-        (
-            vec![
-                "--eye",
-                EYE,
-                "--target",
-                TARGET,
-                "--tau",
-                "1",
-                "--viewport",
-                "10x",
-            ],
-            "viewport",
-        ),
-        (
-            vec![
-                "--eye",
-                EYE,
-                "--target",
-                TARGET,
-                "--tau",
-                "1",
-                "--window",
-                "0,0,2000,5",
-            ],
+            standard_view(file, &["--window", "0,0,2000,5"]),
             "not inside",
         ),
-        (
-            vec![
-                "--eye", EYE, "--target", TARGET, "--tau", "1", "--up", "0,0,0",
-            ],
-            "up vector",
-        ),
+        (standard_view(file, &["--up", "0,0,0"]), "up vector"),
     ];
-    for (args, needle) in cases {
-        let mut all = vec!["scene", file];
-        all.extend(args.iter().copied());
+    for (all, needle) in cases {
         let o = fmrh(&all);
         let err = String::from_utf8_lossy(&o.stderr);
         assert_eq!(o.status.code(), Some(2), "{all:?}: {err}");
