@@ -313,11 +313,7 @@ impl<S: Source + 'static> Scheduler<S> {
             .resident
             .iter()
             .filter(|(id, r)| {
-                !visible.contains(id)
-                    && terrain
-                        .rect_box(&r.block.rect(), r.block.min_height, r.block.max_height)
-                        .distance(eye)
-                        > radius
+                !visible.contains(id) && terrain.block_box(&r.block).distance(eye) > radius
             })
             .map(|(id, _)| *id)
             .collect();
@@ -442,34 +438,23 @@ fn warm<S: Source>(
     camera: Camera,
     have: &HashSet<BlockId>,
 ) {
-    {
-        let Ok(terrain) = Terrain::new(store) else {
-            return;
-        };
-        let Ok(scene) = terrain.scene(&camera, &options.scene) else {
-            return;
-        };
+    let Ok(terrain) = Terrain::new(store) else {
+        return;
+    };
+    let Ok(scene) = terrain.scene(&camera, &options.scene) else {
+        return;
+    };
+    lock(cache)
+        .retain(|_, (b, _)| terrain.block_box(b).distance(camera.eye) <= options.cache_radius);
+    for b in &scene.blocks {
+        let id = BlockId::of(b);
+        if have.contains(&id) || b.distance > options.cache_radius || lock(cache).contains_key(&id)
         {
-            let mut c = lock(cache);
-            c.retain(|_, (b, _)| {
-                terrain
-                    .rect_box(&b.rect(), b.min_height, b.max_height)
-                    .distance(camera.eye)
-                    <= options.cache_radius
-            });
+            continue;
         }
-        for b in &scene.blocks {
-            let id = BlockId::of(b);
-            if have.contains(&id)
-                || b.distance > options.cache_radius
-                || lock(cache).contains_key(&id)
-            {
-                continue;
-            }
-            let p = b.payload;
-            if let Ok(bytes) = store.payload(p.offset, p.len, p.crc) {
-                lock(cache).insert(id, (*b, Arc::from(&*bytes)));
-            }
+        let p = b.payload;
+        if let Ok(bytes) = store.payload(p.offset, p.len, p.crc) {
+            lock(cache).insert(id, (*b, Arc::from(&*bytes)));
         }
     }
 }

@@ -398,6 +398,11 @@ impl<'s, S: Source> Terrain<'s, S> {
         })
     }
 
+    /// The box of a scene block: its samples by its height range.
+    pub fn block_box(&self, b: &SceneBlock) -> Aabb {
+        self.rect_box(&b.rect(), b.min_height, b.max_height)
+    }
+
     /// The root's height range: bounds every height of the terrain.
     pub fn height_range(&self) -> (f32, f32) {
         (self.root.min_height.get(), self.root.max_height.get())
@@ -409,8 +414,7 @@ impl<'s, S: Source> Terrain<'s, S> {
         blocks.sort_unstable_by_key(|b| (b.key, b.level));
         blocks.dedup_by_key(|b| (b.key, b.level));
         if window.is_none() {
-            blocks
-                .retain(|b| view.intersects(&self.rect_box(&b.rect(), b.min_height, b.max_height)));
+            blocks.retain(|b| view.intersects(&self.block_box(b)));
         }
         set_neighbours(&self.domain, blocks, CellMap::CELLS_PER_BLOCK);
     }
