@@ -1,4 +1,4 @@
-//! Scene scheduling cost on Puget Sound 1k (160 m spacing) from a warm mapping, at
+//! Scene scheduling cost on Puget Sound 1k (160 m spacing) and 4k (40 m) from a warm mapping, at
 //! tau = 0.5, 1, 2, 4 px: uniform mode, view-dependent mode, and the two naive baselines of
 //! `fmrh::scene::baseline` (every finest block of the view; the FMRH walked from the root
 //! without clusters). Each is timed twice: selection alone (the block list with payload
@@ -54,23 +54,27 @@ fn cameras() -> Vec<(&'static str, Camera)> {
     ]
 }
 
-fn bench(c: &mut Criterion) {
-    let mut hf = load(
-        &data("puget-sound-1k/ps_height_1k.f32"),
-        &IngestOptions::default(),
-    )
-    .expect("real data (../shared/data)");
-    hf.metadata.spacing_m = Some([160.0, 160.0]);
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("ps1k.fmrh");
+/// A container of `rel` (a `../shared/data` `.f32`) at `spacing` metres, mapped.
+fn open(dir: &std::path::Path, rel: &str, spacing: f64) -> Store<fmrh::store::MmapSource> {
+    let mut hf = load(&data(rel), &IngestOptions::default()).expect("real data (../shared/data)");
+    hf.metadata.spacing_m = Some([spacing, spacing]);
+    let path = dir.join("bench.fmrh");
     let model = Model::build(hf.clone(), &BuildOptions::default()).unwrap();
     write_file(&model, &hf.metadata, &path, &WriteOptions::default(), true).unwrap();
     // SAFETY: the file is private to this benchmark and never written while mapped.
-    let store = unsafe { Store::open(&path) }.unwrap();
-    let terrain = Terrain::new(&store).unwrap();
+    unsafe { Store::open(&path) }.unwrap()
+}
 
-    let mut g = c.benchmark_group("scene_puget_1k");
-    for (name, cam) in cameras() {
+fn bench_store<S: Source>(
+    c: &mut Criterion,
+    group: &str,
+    store: &Store<S>,
+    cams: &[(&str, Camera)],
+) {
+    let terrain = Terrain::new(store).unwrap();
+    let mut g = c.benchmark_group(group);
+    for (name, cam) in cams {
+        let cam = *cam;
         for tau in [0.5, 1.0, 2.0, 4.0] {
             let uniform = SceneOptions {
                 mode: Mode::Uniform,
@@ -91,9 +95,9 @@ fn bench(c: &mut Criterion) {
             ];
             for (method, blocks) in &answers {
                 eprintln!(
-                    "{name} tau {tau}: {method:>10} {:>4} blocks {:>8} bytes",
+                    "{group} {name} tau {tau}: {method:>10} {:>5} blocks {:>9} bytes",
                     blocks.len(),
-                    load_all(&store, blocks)
+                    load_all(store, blocks)
                 );
             }
             let id = |m: &str, what: &str| format!("{name}/tau{tau}/{m}/{what}");
@@ -114,18 +118,18 @@ fn bench(c: &mut Criterion) {
                 })
             });
             g.bench_function(id("uniform", "load"), |b| {
-                b.iter(|| load_all(&store, &terrain.scene(&cam, &uniform).unwrap().blocks))
+                b.iter(|| load_all(store, &terrain.scene(&cam, &uniform).unwrap().blocks))
             });
             g.bench_function(id("view", "load"), |b| {
-                b.iter(|| load_all(&store, &terrain.scene(&cam, &view).unwrap().blocks))
+                b.iter(|| load_all(store, &terrain.scene(&cam, &view).unwrap().blocks))
             });
             g.bench_function(id("all_finest", "load"), |b| {
-                b.iter(|| load_all(&store, &baseline::all_finest(&terrain, &cam, None).unwrap()))
+                b.iter(|| load_all(store, &baseline::all_finest(&terrain, &cam, None).unwrap()))
             });
             g.bench_function(id("traversal", "load"), |b| {
                 b.iter(|| {
                     load_all(
-                        &store,
+                        store,
                         &baseline::traversal(&terrain, &cam, tau, None).unwrap(),
                     )
                 })
@@ -133,6 +137,17 @@ fn bench(c: &mut Criterion) {
         }
     }
     g.finish();
+}
+
+fn bench(c: &mut Criterion) {
+    let dir = tempfile::tempdir().unwrap();
+    let store = open(dir.path(), "puget-sound-1k/ps_height_1k.f32", 160.0);
+    bench_store(c, "scene_puget_1k", &store, &cameras());
+    drop(store);
+    // The same terrain at 40 m (4096², 8-bit JPEG heights: fine for cost, not precision):
+    // 16x the blocks, two more levels.
+    let store = open(dir.path(), "puget-sound-4k-jpg/ps_height_4k_jpg.f32", 40.0);
+    bench_store(c, "scene_puget_4k", &store, &cameras()[..1]);
 }
 
 criterion_group! {
