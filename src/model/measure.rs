@@ -127,7 +127,7 @@ pub fn measure_node(
 
 /// Measures one band of a node: the sample rows of its cell row `band`. The band takes its
 /// north edge row; its south edge row belongs to the next band, except for the last band.
-fn measure_band(
+pub(crate) fn measure_band(
     raster: &MendedRaster,
     domain: &Domain,
     level: u8,

@@ -7,12 +7,14 @@
 
 pub mod cluster;
 pub mod domain;
+pub mod edit;
 pub mod measure;
 pub mod raster;
 pub mod tree;
 
 pub use cluster::{Cluster, MAX_CLUSTERS};
 pub use domain::{Domain, SampleRect, DEFAULT_BLOCK_SIZE, MAX_BLOCK_SIZE, MIN_BLOCK_SIZE};
+pub use edit::ModelEditor;
 pub use measure::NodeStats;
 pub use raster::MendedRaster;
 pub use tree::{Fmrh, Measurements, Node, NO_PARENT};

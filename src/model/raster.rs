@@ -21,6 +21,7 @@
 //! built in place from the heightfield's own buffer, so the padded domain costs no memory. The
 //! work is O(samples), plus four bytes per void sample while mending.
 
+use super::domain::SampleRect;
 use crate::heightfield::Heightfield;
 
 /// The data grid with voids mended, and which samples are valid.
@@ -187,6 +188,74 @@ impl MendedRaster {
 
 /// Rules 1–3 of the module docs, in place. `valid` marks the real samples; void slots of
 /// `values` are overwritten.
+impl MendedRaster {
+    /// Replaces the samples of the rectangle at `(col0, row0)` with `patch` (NaN = void), and
+    /// mends again. The caller has checked that the rectangle lies inside the grid.
+    ///
+    /// Returns the rectangles whose mended heights or validity may have changed: the patch's,
+    /// and, when voids are involved, the bounding box of the stand-ins elsewhere that took a
+    /// new value (mending is not local: a void takes its height from anywhere along its row
+    /// or column). Without voids before or after, only the patch is written, in
+    /// O(patch); otherwise the raster is mended again from scratch, in O(samples), so that
+    /// the result is exactly [`MendedRaster::new`] of the new samples.
+    pub fn replace(&mut self, col0: u64, row0: u64, patch: &Heightfield) -> Vec<SampleRect> {
+        let (pw, ph) = (u64::from(patch.width()), u64::from(patch.height()));
+        debug_assert!(col0 + pw <= u64::from(self.width) && row0 + ph <= u64::from(self.height));
+        let rect = SampleRect {
+            col0,
+            row0,
+            col1: col0 + pw - 1,
+            row1: row0 + ph - 1,
+        };
+        let w = self.width as usize;
+        if self.void_count == 0 && patch.void_count() == 0 {
+            for (j, src) in patch.samples().chunks_exact(pw as usize).enumerate() {
+                let at = (row0 as usize + j) * w + col0 as usize;
+                self.values[at..at + src.len()].copy_from_slice(src);
+            }
+            return vec![rect];
+        }
+        let mut samples = self.to_heightfield().into_samples();
+        for (j, src) in patch.samples().chunks_exact(pw as usize).enumerate() {
+            let at = (row0 as usize + j) * w + col0 as usize;
+            samples[at..at + src.len()].copy_from_slice(src);
+        }
+        let old = std::mem::replace(
+            self,
+            MendedRaster::new(
+                Heightfield::new(self.width, self.height, samples)
+                    .expect("same size as a valid heightfield, finite patch"),
+            ),
+        );
+        // Stand-ins that changed outside the patch.
+        let mut changed: Option<SampleRect> = None;
+        for (i, (&a, &b)) in old.values.iter().zip(&self.values).enumerate() {
+            if a.to_bits() == b.to_bits() {
+                continue;
+            }
+            let (c, r) = ((i % w) as u64, (i / w) as u64);
+            if rect.contains(c, r) {
+                continue;
+            }
+            changed = Some(match changed {
+                None => SampleRect {
+                    col0: c,
+                    row0: r,
+                    col1: c,
+                    row1: r,
+                },
+                Some(x) => SampleRect {
+                    col0: x.col0.min(c),
+                    row0: x.row0.min(r),
+                    col1: x.col1.max(c),
+                    row1: x.row1.max(r),
+                },
+            });
+        }
+        std::iter::once(rect).chain(changed).collect()
+    }
+}
+
 fn mend(values: &mut [f32], valid: &[u64], w: usize, h: usize, void_count: u64) {
     let is_valid = |i: usize| (valid[i / 64] >> (i % 64)) & 1 == 1;
     // Distance of the best candidate so far, for each void in row-major order.

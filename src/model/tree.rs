@@ -88,18 +88,41 @@ pub struct Measurements {
 impl Measurements {
     /// Measures every level of `domain` over `raster` and computes monotone errors.
     pub fn measure(raster: &MendedRaster, domain: &Domain) -> Measurements {
-        let mut levels: Vec<LevelMeasurements> = (0..domain.levels())
-            .map(|level| {
-                let (cols, rows) = domain.nodes_across(level);
-                let stats = measure_level(raster, domain, level);
-                LevelMeasurements {
+        Measurements::from_stats(
+            (0..domain.levels())
+                .map(|level| {
+                    let (cols, rows) = domain.nodes_across(level);
+                    (cols, rows, measure_level(raster, domain, level))
+                })
+                .collect(),
+        )
+    }
+
+    /// The measurements of per-level node statistics `(cols, rows, stats)` (row-major),
+    /// root level first: `e*` is taken bottom-up as the largest error in each subtree.
+    pub fn from_stats(levels: Vec<(u32, u32, Vec<NodeStats>)>) -> Measurements {
+        let mut m = Measurements {
+            levels: levels
+                .into_iter()
+                .map(|(cols, rows, stats)| LevelMeasurements {
                     cols,
                     rows,
-                    monotone: stats.iter().map(|s| s.error).collect(),
+                    monotone: Vec::new(),
                     stats,
-                }
-            })
-            .collect();
+                })
+                .collect(),
+        };
+        m.update_monotone();
+        m
+    }
+
+    /// Recomputes every `e*` from the node errors.
+    pub fn update_monotone(&mut self) {
+        let levels = &mut self.levels;
+        for l in levels.iter_mut() {
+            l.monotone.clear();
+            l.monotone.extend(l.stats.iter().map(|s| s.error));
+        }
         for level in (0..levels.len().saturating_sub(1)).rev() {
             let (upper, lower) = levels.split_at_mut(level + 1);
             let (parent, child) = (&mut upper[level], &lower[0]);
@@ -113,10 +136,8 @@ impl Measurements {
                 }
             }
         }
-        Measurements { levels }
     }
 
-    /// The root's monotone error: the largest static error anywhere.
     pub fn root_error(&self) -> f64 {
         self.levels[0].monotone[0]
     }

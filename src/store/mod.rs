@@ -25,6 +25,7 @@
 //! All three give the same API, because everything above the [`Source`] works on `&[u8]`.
 
 pub mod btree;
+pub mod io;
 pub mod source;
 pub mod verify;
 pub mod write;
