@@ -93,7 +93,7 @@ enum Item {
 }
 
 /// The physical blocks' shapes, row-major over the finest level.
-struct BlockShape {
+pub(crate) struct BlockShape {
     rect: SampleRect,
     void_count: u32,
 }
@@ -203,7 +203,7 @@ pub fn write_to<W: Write + Seek>(
     let domain = *model.domain();
     let tree = model.tree();
     let finest = domain.finest_level();
-    let (cols, rows) = domain.nodes_across(finest);
+    let (cols, _) = domain.nodes_across(finest);
     let shapes = block_shapes(model);
     let grid_voids = grid_void_flags(model);
     let items = payload_order(model);
@@ -270,15 +270,105 @@ pub fn write_to<W: Write + Seek>(
     sections.payload_padding += out.written - before;
     next_page = out.written / u64::from(p);
 
-    // Node table.
+    let refs = PayloadRefs {
+        grid: grid_ref,
+        block: block_ref,
+        grid_voids,
+        shapes,
+    };
+    let mut sink = SeqSink {
+        out: &mut out,
+        next_page: &mut next_page,
+        page_size: p,
+        bytes: Default::default(),
+    };
+    let roots = write_tables(model, &refs, &mut sink)?;
+    let bytes = std::mem::take(&mut sink.bytes);
+    let of = |t: [u8; 4]| bytes.get(&t).copied().unwrap_or(0);
+    sections.node_table = of(tag::NODE_TABLE);
+    sections.block_table = of(tag::BLOCK_TABLE);
+    sections.cluster_index = of(tag::CLUSTER_INDEX);
+    sections.adjacency = of(tag::ADJACENCY);
+    sections.cluster_directory = of(tag::CLUSTER_DIRECTORY);
+    let Roots {
+        node_table,
+        block_table,
+        adjacency,
+        cluster_directory,
+    } = roots;
+
+    // The commit record, last.
+    let file_length = out.written;
+    debug_assert_eq!(file_length, next_page * u64::from(p));
+    let record = commit_record(
+        p,
+        1,
+        file_length,
+        dataset_header,
+        cluster_directory,
+        node_table,
+        block_table,
+        btree::empty(size_of::<FreeEntry>()),
+        adjacency,
+    );
+    out.w.seek(SeekFrom::Start(0)).map_err(io_err)?;
+    out.w.write_all(record.as_bytes()).map_err(io_err)?;
+    out.w.seek(SeekFrom::Start(file_length)).map_err(io_err)?;
+    Ok(WriteSummary {
+        file_length,
+        page_size: p,
+        sections,
+    })
+}
+
+/// Where each payload of a state lies: `(offset, len, crc)` per node (its grid; unused at the
+/// finest level) and per physical block (row-major), with what the tables need to describe
+/// them.
+pub(crate) struct PayloadRefs {
+    pub grid: Vec<(u64, u32, u32)>,
+    pub block: Vec<(u64, u32, u32)>,
+    pub grid_voids: Vec<bool>,
+    pub shapes: Vec<BlockShape>,
+}
+
+/// Where the pages of a state's tables and blobs go: in order for a fresh file, wherever
+/// the allocator finds room for a commit.
+pub(crate) trait PageSink {
+    /// Writes `records` (`record_size` bytes each) as a tree of `tag` pages.
+    fn tree(&mut self, records: &[u8], record_size: usize, keyed: bool, tag: [u8; 4])
+        -> Result<TreeRef>;
+    /// Writes `content` as a blob of consecutive `tag` pages.
+    fn blob(&mut self, content: &[u8], tag: [u8; 4]) -> Result<BlobRef>;
+}
+
+/// The roots [`write_tables`] returns.
+pub(crate) struct Roots {
+    pub node_table: TreeRef,
+    pub block_table: TreeRef,
+    pub adjacency: TreeRef,
+    pub cluster_directory: BlobRef,
+}
+
+/// Writes the node table, block table, every cluster's index, the adjacency table and the
+/// cluster directory of `model`, in that order, with payloads where `refs` says.
+pub(crate) fn write_tables(
+    model: &Model,
+    refs: &PayloadRefs,
+    sink: &mut dyn PageSink,
+) -> Result<Roots> {
+    let domain = *model.domain();
+    let tree = model.tree();
+    let finest = domain.finest_level();
+    let (cols, rows) = domain.nodes_across(finest);
+
     let mut node_records = Vec::with_capacity(tree.nodes().len() * size_of::<NodeRecord>());
     for (i, n) in tree.nodes().iter().enumerate() {
         let (offset, len, crc) = if n.level == finest {
-            block_ref[(n.y * cols + n.x) as usize]
+            refs.block[(n.y * cols + n.x) as usize]
         } else {
-            grid_ref[i]
+            refs.grid[i]
         };
-        let flags = if n.level < finest && grid_voids[i] {
+        let flags = if n.level < finest && refs.grid_voids[i] {
             NODE_GRID_HAS_VOIDS
         } else {
             0
@@ -304,21 +394,15 @@ pub fn write_to<W: Write + Seek>(
         };
         node_records.extend_from_slice(rec.as_bytes());
     }
-    let before = out.written;
-    let node_table = write_tree(
-        &mut out,
+    let node_table = sink.tree(
         &node_records,
         size_of::<NodeRecord>(),
         false,
         tag::NODE_TABLE,
-        &mut next_page,
-        p,
     )?;
-    sections.node_table = out.written - before;
 
-    // Block table.
-    let mut block_records = Vec::with_capacity(shapes.len() * size_of::<BlockRecord>());
-    for (s, &(offset, len, crc)) in shapes.iter().zip(&block_ref) {
+    let mut block_records = Vec::with_capacity(refs.shapes.len() * size_of::<BlockRecord>());
+    for (s, &(offset, len, crc)) in refs.shapes.iter().zip(&refs.block) {
         let rec = BlockRecord {
             payload_offset: U64::new(offset),
             payload_len: U32::new(len),
@@ -330,18 +414,13 @@ pub fn write_to<W: Write + Seek>(
         };
         block_records.extend_from_slice(rec.as_bytes());
     }
-    debug_assert_eq!(shapes.len() as u64, u64::from(cols) * u64::from(rows));
-    let before = out.written;
-    let block_table = write_tree(
-        &mut out,
+    debug_assert_eq!(refs.shapes.len() as u64, u64::from(cols) * u64::from(rows));
+    let block_table = sink.tree(
         &block_records,
         size_of::<BlockRecord>(),
         false,
         tag::BLOCK_TABLE,
-        &mut next_page,
-        p,
     )?;
-    sections.block_table = out.written - before;
 
     // Clusters: one index each; their edge lists go into the one adjacency table.
     let mut directory = Vec::with_capacity(
@@ -362,17 +441,12 @@ pub fn write_to<W: Write + Seek>(
             };
             entries.extend_from_slice(e.as_bytes());
         }
-        let before = out.written;
-        let index = write_tree(
-            &mut out,
+        let index = sink.tree(
             &entries,
             size_of::<IndexEntry>(),
             true,
             tag::CLUSTER_INDEX,
-            &mut next_page,
-            p,
         )?;
-        sections.cluster_index += out.written - before;
         let mut adjacency = [EdgeRange::default(); 4];
         for (range, list) in adjacency
             .iter_mut()
@@ -397,49 +471,57 @@ pub fn write_to<W: Write + Seek>(
         };
         directory.extend_from_slice(rec.as_bytes());
     }
-    let before = out.written;
-    let adjacency = write_tree(
-        &mut out,
+    let adjacency = sink.tree(
         &adjacency_entries,
         size_of::<AdjacencyEntry>(),
         false,
         tag::ADJACENCY,
-        &mut next_page,
-        p,
     )?;
-    sections.adjacency = out.written - before;
-    let before = out.written;
-    let cluster_directory = write_blob(
-        &mut out,
-        &directory,
-        tag::CLUSTER_DIRECTORY,
-        &mut next_page,
-        p,
-    )?;
-    sections.cluster_directory = out.written - before;
-
-    // The commit record, last.
-    let file_length = out.written;
-    debug_assert_eq!(file_length, next_page * u64::from(p));
-    let record = commit_record(
-        p,
-        1,
-        file_length,
-        dataset_header,
-        cluster_directory,
+    let cluster_directory = sink.blob(&directory, tag::CLUSTER_DIRECTORY)?;
+    Ok(Roots {
         node_table,
         block_table,
-        btree::empty(size_of::<FreeEntry>()),
         adjacency,
-    );
-    out.w.seek(SeekFrom::Start(0)).map_err(io_err)?;
-    out.w.write_all(record.as_bytes()).map_err(io_err)?;
-    out.w.seek(SeekFrom::Start(file_length)).map_err(io_err)?;
-    Ok(WriteSummary {
-        file_length,
-        page_size: p,
-        sections,
+        cluster_directory,
     })
+}
+
+/// A [`PageSink`] that appends pages in order (a fresh file), counting bytes per tag.
+struct SeqSink<'a, 'w, W: Write> {
+    out: &'a mut PageWriter<'w, W>,
+    next_page: &'a mut u64,
+    page_size: u32,
+    bytes: std::collections::HashMap<[u8; 4], u64>,
+}
+
+impl<W: Write> PageSink for SeqSink<'_, '_, W> {
+    fn tree(
+        &mut self,
+        records: &[u8],
+        record_size: usize,
+        keyed: bool,
+        tag: [u8; 4],
+    ) -> Result<TreeRef> {
+        let before = self.out.written;
+        let r = write_tree(
+            self.out,
+            records,
+            record_size,
+            keyed,
+            tag,
+            self.next_page,
+            self.page_size,
+        )?;
+        *self.bytes.entry(tag).or_default() += self.out.written - before;
+        Ok(r)
+    }
+
+    fn blob(&mut self, content: &[u8], tag: [u8; 4]) -> Result<BlobRef> {
+        let before = self.out.written;
+        let r = write_blob(self.out, content, tag, self.next_page, self.page_size)?;
+        *self.bytes.entry(tag).or_default() += self.out.written - before;
+        Ok(r)
+    }
 }
 
 /// A commit record with its CRC.
