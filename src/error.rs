@@ -59,6 +59,10 @@ pub enum Error {
         /// What was found, for a person.
         detail: String,
     },
+    /// An earlier write, sync or length change of this container failed, so what the file
+    /// holds past its last commit is unknown; open it again to go on (recovery runs then).
+    #[error("the container had an I/O failure and refuses further use; open it again")]
+    Poisoned,
 }
 
 impl Error {

@@ -43,8 +43,24 @@ pub const MAGIC: [u8; 8] = *b"FMRH\r\n\x1a\n";
 /// Incompatible revisions of the format. This reader reads major version 1 only.
 pub const FORMAT_MAJOR: u16 = 1;
 
-/// Compatible additions within [`FORMAT_MAJOR`].
-pub const FORMAT_MINOR: u16 = 0;
+/// Compatible additions within [`FORMAT_MAJOR`]. 1.1 added the commit record's flags
+/// ([`COMMIT_RECOVERY_NEEDED`]) and files changed by transactions.
+pub const FORMAT_MINOR: u16 = 1;
+
+/// Commit record flag: a transactional writer had the file open when this state was
+/// committed, and may have written past `file_length` since. The next writer to open the file
+/// cuts it back to `file_length` (recovery) before anything else; readers ignore the excess.
+/// A writer that closes cleanly commits a record without the flag.
+pub const COMMIT_RECOVERY_NEEDED: u32 = 1;
+
+/// Commit record flag: a transaction has replaced payloads, so bytes of dead payloads may
+/// remain in payload pages that live payloads still use (a commit never writes a page the
+/// previous state reaches, so it cannot zero them). Without it, those bytes are zero (I-9).
+/// Once set, later commits keep it.
+pub const COMMIT_PAYLOAD_SLACK: u32 = 2;
+
+/// Every commit record flag this reader knows.
+pub const COMMIT_FLAGS_KNOWN: u32 = COMMIT_RECOVERY_NEEDED | COMMIT_PAYLOAD_SLACK;
 
 /// The page size a writer uses unless told otherwise.
 pub const DEFAULT_PAGE_SIZE: u32 = 4096;

@@ -27,6 +27,7 @@
 pub mod btree;
 pub mod io;
 pub mod source;
+pub mod txn;
 pub mod verify;
 pub mod write;
 
@@ -38,6 +39,7 @@ use std::path::Path;
 use zerocopy::FromBytes;
 
 pub use source::{Bytes, FileSource, MmapSource, Source};
+pub use txn::{CommitSummary, Container, Recovery, Snapshot, WriteTxn};
 pub use verify::{verify, CheckReport, CheckStatus, VerifyReport};
 pub use write::{write_atomically, write_file, write_to, SectionBytes, WriteOptions, WriteSummary};
 
@@ -273,7 +275,9 @@ pub(crate) fn parse_commit(bytes: &[u8], slot: u8) -> Result<CommitRecord> {
         return Err(bad("transaction id 0".into()));
     }
     if !newer_minor(r.minor.get())
-        && (r.flags.get() != 0 || r.reserved0.get() != 0 || !is_zero(&r.reserved))
+        && (r.flags.get() & !format::COMMIT_FLAGS_KNOWN != 0
+            || r.reserved0.get() != 0
+            || !is_zero(&r.reserved))
     {
         return Err(bad("reserved fields are not zero".into()));
     }

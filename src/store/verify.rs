@@ -635,14 +635,21 @@ impl std::fmt::Display for Payload {
 /// tail of `from`'s page and the head of `to`'s page (whole pages between belong to someone
 /// else or to nobody, which I-8 reports).
 fn zero_gap<S: Source>(store: &Store<S>, from: u64, to: u64, p: u64, checks: &mut Checks) {
-    if from >= to {
+    if from >= to || store.commit_record().flags.get() & crate::format::COMMIT_PAYLOAD_SLACK != 0 {
         return;
     }
-    let first_end = to.min((from / p + 1) * p);
-    let mut ranges = vec![(from, first_end)];
-    let last_start = (to - 1) / p * p;
-    if last_start >= first_end {
-        ranges.push((last_start, to));
+    // Only the pages the gap shares with a payload: the tail of the page holding the byte
+    // before `from`, and the head of the page holding the byte at `to`.
+    let mut ranges: Vec<(u64, u64)> = Vec::new();
+    if from % p != 0 {
+        ranges.push((from, to.min((from / p + 1) * p)));
+    }
+    if to % p != 0 {
+        let head = (from.max(to / p * p), to);
+        match ranges.last_mut() {
+            Some(last) if last.1 >= head.0 => last.1 = last.1.max(head.1),
+            _ => ranges.push(head),
+        }
     }
     for (a, b) in ranges {
         match store.source().read_at(a, (b - a) as usize) {

@@ -94,8 +94,8 @@ enum Item {
 
 /// The physical blocks' shapes, row-major over the finest level.
 pub(crate) struct BlockShape {
-    rect: SampleRect,
-    void_count: u32,
+    pub rect: SampleRect,
+    pub void_count: u32,
 }
 
 /// Writes `model` (of a heightfield with `metadata`) to `path` through a temporary file (see
@@ -335,8 +335,13 @@ pub(crate) struct PayloadRefs {
 /// the allocator finds room for a commit.
 pub(crate) trait PageSink {
     /// Writes `records` (`record_size` bytes each) as a tree of `tag` pages.
-    fn tree(&mut self, records: &[u8], record_size: usize, keyed: bool, tag: [u8; 4])
-        -> Result<TreeRef>;
+    fn tree(
+        &mut self,
+        records: &[u8],
+        record_size: usize,
+        keyed: bool,
+        tag: [u8; 4],
+    ) -> Result<TreeRef>;
     /// Writes `content` as a blob of consecutive `tag` pages.
     fn blob(&mut self, content: &[u8], tag: [u8; 4]) -> Result<BlobRef>;
 }
@@ -441,12 +446,7 @@ pub(crate) fn write_tables(
             };
             entries.extend_from_slice(e.as_bytes());
         }
-        let index = sink.tree(
-            &entries,
-            size_of::<IndexEntry>(),
-            true,
-            tag::CLUSTER_INDEX,
-        )?;
+        let index = sink.tree(&entries, size_of::<IndexEntry>(), true, tag::CLUSTER_INDEX)?;
         let mut adjacency = [EdgeRange::default(); 4];
         for (range, list) in adjacency
             .iter_mut()
@@ -649,7 +649,7 @@ fn progress_bar(enabled: bool, total: u64) -> ProgressBar {
 }
 
 /// Every physical block's data rectangle and void count, row-major.
-fn block_shapes(model: &Model) -> Vec<BlockShape> {
+pub(crate) fn block_shapes(model: &Model) -> Vec<BlockShape> {
     let d = model.domain();
     let finest = d.finest_level();
     let (cols, rows) = d.nodes_across(finest);
@@ -673,7 +673,7 @@ fn block_shapes(model: &Model) -> Vec<BlockShape> {
 }
 
 /// Per node: whether its stored (clipped) coarse grid has a void or padding sample.
-fn grid_void_flags(model: &Model) -> Vec<bool> {
+pub(crate) fn grid_void_flags(model: &Model) -> Vec<bool> {
     let d = model.domain();
     let tree = model.tree();
     let data = d.data_rect();
@@ -743,7 +743,7 @@ fn blocks_under(d: &crate::model::Domain, level: u8, x: u32, y: u32, items: &mut
 }
 
 /// The stored (clipped) grid of `node`: the top-left `gw × gh` of its `b × b` grid.
-fn encode_grid(model: &Model, node: u32, has_voids: bool) -> Vec<u8> {
+pub(crate) fn encode_grid(model: &Model, node: u32, has_voids: bool) -> Vec<u8> {
     let (g, gw, gh) = clipped_grid(model, node);
     let mut bytes = Vec::with_capacity(payload::grid_len(gw, gh, has_voids) as usize);
     for h in &g.heights {
@@ -781,7 +781,7 @@ pub(crate) fn clipped_grid(model: &Model, node: u32) -> (crate::model::NodeGrid,
     (g, gw, gh)
 }
 
-fn encode_block(model: &Model, shape: &BlockShape) -> Vec<u8> {
+pub(crate) fn encode_block(model: &Model, shape: &BlockShape) -> Vec<u8> {
     let raster = model.raster();
     let r = shape.rect;
     let n = r.samples() as usize + shape.void_count as usize;
