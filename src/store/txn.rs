@@ -46,7 +46,7 @@ use super::Store;
 use crate::error::{Error, Result};
 use crate::format::{
     self, payload, tag, BlobRef, CommitRecord, DatasetHeader, FreeEntry, PageHeader, TreeRef,
-    COMMIT_PAYLOAD_SLACK, COMMIT_RECOVERY_NEEDED, PAGE_HEADER_LEN,
+    COMMIT_PAYLOAD_SLACK, COMMIT_RECORD_LEN, COMMIT_RECOVERY_NEEDED, PAGE_HEADER_LEN,
 };
 use crate::heightfield::Heightfield;
 use crate::model::{ModelEditor, SampleRect};
@@ -113,6 +113,8 @@ pub struct Recovery {
     pub marked: bool,
     /// Bytes cut from the end (left by an unfinished transaction).
     pub truncated: u64,
+    /// Whether the unused commit slot held a torn record, now zeroed.
+    pub slot_cleared: bool,
 }
 
 impl Container<FileIo> {
@@ -140,16 +142,29 @@ impl<I: Io> Container<I> {
         let committed = record.file_length.get();
         let len = io.len().map_err(|e| Error::io(io.name(), e))?;
         let marked = record.flags.get() & COMMIT_RECOVERY_NEEDED != 0;
+        let inactive = 1 - usize::from(store.commit_slot());
+        let torn = matches!(
+            super::read_slots(store.source())?[inactive],
+            super::Slot::Invalid(_)
+        );
         let mut recovery = Recovery {
             marked,
             truncated: 0,
+            slot_cleared: torn,
         };
-        let store = if marked || len > committed {
+        let store = if marked || torn || len > committed {
+            let e = |err| Error::io(io.name(), err);
+            if torn {
+                // An interrupted commit's record: never valid, so clearing it loses nothing.
+                let p = u64::from(store.page_size());
+                io.write_at(inactive as u64 * p, &[0u8; COMMIT_RECORD_LEN])
+                    .map_err(e)?;
+            }
             if len > committed {
-                io.set_len(committed).map_err(|e| Error::io(io.name(), e))?;
+                io.set_len(committed).map_err(e)?;
                 recovery.truncated = len - committed;
             }
-            io.sync().map_err(|e| Error::io(io.name(), e))?;
+            io.sync().map_err(e)?;
             load(&io)?
         } else {
             store
@@ -258,11 +273,11 @@ impl<I: Io> Container<I> {
         let e = |err| Error::io(io.name(), err);
         record.flags = U32::new(flags);
         record.crc = U32::new(format::crc32(&record.as_bytes()[..252]));
+        // Only the record's bytes: the rest of the slot page stays zero whatever a crash
+        // does to this write.
         let p = u64::from(base.page_size());
-        let mut page = vec![0u8; p as usize];
-        page[..size_of::<CommitRecord>()].copy_from_slice(record.as_bytes());
         let slot = 1 - u64::from(base.commit_slot());
-        io.write_at(slot * p, &page).map_err(e)?;
+        io.write_at(slot * p, record.as_bytes()).map_err(e)?;
         io.sync().map_err(e)?;
         if length < io.len().map_err(e)? {
             io.set_len(length).map_err(e)?;
