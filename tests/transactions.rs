@@ -172,7 +172,7 @@ fn samples_digest<S: fmrh::store::Source>(s: &Store<S>) -> u64 {
 /// reopened file verifies and holds exactly the old or the new samples.
 #[test]
 fn crash_at_every_operation_recovers_old_or_new() {
-    use fmrh::store::io::{Damage, Io};
+    use fmrh::store::io::Damage;
     let bytes = build_bytes(&terrain(90, 70), 17, &Thresholds::Ladder);
     let old = samples_digest(&Store::from_bytes(bytes.clone()).unwrap());
     // The new state, and how many operations its commit takes.
