@@ -45,7 +45,7 @@ use super::write::{self, PageSink, PayloadRefs};
 use super::Store;
 use crate::error::{Error, Result};
 use crate::format::{
-    self, payload, tag, BlobRef, CommitRecord, DatasetHeader, FreeEntry, PageHeader, TreeRef,
+    self, payload, tag, BlobRef, CommitRecord, DatasetHeader, FreeEntry, TreeRef,
     COMMIT_PAYLOAD_SLACK, COMMIT_RECORD_LEN, COMMIT_RECOVERY_NEEDED, PAGE_HEADER_LEN,
 };
 use crate::heightfield::Heightfield;
@@ -545,6 +545,36 @@ impl<I: Io> CommitSink<'_, I> {
         self.written += 1;
         Ok(())
     }
+
+    /// Builds a tree of `records` into the pages from `first` on (enough of them are
+    /// reserved) and writes them.
+    fn tree_at(
+        &mut self,
+        first: u64,
+        records: &[u8],
+        record_size: usize,
+        keyed: bool,
+        tag: [u8; 4],
+    ) -> Result<TreeRef> {
+        let mut next = first;
+        let mut pages = Vec::new();
+        let r = btree::build(
+            records,
+            record_size,
+            keyed,
+            tag,
+            self.page_size,
+            &mut next,
+            &mut |bytes| {
+                pages.push(bytes);
+                Ok(())
+            },
+        )?;
+        for (i, bytes) in pages.iter().enumerate() {
+            self.write_page(first + i as u64, bytes)?;
+        }
+        Ok(r)
+    }
 }
 
 impl<I: Io> PageSink for CommitSink<'_, I> {
@@ -561,46 +591,18 @@ impl<I: Io> PageSink for CommitSink<'_, I> {
             self.page_size,
         );
         let first = self.alloc.extent(n);
-        let mut next = first;
-        let mut pages = Vec::new();
-        let r = btree::build(
-            records,
-            record_size,
-            keyed,
-            tag,
-            self.page_size,
-            &mut next,
-            &mut |bytes| {
-                pages.push(bytes);
-                Ok(())
-            },
-        )?;
-        debug_assert_eq!(next, first + n);
-        for (i, bytes) in pages.iter().enumerate() {
-            self.write_page(first + i as u64, bytes)?;
-        }
-        Ok(r)
+        self.tree_at(first, records, record_size, keyed, tag)
     }
 
     fn blob(&mut self, content: &[u8], tag: [u8; 4]) -> Result<BlobRef> {
         let per_page = self.page_size as usize - PAGE_HEADER_LEN;
         let n = content.len().div_ceil(per_page) as u64;
         let first = self.alloc.extent(n);
-        for (i, chunk) in content.chunks(per_page).enumerate() {
-            let no = first + i as u64;
-            let mut page = vec![0u8; self.page_size as usize];
-            let h = PageHeader {
-                tag,
-                crc: U32::new(0),
-                page_no: U64::new(no),
-                level: zerocopy::byteorder::little_endian::U16::new(0),
-                reserved: zerocopy::byteorder::little_endian::U16::new(0),
-                count: U32::new(chunk.len() as u32),
-            };
-            page[..PAGE_HEADER_LEN].copy_from_slice(h.as_bytes());
-            page[PAGE_HEADER_LEN..PAGE_HEADER_LEN + chunk.len()].copy_from_slice(chunk);
-            format::seal_page(&mut page);
-            self.write_page(no, &page)?;
+        for (i, page) in write::blob_pages(content, tag, first, self.page_size)
+            .iter()
+            .enumerate()
+        {
+            self.write_page(first + i as u64, page)?;
         }
         Ok(BlobRef {
             first_page: U64::new(first),
@@ -854,24 +856,19 @@ fn write_state<I: Io>(
             }
         };
         let records = entries(&alloc.pool);
-        let mut next = first;
-        let mut pages = Vec::new();
-        free_list = btree::build(
+        let mut sink = CommitSink {
+            io: io.as_ref(),
+            alloc: &mut alloc,
+            page_size: p as u32,
+            written: 0,
+        };
+        free_list = sink.tree_at(
+            first,
             &records,
             size_of::<FreeEntry>(),
             true,
             tag::FREE_LIST,
-            p as u32,
-            &mut next,
-            &mut |bytes| {
-                pages.push(bytes);
-                Ok(())
-            },
         )?;
-        for (i, bytes) in pages.iter().enumerate() {
-            io.write_at((first + i as u64) * p, bytes)
-                .map_err(|e| Error::io(io.name(), e))?;
-        }
     }
     summary.pages_written = written + k;
     summary.pages_reused = alloc.reused;

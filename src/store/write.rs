@@ -611,20 +611,7 @@ fn write_blob<W: Write>(
     page_size: u32,
 ) -> Result<BlobRef> {
     let first_page = *next_page;
-    let per_page = page_size as usize - PAGE_HEADER_LEN;
-    for chunk in content.chunks(per_page) {
-        let mut page = vec![0u8; page_size as usize];
-        let h = PageHeader {
-            tag,
-            crc: U32::new(0),
-            page_no: U64::new(*next_page),
-            level: U16::new(0),
-            reserved: U16::new(0),
-            count: U32::new(chunk.len() as u32),
-        };
-        page[..PAGE_HEADER_LEN].copy_from_slice(h.as_bytes());
-        page[PAGE_HEADER_LEN..PAGE_HEADER_LEN + chunk.len()].copy_from_slice(chunk);
-        format::seal_page(&mut page);
+    for page in blob_pages(content, tag, first_page, page_size) {
         out.write(&page)?;
         *next_page += 1;
     }
@@ -632,6 +619,35 @@ fn write_blob<W: Write>(
         first_page: U64::new(first_page),
         length: U64::new(content.len() as u64),
     })
+}
+
+/// The sealed pages of a blob of `content` starting at page `first_page`.
+pub(crate) fn blob_pages(
+    content: &[u8],
+    tag: [u8; 4],
+    first_page: u64,
+    page_size: u32,
+) -> Vec<Vec<u8>> {
+    let per_page = page_size as usize - PAGE_HEADER_LEN;
+    content
+        .chunks(per_page)
+        .enumerate()
+        .map(|(i, chunk)| {
+            let mut page = vec![0u8; page_size as usize];
+            let h = PageHeader {
+                tag,
+                crc: U32::new(0),
+                page_no: U64::new(first_page + i as u64),
+                level: U16::new(0),
+                reserved: U16::new(0),
+                count: U32::new(chunk.len() as u32),
+            };
+            page[..PAGE_HEADER_LEN].copy_from_slice(h.as_bytes());
+            page[PAGE_HEADER_LEN..PAGE_HEADER_LEN + chunk.len()].copy_from_slice(chunk);
+            format::seal_page(&mut page);
+            page
+        })
+        .collect()
 }
 
 fn progress_bar(enabled: bool, total: u64) -> ProgressBar {
