@@ -1,4 +1,5 @@
-//! The `fmrh` command line: build containers from DEMs, inspect, verify, scan and extract them.
+//! The `fmrh` command line: build containers from DEMs, inspect, verify, scan and extract them,
+//! schedule scenes, and replace samples transactionally.
 //!
 //! Exit status: 0 on success; 2 when the input or the arguments are unusable (malformed,
 //! corrupt or unsupported file, bad option value, size beyond limits); 1 when the system fails
@@ -65,6 +66,14 @@ enum Command {
     /// Algorithm 3). --memory-radius keeps blocks that left the view; --prefetch with
     /// --cache-radius warms the blocks of the extrapolated next camera on a second thread.
     Fly(cli::fly::FlyArgs),
+    /// Replace full-resolution samples, atomically: new blocks, errors, clusters, one commit.
+    ///
+    /// Reads PATCH in any format `build` reads and writes its samples at --at COL,ROW (the
+    /// patch must fit inside the data; NaN or nodata samples become voids). Every affected
+    /// block, node error, cluster cut and table is rewritten copy-on-write and published by
+    /// one commit record: a crash at any instant leaves the old state or the new one, and
+    /// the next open recovers. Prints what changed (--json for machine-readable output).
+    Replace(cli::replace::ReplaceArgs),
 }
 
 fn main() -> ExitCode {
@@ -77,6 +86,7 @@ fn main() -> ExitCode {
         Command::Scan(args) => cli::scan::run(args),
         Command::Scene(args) => cli::scene::run(args),
         Command::Fly(args) => cli::fly::run(args),
+        Command::Replace(args) => cli::replace::run(args),
     };
     match result {
         Ok(code) => code,

@@ -7,7 +7,7 @@ use std::time::Instant;
 use serde::Serialize;
 
 use fmrh::format::DEFAULT_PAGE_SIZE;
-use fmrh::ingest::{self, ColorEncoding, Format, IngestOptions};
+use fmrh::ingest;
 use fmrh::model::{BuildOptions, Model, Thresholds, DEFAULT_BLOCK_SIZE};
 use fmrh::store::{write_file, WriteOptions, WriteSummary};
 use fmrh::Error;
@@ -48,43 +48,12 @@ pub struct BuildArgs {
     /// Print the report as JSON.
     #[arg(long)]
     json: bool,
-    #[command(flatten)]
-    ingest: IngestArgs,
-}
-
-#[derive(clap::Args)]
-struct IngestArgs {
-    /// Input format; guessed from the name and contents when absent.
-    #[arg(long, value_enum)]
-    format: Option<Format>,
-    /// How an RGB(A) PNG encodes heights.
-    #[arg(long, value_enum)]
-    color_encoding: Option<ColorEncoding>,
-    /// Multiply raw values by this (e.g. 0.1 for a decimetre 16-bit PNG).
-    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
-    z_scale: f64,
-    /// Add this to scaled values.
-    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
-    z_offset: f64,
-    /// A raw value that marks a void, besides the format's own nodata.
-    #[arg(long, allow_negative_numbers = true)]
-    nodata: Option<f64>,
     /// Ground distance between samples in metres, DX or DX,DY (east, south). Overrides what
     /// the source says; scenes use it to place the terrain in the world.
     #[arg(long, value_delimiter = ',')]
     spacing: Option<Vec<f64>>,
-}
-
-impl IngestArgs {
-    fn options(&self) -> IngestOptions {
-        IngestOptions {
-            format: self.format,
-            color_encoding: self.color_encoding,
-            z_scale: self.z_scale,
-            z_offset: self.z_offset,
-            nodata: self.nodata,
-        }
-    }
+    #[command(flatten)]
+    ingest: super::IngestArgs,
 }
 
 #[derive(Serialize)]
@@ -156,7 +125,7 @@ fn parse_spacing(values: &[f64]) -> Result<[f64; 2], Error> {
 pub fn run(args: &BuildArgs) -> Result<ExitCode, Error> {
     let t0 = Instant::now();
     let mut heightfield = ingest::load(&args.input, &args.ingest.options())?;
-    if let Some(spacing) = &args.ingest.spacing {
+    if let Some(spacing) = &args.spacing {
         heightfield.metadata.spacing_m = Some(parse_spacing(spacing)?);
     }
     let ingest_time = t0.elapsed();

@@ -4,6 +4,7 @@ pub mod build;
 pub mod extract;
 pub mod fly;
 pub mod info;
+pub mod replace;
 pub mod scan;
 pub mod scene;
 pub mod sidecar;
@@ -13,8 +14,42 @@ use std::path::Path;
 
 use serde::Serialize;
 
+use fmrh::ingest::{ColorEncoding, Format, IngestOptions};
 use fmrh::store::FileSource;
 use fmrh::{Error, Store};
+
+/// How to read an input DEM: the options every command that ingests shares.
+#[derive(clap::Args)]
+pub struct IngestArgs {
+    /// Input format; guessed from the name and contents when absent.
+    #[arg(long, value_enum)]
+    format: Option<Format>,
+    /// How an RGB(A) PNG encodes heights.
+    #[arg(long, value_enum)]
+    color_encoding: Option<ColorEncoding>,
+    /// Multiply raw values by this (e.g. 0.1 for a decimetre 16-bit PNG).
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
+    z_scale: f64,
+    /// Add this to scaled values.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    z_offset: f64,
+    /// A raw value that marks a void, besides the format's own nodata.
+    #[arg(long, allow_negative_numbers = true)]
+    nodata: Option<f64>,
+}
+
+impl IngestArgs {
+    /// The ingest options these flags give.
+    pub fn options(&self) -> IngestOptions {
+        IngestOptions {
+            format: self.format,
+            color_encoding: self.color_encoding,
+            z_scale: self.z_scale,
+            z_offset: self.z_offset,
+            nodata: self.nodata,
+        }
+    }
+}
 
 /// Prints `value` as pretty JSON.
 pub fn print_json<T: Serialize>(value: &T) -> Result<(), Error> {

@@ -117,7 +117,8 @@ impl ModelEditor {
         let d = *self.model.domain();
         let data = d.data_rect();
         let (pw, ph) = (u64::from(patch.width()), u64::from(patch.height()));
-        if col0 + pw > data.col1 + 1 || row0 + ph > data.row1 + 1 {
+        let fits = |c0: u64, len: u64, end: u64| c0.checked_add(len).is_some_and(|e| e <= end + 1);
+        if !fits(col0, pw, data.col1) || !fits(row0, ph, data.row1) {
             return Err(Error::InvalidArgument(format!(
                 "a {pw} x {ph} patch at column {col0}, row {row0} does not fit inside the \
                  {} x {} data",

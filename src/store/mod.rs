@@ -198,7 +198,7 @@ impl<T: AsRef<[u8]> + Send + Sync> Store<Bytes<T>> {
 }
 
 /// Puts `path` into errors that name no file.
-fn with_path(e: Error, path: &Path) -> Error {
+pub(crate) fn with_path(e: Error, path: &Path) -> Error {
     match e {
         Error::Corrupt {
             invariant,

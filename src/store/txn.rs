@@ -131,6 +131,7 @@ fn load<I: Io>(io: &Arc<I>) -> Result<SnapshotStore<I>> {
         io: Arc::clone(io),
         len,
     })
+    .map_err(|e| super::with_path(e, io.name()))
 }
 
 impl<I: Io> Container<I> {
