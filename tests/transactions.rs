@@ -3,77 +3,18 @@
 //! `verify --full`, snapshots keep their state across commits, and an aborted transaction
 //! changes nothing.
 
-use std::io::Cursor;
+mod common;
 
-use fmrh::model::{BuildOptions, Model, Thresholds};
+use common::txn::{build_bytes, described, paste, patch, samples_digest};
+use fmrh::model::Thresholds;
 use fmrh::store::io::SimDisk;
-use fmrh::store::{verify, write_to, Bytes, Container, WriteOptions};
+use fmrh::store::{verify, Bytes, Container};
 use fmrh::{Heightfield, Store};
 
 fn terrain(w: u32, h: u32) -> Heightfield {
     Heightfield::from_fn(w, h, |x, y| {
         ((x as f32 * 0.11).sin() * 30.0 + (y as f32 * 0.07).cos() * 20.0 + (x * y) as f32 * 0.01)
             .round()
-    })
-    .unwrap()
-}
-
-fn build_bytes(hf: &Heightfield, block: u32, thresholds: &Thresholds) -> Vec<u8> {
-    let model = Model::build(
-        hf.clone(),
-        &BuildOptions {
-            block_size: block,
-            thresholds: thresholds.clone(),
-        },
-    )
-    .unwrap();
-    let mut out = Cursor::new(Vec::new());
-    write_to(&model, &hf.metadata, &WriteOptions::default(), &mut out).unwrap();
-    out.into_inner()
-}
-
-/// The model a container describes, in comparable form: every node record without its
-/// payload location, and every cut as (key, level) lists.
-fn described<S: fmrh::store::Source>(s: &Store<S>) -> (Vec<String>, Vec<Vec<(u64, u8)>>) {
-    let nodes = s
-        .nodes()
-        .unwrap()
-        .iter()
-        .map(|n| {
-            format!(
-                "{} {} {} {} {} {} {} {} {} {} {} {}",
-                n.key.get(),
-                n.level,
-                n.child_mask,
-                n.x.get(),
-                n.y.get(),
-                n.parent.get(),
-                n.subtree_len.get(),
-                n.static_error.get().to_bits(),
-                n.monotone_error.get().to_bits(),
-                n.min_height.get().to_bits(),
-                n.max_height.get().to_bits(),
-                n.valid_samples.get(),
-            )
-        })
-        .collect();
-    let cuts = (0..s.clusters().len())
-        .map(|c| {
-            s.scan_codes(c, 0..s.clusters()[c].nodes())
-                .unwrap()
-                .map(|e| {
-                    let e = e.unwrap();
-                    (e.key.0, e.level)
-                })
-                .collect()
-        })
-        .collect();
-    (nodes, cuts)
-}
-
-fn patch(w: u32, h: u32, seed: f32) -> Heightfield {
-    Heightfield::from_fn(w, h, |x, y| {
-        (seed * 10.0 + (x as f32 * 0.9 + seed).sin() * 45.0 + y as f32 * 2.0).round()
     })
     .unwrap()
 }
@@ -109,15 +50,7 @@ fn replacement_commits_equal_a_fresh_build() {
         txn.replace_region(*c0, *r0, p).unwrap();
         let summary = txn.commit().unwrap();
         assert!(summary.blocks > 0, "edit {i}: {summary:?}");
-        // Apply to the reference samples.
-        let mut samples = hf.samples().to_vec();
-        for j in 0..p.height() as u64 {
-            for k in 0..p.width() as u64 {
-                samples[((r0 + j) * w as u64 + c0 + k) as usize] =
-                    p.samples()[(j * p.width() as u64 + k) as usize];
-            }
-        }
-        hf = Heightfield::new(w, h, samples).unwrap();
+        hf = paste(&hf, *c0, *r0, p);
         let fresh = build_bytes(&hf, 17, &Thresholds::Explicit(thresholds.clone()));
         let now = container.read().unwrap();
         assert_eq!(
@@ -157,15 +90,6 @@ fn abort_changes_nothing() {
     let s = container.read().unwrap();
     let back = s.read_window(s.domain().data_rect()).unwrap();
     assert_eq!(back.get(3, 3), terrain(60, 60).get(3, 3));
-}
-
-/// A digest of every sample a state holds (bits; voids as one value).
-fn samples_digest<S: fmrh::store::Source>(s: &Store<S>) -> u64 {
-    let hf = s.read_window(s.domain().data_rect()).unwrap();
-    hf.samples().iter().fold(0xcbf2_9ce4_8422_2325u64, |h, v| {
-        let bits = if v.is_nan() { 0x7FC0_0000 } else { v.to_bits() };
-        (h ^ u64::from(bits)).wrapping_mul(0x100_0000_01b3)
-    })
 }
 
 /// Crash after every mutating operation of a commit, with several damage patterns: the
