@@ -1,6 +1,7 @@
-//! The crash matrix on a real DEM (Puget Sound east, 512 x 512): a workload of three write
-//! transactions (four replacements: a raised block, voids, a flattened region that merges
-//! nodes, rough ground that splits them) and a clean close, crashed after every mutating
+//! The crash matrix on a real DEM (Puget Sound east, 512 x 512): a workload of five write
+//! transactions (six replacements: a raised block and voids together, a flattened region
+//! that merges nodes, rough ground there that splits them, flat again, and a small one whose
+//! commit cuts the file's free tail) and a clean close, crashed after every mutating
 //! operation (write, sync, set_len) with six damage patterns to the unsynced operations
 //! (keep all, drop all, four random mixes of kept, dropped and torn 512-byte sectors).
 //!
@@ -36,18 +37,33 @@ fn workload() -> Vec<Txn> {
     })
     .unwrap();
     let flat = Heightfield::from_fn(200, 150, |_, _| 100.0).unwrap();
-    let rough = Heightfield::from_fn(120, 120, |x, y| {
+    let steps = Heightfield::from_fn(200, 150, |x, y| {
         ((x.wrapping_mul(2_654_435_761) ^ y.wrapping_mul(40_503)) % 97) as f32 * 2.5
     })
     .unwrap();
     vec![
         vec![(100, 100, raised), (300, 50, voids)],
+        // Flat ground: nodes merge.
         vec![(200, 250, flat)],
-        vec![(0, 380, rough)],
+        // Rough ground in the same place: they split again, and their new grids are
+        // appended at the file's end ...
+        vec![(200, 250, steps)],
+        // ... flat again: they merge, and those grids are freed ...
+        vec![(
+            200,
+            250,
+            Heightfield::from_fn(200, 150, |_, _| 101.0).unwrap(),
+        )],
+        // ... and cut off by the next commit (a length change after the record).
+        vec![(
+            450,
+            10,
+            Heightfield::from_fn(20, 12, |x, y| (x + y) as f32).unwrap(),
+        )],
     ]
 }
 
-/// Runs the workload from transaction `from`; returns how many transactions committed.
+/// Runs the transactions in order; returns how many committed.
 fn run(c: &Container<SimDisk>, txns: &[Txn]) -> fmrh::Result<usize> {
     let mut done = 0;
     for txn in txns {
@@ -118,12 +134,19 @@ fn crash_anywhere_in_a_real_workload_recovers_old_or_new() {
             model: described(&s),
         };
         assert_eq!(state.digest, digest_samples(hf.samples()), "txn {k}");
-        assert!(state.model == described(&fresh), "txn {k}: model != fresh build");
+        assert!(
+            state.model == described(&fresh),
+            "txn {k}: model != fresh build"
+        );
         assert!(states.iter().all(|o| o.digest != state.digest));
         states.push(state);
     }
     c.close().unwrap();
     let total = probe.ops();
+    assert!(
+        probe.count(fmrh::store::io::OpKind::SetLen) > 0,
+        "no length change"
+    );
     let last = txns.len();
 
     let damages = |at: u64| {
@@ -164,9 +187,17 @@ fn crash_anywhere_in_a_real_workload_recovers_old_or_new() {
                     let again = SimDisk::new(image.clone());
                     again.power_off_after(r);
                     let opened = Container::open_io(again.clone());
-                    assert!(opened.is_err(), "{what}: recovery survived a crash at op {r}");
+                    assert!(
+                        opened.is_err(),
+                        "{what}: recovery survived a crash at op {r}"
+                    );
                     let image2 = again.crash_image(Damage::Random(at ^ (r << 32)));
-                    check(image2, &states, &allowed, &format!("{what}, recovery op {r}"));
+                    check(
+                        image2,
+                        &states,
+                        &allowed,
+                        &format!("{what}, recovery op {r}"),
+                    );
                     recovery_crashes += 1;
                 }
                 let which = check(image.clone(), &states, &allowed, &what);
@@ -182,7 +213,8 @@ fn crash_anywhere_in_a_real_workload_recovers_old_or_new() {
                     let mut w = c.begin_write().unwrap();
                     let p = Heightfield::from_fn(9, 9, |x, _| x as f32).unwrap();
                     w.replace_region(7, 7, &p).unwrap();
-                    w.commit().unwrap_or_else(|e| panic!("{what}: commit after recovery: {e}"));
+                    w.commit()
+                        .unwrap_or_else(|e| panic!("{what}: commit after recovery: {e}"));
                     drop(c);
                     let report = verify(Bytes(disk.current()), true).unwrap();
                     assert!(report.valid, "{what}: after a further commit: {report:#?}");
@@ -200,4 +232,111 @@ fn crash_anywhere_in_a_real_workload_recovers_old_or_new() {
     );
     assert_eq!(old + new, cases);
     assert!(old > 0 && new > 0 && rec > 0);
+}
+
+/// The I/O error loop: the same workload with the Nth write, sync or length change failing
+/// (once, or from then on), for N = 1, 2, ... until the workload completes without meeting
+/// the fault. Each time the error surfaces as an I/O error, the container is poisoned (every
+/// later call fails with `Poisoned` and touches nothing), and the file, whatever becomes of
+/// the operations not yet synced, holds the last committed state or the one in flight.
+#[test]
+fn io_error_at_every_operation_poisons_and_keeps_old_or_new() {
+    use fmrh::store::io::{Fault, OpKind};
+    use fmrh::Error;
+    let src = ingest::load(
+        &data("puget-sound-east-512/ps-e_lg.f32"),
+        &IngestOptions::default(),
+    )
+    .unwrap();
+    let bytes = build_bytes(&src, 65, &Thresholds::Ladder);
+    let txns = workload();
+    // The states, by the samples they hold (the models are checked by the crash matrix).
+    let mut states = vec![State {
+        digest: digest_samples(src.samples()),
+        model: described(&Store::from_bytes(bytes.clone()).unwrap()),
+    }];
+    let probe = SimDisk::new(bytes.clone());
+    let (c, _) = Container::open_io(probe).unwrap();
+    for txn in &txns {
+        run(&c, std::slice::from_ref(txn)).unwrap();
+        let s = c.read().unwrap();
+        states.push(State {
+            digest: samples_digest(&s),
+            model: described(&s),
+        });
+    }
+    drop(c);
+
+    let cases: Vec<(OpKind, bool)> = [OpKind::Write, OpKind::Sync, OpKind::SetLen]
+        .into_iter()
+        .flat_map(|k| [(k, false), (k, true)])
+        .collect();
+    let counts: Vec<(u64, u64)> = cases
+        .par_iter()
+        .map(|&(kind, sticky)| {
+            let (mut failed, mut n) = (0u64, 1u64);
+            loop {
+                let what = format!("{kind:?} #{n} failing (sticky: {sticky})");
+                let disk = SimDisk::new(bytes.clone());
+                let (c, _) = Container::open_io(disk.clone()).unwrap();
+                disk.inject(Fault {
+                    kind,
+                    nth: n,
+                    sticky,
+                });
+                let mut committed = 0;
+                let mut error = None;
+                for txn in &txns {
+                    match run(&c, std::slice::from_ref(txn)) {
+                        Ok(_) => committed += 1,
+                        Err(e) => {
+                            error = Some(e);
+                            break;
+                        }
+                    }
+                }
+                match error {
+                    Some(error) => {
+                        assert!(matches!(error, Error::Io { .. }), "{what}: {error}");
+                        assert!(c.is_poisoned(), "{what}");
+                        let ops = disk.ops();
+                        assert!(matches!(c.read(), Err(Error::Poisoned)), "{what}");
+                        assert!(matches!(c.begin_write(), Err(Error::Poisoned)), "{what}");
+                        assert!(matches!(c.close(), Err(Error::Poisoned)), "{what}");
+                        assert_eq!(disk.ops(), ops, "{what}: a poisoned container wrote");
+                    }
+                    // The last chance: the clean close (its handle is gone either way).
+                    None => match c.close() {
+                        Ok(()) => {
+                            assert!(disk.count(kind) < n, "{what}: the fault fired unseen");
+                            break;
+                        }
+                        Err(error) => {
+                            assert!(matches!(error, Error::Io { .. }), "{what}: {error}");
+                        }
+                    },
+                }
+                failed += 1;
+                let allowed: Vec<usize> = (committed..=(committed + 1).min(txns.len())).collect();
+                for damage in [Damage::KeepAll, Damage::DropAll, Damage::Random(n)] {
+                    check(
+                        disk.crash_image(damage),
+                        &states,
+                        &allowed,
+                        &format!("{what}, then {damage:?}"),
+                    );
+                }
+                n += 1;
+            }
+            (n, failed)
+        })
+        .collect();
+    for ((kind, sticky), (n, failed)) in cases.iter().zip(&counts) {
+        eprintln!(
+            "io error loop: {kind:?} (sticky: {sticky}): N = 1..={}: {failed} errors surfaced, \
+             each poisoned, file old or new; N = {n} completes",
+            n - 1
+        );
+        assert!(*failed > 0);
+    }
 }
