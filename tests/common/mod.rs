@@ -52,4 +52,5 @@ pub fn ok_json(out: &std::process::Output) -> serde_json::Value {
 pub mod fields;
 pub mod oracle;
 pub mod txn;
+pub mod txn_driver;
 pub mod views;

@@ -2,73 +2,16 @@
 //! container holds in comparable form, digesting its samples, and applying a patch to a
 //! reference heightfield the way `replace_region` should.
 
-#![allow(dead_code)]
+#![allow(dead_code, unused_imports)]
 
-use std::io::Cursor;
-
-use fmrh::model::{BuildOptions, Model, Thresholds};
-use fmrh::store::{write_to, Source, WriteOptions};
+use fmrh::store::Source;
 use fmrh::{Heightfield, Store};
 
-/// The bytes of a fresh container of `hf`.
-pub fn build_bytes(hf: &Heightfield, block: u32, thresholds: &Thresholds) -> Vec<u8> {
-    let model = Model::build(
-        hf.clone(),
-        &BuildOptions {
-            block_size: block,
-            thresholds: thresholds.clone(),
-        },
-    )
-    .unwrap();
-    let mut out = Cursor::new(Vec::new());
-    write_to(&model, &hf.metadata, &WriteOptions::default(), &mut out).unwrap();
-    out.into_inner()
-}
+pub use super::txn_driver::{build_bytes, described, Described};
 
 /// The stored cluster thresholds.
 pub fn thresholds<S: Source>(s: &Store<S>) -> Vec<f64> {
     s.clusters().iter().map(|c| c.threshold).collect()
-}
-
-/// The model a container describes, in comparable form: every node record without its
-/// payload location, and every cut as (key, level) lists.
-pub type Described = (Vec<String>, Vec<Vec<(u64, u8)>>);
-
-pub fn described<S: Source>(s: &Store<S>) -> Described {
-    let nodes = s
-        .nodes()
-        .unwrap()
-        .iter()
-        .map(|n| {
-            format!(
-                "{} {} {} {} {} {} {} {} {} {} {} {}",
-                n.key.get(),
-                n.level,
-                n.child_mask,
-                n.x.get(),
-                n.y.get(),
-                n.parent.get(),
-                n.subtree_len.get(),
-                n.static_error.get().to_bits(),
-                n.monotone_error.get().to_bits(),
-                n.min_height.get().to_bits(),
-                n.max_height.get().to_bits(),
-                n.valid_samples.get(),
-            )
-        })
-        .collect();
-    let cuts = (0..s.clusters().len())
-        .map(|c| {
-            s.scan_codes(c, 0..s.clusters()[c].nodes())
-                .unwrap()
-                .map(|e| {
-                    let e = e.unwrap();
-                    (e.key.0, e.level)
-                })
-                .collect()
-        })
-        .collect();
-    (nodes, cuts)
 }
 
 /// A digest of every sample (bits; every void as one value).
