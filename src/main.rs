@@ -74,6 +74,12 @@ enum Command {
     /// one commit record: a crash at any instant leaves the old state or the new one, and
     /// the next open recovers. Prints what changed (--json for machine-readable output).
     Replace(cli::replace::ReplaceArgs),
+    /// Recover a file an interrupted writer left: cut uncommitted pages, clear a torn slot.
+    ///
+    /// A crash can never lose a committed state, but it can leave pages past the committed
+    /// length and a torn record in the unused commit slot, which `verify` reports (I-3, I-4).
+    /// Any writer's open recovers the file; this command does only that, then closes it.
+    Recover(cli::recover::RecoverArgs),
 }
 
 fn main() -> ExitCode {
@@ -87,6 +93,7 @@ fn main() -> ExitCode {
         Command::Scene(args) => cli::scene::run(args),
         Command::Fly(args) => cli::fly::run(args),
         Command::Replace(args) => cli::replace::run(args),
+        Command::Recover(args) => cli::recover::run(args),
     };
     match result {
         Ok(code) => code,

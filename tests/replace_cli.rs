@@ -3,7 +3,8 @@
 //! `verify --full`, the model equals a fresh build of the new samples with the stored
 //! thresholds (`info` agrees on nodes and cluster sizes), and the report counts what changed.
 //! Bad input (a patch that does not fit, a malformed `--at`, a non-container, a patch in
-//! other units) exits 2 and leaves the file byte for byte as it was.
+//! other units) exits 2 and leaves the file byte for byte as it was. `fmrh recover` repairs
+//! what a crash leaves, and a second writer is locked out.
 
 mod common;
 
@@ -150,4 +151,67 @@ fn bad_input_exits_2_and_leaves_the_file_alone() {
     let out = fmrh(&["replace", patch_s, "--at", "0,0", patch_s]);
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("not an fmrh container"));
+}
+
+/// What a crash can leave (pages past the committed length, a torn record in the unused
+/// slot) fails `verify` with I-3 and I-4; `fmrh recover` repairs it without losing the
+/// committed state, and a file held by another writer is refused (exit 1), untouched.
+#[test]
+fn recover_repairs_what_a_crash_leaves_and_writers_exclude_each_other() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = data("puget-sound-east-512/ps-e_lg.f32");
+    let file = dir.path().join("ps.fmrh");
+    let file_s = file.to_str().unwrap();
+    ok_json(&fmrh(&[
+        "build",
+        src.to_str().unwrap(),
+        "-o",
+        file_s,
+        "--json",
+    ]));
+    let before = std::fs::read(&file).unwrap();
+    let page = ok_json(&fmrh(&["info", file_s, "--json"]))["page_size"]
+        .as_u64()
+        .unwrap() as usize;
+    let mut damaged = before.clone();
+    damaged.extend(std::iter::repeat_n(0xA5u8, 3 * page));
+    damaged[page..page + 256].fill(0x5A);
+    std::fs::write(&file, &damaged).unwrap();
+    let v = fmrh(&["verify", file_s, "--json"]);
+    assert_eq!(v.status.code(), Some(1));
+    let text = String::from_utf8_lossy(&v.stdout);
+    assert!(text.contains("fmrh recover"), "{text}");
+
+    let r = ok_json(&fmrh(&["recover", file_s, "--json"]));
+    assert_eq!(r["truncated"], 3 * page as u64);
+    assert_eq!(r["slot_cleared"], true);
+    let v = ok_json(&fmrh(&["verify", file_s, "--full", "--json"]));
+    assert_eq!(v["valid"], true, "{v}");
+    assert!(std::fs::read(&file).unwrap()[2 * page..] == before[2 * page..]);
+    let again = fmrh(&["recover", file_s]);
+    assert!(String::from_utf8_lossy(&again.stdout).contains("nothing to recover"));
+
+    // Another writer holds the file: refused, exit 1, nothing written.
+    let holder = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(&file)
+        .unwrap();
+    holder.try_lock().unwrap();
+    let now = std::fs::read(&file).unwrap();
+    let patch = dir.path().join("p.f32");
+    write_f32(&patch, 4, 4, &[1.0; 16], None);
+    let out = fmrh(&["replace", file_s, "--at", "0,0", patch.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("locked"));
+    assert!(std::fs::read(&file).unwrap() == now);
+    drop(holder);
+    ok_json(&fmrh(&[
+        "replace",
+        file_s,
+        "--at",
+        "0,0",
+        patch.to_str().unwrap(),
+        "--json",
+    ]));
 }

@@ -4,6 +4,7 @@ pub mod build;
 pub mod extract;
 pub mod fly;
 pub mod info;
+pub mod recover;
 pub mod replace;
 pub mod scan;
 pub mod scene;

@@ -47,12 +47,26 @@ pub struct FileIo {
 }
 
 impl FileIo {
-    /// Opens `path` for reading and writing.
+    /// Opens `path` for reading and writing, and takes an exclusive advisory lock on it
+    /// (`flock` / `LockFileEx`) for as long as the `FileIo` lives, so that a second writer,
+    /// in this process or another, is refused instead of corrupting the file. Readers that
+    /// open the file without a `Container` take no lock and are not protected (see
+    /// `format-spec/container.md` §11.6).
     pub fn open(path: &Path) -> io::Result<FileIo> {
         let file = std::fs::OpenOptions::new()
             .read(true)
             .write(true)
             .open(path)?;
+        match file.try_lock() {
+            Ok(()) => {}
+            Err(std::fs::TryLockError::WouldBlock) => {
+                return Err(io::Error::new(
+                    io::ErrorKind::WouldBlock,
+                    "another writer has the file open (it is locked)",
+                ))
+            }
+            Err(std::fs::TryLockError::Error(e)) => return Err(e),
+        }
         Ok(FileIo {
             file,
             path: path.to_path_buf(),
@@ -370,6 +384,16 @@ impl Io for SimDisk {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_second_writer_is_refused_while_the_first_holds_the_file() {
+        let f = tempfile::NamedTempFile::new().unwrap();
+        let first = FileIo::open(f.path()).unwrap();
+        let second = FileIo::open(f.path()).unwrap_err();
+        assert_eq!(second.kind(), io::ErrorKind::WouldBlock, "{second}");
+        drop(first);
+        FileIo::open(f.path()).unwrap();
+    }
 
     #[test]
     fn sync_makes_writes_durable() {

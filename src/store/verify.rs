@@ -188,7 +188,8 @@ pub fn verify<S: Source>(src: S, full: bool) -> Result<VerifyReport> {
                 if file_length < record.file_length.get() {
                     " (truncated)"
                 } else {
-                    " (an interrupted transaction left pages past the end)"
+                    " (an interrupted transaction left pages past the end; `fmrh recover` cuts \
+                     them)"
                 }
             ),
         );
@@ -207,7 +208,8 @@ pub fn verify<S: Source>(src: S, full: bool) -> Result<VerifyReport> {
         Slot::Invalid(e) => checks.fail(
             inv::INACTIVE_SLOT,
             format!(
-                "commit slot {}: neither zero nor a valid record ({e})",
+                "commit slot {}: neither zero nor a valid record ({e}); an interrupted commit \
+                 leaves a torn record, which `fmrh recover` clears",
                 1 - slot
             ),
         ),
