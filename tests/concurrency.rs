@@ -103,7 +103,7 @@ fn readers_running_scenes_see_only_whole_snapshots() {
                     let first = scene_checksum(&*s, cameras);
                     seen.lock().unwrap().push((s.txn_id(), first));
                     // Every few rounds, hold the snapshot while commits go by.
-                    if (round + reader) % 4 == 0 {
+                    if (round + reader).is_multiple_of(4) {
                         std::thread::sleep(std::time::Duration::from_millis(30));
                         let again = scene_checksum(&*s, cameras);
                         assert_eq!(first, again, "a held snapshot changed");

@@ -66,8 +66,8 @@ fn single_spike() {
     for n in tree.nodes() {
         let fp = m.domain().footprint(n.level, n.x, n.y);
         let holds = fp.contains(37, 91);
-        let is_grid_point = (37 - fp.col0) % m.domain().stride(n.level) == 0
-            && (91 - fp.row0) % m.domain().stride(n.level) == 0;
+        let is_grid_point = (37 - fp.col0).is_multiple_of(m.domain().stride(n.level))
+            && (91 - fp.row0).is_multiple_of(m.domain().stride(n.level));
         let expect = if holds && !is_grid_point { 250.0 } else { 0.0 };
         assert_eq!(
             n.static_error, expect,

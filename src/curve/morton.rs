@@ -90,7 +90,7 @@ impl MortonKey {
     /// deeper than [`Self::MAX_LEVEL`].
     pub fn from_paper_str(text: &str) -> Option<MortonKey> {
         let bytes = text.as_bytes();
-        if bytes.len() < 2 || bytes.len() % 2 != 0 || &bytes[..2] != b"00" {
+        if bytes.len() < 2 || !bytes.len().is_multiple_of(2) || &bytes[..2] != b"00" {
             return None;
         }
         let level = u8::try_from(bytes.len() / 2 - 1).ok()?;

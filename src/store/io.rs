@@ -281,7 +281,7 @@ impl SimDisk {
                     (Pending::Write(offset, data), _) => {
                         // Torn: sector by sector, written, skipped or garbage.
                         let end = *offset as usize + data.len();
-                        if image.len() < end && splitmix(&mut rng) % 2 == 0 {
+                        if image.len() < end && splitmix(&mut rng).is_multiple_of(2) {
                             image.resize(end, 0);
                         }
                         let mut at = 0usize;

@@ -643,10 +643,10 @@ fn zero_gap<S: Source>(store: &Store<S>, from: u64, to: u64, p: u64, checks: &mu
     // Only the pages the gap shares with a payload: the tail of the page holding the byte
     // before `from`, and the head of the page holding the byte at `to`.
     let mut ranges: Vec<(u64, u64)> = Vec::new();
-    if from % p != 0 {
+    if !from.is_multiple_of(p) {
         ranges.push((from, to.min((from / p + 1) * p)));
     }
-    if to % p != 0 {
+    if !to.is_multiple_of(p) {
         let head = (from.max(to / p * p), to);
         match ranges.last_mut() {
             Some(last) if last.1 >= head.0 => last.1 = last.1.max(head.1),

@@ -75,7 +75,7 @@ pub fn make(w: u32, h: u32, character: Character, void_rate: f64, seed: u64) -> 
                 }
             }
             Character::Spikes => {
-                if rng.next_u64() % 97 == 0 {
+                if rng.next_u64().is_multiple_of(97) {
                     1000.0
                 } else {
                     0.0
