@@ -171,8 +171,10 @@ impl Store<MmapSource> {
     /// While the returned store (or anything borrowed from it) lives, the file must not be
     /// modified or truncated, by this process or any other. A write would change bytes the
     /// store has already checked (undefined behaviour for the zero-copy views). A truncation
-    /// raises `SIGBUS` on the next access. fmrh's own writers never modify a container in
-    /// place. Use [`Store::open_read`] when this cannot be promised.
+    /// raises `SIGBUS` on the next access. `fmrh build` never modifies a container in place,
+    /// but a [`Container`] does (its transactions reuse free pages and cut the file's end):
+    /// never map a file that a container has open; take [`Container::read`] snapshots
+    /// instead. Use [`Store::open_read`] when this cannot be promised.
     pub unsafe fn open(path: &Path) -> Result<Self> {
         let file = File::open(path).map_err(|e| Error::io(path, e))?;
         // SAFETY: our caller upholds the no-modification contract stated above.
