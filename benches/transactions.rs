@@ -81,6 +81,23 @@ fn main() {
             grids / commits as u64
         );
     }
+    // What the disk's fsync costs alone, beside the commits: a 4 KiB write and a sync.
+    let mut syncs = Vec::new();
+    {
+        use std::io::{Seek, Write};
+        let mut f = std::fs::File::create(dir.path().join("sync-probe")).unwrap();
+        for _ in 0..60 {
+            f.rewind().unwrap();
+            f.write_all(&[7u8; 4096]).unwrap();
+            let t = Instant::now();
+            f.sync_all().unwrap();
+            syncs.push(t.elapsed().as_secs_f64() * 1e3);
+        }
+    }
+    println!(
+        "one fsync of a 4 KiB write on this disk: median {:.2} ms (a commit makes two)",
+        percentile(&mut syncs, 0.5)
+    );
     let n: usize = std::env::var("FMRH_BENCH_REPLACEMENTS")
         .ok()
         .and_then(|v| v.parse().ok())
