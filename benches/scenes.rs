@@ -139,11 +139,45 @@ fn bench_store<S: Source>(
     g.finish();
 }
 
+/// The same τ = 1 view scene (selection and loading) from the three ways to read a file:
+/// a mapping, positioned reads (`Store::open_read`), and a snapshot of a `Container` (the
+/// live, transactional file).
+fn bench_sources(c: &mut Criterion, path: &std::path::Path) {
+    let (_, cam) = cameras()[0];
+    let view = SceneOptions::new(1.0);
+    let mut g = c.benchmark_group("scene_puget_1k_sources");
+    fn both<S: Source>(
+        g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
+        name: &str,
+        store: &Store<S>,
+        cam: &Camera,
+        view: &SceneOptions,
+    ) {
+        let terrain = Terrain::new(store).unwrap();
+        g.bench_function(format!("{name}/select"), |b| {
+            b.iter(|| terrain.scene(cam, view).unwrap().blocks.len())
+        });
+        g.bench_function(format!("{name}/load"), |b| {
+            b.iter(|| load_all(store, &terrain.scene(cam, view).unwrap().blocks))
+        });
+    }
+    // SAFETY: the file is private to this benchmark, and the container below only reads it.
+    let mapped = unsafe { Store::open(path) }.unwrap();
+    both(&mut g, "mmap", &mapped, &cam, &view);
+    let pread = Store::open_read(path).unwrap();
+    both(&mut g, "pread", &pread, &cam, &view);
+    let container = fmrh::store::Container::open(path).unwrap();
+    let snapshot = container.read().unwrap();
+    both(&mut g, "snapshot", &snapshot, &cam, &view);
+    g.finish();
+}
+
 fn bench(c: &mut Criterion) {
     let dir = tempfile::tempdir().unwrap();
     let store = open(dir.path(), "puget-sound-1k/ps_height_1k.f32", 160.0);
     bench_store(c, "scene_puget_1k", &store, &cameras());
     drop(store);
+    bench_sources(c, &dir.path().join("bench.fmrh"));
     // The same terrain at 40 m (4096², 8-bit JPEG heights: fine for cost, not precision):
     // 16x the blocks, two more levels.
     let store = open(dir.path(), "puget-sound-4k-jpg/ps_height_4k_jpg.f32", 40.0);

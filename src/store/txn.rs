@@ -32,7 +32,7 @@ use std::collections::{BTreeMap, HashMap, HashSet};
 use std::ops::Deref;
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::{Arc, Mutex, MutexGuard, OnceLock};
 
 use serde::Serialize;
 use zerocopy::byteorder::little_endian::{U32, U64};
@@ -51,10 +51,44 @@ use crate::format::{
 use crate::heightfield::Heightfield;
 use crate::model::{ModelEditor, SampleRect};
 
-/// A [`Source`] over an [`Io`], for snapshots: every read is a positioned read.
+/// A [`Source`] over an [`Io`], for the states a container hands out.
+///
+/// Opening a state reads and checks every table and blob page it reaches. The source keeps
+/// those page-shaped reads (a power-of-two length from 1024 to 65536 at a multiple of it), and
+/// once the state is open it [freezes](IoSource::freeze) them: lookups then borrow pages from
+/// memory, zero-copy, instead of making a system call. That is sound because no page a state
+/// reaches changes while anything can read that state (§11.5): what the cache serves is what
+/// was checked, so the source is `stable` and lookups skip a second check. Payloads are read
+/// from the device each time, and [`Store::payload`] checks every one's CRC.
 pub struct IoSource<I: Io> {
     io: Arc<I>,
     len: u64,
+    filling: Mutex<HashMap<u64, Box<[u8]>>>,
+    frozen: OnceLock<HashMap<u64, Box<[u8]>>>,
+}
+
+impl<I: Io> IoSource<I> {
+    fn new(io: Arc<I>, len: u64) -> Self {
+        IoSource {
+            io,
+            len,
+            filling: Mutex::new(HashMap::new()),
+            frozen: OnceLock::new(),
+        }
+    }
+
+    /// Ends the filling: from now on the pages read so far are served from memory and
+    /// nothing more is kept.
+    fn freeze(&self) {
+        let pages = std::mem::take(&mut *lock(&self.filling));
+        let _ = self.frozen.set(pages);
+    }
+}
+
+fn page_shaped(offset: u64, len: usize) -> bool {
+    len.is_power_of_two()
+        && (format::MIN_PAGE_SIZE as usize..=format::MAX_PAGE_SIZE as usize).contains(&len)
+        && offset.is_multiple_of(len as u64)
 }
 
 impl<I: Io> Source for IoSource<I> {
@@ -69,13 +103,25 @@ impl<I: Io> Source for IoSource<I> {
                 format!("{len} bytes at offset {offset} lie past the end"),
             ));
         }
+        let frozen = self.frozen.get();
+        if let Some(page) = frozen
+            .and_then(|f| f.get(&offset))
+            .filter(|p| p.len() == len)
+        {
+            return Ok(Cow::Borrowed(page));
+        }
         let mut buf = vec![0u8; len];
         self.io.read_at(offset, &mut buf)?;
+        if frozen.is_none() && page_shaped(offset, len) {
+            lock(&self.filling)
+                .entry(offset)
+                .or_insert_with(|| buf.clone().into_boxed_slice());
+        }
         Ok(Cow::Owned(buf))
     }
 
     fn stable(&self) -> bool {
-        false
+        true
     }
 }
 
@@ -127,11 +173,10 @@ impl Container<FileIo> {
 
 fn load<I: Io>(io: &Arc<I>) -> Result<SnapshotStore<I>> {
     let len = io.len().map_err(|e| Error::io(io.name(), e))?;
-    Store::from_source(IoSource {
-        io: Arc::clone(io),
-        len,
-    })
-    .map_err(|e| super::with_path(e, io.name()))
+    let store = Store::from_source(IoSource::new(Arc::clone(io), len))
+        .map_err(|e| super::with_path(e, io.name()))?;
+    store.source().freeze();
+    Ok(store)
 }
 
 impl<I: Io> Container<I> {
