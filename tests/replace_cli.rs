@@ -86,6 +86,13 @@ fn replace_stores_the_patch_and_equals_a_rebuild() {
 
     // A fresh build of those samples with the stored thresholds describes the same model.
     let info = ok_json(&fmrh(&["info", file_s, "--json"]));
+    // Closed cleanly; dead payload bytes may remain; the replaced payloads' pages are free.
+    assert_eq!(info["recovery_needed"], false);
+    assert_eq!(info["payload_slack"], true);
+    assert!(
+        info["sections"]["free_pages"].as_u64().unwrap() > 0,
+        "{info}"
+    );
     let thresholds: Vec<String> = info["clusters"]
         .as_array()
         .unwrap()

@@ -23,6 +23,11 @@ pub struct InfoArgs {
 struct Info {
     format_version: String,
     txn_id: u64,
+    /// The state was committed while a writer had the file open and it was not closed
+    /// cleanly since (format §3, §11.4).
+    recovery_needed: bool,
+    /// Transactions have replaced payloads (format §7).
+    payload_slack: bool,
     commit_slot: u8,
     page_size: u32,
     file_length: u64,
@@ -84,6 +89,7 @@ struct Sections {
     node_table: u64,
     block_table: u64,
     free_list: u64,
+    free_pages: u64,
     cluster_indexes: u64,
     adjacency_lists: u64,
     block_payloads: u64,
@@ -102,6 +108,7 @@ impl Sections {
             + l.node_table_pages
             + l.block_table_pages
             + l.free_list_pages
+            + l.free_pages
             + index
             + adjacency;
         Sections {
@@ -111,6 +118,7 @@ impl Sections {
             node_table: l.node_table_pages * p,
             block_table: l.block_table_pages * p,
             free_list: l.free_list_pages * p,
+            free_pages: l.free_pages * p,
             cluster_indexes: index * p,
             adjacency_lists: adjacency * p,
             block_payloads: l.block_bytes,
@@ -154,6 +162,8 @@ pub fn run(args: &InfoArgs) -> Result<ExitCode, Error> {
     let info = Info {
         format_version: format!("{}.{}", r.major.get(), r.minor.get()),
         txn_id: store.txn_id(),
+        recovery_needed: r.flags.get() & fmrh::format::COMMIT_RECOVERY_NEEDED != 0,
+        payload_slack: r.flags.get() & fmrh::format::COMMIT_PAYLOAD_SLACK != 0,
         commit_slot: store.commit_slot(),
         page_size: store.page_size(),
         file_length: r.file_length.get(),
@@ -195,6 +205,9 @@ fn print_info(path: &std::path::Path, i: &Info) {
         i.file_length,
         i.page_size
     );
+    if i.recovery_needed {
+        println!("  a writer did not close it cleanly: its next writer recovers it (fmrh recover)");
+    }
     println!(
         "  grid        {} x {} samples ({} valid, {} void), from {}",
         i.width, i.height, i.valid_samples, i.void_samples, i.source_format
@@ -242,6 +255,7 @@ fn print_info(path: &std::path::Path, i: &Info) {
         ("dataset header", s.dataset_header),
         ("commit slots", s.commit_slots),
         ("free list", s.free_list),
+        ("free pages", s.free_pages),
     ] {
         println!(
             "    {name:<18} {bytes:>12}  {:>6.2}%",

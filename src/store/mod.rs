@@ -110,6 +110,8 @@ pub struct Layout {
     pub block_table_pages: u64,
     /// Free list pages.
     pub free_list_pages: u64,
+    /// Free pages (the free list's entries): space transactions left for reuse.
+    pub free_pages: u64,
     /// Adjacency table pages.
     pub adjacency_pages: u64,
     /// Index pages of each cluster.
@@ -607,6 +609,7 @@ impl<S: Source> Store<S> {
             node_table_pages: count(&self.commit.node_table, specs::NODES)?,
             block_table_pages: count(&self.commit.block_table, specs::BLOCKS)?,
             free_list_pages: count(&self.commit.free_list, specs::FREE)?,
+            free_pages: self.commit.free_list.records.get(),
             adjacency_pages: count(&self.commit.adjacency, specs::ADJACENCY)?,
             cluster_index_pages,
             block_bytes,
