@@ -8,7 +8,7 @@
 
 mod common;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use common::{data, first_difference, fmrh, ok_json};
 
@@ -17,6 +17,22 @@ fn write_f32(path: &Path, w: u32, h: u32, samples: &[f32], units: Option<&str>) 
     std::fs::write(path, bytes).unwrap();
     let json = serde_json::json!({ "width": w, "height": h, "units": units });
     std::fs::write(path.with_extension("json"), json.to_string()).unwrap();
+}
+
+/// A container of Puget Sound east in a fresh temporary directory: (dir, source, container).
+fn built() -> (tempfile::TempDir, PathBuf, PathBuf) {
+    let dir = tempfile::tempdir().unwrap();
+    let src = data("puget-sound-east-512/ps-e_lg.f32");
+    let file = dir.path().join("ps.fmrh");
+    let file_s = file.to_str().unwrap();
+    ok_json(&fmrh(&[
+        "build",
+        src.to_str().unwrap(),
+        "-o",
+        file_s,
+        "--json",
+    ]));
+    (dir, src, file)
 }
 
 fn read_f32(path: &Path) -> Vec<f32> {
@@ -29,17 +45,8 @@ fn read_f32(path: &Path) -> Vec<f32> {
 
 #[test]
 fn replace_stores_the_patch_and_equals_a_rebuild() {
-    let dir = tempfile::tempdir().unwrap();
-    let src = data("puget-sound-east-512/ps-e_lg.f32");
-    let file = dir.path().join("ps.fmrh");
+    let (dir, src, file) = built();
     let file_s = file.to_str().unwrap();
-    ok_json(&fmrh(&[
-        "build",
-        src.to_str().unwrap(),
-        "-o",
-        file_s,
-        "--json",
-    ]));
 
     // A 70 x 40 patch with a void and a cliff, straddling block edges.
     let (pw, ph, c0, r0) = (70u32, 40u32, 250u32, 120u32);
@@ -117,17 +124,8 @@ fn replace_stores_the_patch_and_equals_a_rebuild() {
 
 #[test]
 fn bad_input_exits_2_and_leaves_the_file_alone() {
-    let dir = tempfile::tempdir().unwrap();
-    let src = data("puget-sound-east-512/ps-e_lg.f32");
-    let file = dir.path().join("ps.fmrh");
+    let (dir, _, file) = built();
     let file_s = file.to_str().unwrap();
-    ok_json(&fmrh(&[
-        "build",
-        src.to_str().unwrap(),
-        "-o",
-        file_s,
-        "--json",
-    ]));
     let before = std::fs::read(&file).unwrap();
     let patch = dir.path().join("p.f32");
     write_f32(&patch, 20, 20, &[1.0; 400], None);
@@ -165,17 +163,8 @@ fn bad_input_exits_2_and_leaves_the_file_alone() {
 /// committed state, and a file held by another writer is refused (exit 1), untouched.
 #[test]
 fn recover_repairs_what_a_crash_leaves_and_writers_exclude_each_other() {
-    let dir = tempfile::tempdir().unwrap();
-    let src = data("puget-sound-east-512/ps-e_lg.f32");
-    let file = dir.path().join("ps.fmrh");
+    let (dir, _, file) = built();
     let file_s = file.to_str().unwrap();
-    ok_json(&fmrh(&[
-        "build",
-        src.to_str().unwrap(),
-        "-o",
-        file_s,
-        "--json",
-    ]));
     let before = std::fs::read(&file).unwrap();
     let page = ok_json(&fmrh(&["info", file_s, "--json"]))["page_size"]
         .as_u64()
