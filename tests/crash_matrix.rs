@@ -99,8 +99,18 @@ fn check(image: Vec<u8>, states: &[State], allowed: &[usize], what: &str) -> usi
     which
 }
 
-#[test]
-fn crash_anywhere_in_a_real_workload_recovers_old_or_new() {
+/// The workload on the real DEM, run once without faults: the container's bytes, the
+/// transactions, every state (each checked against a fresh build of its samples), the
+/// operation count at the end of each commit, and the total with the clean close.
+struct Workload {
+    bytes: Vec<u8>,
+    txns: Vec<Txn>,
+    states: Vec<State>,
+    ends: Vec<u64>,
+    total: u64,
+}
+
+fn prepare() -> Workload {
     let src = ingest::load(
         &data("puget-sound-east-512/ps-e_lg.f32"),
         &IngestOptions::default(),
@@ -110,8 +120,6 @@ fn crash_anywhere_in_a_real_workload_recovers_old_or_new() {
     let stored = Store::from_bytes(bytes.clone()).unwrap();
     let thresholds = common::txn::thresholds(&stored);
     let txns = workload();
-
-    // The states, each checked against a fresh build of its samples.
     let probe = SimDisk::new(bytes.clone());
     let (c, _) = Container::open_io(probe.clone()).unwrap();
     let mut states = vec![State {
@@ -119,7 +127,7 @@ fn crash_anywhere_in_a_real_workload_recovers_old_or_new() {
         model: described(&stored),
     }];
     let mut ends = Vec::new();
-    let mut hf = src.clone();
+    let mut hf = src;
     for (k, txn) in txns.iter().enumerate() {
         assert_eq!(run(&c, std::slice::from_ref(txn)).unwrap(), 1);
         ends.push(probe.ops());
@@ -142,11 +150,28 @@ fn crash_anywhere_in_a_real_workload_recovers_old_or_new() {
         states.push(state);
     }
     c.close().unwrap();
-    let total = probe.ops();
     assert!(
         probe.count(fmrh::store::io::OpKind::SetLen) > 0,
         "no length change"
     );
+    Workload {
+        bytes,
+        txns,
+        states,
+        ends,
+        total: probe.ops(),
+    }
+}
+
+#[test]
+fn crash_anywhere_in_a_real_workload_recovers_old_or_new() {
+    let Workload {
+        bytes,
+        txns,
+        states,
+        ends,
+        total,
+    } = prepare();
     let last = txns.len();
 
     let damages = |at: u64| {
@@ -243,29 +268,12 @@ fn crash_anywhere_in_a_real_workload_recovers_old_or_new() {
 fn io_error_at_every_operation_poisons_and_keeps_old_or_new() {
     use fmrh::store::io::{Fault, OpKind};
     use fmrh::Error;
-    let src = ingest::load(
-        &data("puget-sound-east-512/ps-e_lg.f32"),
-        &IngestOptions::default(),
-    )
-    .unwrap();
-    let bytes = build_bytes(&src, 65, &Thresholds::Ladder);
-    let txns = workload();
-    // The states, by the samples they hold (the models are checked by the crash matrix).
-    let mut states = vec![State {
-        digest: digest_samples(src.samples()),
-        model: described(&Store::from_bytes(bytes.clone()).unwrap()),
-    }];
-    let probe = SimDisk::new(bytes.clone());
-    let (c, _) = Container::open_io(probe).unwrap();
-    for txn in &txns {
-        run(&c, std::slice::from_ref(txn)).unwrap();
-        let s = c.read().unwrap();
-        states.push(State {
-            digest: samples_digest(&s),
-            model: described(&s),
-        });
-    }
-    drop(c);
+    let Workload {
+        bytes,
+        txns,
+        states,
+        ..
+    } = prepare();
 
     let cases: Vec<(OpKind, bool)> = [OpKind::Write, OpKind::Sync, OpKind::SetLen]
         .into_iter()

@@ -6,8 +6,7 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use fmrh::store::io::FileIo;
-use fmrh::store::{Container, Recovery};
+use fmrh::store::Container;
 use fmrh::Error;
 
 #[derive(clap::Args)]
@@ -21,8 +20,7 @@ pub struct RecoverArgs {
 
 /// Runs `fmrh recover`.
 pub fn run(args: &RecoverArgs) -> Result<ExitCode, Error> {
-    let io = FileIo::open(&args.file).map_err(|e| Error::io(&args.file, e))?;
-    let (container, recovery): (Container<FileIo>, Recovery) = Container::open_io(io)?;
+    let (container, recovery) = Container::open_recovering(&args.file)?;
     container.close()?;
     if args.json {
         super::print_json(&recovery)?;

@@ -60,8 +60,7 @@ fn parse_at(text: &str) -> Result<[u64; 2], Error> {
 pub fn run(args: &ReplaceArgs) -> Result<ExitCode, Error> {
     let [col0, row0] = parse_at(&args.at)?;
     let patch = ingest::load(&args.patch, &args.ingest.options())?;
-    let io = fmrh::store::io::FileIo::open(&args.file).map_err(|e| Error::io(&args.file, e))?;
-    let (container, recovery) = Container::open_io(io)?;
+    let (container, recovery) = Container::open_recovering(&args.file)?;
     let units = container.read()?.header().metadata.units.clone();
     if let (Some(file), Some(patch_units)) = (&units, &patch.metadata.units) {
         if file != patch_units {

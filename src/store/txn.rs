@@ -166,8 +166,13 @@ pub struct Recovery {
 impl Container<FileIo> {
     /// Opens `path` for reading and writing, recovering it if needed.
     pub fn open(path: &Path) -> Result<Container<FileIo>> {
+        Container::open_recovering(path).map(|(c, _)| c)
+    }
+
+    /// [`Container::open`], also telling what recovery did.
+    pub fn open_recovering(path: &Path) -> Result<(Container<FileIo>, Recovery)> {
         let io = FileIo::open(path).map_err(|e| Error::io(path, e))?;
-        Container::open_io(io).map(|(c, _)| c)
+        Container::open_io(io)
     }
 }
 
