@@ -29,7 +29,7 @@ fn bench(c: &mut Criterion) {
     let model = Model::build(hf.clone(), &BuildOptions::default()).unwrap();
     write_file(&model, &hf.metadata, &path, &WriteOptions::default(), true).unwrap();
     // SAFETY: the file is private to this benchmark and never written while mapped.
-    let store = unsafe { Store::open(&path) }.unwrap();
+    let store = unsafe { Store::open_mapped(&path) }.unwrap();
     let finest = store.domain().finest_level();
     let span = HilbertKey::span(finest, 0);
 
@@ -54,7 +54,7 @@ fn bench(c: &mut Criterion) {
                     store
                         .scan_hilbert(cluster, lo..=hi)
                         .unwrap()
-                        .map(|e| store.node(e.unwrap().node).unwrap().monotone_error.get())
+                        .map(|e| store.node(e.unwrap().node).unwrap().monotone_error)
                         .sum::<f64>()
                 })
             });

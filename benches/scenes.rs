@@ -28,7 +28,7 @@ fn load_all<S: Source>(store: &Store<S>, blocks: &[SceneBlock]) -> u64 {
         .iter()
         .map(|b| {
             let p = b.payload;
-            store.payload(p.offset, p.len, p.crc).unwrap().len() as u64
+            store.payload(p).unwrap().len() as u64
         })
         .sum()
 }
@@ -62,7 +62,7 @@ fn open(dir: &std::path::Path, rel: &str, spacing: f64) -> Store<fmrh::store::Mm
     let model = Model::build(hf.clone(), &BuildOptions::default()).unwrap();
     write_file(&model, &hf.metadata, &path, &WriteOptions::default(), true).unwrap();
     // SAFETY: the file is private to this benchmark and never written while mapped.
-    unsafe { Store::open(&path) }.unwrap()
+    unsafe { Store::open_mapped(&path) }.unwrap()
 }
 
 fn bench_store<S: Source>(
@@ -162,9 +162,9 @@ fn bench_sources(c: &mut Criterion, path: &std::path::Path) {
         });
     }
     // SAFETY: the file is private to this benchmark, and the container below only reads it.
-    let mapped = unsafe { Store::open(path) }.unwrap();
+    let mapped = unsafe { Store::open_mapped(path) }.unwrap();
     both(&mut g, "mmap", &mapped, &cam, &view);
-    let pread = Store::open_read(path).unwrap();
+    let pread = Store::open(path).unwrap();
     both(&mut g, "pread", &pread, &cam, &view);
     let container = fmrh::store::Container::open(path).unwrap();
     let snapshot = container.read().unwrap();

@@ -2,17 +2,21 @@
 //!
 //! Errors say *whose fault* they are, in the SQLite spirit of keeping "your input is bad" apart
 //! from "this program is wrong": [`Error::Input`] and [`Error::Unsupported`] name a file and
-//! what is wrong with it, [`Error::TooLarge`] refuses a size before anything is allocated,
-//! [`Error::InvalidArgument`] is a bad option value, and [`Error::Io`] is the operating system
-//! saying no. Nothing in this crate reports a malformed file by panicking.
+//! what is wrong with it, [`Error::Corrupt`] names a container and the invariant it breaks,
+//! [`Error::TooLarge`] refuses a size before anything is allocated, [`Error::InvalidArgument`]
+//! is a bad option value, [`Error::Io`] is the operating system saying no, and
+//! [`Error::Internal`] is fmrh itself being wrong. Nothing in this crate reports a malformed
+//! file by panicking, and an I/O failure while reading is never reported as corruption.
 
 use std::path::PathBuf;
+
+use crate::format::Invariant;
 
 /// Everything that can go wrong in fmrh.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
     /// Reading or writing a file failed at the operating-system level.
-    #[error("{path}: {source}")]
+    #[error("{}: {source}", path.display())]
     Io {
         /// The file involved.
         path: PathBuf,
@@ -21,7 +25,7 @@ pub enum Error {
         source: std::io::Error,
     },
     /// The input file is malformed: truncated, inconsistent or not what it claims to be.
-    #[error("{path}: {reason}")]
+    #[error("{}: {reason}", path.display())]
     Input {
         /// The offending file.
         path: PathBuf,
@@ -30,7 +34,7 @@ pub enum Error {
     },
     /// The input is well formed but uses a feature fmrh does not read (a sample type, a
     /// compression, a colour model).
-    #[error("{path}: unsupported: {reason}")]
+    #[error("{}: unsupported: {reason}", path.display())]
     Unsupported {
         /// The offending file.
         path: PathBuf,
@@ -50,10 +54,12 @@ pub enum Error {
     InvalidArgument(String),
     /// A container breaks one of the numbered invariants of `format-spec/container.md`: the
     /// file is damaged (or was written by a buggy writer), which is never a bug of the reader.
-    #[error("corrupt container: {invariant} violated at {location}: {detail}")]
+    #[error("{}: corrupt container: {invariant} violated at {location}: {detail}", path.display())]
     Corrupt {
-        /// The invariant, as the spec numbers it (`I-7`).
-        invariant: &'static str,
+        /// The container.
+        path: PathBuf,
+        /// The invariant broken.
+        invariant: Invariant,
         /// Where: a page number, a byte offset, a node index.
         location: String,
         /// What was found, for a person.
@@ -63,22 +69,13 @@ pub enum Error {
     /// holds past its last commit is unknown; open it again to go on (recovery runs then).
     #[error("the container had an I/O failure and refuses further use; open it again")]
     Poisoned,
+    /// A state fmrh's own code should never reach: a bug, to be reported, never a property of
+    /// the input.
+    #[error("internal error (a bug in fmrh): {0}")]
+    Internal(String),
 }
 
 impl Error {
-    /// A broken invariant of a container.
-    pub fn corrupt(
-        invariant: &'static str,
-        location: impl Into<String>,
-        detail: impl Into<String>,
-    ) -> Self {
-        Error::Corrupt {
-            invariant,
-            location: location.into(),
-            detail: detail.into(),
-        }
-    }
-
     /// A malformed-input error about `path`.
     pub fn input(path: impl Into<PathBuf>, reason: impl Into<String>) -> Self {
         Error::Input {

@@ -28,10 +28,57 @@
 //!
 //! ## The API
 //!
-//! [`ingest::load`] reads a heightfield from any supported format. [`model::Model::build`]
-//! turns it into the FMRH and its clusters, [`store`] keeps them in one checksummed file, and
-//! [`scene`] answers a camera and a tolerance in pixels with exactly the blocks the view needs,
-//! frame after frame. The curves in [`curve`] know nothing of terrain.
+//! Three calls cover a terrain application's life, all at the crate root:
+//!
+//! * [`create`] turns a [`Heightfield`] into a container file, atomically;
+//! * [`Store::open`] opens a file for reading: nodes, blocks, range scans;
+//! * [`Container::open`] opens it for writing: [`Container::read`] takes a snapshot that
+//!   keeps its state while [`Container::begin_write`]'s transaction replaces samples and
+//!   commits, all at once or not at all, and crash-safe.
+//!
+//! A [`scene::Terrain`] over a store answers a camera and a tolerance in pixels with the
+//! blocks the view needs; a [`scene::Scheduler`] does it frame after frame.
+//!
+//! ```
+//! use fmrh::scene::{Camera, SceneOptions, Terrain};
+//! use glam::DVec3;
+//!
+//! # fn main() -> fmrh::Result<()> {
+//! # let dir = tempfile::tempdir().unwrap();
+//! let path = dir.path().join("hills.fmrh");
+//! // Any DEM: `fmrh::ingest::load` reads GeoTIFF, SRTM, PNG, ASCII grids and more.
+//! let hills = fmrh::Heightfield::from_fn(257, 257, |x, y| {
+//!     let (x, y) = (x as f32 * 0.05, y as f32 * 0.07);
+//!     40.0 * x.sin() * y.cos() + 3.0 * (5.0 * x).sin()
+//! })?;
+//! fmrh::create(&path, hills, &fmrh::CreateOptions::default())?;
+//!
+//! // Read: the blocks a camera needs at 1 pixel of screen-space error, and their samples.
+//! let store = fmrh::Store::open(&path)?;
+//! let camera = Camera::looking_at(DVec3::new(-50.0, -50.0, 120.0), DVec3::new(128.0, 128.0, 0.0));
+//! let scene = Terrain::new(&store)?.scene(&camera, &SceneOptions::new(1.0))?;
+//! assert!(!scene.blocks.is_empty() && scene.stats.max_screen_error <= 1.0);
+//! for block in &scene.blocks {
+//!     let bytes = store.payload(block.payload)?; // CRC-checked
+//!     assert_eq!(bytes.len() as u32, block.payload.len);
+//! }
+//!
+//! // Write: dig a pit; a snapshot taken before keeps seeing the hills.
+//! let container = fmrh::Container::open(&path)?;
+//! let before = container.read()?;
+//! let mut txn = container.begin_write()?;
+//! txn.replace_region(100, 100, &fmrh::Heightfield::from_fn(20, 20, |_, _| -10.0)?)?;
+//! let summary = txn.commit()?;
+//! assert!(summary.blocks >= 1 && before.txn_id() < summary.txn_id);
+//! # drop(before);
+//! container.close()?;
+//! # Ok(()) }
+//! ```
+//!
+//! Underneath: [`ingest`] reads DEMs, [`model`] builds the FMRH and its clusters,
+//! [`format`] is every byte of the file format, [`store`] reads, writes and verifies files,
+//! [`scene`] selects blocks for cameras, and [`curve`] knows Hilbert and Morton keys and
+//! nothing of terrain. Errors say whose fault they are ([`Error`]).
 
 pub mod curve;
 pub mod error;
@@ -43,6 +90,10 @@ pub mod scene;
 pub mod store;
 
 pub use error::{Error, Result};
+pub use format::Invariant;
 pub use heightfield::Heightfield;
 pub use model::{BuildOptions, Model, Thresholds};
-pub use store::Store;
+pub use store::{
+    create, verify, CommitSummary, Container, CreateOptions, Snapshot, Store, VerifyMode,
+    VerifyReport, WriteTxn,
+};

@@ -47,7 +47,7 @@ fn scene_checksum<S: Source>(store: &Store<S>, cameras: &[Camera]) -> u64 {
             fold(&[b.level]);
             fold(&b.error.to_bits().to_le_bytes());
             let p = b.payload;
-            fold(&store.payload(p.offset, p.len, p.crc).expect("payload"));
+            fold(&store.payload(p).expect("payload"));
         }
     }
     h
@@ -166,6 +166,6 @@ fn readers_running_scenes_see_only_whole_snapshots() {
     );
     container.close().unwrap();
     let bytes = std::fs::read(&path).unwrap();
-    let report = fmrh::store::verify(fmrh::store::Bytes(bytes), true).unwrap();
+    let report = fmrh::store::verify(fmrh::store::Bytes(bytes), fmrh::VerifyMode::Full).unwrap();
     assert!(report.valid, "{report:#?}");
 }

@@ -29,7 +29,7 @@ fn write(field: &Heightfield, block_size: u32, page_size: u32) -> (Model, Vec<u8
     let mut out = Cursor::new(Vec::new());
     let options = WriteOptions {
         page_size,
-        progress: false,
+        ..WriteOptions::default()
     };
     write_to(&model, &field.metadata, &options, &mut out).unwrap();
     (model, out.into_inner())
@@ -73,12 +73,9 @@ fn check_store<S: Source>(
     let nodes = store.nodes().unwrap();
     assert_eq!(nodes.len(), model.tree().nodes().len());
     for (r, n) in nodes.iter().zip(model.tree().nodes()) {
-        assert_eq!(
-            (r.key.get(), r.level, r.x.get(), r.y.get()),
-            (n.key.0, n.level, n.x, n.y)
-        );
-        assert_eq!(r.monotone_error.get().to_bits(), n.monotone_error.to_bits());
-        assert_eq!(r.static_error.get().to_bits(), n.static_error.to_bits());
+        assert_eq!((r.key, r.level, r.x, r.y), (n.key, n.level, n.x, n.y));
+        assert_eq!(r.monotone_error.to_bits(), n.monotone_error.to_bits());
+        assert_eq!(r.static_error.to_bits(), n.static_error.to_bits());
     }
     // Grids expand to the model's node grids.
     let finest = model.domain().finest_level();
@@ -157,7 +154,7 @@ proptest! {
         ranges in prop::collection::vec((any::<u64>(), any::<u64>()), 6),
     ) {
         let (model, bytes) = write(&field, b, p);
-        let report = verify(Bytes(&bytes), true).unwrap();
+        let report = verify(Bytes(&bytes), fmrh::VerifyMode::Full).unwrap();
         prop_assert!(report.valid, "{:#?}", report.checks);
         let store = Store::from_bytes(&bytes).unwrap();
         check_store(&store, &model, &field, &ranges);
@@ -173,9 +170,9 @@ fn the_three_sources_agree() {
     std::fs::write(&path, &bytes).unwrap();
     let ranges = [(0, 5), (3, 900), (17, 18), (100, 4000)];
     check_store(&Store::from_bytes(&bytes).unwrap(), &model, &field, &ranges);
-    check_store(&Store::open_read(&path).unwrap(), &model, &field, &ranges);
+    check_store(&Store::open(&path).unwrap(), &model, &field, &ranges);
     // SAFETY: the file is private to this test and nothing writes it while mapped.
-    let mapped = unsafe { Store::open(&path) }.unwrap();
+    let mapped = unsafe { Store::open_mapped(&path) }.unwrap();
     check_store(&mapped, &model, &field, &ranges);
 }
 
@@ -191,7 +188,7 @@ fn a_deep_index_is_searched_correctly() {
     let field = common::fields::make(1025, 1025, common::fields::Character::Noise, 0.0, 11);
     let (model, bytes) = write(&field, 9, 1024);
     let store = Store::from_bytes(&bytes).unwrap();
-    assert!(store.clusters()[0].index.depth.get() >= 3);
+    assert!(store.clusters()[0].index_depth() >= 3);
     let span = HilbertKey::span(model.domain().finest_level(), 0);
     let ranges: Vec<(u64, u64)> = (0..40u64)
         .map(|i| (i * 409 % span, (i * 409 + i * i * 31) % span))

@@ -52,9 +52,13 @@ fn roundtrip(source: &Path, dir: &Path) {
     // and fixed pages the rest; the smallest DEMs pay most for the fixed pages.
     assert!(ratio < 1.6, "{}: {ratio:.3} x raw", source.display());
     let file = std::fs::File::open(&path).unwrap();
-    let report = verify(FileSource::new(file, &path).unwrap(), true).unwrap();
+    let report = verify(
+        FileSource::new(file, &path).unwrap(),
+        fmrh::VerifyMode::Full,
+    )
+    .unwrap();
     assert!(report.valid, "{}: {:#?}", source.display(), report.checks);
-    let store = Store::open_read(&path).unwrap();
+    let store = Store::open(&path).unwrap();
     let back = store.read_window(store.domain().data_rect()).unwrap();
     let original = std::fs::read(source).unwrap();
     let mut bytes = Vec::with_capacity(original.len());

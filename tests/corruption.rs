@@ -26,7 +26,7 @@ fn small_container() -> Vec<u8> {
     let mut out = Cursor::new(Vec::new());
     let options = WriteOptions {
         page_size: 1024,
-        progress: false,
+        ..WriteOptions::default()
     };
     write_to(&model, &field.metadata, &options, &mut out).unwrap();
     out.into_inner()
@@ -34,7 +34,12 @@ fn small_container() -> Vec<u8> {
 
 /// Whether `verify` (fast or full) rejects `bytes`.
 fn rejected(bytes: &[u8], full: bool) -> bool {
-    match verify(Bytes(bytes), full) {
+    let mode = if full {
+        fmrh::VerifyMode::Full
+    } else {
+        fmrh::VerifyMode::Fast
+    };
+    match verify(Bytes(bytes), mode) {
         Ok(report) => !report.valid,
         Err(_) => true,
     }
@@ -96,7 +101,7 @@ fn truncation_at_every_page_boundary_is_detected() {
 #[test]
 fn bytes_that_are_not_a_container_are_unusable() {
     for bytes in [&b""[..], b"hello", &[0u8; 5000], &[0xffu8; 4096]] {
-        assert!(verify(Bytes(bytes), true).is_err());
+        assert!(verify(Bytes(bytes), fmrh::VerifyMode::Full).is_err());
         assert!(Store::from_bytes(bytes).is_err());
     }
 }

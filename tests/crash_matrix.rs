@@ -86,7 +86,7 @@ struct State {
 fn check(image: Vec<u8>, states: &[State], allowed: &[usize], what: &str) -> usize {
     let disk = SimDisk::new(image);
     let (c, _) = Container::open_io(disk.clone()).unwrap_or_else(|e| panic!("{what}: {e}"));
-    let report = verify(Bytes(disk.current()), true).unwrap();
+    let report = verify(Bytes(disk.current()), fmrh::VerifyMode::Full).unwrap();
     assert!(report.valid, "{what}: {report:#?}");
     let s = c.read().unwrap();
     let digest = samples_digest(&s);
@@ -241,7 +241,7 @@ fn crash_anywhere_in_a_real_workload_recovers_old_or_new() {
                     w.commit()
                         .unwrap_or_else(|e| panic!("{what}: commit after recovery: {e}"));
                     drop(c);
-                    let report = verify(Bytes(disk.current()), true).unwrap();
+                    let report = verify(Bytes(disk.current()), fmrh::VerifyMode::Full).unwrap();
                     assert!(report.valid, "{what}: after a further commit: {report:#?}");
                 }
             }

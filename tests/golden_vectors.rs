@@ -79,7 +79,7 @@ fn build(v: &Vector) -> Vec<u8> {
         &v.field.metadata,
         &WriteOptions {
             page_size: 1024,
-            progress: false,
+            ..WriteOptions::default()
         },
         &mut out,
     )

@@ -69,7 +69,7 @@ fn replacement_commits_equal_a_fresh_build() {
         assert_eq!(before.txn_id(), before_txn);
         assert_eq!(described(&before), before_model);
         drop(before);
-        let report = verify(Bytes(disk.current()), true).unwrap();
+        let report = verify(Bytes(disk.current()), fmrh::VerifyMode::Full).unwrap();
         assert!(report.valid, "edit {i}: {report:#?}");
     }
 }
@@ -129,7 +129,7 @@ fn crash_at_every_operation_recovers_old_or_new() {
             let after = SimDisk::new(image);
             let (c2, _) = Container::open_io(after.clone())
                 .unwrap_or_else(|e| panic!("at {at} {damage:?}: {e}"));
-            let report = verify(Bytes(after.current()), true).unwrap();
+            let report = verify(Bytes(after.current()), fmrh::VerifyMode::Full).unwrap();
             assert!(report.valid, "at {at} {damage:?}: {report:#?}");
             let got = samples_digest(&c2.read().unwrap());
             if got == old {

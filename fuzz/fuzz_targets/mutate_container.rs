@@ -31,7 +31,7 @@ fuzz_target!(|data: &[u8]| {
             bytes[i] = e[3];
         }
     }
-    let verdict = fmrh::store::verify(fmrh::store::Bytes(&bytes), true);
+    let verdict = fmrh::store::verify(fmrh::store::Bytes(&bytes), fmrh::VerifyMode::Full);
     if bytes != original {
         if let Ok(report) = &verdict {
             assert!(!report.valid, "a damaged container verified as valid");

@@ -10,7 +10,7 @@
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
-    let _ = fmrh::store::verify(fmrh::store::Bytes(data), true);
+    let _ = fmrh::store::verify(fmrh::store::Bytes(data), fmrh::VerifyMode::Full);
     if let Ok(store) = fmrh::Store::from_bytes(data) {
         exercise(&store);
     }

@@ -143,10 +143,13 @@ pub fn run(args: &BuildArgs) -> Result<ExitCode, Error> {
     let output = match &args.output {
         Some(path) if !args.dry_run => {
             let t2 = Instant::now();
-            let options = WriteOptions {
+            let mut options = WriteOptions {
                 page_size: args.page_size,
-                progress: !args.quiet && !args.json,
+                ..WriteOptions::default()
             };
+            if !args.quiet && !args.json {
+                options.progress = std::sync::Arc::new(super::progress::Bar::new());
+            }
             let summary = write_file(&model, &metadata, path, &options, args.force)?;
             let raw = 4 * u64::from(model.domain().width()) * u64::from(model.domain().height());
             Some(OutputReport {

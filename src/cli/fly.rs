@@ -64,10 +64,10 @@ pub fn run(args: &FlyArgs) -> Result<ExitCode, Error> {
     if args.view.mmap {
         // SAFETY: the --mmap contract, stated in its help: nobody modifies the file while
         // this command runs.
-        let store = unsafe { Store::open(&args.file) }?;
+        let store = unsafe { Store::open_mapped(&args.file) }?;
         replay(args, Arc::new(store), &cameras)
     } else {
-        replay(args, Arc::new(Store::open_read(&args.file)?), &cameras)
+        replay(args, Arc::new(Store::open(&args.file)?), &cameras)
     }
 }
 

@@ -153,20 +153,20 @@ pub fn run(args: &InfoArgs) -> Result<ExitCode, Error> {
             threshold: c.threshold,
             max_error: c.max_error,
             nodes: c.nodes(),
-            index_depth: c.index.depth.get(),
+            index_depth: c.index_depth(),
             index_pages: layout.cluster_index_pages[i],
             edge_nodes,
         });
     }
-    let r = store.commit_record();
+    let state = store.state();
     let info = Info {
-        format_version: format!("{}.{}", r.major.get(), r.minor.get()),
-        txn_id: store.txn_id(),
-        recovery_needed: r.flags.get() & fmrh::format::COMMIT_RECOVERY_NEEDED != 0,
-        payload_slack: r.flags.get() & fmrh::format::COMMIT_PAYLOAD_SLACK != 0,
-        commit_slot: store.commit_slot(),
-        page_size: store.page_size(),
-        file_length: r.file_length.get(),
+        format_version: format!("{}.{}", state.format_version.0, state.format_version.1),
+        txn_id: state.txn_id,
+        recovery_needed: state.recovery_needed,
+        payload_slack: state.payload_slack,
+        commit_slot: state.commit_slot,
+        page_size: state.page_size,
+        file_length: state.file_length,
         width: d.width(),
         height: d.height(),
         block_size: d.block_size(),

@@ -1,9 +1,12 @@
-//! The subcommands, one module each, and the few helpers they share.
+//! The subcommands, one module each, and the few helpers they share: the ingest flags (the
+//! command line's mirror of `fmrh::ingest`'s options, so the library knows nothing of clap),
+//! the progress bar, JSON output and argument parsers.
 
 pub mod build;
 pub mod extract;
 pub mod fly;
 pub mod info;
+pub mod progress;
 pub mod recover;
 pub mod replace;
 pub mod scan;
@@ -19,15 +22,66 @@ use fmrh::ingest::{ColorEncoding, Format, IngestOptions};
 use fmrh::store::FileSource;
 use fmrh::{Error, Store};
 
+/// The input formats, as `--format` names them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum FormatArg {
+    /// Raw little-endian `f32` + `.json` sidecar, the form of `../shared/data` (either file).
+    F32,
+    /// SRTM `.hgt` or `.hgt.gz`: 1201² or 3601² big-endian `i16`, -32768 void.
+    Hgt,
+    /// GeoTIFF, one band of 8/16/32-bit integers or 32/64-bit floats, GDAL_NODATA honoured.
+    Geotiff,
+    /// PNG: 8/16-bit grey or grey palette, or Terrain-RGB / Terrarium colour.
+    Png,
+    /// Baseline JPEG, grey or R=G=B colour (lossy: for throughput tests, not precision).
+    Jpeg,
+    /// ESRI ASCII grid (`.asc`).
+    Asc,
+    /// USGS ASCII DEM (`.dem`), 1024-byte records, UTM or geographic profiles.
+    UsgsDem,
+}
+
+impl From<FormatArg> for Format {
+    fn from(f: FormatArg) -> Format {
+        match f {
+            FormatArg::F32 => Format::F32,
+            FormatArg::Hgt => Format::Hgt,
+            FormatArg::Geotiff => Format::Geotiff,
+            FormatArg::Png => Format::Png,
+            FormatArg::Jpeg => Format::Jpeg,
+            FormatArg::Asc => Format::Asc,
+            FormatArg::UsgsDem => Format::UsgsDem,
+        }
+    }
+}
+
+/// How an RGB(A) PNG encodes heights, as `--color-encoding` names it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ColorArg {
+    /// Mapbox Terrain-RGB: `h = -10000 + (R·65536 + G·256 + B) · 0.1`.
+    TerrainRgb,
+    /// Terrarium: `h = R·256 + G + B/256 - 32768`.
+    Terrarium,
+}
+
+impl From<ColorArg> for ColorEncoding {
+    fn from(c: ColorArg) -> ColorEncoding {
+        match c {
+            ColorArg::TerrainRgb => ColorEncoding::TerrainRgb,
+            ColorArg::Terrarium => ColorEncoding::Terrarium,
+        }
+    }
+}
+
 /// How to read an input DEM: the options every command that ingests shares.
 #[derive(clap::Args)]
 pub struct IngestArgs {
     /// Input format; guessed from the name and contents when absent.
     #[arg(long, value_enum)]
-    format: Option<Format>,
+    format: Option<FormatArg>,
     /// How an RGB(A) PNG encodes heights.
     #[arg(long, value_enum)]
-    color_encoding: Option<ColorEncoding>,
+    color_encoding: Option<ColorArg>,
     /// Multiply raw values by this (e.g. 0.1 for a decimetre 16-bit PNG).
     #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
     z_scale: f64,
@@ -43,8 +97,8 @@ impl IngestArgs {
     /// The ingest options these flags give.
     pub fn options(&self) -> IngestOptions {
         IngestOptions {
-            format: self.format,
-            color_encoding: self.color_encoding,
+            format: self.format.map(Format::from),
+            color_encoding: self.color_encoding.map(ColorEncoding::from),
             z_scale: self.z_scale,
             z_offset: self.z_offset,
             nodata: self.nodata,
@@ -61,9 +115,9 @@ pub fn print_json<T: Serialize>(value: &T) -> Result<(), Error> {
 }
 
 /// Opens a container for the read-only commands. Positioned reads, not a mapping: a command
-/// line tool cannot promise that nobody else touches the file (see `Store::open`).
+/// line tool cannot promise that nobody else touches the file (see `Store::open_mapped`).
 pub fn open(path: &Path) -> Result<Store<FileSource>, Error> {
-    Store::open_read(path)
+    Store::open(path)
 }
 
 /// Parses `a,b,c,d` into four integers.

@@ -76,20 +76,20 @@ pub fn run(args: &ScanArgs) -> Result<ExitCode, Error> {
     let mut entries = Vec::with_capacity(found.len());
     for e in found {
         let e = e?;
-        let n = store.node(e.node)?;
-        let fp = d.footprint(n.level, n.x.get(), n.y.get());
+        let n = store.node_of(args.cluster, &e)?;
+        let fp = d.footprint(n.level, n.x, n.y);
         entries.push(Entry {
             node: e.node,
             key: e.key.0,
             level: e.level,
-            x: n.x.get(),
-            y: n.y.get(),
+            x: n.x,
+            y: n.y,
             col0: fp.col0,
             row0: fp.row0,
             col1: fp.col1,
             row1: fp.row1,
-            error: n.static_error.get(),
-            monotone_error: n.monotone_error.get(),
+            error: n.static_error,
+            monotone_error: n.monotone_error,
         });
     }
     let report = ScanReport {

@@ -142,7 +142,7 @@ pub fn run(args: &SceneArgs) -> Result<ExitCode, Error> {
     if args.view.mmap {
         // SAFETY: the --mmap contract, stated in its help: nobody modifies the file while
         // this command runs.
-        let store = unsafe { fmrh::Store::open(&args.file) }?;
+        let store = unsafe { fmrh::Store::open_mapped(&args.file) }?;
         run_on(args, &store, camera, options, output)
     } else {
         run_on(args, &super::open(&args.file)?, camera, options, output)

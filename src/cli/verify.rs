@@ -4,7 +4,7 @@ use std::fs::File;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use fmrh::store::{verify, CheckStatus, FileSource};
+use fmrh::store::{verify, CheckStatus, FileSource, VerifyMode};
 use fmrh::Error;
 
 #[derive(clap::Args)]
@@ -25,12 +25,12 @@ pub fn run(args: &VerifyArgs) -> Result<ExitCode, Error> {
     let path = &args.file;
     let file = File::open(path).map_err(|e| Error::input(path, e.to_string()))?;
     let src = FileSource::new(file, path)?;
-    let report = match verify(src, args.full) {
-        Ok(r) => r,
-        Err(Error::Input { reason, .. }) => return Err(Error::input(path, reason)),
-        Err(Error::Unsupported { reason, .. }) => return Err(Error::unsupported(path, reason)),
-        Err(e) => return Err(e),
+    let mode = if args.full {
+        VerifyMode::Full
+    } else {
+        VerifyMode::Fast
     };
+    let report = verify(src, mode)?;
     if args.json {
         super::print_json(&report)?;
     } else {
@@ -38,7 +38,10 @@ pub fn run(args: &VerifyArgs) -> Result<ExitCode, Error> {
             "{}: {} ({} check, txn {})",
             path.display(),
             if report.valid { "valid" } else { "INVALID" },
-            report.mode,
+            match report.mode {
+                VerifyMode::Fast => "fast",
+                VerifyMode::Full => "full",
+            },
             report
                 .txn_id
                 .map_or_else(|| "none".to_string(), |t| t.to_string())

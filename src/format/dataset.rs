@@ -7,13 +7,15 @@
 use zerocopy::byteorder::little_endian::{F64, U16, U32, U64};
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
 
-use super::{invariant, MAX_STRING_LEN, VOID_BITS};
-use crate::error::{Error, Result};
+use super::{Invariant, Violation, MAX_STRING_LEN, VOID_BITS};
 use crate::heightfield::{Georeference, Metadata};
 use crate::model::{Domain, Model};
 
 /// Bytes of the fixed part of the dataset header.
 pub const DATASET_FIXED_LEN: usize = 160;
+
+/// The longest dataset header blob: the fixed part and three strings of the longest length.
+pub const MAX_DATASET_HEADER_LEN: u64 = DATASET_FIXED_LEN as u64 + 3 * MAX_STRING_LEN as u64;
 
 /// Flag: `spacing_m` is known.
 pub const HAS_SPACING: u16 = 1;
@@ -91,7 +93,8 @@ impl DatasetHeader {
             max_error: model.max_error(),
             node_count: model.tree().nodes().len() as u64,
             block_count: u64::from(cols) * u64::from(rows),
-            cluster_count: model.clusters().len() as u32,
+            // A model holds at most MAX_CLUSTERS clusters.
+            cluster_count: u32::try_from(model.clusters().len()).unwrap_or(u32::MAX),
             metadata: metadata.clone(),
         }
     }
@@ -143,9 +146,10 @@ impl DatasetHeader {
             block_count: U64::new(self.block_count),
             cluster_count: U32::new(self.cluster_count),
             void_bits: U32::new(VOID_BITS),
-            crs_len: U32::new(crs.len() as u32),
-            units_len: U32::new(units.len() as u32),
-            source_format_len: U32::new(source_format.len() as u32),
+            // Each string was cut to MAX_STRING_LEN bytes above.
+            crs_len: U32::new(string_len(crs)),
+            units_len: U32::new(string_len(units)),
+            source_format_len: U32::new(string_len(source_format)),
             reserved: [0; 12],
         };
         let mut out = fixed.as_bytes().to_vec();
@@ -156,9 +160,9 @@ impl DatasetHeader {
     }
 
     /// Parses and checks a blob (invariant I-6).
-    pub fn decode(bytes: &[u8]) -> Result<DatasetHeader> {
+    pub fn decode(bytes: &[u8]) -> Result<DatasetHeader, Violation> {
         let bad =
-            |detail: String| Error::corrupt(invariant::DATASET_HEADER, "dataset header", detail);
+            |detail: String| Violation::new(Invariant::DatasetHeader, "dataset header", detail);
         let (f, rest) = Fixed::read_from_prefix(bytes).map_err(|_| {
             bad(format!(
                 "{} bytes, shorter than the fixed part",
@@ -276,6 +280,10 @@ impl DatasetHeader {
             metadata,
         })
     }
+}
+
+fn string_len(s: &str) -> u32 {
+    u32::try_from(s.len()).unwrap_or(u32::MAX)
 }
 
 /// `s` cut to at most `max` bytes on a character boundary.

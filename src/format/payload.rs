@@ -18,12 +18,89 @@
 //! (bit `k % 8` of byte `k / 8` set when stored sample `k` stands for a void or for padding).
 //!
 //! Payloads start on multiples of [`super::PAYLOAD_ALIGN`] bytes, and the bytes between them
-//! are zero.
+//! are zero. A record finds its payload by a [`PayloadRef`]: offset, length and CRC.
 
+use std::ops::Range;
+
+use serde::Serialize;
 use zerocopy::byteorder::little_endian::F32;
 use zerocopy::FromBytes;
 
+use super::VOID_BITS;
 use crate::model::Domain;
+
+/// Where a payload is: its byte offset in the container, its length, and the CRC-32 of its
+/// bytes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize)]
+pub struct PayloadRef {
+    /// Byte offset in the container.
+    pub offset: u64,
+    /// Bytes.
+    pub len: u32,
+    /// CRC-32 of the bytes.
+    pub crc: u32,
+}
+
+impl PayloadRef {
+    /// The reference of `bytes` placed at `offset`. `None` when they are 4 GiB or more.
+    pub fn of(offset: u64, bytes: &[u8]) -> Option<PayloadRef> {
+        Some(PayloadRef {
+            offset,
+            len: u32::try_from(bytes.len()).ok()?,
+            crc: super::crc32(bytes),
+        })
+    }
+
+    /// The byte just past it (saturating).
+    pub fn end(&self) -> u64 {
+        self.offset.saturating_add(u64::from(self.len))
+    }
+
+    /// The pages of `page_size` bytes it touches (none when empty).
+    pub fn pages(&self, page_size: u32) -> Range<u64> {
+        let p = u64::from(page_size);
+        if self.len == 0 {
+            return 0..0;
+        }
+        self.offset / p..self.end().div_ceil(p)
+    }
+}
+
+/// Encodes a physical block from its `count` samples in row-major order, each
+/// `(height, valid)`: a valid sample is stored as is, a void as [`VOID_BITS`] with `height`
+/// (its mended stand-in) appended after the samples.
+pub fn encode_block(samples: impl Iterator<Item = (f32, bool)>, count: usize) -> Vec<u8> {
+    let mut bytes = Vec::with_capacity(4 * count);
+    let mut stand_ins = Vec::new();
+    for (v, valid) in samples {
+        if valid {
+            bytes.extend_from_slice(&v.to_le_bytes());
+        } else {
+            bytes.extend_from_slice(&VOID_BITS.to_le_bytes());
+            stand_ins.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    bytes.extend_from_slice(&stand_ins);
+    bytes
+}
+
+/// Encodes a coarse grid stored as `heights` (its clipped `gw × gh` samples, row-major), with
+/// the void bitmap of `void` when `has_voids`.
+pub fn encode_grid(heights: &[f32], void: &[bool], has_voids: bool) -> Vec<u8> {
+    let n = heights.len() as u64;
+    let mut bytes = Vec::with_capacity(usize::try_from(grid_bytes(n, has_voids)).unwrap_or(0));
+    for h in heights {
+        bytes.extend_from_slice(&h.to_le_bytes());
+    }
+    if has_voids {
+        let mut bitmap = vec![0u8; heights.len().div_ceil(8)];
+        for (i, _) in void.iter().enumerate().filter(|(_, &v)| v) {
+            bitmap[i / 8] |= 1 << (i % 8);
+        }
+        bytes.extend_from_slice(&bitmap);
+    }
+    bytes
+}
 
 /// Bytes of a physical block's payload.
 pub fn block_len(width: u32, height: u32, void_count: u32) -> u64 {
@@ -56,7 +133,10 @@ pub fn grid_dims(domain: &Domain, level: u8, x: u32, y: u32) -> (u32, u32) {
 
 /// Bytes of a coarse grid's payload of `gw × gh` stored samples.
 pub fn grid_len(gw: u32, gh: u32, has_voids: bool) -> u64 {
-    let n = u64::from(gw) * u64::from(gh);
+    grid_bytes(u64::from(gw) * u64::from(gh), has_voids)
+}
+
+fn grid_bytes(n: u64, has_voids: bool) -> u64 {
     4 * n + if has_voids { n.div_ceil(8) } else { 0 }
 }
 

@@ -1,141 +1,24 @@
-//! The fixed-size on-disk structures, as `zerocopy` structs of little-endian fields.
+//! The fixed-size table records, as `zerocopy` structs of little-endian fields, and the plain
+//! values they encode and decode to.
 //!
 //! Every struct is `#[repr(C)]` with alignment 1 (all fields are byte arrays underneath), so a
 //! record is read straight out of any byte slice, mapped or not, on any host, and its size is
 //! pinned by a compile-time assertion. Offsets and meanings are tabulated in
-//! `format-spec/container.md`. Comments here say why a field exists.
+//! `format-spec/container.md` §6. Each record has a plain counterpart ([`StoredNode`],
+//! [`StoredBlock`], [`ScanEntry`], [`FreePage`]) with native fields, which is what the
+//! store's API hands out; the conversions both ways live here and nowhere else.
 
 use zerocopy::byteorder::little_endian::{F32, F64, U16, U32, U64};
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
 
-use super::{COMMIT_RECORD_LEN, PAGE_HEADER_LEN};
+use super::payload::PayloadRef;
+use crate::curve::HilbertKey;
 
-/// Where a blob lives: pages `first_page ..` holding `length` content bytes.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    FromBytes,
-    IntoBytes,
-    KnownLayout,
-    Immutable,
-    Unaligned,
-)]
-#[repr(C)]
-pub struct BlobRef {
-    /// First page of the run.
-    pub first_page: U64,
-    /// Content bytes (the pages hold `P - 24` content bytes each).
-    pub length: U64,
-}
+/// `parent` of the root in the node table.
+pub const ROOT_PARENT: u32 = u32::MAX;
 
-/// Where a B+-tree lives. An empty tree has root, records and depth zero (and still names
-/// its record size).
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    FromBytes,
-    IntoBytes,
-    KnownLayout,
-    Immutable,
-    Unaligned,
-)]
-#[repr(C)]
-pub struct TreeRef {
-    /// The root page; 0 for an empty tree.
-    pub root_page: U64,
-    /// Records in the leaves.
-    pub records: U64,
-    /// Page levels: 1 when the root is a leaf, 0 for an empty tree.
-    pub depth: U16,
-    /// Bytes per leaf record (pins the record layout the writer used).
-    pub record_size: U16,
-    /// Zero.
-    pub reserved: U32,
-}
-
-/// A commit record: the first [`COMMIT_RECORD_LEN`] bytes of page 0 or page 1.
-#[derive(Clone, Copy, Debug, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
-#[repr(C)]
-pub struct CommitRecord {
-    /// [`super::MAGIC`].
-    pub magic: [u8; 8],
-    /// [`super::FORMAT_MAJOR`] of the writer.
-    pub major: U16,
-    /// [`super::FORMAT_MINOR`] of the writer.
-    pub minor: U16,
-    /// Bytes per page.
-    pub page_size: U32,
-    /// Transaction id: the valid record with the higher id is the current state.
-    pub txn_id: U64,
-    /// The file's length in bytes when this record was written; a shorter file is truncated.
-    pub file_length: U64,
-    /// Reserved for flags (recovery state); zero.
-    pub flags: U32,
-    /// Zero.
-    pub reserved0: U32,
-    /// The dataset header blob.
-    pub dataset_header: BlobRef,
-    /// The cluster directory blob.
-    pub cluster_directory: BlobRef,
-    /// The node table ([`NodeRecord`]s in Hilbert pre-order).
-    pub node_table: TreeRef,
-    /// The block table ([`BlockRecord`]s, row-major over the finest level).
-    pub block_table: TreeRef,
-    /// The free list ([`FreeEntry`]s); empty in a freshly built file.
-    pub free_list: TreeRef,
-    /// The adjacency table: every cluster's edge lists ([`AdjacencyEntry`]s), back to back
-    /// in the order the cluster directory's [`EdgeRange`]s give.
-    pub adjacency: TreeRef,
-    /// Zero.
-    pub reserved: [u8; 84],
-    /// CRC-32 of bytes `0..252` of the record.
-    pub crc: U32,
-}
-
-/// The header that opens every structured page.
-#[derive(Clone, Copy, Debug, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
-#[repr(C)]
-pub struct PageHeader {
-    /// What the page is (see [`super::tag`]).
-    pub tag: [u8; 4],
-    /// CRC-32 of bytes `8..P` of the page.
-    pub crc: U32,
-    /// The page's own number: a page written to the wrong place is caught.
-    pub page_no: U64,
-    /// Tree pages: 0 for a leaf, else the height above the leaves. Blob pages: 0.
-    pub level: U16,
-    /// Zero.
-    pub reserved: U16,
-    /// Tree pages: records or branch entries in the page. Blob pages: content bytes.
-    pub count: U32,
-}
-
-impl PageHeader {
-    /// The header at the start of `bytes`, if there are enough of them.
-    pub fn read(bytes: &[u8]) -> Option<PageHeader> {
-        PageHeader::read_from_prefix(bytes).ok().map(|(h, _)| h)
-    }
-}
-
-/// One child of a B+-tree branch page.
-#[derive(Clone, Copy, Debug, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
-#[repr(C)]
-pub struct BranchEntry {
-    /// The key of the first record under the child (the ordinal, for unkeyed tables).
-    pub first_key: U64,
-    /// The ordinal of the first record under the child.
-    pub first_ordinal: U64,
-    /// The child page.
-    pub child: U64,
-}
+/// [`NodeRecord::flags`]: the grid has void or padding samples (a bitmap follows the heights).
+pub const NODE_GRID_HAS_VOIDS: u16 = 1;
 
 /// One node of the FMRH.
 #[derive(
@@ -143,7 +26,7 @@ pub struct BranchEntry {
 )]
 #[repr(C)]
 pub struct NodeRecord {
-    /// The node's [`crate::curve::HilbertKey`].
+    /// The node's [`HilbertKey`].
     pub key: U64,
     /// 0 = root, `L` = physical blocks.
     pub level: u8,
@@ -156,7 +39,7 @@ pub struct NodeRecord {
     pub x: U32,
     /// Row among the level's nodes, from the north.
     pub y: U32,
-    /// Index of the parent; `u32::MAX` for the root.
+    /// Index of the parent; [`ROOT_PARENT`] for the root.
     pub parent: U32,
     /// Nodes in the subtree, itself included.
     pub subtree_len: U32,
@@ -180,8 +63,101 @@ pub struct NodeRecord {
     pub reserved: U32,
 }
 
-/// [`NodeRecord::flags`]: the grid has void or padding samples (a bitmap follows the heights).
-pub const NODE_GRID_HAS_VOIDS: u16 = 1;
+/// A node of the FMRH as a store holds it: the tree node, and where its payload is.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StoredNode {
+    /// Place on the multiresolution Hilbert curve.
+    pub key: HilbertKey,
+    /// Level: 0 is the root, `L` the physical blocks.
+    pub level: u8,
+    /// Column among the level's nodes.
+    pub x: u32,
+    /// Row among the level's nodes, from the north.
+    pub y: u32,
+    /// Kept children: bit `dy * 2 + dx` for the child in quadrant `(dx, dy)`.
+    pub child_mask: u8,
+    /// Index of the parent in the node table; `None` for the root.
+    pub parent: Option<u32>,
+    /// Nodes in its subtree, itself included: its descendants are the next
+    /// `subtree_len - 1` nodes of the table.
+    pub subtree_len: u32,
+    /// The measured static error of its own grid, in height units.
+    pub static_error: f64,
+    /// `e*`: the largest static error in its subtree; never grows from parent to child.
+    pub monotone_error: f64,
+    /// Least mended height over the footprint.
+    pub min_height: f32,
+    /// Greatest mended height over the footprint.
+    pub max_height: f32,
+    /// Valid samples in the footprint.
+    pub valid_samples: u64,
+    /// Its payload: the coarse grid, or at the finest level the physical block.
+    pub payload: PayloadRef,
+    /// Whether its coarse grid carries a void bitmap.
+    pub grid_has_voids: bool,
+}
+
+impl NodeRecord {
+    /// The plain node.
+    pub fn decode(&self) -> StoredNode {
+        StoredNode {
+            key: HilbertKey(self.key.get()),
+            level: self.level,
+            x: self.x.get(),
+            y: self.y.get(),
+            child_mask: self.child_mask,
+            parent: Some(self.parent.get()).filter(|&p| p != ROOT_PARENT),
+            subtree_len: self.subtree_len.get(),
+            static_error: self.static_error.get(),
+            monotone_error: self.monotone_error.get(),
+            min_height: self.min_height.get(),
+            max_height: self.max_height.get(),
+            valid_samples: self.valid_samples.get(),
+            payload: PayloadRef {
+                offset: self.payload_offset.get(),
+                len: self.payload_len.get(),
+                crc: self.payload_crc.get(),
+            },
+            grid_has_voids: self.flags.get() & NODE_GRID_HAS_VOIDS != 0,
+        }
+    }
+
+    /// The record of `node`.
+    pub fn encode(node: &StoredNode) -> NodeRecord {
+        NodeRecord {
+            key: U64::new(node.key.0),
+            level: node.level,
+            child_mask: node.child_mask,
+            flags: U16::new(if node.grid_has_voids {
+                NODE_GRID_HAS_VOIDS
+            } else {
+                0
+            }),
+            x: U32::new(node.x),
+            y: U32::new(node.y),
+            parent: U32::new(node.parent.unwrap_or(ROOT_PARENT)),
+            subtree_len: U32::new(node.subtree_len),
+            payload_crc: U32::new(node.payload.crc),
+            static_error: F64::new(node.static_error),
+            monotone_error: F64::new(node.monotone_error),
+            min_height: F32::new(node.min_height),
+            max_height: F32::new(node.max_height),
+            valid_samples: U64::new(node.valid_samples),
+            payload_offset: U64::new(node.payload.offset),
+            payload_len: U32::new(node.payload.len),
+            reserved: U32::new(0),
+        }
+    }
+
+    /// Where its payload is.
+    pub fn payload(&self) -> PayloadRef {
+        PayloadRef {
+            offset: self.payload_offset.get(),
+            len: self.payload_len.get(),
+            crc: self.payload_crc.get(),
+        }
+    }
+}
 
 /// One physical block: the full-resolution samples of a finest-level footprint, clipped to
 /// the data rectangle.
@@ -206,6 +182,53 @@ pub struct BlockRecord {
     pub reserved: U32,
 }
 
+/// A physical block as the block table describes it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct StoredBlock {
+    /// Its payload.
+    pub payload: PayloadRef,
+    /// Samples along a row (its footprint clipped to the data).
+    pub width: u32,
+    /// Samples down a column.
+    pub height: u32,
+    /// Void samples.
+    pub void_count: u32,
+}
+
+impl BlockRecord {
+    /// The plain block description.
+    pub fn decode(&self) -> StoredBlock {
+        StoredBlock {
+            payload: self.payload(),
+            width: self.width.get(),
+            height: self.height.get(),
+            void_count: self.void_count.get(),
+        }
+    }
+
+    /// The record of `block`.
+    pub fn encode(block: &StoredBlock) -> BlockRecord {
+        BlockRecord {
+            payload_offset: U64::new(block.payload.offset),
+            payload_len: U32::new(block.payload.len),
+            payload_crc: U32::new(block.payload.crc),
+            width: U32::new(block.width),
+            height: U32::new(block.height),
+            void_count: U32::new(block.void_count),
+            reserved: U32::new(0),
+        }
+    }
+
+    /// Where its payload is.
+    pub fn payload(&self) -> PayloadRef {
+        PayloadRef {
+            offset: self.payload_offset.get(),
+            len: self.payload_len.get(),
+            crc: self.payload_crc.get(),
+        }
+    }
+}
+
 /// One node of a cluster, in the cluster's index.
 #[derive(
     Clone, Copy, Debug, PartialEq, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned,
@@ -222,6 +245,38 @@ pub struct IndexEntry {
     pub reserved: [u8; 3],
 }
 
+/// An entry of a cluster index, as a scan returns it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct ScanEntry {
+    /// The node's Hilbert key.
+    pub key: HilbertKey,
+    /// The node's level.
+    pub level: u8,
+    /// The node's index in the node table.
+    pub node: u32,
+}
+
+impl IndexEntry {
+    /// The plain entry.
+    pub fn decode(&self) -> ScanEntry {
+        ScanEntry {
+            key: HilbertKey(self.key.get()),
+            level: self.level,
+            node: self.node.get(),
+        }
+    }
+
+    /// The record of `entry`.
+    pub fn encode(entry: &ScanEntry) -> IndexEntry {
+        IndexEntry {
+            key: U64::new(entry.key.0),
+            node: U32::new(entry.node),
+            level: entry.level,
+            reserved: [0; 3],
+        }
+    }
+}
+
 /// One node touching an edge of the data, in the adjacency table.
 #[derive(
     Clone, Copy, Debug, PartialEq, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned,
@@ -232,7 +287,7 @@ pub struct AdjacencyEntry {
     pub node: U32,
 }
 
-/// One free page (reserved for copy-on-write updates; a fresh file has none).
+/// One free page.
 #[derive(
     Clone, Copy, Debug, PartialEq, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned,
 )]
@@ -244,59 +299,37 @@ pub struct FreeEntry {
     pub freed_txn: U64,
 }
 
-/// One cluster in the cluster directory.
-#[derive(
-    Clone, Copy, Debug, PartialEq, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned,
-)]
-#[repr(C)]
-pub struct ClusterRecord {
-    /// δ.
-    pub threshold: F64,
-    /// The largest `e*` in the cut.
-    pub max_error: F64,
-    /// The index: [`IndexEntry`]s keyed by Hilbert key.
-    pub index: TreeRef,
-    /// Where this cluster's north, east, south and west edge lists lie in the adjacency
-    /// table.
-    pub adjacency: [EdgeRange; 4],
+/// A page no structure of a state uses, and the first state that stopped using it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub struct FreePage {
+    /// The page number.
+    pub page: u64,
+    /// The txn id of the first state that no longer reaches it.
+    pub freed_txn: u64,
 }
 
-/// A run of the adjacency table: records `first .. first + count`.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    FromBytes,
-    IntoBytes,
-    KnownLayout,
-    Immutable,
-    Unaligned,
-)]
-#[repr(C)]
-pub struct EdgeRange {
-    /// Ordinal of the first record.
-    pub first: U64,
-    /// Records in the run.
-    pub count: U64,
-}
+impl FreeEntry {
+    /// The plain entry.
+    pub fn decode(&self) -> FreePage {
+        FreePage {
+            page: self.page.get(),
+            freed_txn: self.freed_txn.get(),
+        }
+    }
 
-/// Bytes before the cluster records in the cluster directory: `count: u32, reserved: u32`.
-pub const CLUSTER_DIRECTORY_PREFIX: usize = 8;
+    /// The record of `free`.
+    pub fn encode(free: &FreePage) -> FreeEntry {
+        FreeEntry {
+            page: U64::new(free.page),
+            freed_txn: U64::new(free.freed_txn),
+        }
+    }
+}
 
 const _: () = {
-    assert!(size_of::<BlobRef>() == 16);
-    assert!(size_of::<TreeRef>() == 24);
-    assert!(size_of::<CommitRecord>() == COMMIT_RECORD_LEN);
-    assert!(size_of::<PageHeader>() == PAGE_HEADER_LEN);
-    assert!(size_of::<BranchEntry>() == 24);
     assert!(size_of::<NodeRecord>() == 80);
     assert!(size_of::<BlockRecord>() == 32);
     assert!(size_of::<IndexEntry>() == 16);
     assert!(size_of::<AdjacencyEntry>() == 4);
     assert!(size_of::<FreeEntry>() == 16);
-    assert!(size_of::<ClusterRecord>() == 104);
-    assert!(size_of::<EdgeRange>() == 16);
 };

@@ -31,7 +31,7 @@ use crate::error::{Error, Result};
 use crate::heightfield::{Heightfield, Metadata};
 
 /// The input formats fmrh reads.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Format {
     /// Raw little-endian `f32` + `.json` sidecar, the form of `../shared/data` (either file).
     F32,
@@ -65,7 +65,7 @@ impl Format {
 }
 
 /// How the colour channels of an 8-bit RGB(A) PNG encode height.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ColorEncoding {
     /// Mapbox Terrain-RGB: `h = -10000 + (R·65536 + G·256 + B) · 0.1`.
     TerrainRgb,

@@ -7,14 +7,13 @@
 //!   table, without clusters or index pages (seed 000's "logic structure FMRH"). Its answer
 //!   is the view mode's; only the nodes it reads differ.
 
-use crate::error::{Error, Result};
-use crate::format::invariant;
+use crate::error::Result;
 use crate::model::SampleRect;
 use crate::store::Source;
 
 use super::camera::Camera;
 use super::ranges::{self, KeyRange};
-use super::select::{SceneBlock, Terrain};
+use super::{SceneBlock, Terrain};
 
 /// Every physical block of the region (the window, or the frustum's footprint), sorted by
 /// key.
@@ -61,47 +60,41 @@ pub fn traversal<S: Source>(
     let mut stack = vec![(0u32, store.node(0)?)];
     while let Some((i, n)) = stack.pop() {
         let distance = terrain.node_box(&n).distance(view.eye);
-        if view.screen_error(n.monotone_error.get(), distance) <= tau || n.level >= finest {
+        if view.screen_error(n.monotone_error, distance) <= tau || n.level >= finest {
             out.push(terrain.node_block(&view, i, &n));
             continue;
         }
-        let len = n.subtree_len.get();
-        if len <= 1 {
+        if n.subtree_len <= 1 {
             let q = ranges::Quadrant {
                 level: n.level,
-                x: n.x.get(),
-                y: n.y.get(),
+                x: n.x,
+                y: n.y,
             };
             let (xs, ys) = q.blocks(&d);
             for y in ys {
                 for x in xs.clone() {
                     let key = ranges::block_key(&d, x, y);
                     if region.meets(&KeyRange { lo: key, hi: key }) {
-                        let (lo, hi) = (n.min_height.get(), n.max_height.get());
-                        out.push(terrain.physical_block(&view, x, y, lo, hi)?);
+                        out.push(terrain.physical_block(
+                            &view,
+                            x,
+                            y,
+                            n.min_height,
+                            n.max_height,
+                        )?);
                     }
                 }
             }
             continue;
         }
-        let mut c = i + 1;
-        while c < i.saturating_add(len) {
-            let child = store.node(c)?;
-            if child.subtree_len.get() == 0 {
-                return Err(Error::corrupt(
-                    invariant::NODE_TABLE,
-                    format!("node {c}"),
-                    "an empty subtree",
-                ));
-            }
+        for (c, child) in store.children(i, &n)? {
             let keys = KeyRange {
-                lo: child.key.get(),
-                hi: crate::curve::HilbertKey(child.key.get()).last(finest, child.level),
+                lo: child.key.0,
+                hi: child.key.last(finest, child.level),
             };
             if region.meets(&keys) {
                 stack.push((c, child));
             }
-            c = c.saturating_add(child.subtree_len.get());
         }
     }
     terrain.finish(&view, window, &mut out);

@@ -1,11 +1,14 @@
 //! Scenes: a camera and a pixel tolerance in, exactly the blocks the view needs out.
 //!
 //! Read in order: [`camera`] (the view, the frustum, pixels per metre), [`ranges`] (a region
-//! of the terrain as maximal aligned quadrants, then Hilbert key ranges), [`select`] (the
-//! uniform and view-dependent cuts, found through the clusters), [`reconstruct`] (the
+//! of the terrain as maximal aligned quadrants, then Hilbert key ranges), `result` (what a
+//! scene asks and answers), `terrain` (boxes, regions, and the dispatch to a mode), the modes
+//! `uniform` and `view_dependent` (the cuts, found through the clusters, over the shared
+//! `search` state), `stitch` (neighbour levels across block edges), [`reconstruct`] (the
 //! surface a scene draws, sampled back at full resolution), [`schedule`] (frames: what to
 //! load, keep and evict as the camera moves, with prefetch), [`path`] (camera paths), and
-//! [`baseline`] (naive answers kept as yardsticks).
+//! [`baseline`] (naive answers kept as yardsticks). A new mode is a new file with an `impl`
+//! block on `search::Search`, a [`Mode`] variant, and one arm in [`Terrain::scene`].
 //!
 //! A scene is always a *cover*: every point of its region lies in exactly one block (blocks
 //! share edges, nothing more). In uniform mode every block is within one static bound in
@@ -17,13 +20,17 @@ pub mod camera;
 pub mod path;
 pub mod ranges;
 pub mod reconstruct;
+mod result;
 pub mod schedule;
-pub mod select;
+mod search;
+mod stitch;
+mod terrain;
+mod uniform;
+mod view_dependent;
 
+pub use crate::format::PayloadRef;
 pub use camera::{Aabb, Camera, Coverage, View, WorldFrame};
 pub use reconstruct::{reconstruct, Reconstruction};
+pub use result::{Mode, NeighbourLevels, Scene, SceneBlock, SceneOptions, SceneStats, DEFAULT_GAP};
 pub use schedule::{BlockId, Frame, FrameStats, ScheduleOptions, Scheduler};
-pub use select::{
-    Mode, NeighbourLevels, PayloadRef, Scene, SceneBlock, SceneOptions, SceneStats, Terrain,
-    DEFAULT_GAP,
-};
+pub use terrain::Terrain;

@@ -15,7 +15,7 @@ use crate::model::measure::surface;
 use crate::model::SampleRect;
 use crate::store::{Source, Store};
 
-use super::select::Scene;
+use super::Scene;
 
 /// A window sampled from a scene.
 #[derive(Clone, Debug, PartialEq)]

@@ -31,7 +31,7 @@ use crate::error::Result;
 use crate::store::{Source, Store};
 
 use super::camera::Camera;
-use super::select::{Scene, SceneBlock, SceneOptions, Terrain};
+use super::{Scene, SceneBlock, SceneOptions, Terrain};
 
 /// A block's identity: level and position (a node, or a physical block below a leaf).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
@@ -245,7 +245,7 @@ impl<S: Source + 'static> Scheduler<S> {
                 }
                 None => {
                     let p = block.payload;
-                    Arc::from(&*self.store.payload(p.offset, p.len, p.crc)?)
+                    Arc::from(&*self.store.payload(p)?)
                 }
             };
             stats.loaded_bytes += bytes.len() as u64;
@@ -453,7 +453,7 @@ fn warm<S: Source>(
             continue;
         }
         let p = b.payload;
-        if let Ok(bytes) = store.payload(p.offset, p.len, p.crc) {
+        if let Ok(bytes) = store.payload(p) {
             lock(cache).insert(id, (*b, Arc::from(&*bytes)));
         }
     }

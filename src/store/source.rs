@@ -3,12 +3,13 @@
 //! Every parser works on `&[u8]`. A [`Source`] only hands out byte ranges: borrowed from a
 //! mapping or a buffer (zero-copy), or owned after a read. The store asks a source whether
 //! its bytes can change after they were checked (`stable`). A file read with `pread` can be
-//! rewritten by another process, so every page read from it is checked again.
+//! rewritten by another process, so every page read from it is checked again. A new kind of
+//! source (HTTP ranges, object storage) is one more implementation of this trait.
 
 use std::borrow::Cow;
 use std::fs::File;
 use std::io;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use memmap2::Mmap;
 
@@ -29,9 +30,12 @@ pub trait Source: Send + Sync {
     fn read_at(&self, offset: u64, len: usize) -> io::Result<Cow<'_, [u8]>>;
 
     /// Whether bytes once checked stay as they were, so pages validated at open need no
-    /// second check (true for a mapping under the [`super::Store::open`] contract, and for
-    /// memory).
+    /// second check (true for a mapping under the [`super::Store::open_mapped`] contract, and
+    /// for memory).
     fn stable(&self) -> bool;
+
+    /// What errors call the source: its path, or a description such as `<memory>`.
+    fn name(&self) -> &Path;
 }
 
 fn slice_at(bytes: &[u8], offset: u64, len: usize) -> io::Result<&[u8]> {
@@ -47,9 +51,12 @@ fn slice_at(bytes: &[u8], offset: u64, len: usize) -> io::Result<&[u8]> {
         })
 }
 
-/// Bytes in memory.
+/// Bytes in memory. Errors call it `<memory>`.
 #[derive(Clone, Debug)]
 pub struct Bytes<T>(pub T);
+
+/// The name of every [`Bytes`] source.
+const MEMORY: &str = "<memory>";
 
 impl<T: AsRef<[u8]> + Send + Sync> Source for Bytes<T> {
     fn len(&self) -> u64 {
@@ -63,37 +70,51 @@ impl<T: AsRef<[u8]> + Send + Sync> Source for Bytes<T> {
     fn stable(&self) -> bool {
         true
     }
+
+    fn name(&self) -> &Path {
+        Path::new(MEMORY)
+    }
 }
 
-/// A read-only memory map of a file (see [`super::Store::open`] for the contract).
+/// A read-only memory map of a file (see [`super::Store::open_mapped`] for the contract).
 #[derive(Debug)]
-pub struct MmapSource(Mmap);
+pub struct MmapSource {
+    map: Mmap,
+    path: PathBuf,
+}
 
 impl MmapSource {
-    /// Maps `file`.
+    /// Maps `file`, which is at `path`.
     ///
     /// # Safety
-    /// The caller promises what [`super::Store::open`] documents: nobody modifies or
+    /// The caller promises what [`super::Store::open_mapped`] documents: nobody modifies or
     /// truncates the file while the mapping lives.
     pub unsafe fn new(file: &File, path: &Path) -> Result<MmapSource> {
         // SAFETY: forwarded to our caller's contract (no concurrent modification or
         // truncation of the file for the mapping's lifetime).
         let map = unsafe { Mmap::map(file) }.map_err(|e| Error::io(path, e))?;
-        Ok(MmapSource(map))
+        Ok(MmapSource {
+            map,
+            path: path.to_path_buf(),
+        })
     }
 }
 
 impl Source for MmapSource {
     fn len(&self) -> u64 {
-        self.0.len() as u64
+        self.map.len() as u64
     }
 
     fn read_at(&self, offset: u64, len: usize) -> io::Result<Cow<'_, [u8]>> {
-        slice_at(&self.0, offset, len).map(Cow::Borrowed)
+        slice_at(&self.map, offset, len).map(Cow::Borrowed)
     }
 
     fn stable(&self) -> bool {
         true
+    }
+
+    fn name(&self) -> &Path {
+        &self.path
     }
 }
 
@@ -103,13 +124,24 @@ impl Source for MmapSource {
 pub struct FileSource {
     file: File,
     len: u64,
+    path: PathBuf,
 }
 
 impl FileSource {
-    /// Wraps an open file; its length is read once.
+    /// Wraps `file`, open at `path`; its length is read once.
     pub fn new(file: File, path: &Path) -> Result<FileSource> {
         let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
-        Ok(FileSource { file, len })
+        Ok(FileSource {
+            file,
+            len,
+            path: path.to_path_buf(),
+        })
+    }
+
+    /// Opens the file at `path` for reading.
+    pub fn open(path: &Path) -> Result<FileSource> {
+        let file = File::open(path).map_err(|e| Error::io(path, e))?;
+        FileSource::new(file, path)
     }
 }
 
@@ -136,6 +168,32 @@ impl Source for FileSource {
     fn stable(&self) -> bool {
         false
     }
+
+    fn name(&self) -> &Path {
+        &self.path
+    }
+}
+
+/// The error of a failed read of `len` bytes at `offset` from the file at `path`. A read
+/// past the end means the file is shorter than its commit record says (I-3): corruption. Any
+/// other failure is the operating system's and stays an I/O error.
+pub(crate) fn read_error(path: &Path, offset: u64, len: usize, e: io::Error) -> Error {
+    if e.kind() == io::ErrorKind::UnexpectedEof {
+        crate::format::Violation::new(
+            crate::format::Invariant::FileLength,
+            format!("byte {offset}"),
+            format!("{len} bytes there lie past the end of the file"),
+        )
+        .in_file(path)
+    } else {
+        Error::io(path, e)
+    }
+}
+
+/// Reads `len` bytes at `offset` of `src`, as a store error (see [`read_error`]).
+pub(crate) fn read<S: Source + ?Sized>(src: &S, offset: u64, len: usize) -> Result<Cow<'_, [u8]>> {
+    src.read_at(offset, len)
+        .map_err(|e| read_error(src.name(), offset, len, e))
 }
 
 #[cfg(unix)]

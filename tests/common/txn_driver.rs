@@ -91,18 +91,18 @@ pub fn described<S: Source>(s: &Store<S>) -> Described {
         .map(|n| {
             format!(
                 "{} {} {} {} {} {} {} {:x} {:x} {:x} {:x} {}",
-                n.key.get(),
+                n.key.0,
                 n.level,
                 n.child_mask,
-                n.x.get(),
-                n.y.get(),
-                n.parent.get(),
-                n.subtree_len.get(),
-                n.static_error.get().to_bits(),
-                n.monotone_error.get().to_bits(),
-                n.min_height.get().to_bits(),
-                n.max_height.get().to_bits(),
-                n.valid_samples.get(),
+                n.x,
+                n.y,
+                n.parent.unwrap_or(u32::MAX),
+                n.subtree_len,
+                n.static_error.to_bits(),
+                n.monotone_error.to_bits(),
+                n.min_height.to_bits(),
+                n.max_height.to_bits(),
+                n.valid_samples,
             )
         })
         .collect();
@@ -285,7 +285,8 @@ impl Driver {
 
     /// The expensive check: the file verifies and describes the model a fresh build gives.
     pub fn check_full(&self) {
-        let report = verify(Bytes(self.disk.current()), true).expect("verify runs");
+        let report =
+            verify(Bytes(self.disk.current()), fmrh::VerifyMode::Full).expect("verify runs");
         assert!(report.valid, "verify --full: {report:#?}");
         let now = self.container().read().expect("a snapshot");
         let hf = Heightfield::new(self.width, self.height, self.committed.clone())

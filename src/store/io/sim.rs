@@ -1,121 +1,18 @@
-//! The byte device under a writable container: a real file, or a simulated disk that can lose
-//! power.
+//! A simulated disk that can lose power (for tests; the `testing` feature exports it).
 //!
-//! [`Io`] is the whole contract the commit protocol relies on: positioned reads and writes,
-//! `sync` (after it returns, every earlier write and length change is durable), and
-//! `set_len`. Nothing written since the last `sync` is promised to survive a crash, in whole
-//! or in part.
-//!
-//! [`SimDisk`] makes that promise literal for tests. It keeps the durable image and the list
-//! of operations since the last sync. At a crash ([`SimDisk::crash_image`]) every pending
-//! write is independently *kept*, *dropped* or *torn* (each 512-byte sector written, left
-//! alone, or filled with garbage), and every pending length change kept or dropped, in
-//! combinations drawn from a seed. It can also lose power after the `n`th mutating operation
-//! ([`SimDisk::power_off_after`]), and fail chosen operations ([`Fault`]) once or from then on,
-//! which is how the error paths of the commit protocol are tested.
+//! [`SimDisk`] keeps the durable image and the list of operations since the last sync. At a
+//! crash ([`SimDisk::crash_image`]) every pending write is independently *kept*, *dropped* or
+//! *torn* (each 512-byte sector written, left alone, or filled with garbage), and every
+//! pending length change kept or dropped, in combinations drawn from a seed. It can also lose
+//! power after the `n`th mutating operation ([`SimDisk::power_off_after`]), and fail chosen
+//! operations ([`Fault`]) once or from then on, which is how the error paths of the commit
+//! protocol are tested.
 
-use std::fs::File;
 use std::io;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, MutexGuard};
 
-/// A byte device with durable writes on `sync`.
-pub trait Io: Send + Sync {
-    /// Current length in bytes (what reads see).
-    fn len(&self) -> io::Result<u64>;
-    /// Whether the device holds no byte.
-    fn is_empty(&self) -> io::Result<bool> {
-        Ok(self.len()? == 0)
-    }
-    /// Fills `buf` from `offset`; fails if the range passes the end.
-    fn read_at(&self, offset: u64, buf: &mut [u8]) -> io::Result<()>;
-    /// Writes `data` at `offset`, extending the device if needed.
-    fn write_at(&self, offset: u64, data: &[u8]) -> io::Result<()>;
-    /// Makes every earlier write and length change durable.
-    fn sync(&self) -> io::Result<()>;
-    /// Sets the length, cutting or zero-extending.
-    fn set_len(&self, len: u64) -> io::Result<()>;
-    /// A name for messages.
-    fn name(&self) -> &Path;
-}
-
-/// A real file: `pread`/`pwrite`, `fsync` (`File::sync_all`), `ftruncate`.
-#[derive(Debug)]
-pub struct FileIo {
-    file: File,
-    path: PathBuf,
-}
-
-impl FileIo {
-    /// Opens `path` for reading and writing, and takes an exclusive advisory lock on it
-    /// (`flock` / `LockFileEx`) for as long as the `FileIo` lives, so that a second writer,
-    /// in this process or another, is refused instead of corrupting the file. Readers that
-    /// open the file without a `Container` take no lock and are not protected (see
-    /// `format-spec/container.md` §11.6).
-    pub fn open(path: &Path) -> io::Result<FileIo> {
-        let file = std::fs::OpenOptions::new()
-            .read(true)
-            .write(true)
-            .open(path)?;
-        match file.try_lock() {
-            Ok(()) => {}
-            Err(std::fs::TryLockError::WouldBlock) => {
-                return Err(io::Error::new(
-                    io::ErrorKind::WouldBlock,
-                    "another writer has the file open (it is locked)",
-                ))
-            }
-            Err(std::fs::TryLockError::Error(e)) => return Err(e),
-        }
-        Ok(FileIo {
-            file,
-            path: path.to_path_buf(),
-        })
-    }
-}
-
-impl Io for FileIo {
-    fn len(&self) -> io::Result<u64> {
-        Ok(self.file.metadata()?.len())
-    }
-
-    fn read_at(&self, offset: u64, buf: &mut [u8]) -> io::Result<()> {
-        super::source::read_exact_at(&self.file, buf, offset)
-    }
-
-    fn write_at(&self, offset: u64, data: &[u8]) -> io::Result<()> {
-        #[cfg(unix)]
-        {
-            use std::os::unix::fs::FileExt;
-            self.file.write_all_at(data, offset)
-        }
-        #[cfg(windows)]
-        {
-            use std::os::windows::fs::FileExt;
-            let mut done = 0usize;
-            while done < data.len() {
-                let n = self.file.seek_write(&data[done..], offset + done as u64)?;
-                if n == 0 {
-                    return Err(io::ErrorKind::WriteZero.into());
-                }
-                done += n;
-            }
-            Ok(())
-        }
-    }
-
-    fn sync(&self) -> io::Result<()> {
-        self.file.sync_all()
-    }
-
-    fn set_len(&self, len: u64) -> io::Result<()> {
-        self.file.set_len(len)
-    }
-
-    fn name(&self) -> &Path {
-        &self.path
-    }
-}
+use super::Io;
 
 /// The kinds of mutating operation, for fault injection and counting.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -384,16 +281,6 @@ impl Io for SimDisk {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn a_second_writer_is_refused_while_the_first_holds_the_file() {
-        let f = tempfile::NamedTempFile::new().unwrap();
-        let first = FileIo::open(f.path()).unwrap();
-        let second = FileIo::open(f.path()).unwrap_err();
-        assert_eq!(second.kind(), io::ErrorKind::WouldBlock, "{second}");
-        drop(first);
-        FileIo::open(f.path()).unwrap();
-    }
 
     #[test]
     fn sync_makes_writes_durable() {

@@ -1,0 +1,387 @@
+//! Commit records and the choice of the state a reader opens (`format-spec/container.md` §3).
+//!
+//! Pages 0 and 1 are the two *commit slots*. Each holds a 256-byte record at its start (the
+//! rest of the page is zero) that reaches every structure of one state. A writer publishes a
+//! new state by writing the slot the current state does not use, so a reader takes the newer
+//! of the two valid records.
+//!
+//! ```text
+//!  0        8     10    12     16       24           32     36     40 ...   168 ... 252   256
+//!  | magic  | maj | min | page | txn_id | file_length| flags| rsvd | roots | rsvd  | crc |
+//!  └──────── the envelope: the same in every major version ───────┘              └─ CRC of 0..252
+//! ```
+//!
+//! **The envelope.** Magic, major, minor, page size, txn id and the CRC at 252 keep their
+//! places in every major version, so a reader can tell that a newer writer has superseded the
+//! state it understands: the newest *sealed* record (magic and CRC right) decides, and if its
+//! major is not this reader's, the file is unsupported, whatever the other slot holds.
+
+use zerocopy::byteorder::little_endian::{U16, U32, U64};
+use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
+
+use super::blob::BlobRef;
+use super::tree::TreeRef;
+use super::{
+    crc32, is_zero, page_size_is_valid, Invariant, Violation, FORMAT_MAJOR, FORMAT_MINOR, MAGIC,
+    MAX_PAGE_SIZE, MIN_PAGE_SIZE,
+};
+
+/// Bytes of a commit record at the start of its slot page; the rest of the page is zero.
+pub const COMMIT_RECORD_LEN: usize = 256;
+
+/// The record's CRC covers bytes `0..COMMIT_CRC_SPAN`, and is stored right after them.
+pub const COMMIT_CRC_SPAN: usize = COMMIT_RECORD_LEN - 4;
+
+/// Commit record flag: a transactional writer had the file open when this state was
+/// committed, and may have written past `file_length` since. The next writer to open the file
+/// cuts it back to `file_length` (recovery) before anything else; readers ignore the excess.
+/// A writer that closes cleanly commits a record without the flag.
+pub const COMMIT_RECOVERY_NEEDED: u32 = 1;
+
+/// Commit record flag: a transaction has replaced payloads, so bytes of dead payloads may
+/// remain in payload pages that live payloads still use (a commit never writes a page the
+/// previous state reaches, so it cannot zero them). Without it, those bytes are zero (I-9).
+/// Once set, later commits keep it.
+pub const COMMIT_PAYLOAD_SLACK: u32 = 2;
+
+/// Every commit record flag this reader knows.
+pub const COMMIT_FLAGS_KNOWN: u32 = COMMIT_RECOVERY_NEEDED | COMMIT_PAYLOAD_SLACK;
+
+/// A commit record: the first [`COMMIT_RECORD_LEN`] bytes of page 0 or page 1.
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned,
+)]
+#[repr(C)]
+pub struct CommitRecord {
+    /// [`MAGIC`].
+    pub magic: [u8; 8],
+    /// [`FORMAT_MAJOR`] of the writer.
+    pub major: U16,
+    /// [`FORMAT_MINOR`] of the writer.
+    pub minor: U16,
+    /// Bytes per page.
+    pub page_size: U32,
+    /// Transaction id: the valid record with the higher id is the current state.
+    pub txn_id: U64,
+    /// The file's length in bytes when this record was written.
+    pub file_length: U64,
+    /// [`COMMIT_RECOVERY_NEEDED`], [`COMMIT_PAYLOAD_SLACK`].
+    pub flags: U32,
+    /// Zero.
+    pub reserved0: U32,
+    /// The dataset header blob.
+    pub dataset_header: BlobRef,
+    /// The cluster directory blob.
+    pub cluster_directory: BlobRef,
+    /// The node table.
+    pub node_table: TreeRef,
+    /// The block table.
+    pub block_table: TreeRef,
+    /// The free list; empty in a freshly built file.
+    pub free_list: TreeRef,
+    /// The adjacency table: every cluster's edge lists, back to back in the order the
+    /// cluster directory's runs give.
+    pub adjacency: TreeRef,
+    /// Zero.
+    pub reserved: [u8; 84],
+    /// CRC-32 of bytes `0..COMMIT_CRC_SPAN` of the record.
+    pub crc: U32,
+}
+
+const _: () = assert!(size_of::<CommitRecord>() == COMMIT_RECORD_LEN);
+
+/// The roots of every section of a state: what a commit record points to.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct StateRoots {
+    /// The dataset header blob.
+    pub dataset_header: BlobRef,
+    /// The cluster directory blob.
+    pub cluster_directory: BlobRef,
+    /// The node table.
+    pub node_table: TreeRef,
+    /// The block table.
+    pub block_table: TreeRef,
+    /// The free list.
+    pub free_list: TreeRef,
+    /// The adjacency table.
+    pub adjacency: TreeRef,
+}
+
+impl CommitRecord {
+    /// A sealed record of this format version for `roots`.
+    pub fn new(
+        page_size: u32,
+        txn_id: u64,
+        file_length: u64,
+        flags: u32,
+        roots: &StateRoots,
+    ) -> CommitRecord {
+        let mut r = CommitRecord {
+            magic: MAGIC,
+            major: U16::new(FORMAT_MAJOR),
+            minor: U16::new(FORMAT_MINOR),
+            page_size: U32::new(page_size),
+            txn_id: U64::new(txn_id),
+            file_length: U64::new(file_length),
+            flags: U32::new(flags),
+            reserved0: U32::new(0),
+            dataset_header: roots.dataset_header,
+            cluster_directory: roots.cluster_directory,
+            node_table: roots.node_table,
+            block_table: roots.block_table,
+            free_list: roots.free_list,
+            adjacency: roots.adjacency,
+            reserved: [0; 84],
+            crc: U32::new(0),
+        };
+        r.seal();
+        r
+    }
+
+    /// The same state under another txn id and flags, sealed: what a writer publishes to mark
+    /// or unmark a state without changing it.
+    pub fn copy_as(&self, txn_id: u64, flags: u32) -> CommitRecord {
+        let mut r = *self;
+        r.txn_id = U64::new(txn_id);
+        r.flags = U32::new(flags);
+        r.seal();
+        r
+    }
+
+    /// Fills in the CRC.
+    fn seal(&mut self) {
+        self.crc = U32::new(crc32(&self.as_bytes()[..COMMIT_CRC_SPAN]));
+    }
+
+    /// The roots the record holds.
+    pub fn roots(&self) -> StateRoots {
+        StateRoots {
+            dataset_header: self.dataset_header,
+            cluster_directory: self.cluster_directory,
+            node_table: self.node_table,
+            block_table: self.block_table,
+            free_list: self.free_list,
+            adjacency: self.adjacency,
+        }
+    }
+
+    /// Whether `flag` is set.
+    pub fn has_flag(&self, flag: u32) -> bool {
+        self.flags.get() & flag != 0
+    }
+}
+
+/// What one commit slot holds.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Slot {
+    /// Every byte of the record area is zero.
+    Empty,
+    /// A valid record of this reader's major version.
+    Valid(Box<CommitRecord>),
+    /// A sealed record (magic and CRC right) of another major version: its envelope.
+    Foreign {
+        /// Its major version.
+        major: u16,
+        /// Its minor version.
+        minor: u16,
+        /// Its txn id.
+        txn_id: u64,
+    },
+    /// Not a valid record: why, and whether it carries the magic.
+    Invalid {
+        /// What is wrong (I-1 or, for a file that ends inside the slot, I-3).
+        why: Violation,
+        /// Whether its first bytes are the magic.
+        has_magic: bool,
+    },
+}
+
+impl Slot {
+    /// The slot of a file that ends before the record's end.
+    pub fn missing(slot: u8) -> Slot {
+        Slot::Invalid {
+            why: Violation::new(
+                Invariant::FileLength,
+                format!("commit slot {slot}"),
+                "the file ends inside it",
+            ),
+            has_magic: false,
+        }
+    }
+
+    /// The page size this slot's envelope names, if it is sealed and names an allowed one:
+    /// where slot 1 lies when this is slot 0.
+    pub fn page_size(&self, bytes: &[u8]) -> Option<u32> {
+        match self {
+            Slot::Valid(r) => Some(r.page_size.get()),
+            Slot::Foreign { .. } => envelope_page_size(bytes).filter(|&p| page_size_is_valid(p)),
+            _ => None,
+        }
+    }
+}
+
+fn envelope_page_size(bytes: &[u8]) -> Option<u32> {
+    Some(u32::from_le_bytes(bytes.get(12..16)?.try_into().ok()?))
+}
+
+/// Classifies the [`COMMIT_RECORD_LEN`] bytes of commit slot `slot`, read at byte offset
+/// `offset` (0 for slot 0; the page size for slot 1). A record is valid when its magic and
+/// CRC are right, its major version is this reader's, its fields are in range, and its page
+/// size is the offset it was read at (slot 1 only: a slot 1 that disagrees with slot 0 on
+/// the page size is invalid, not a second geometry).
+pub fn classify(bytes: &[u8], slot: u8, offset: u64) -> Slot {
+    let Some(record) = bytes.get(..COMMIT_RECORD_LEN) else {
+        return Slot::missing(slot);
+    };
+    if is_zero(record) {
+        return Slot::Empty;
+    }
+    let has_magic = record[..8] == MAGIC;
+    let invalid = |detail: String| Slot::Invalid {
+        why: Violation::new(
+            Invariant::CommitRecord,
+            format!("commit slot {slot}"),
+            detail,
+        ),
+        has_magic,
+    };
+    if !has_magic {
+        return invalid("bad magic".into());
+    }
+    let Ok(r) = CommitRecord::read_from_bytes(record) else {
+        return invalid("shorter than a commit record".into());
+    };
+    let crc = crc32(&record[..COMMIT_CRC_SPAN]);
+    if crc != r.crc.get() {
+        return invalid(format!(
+            "CRC {:#010x} stored, {crc:#010x} computed",
+            r.crc.get()
+        ));
+    }
+    if r.major.get() != FORMAT_MAJOR {
+        return Slot::Foreign {
+            major: r.major.get(),
+            minor: r.minor.get(),
+            txn_id: r.txn_id.get(),
+        };
+    }
+    let p = r.page_size.get();
+    if !page_size_is_valid(p) {
+        return invalid(format!("page size {p}"));
+    }
+    if slot == 1 && u64::from(p) != offset {
+        return invalid(format!(
+            "page size {p}, but slot 1 lies at byte {offset}: both slots name one page size"
+        ));
+    }
+    let len = r.file_length.get();
+    if len % u64::from(p) != 0 || len < 2 * u64::from(p) {
+        return invalid(format!("file length {len} is not two or more whole pages"));
+    }
+    if r.txn_id.get() == 0 {
+        return invalid("transaction id 0".into());
+    }
+    let newer_minor = r.minor.get() > FORMAT_MINOR;
+    if !newer_minor
+        && (r.flags.get() & !COMMIT_FLAGS_KNOWN != 0
+            || r.reserved0.get() != 0
+            || !is_zero(&r.reserved))
+    {
+        return invalid("reserved fields are not zero".into());
+    }
+    Slot::Valid(Box::new(r))
+}
+
+/// Where to look for slot 1 when slot 0 names no page size: one page in, for every allowed
+/// page size, smallest first. The first sealed record whose page size is its offset is slot 1.
+pub fn candidate_page_sizes() -> impl Iterator<Item = u32> {
+    (MIN_PAGE_SIZE.trailing_zeros()..=MAX_PAGE_SIZE.trailing_zeros()).map(|s| 1u32 << s)
+}
+
+/// Why no state can be opened from a file's slots.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum NoState {
+    /// Neither slot carries the magic: not an fmrh container at all.
+    NotAContainer,
+    /// The newest sealed record is of another major version.
+    Unsupported {
+        /// Its major version.
+        major: u16,
+        /// Its minor version.
+        minor: u16,
+    },
+    /// No valid record: the first slot's reason.
+    Corrupt(Violation),
+}
+
+/// The state a reader opens (§3): the valid record with the higher txn id (slot 0 on a tie).
+/// If a sealed record of another major version has a higher txn id than every valid record,
+/// a newer writer has superseded them and the file is [`NoState::Unsupported`].
+pub fn choose(slots: &[Slot; 2]) -> Result<(u8, CommitRecord), NoState> {
+    let mut best: Option<(u8, &CommitRecord)> = None;
+    for (i, s) in (0u8..).zip(slots) {
+        if let Slot::Valid(r) = s {
+            if best.is_none_or(|(_, b)| r.txn_id.get() > b.txn_id.get()) {
+                best = Some((i, r));
+            }
+        }
+    }
+    let newest_foreign = slots
+        .iter()
+        .filter_map(|s| match *s {
+            Slot::Foreign {
+                major,
+                minor,
+                txn_id,
+            } => Some((txn_id, major, minor)),
+            _ => None,
+        })
+        .max();
+    if let Some((txn, major, minor)) = newest_foreign {
+        if best.is_none_or(|(_, b)| txn >= b.txn_id.get()) {
+            return Err(NoState::Unsupported { major, minor });
+        }
+    }
+    if let Some((i, r)) = best {
+        return Ok((i, *r));
+    }
+    let magic = |s: &Slot| match s {
+        Slot::Invalid { has_magic, .. } => *has_magic,
+        Slot::Empty => false,
+        _ => true,
+    };
+    if !slots.iter().any(magic) {
+        return Err(NoState::NotAContainer);
+    }
+    Err(NoState::Corrupt(
+        slots
+            .iter()
+            .find_map(|s| match s {
+                Slot::Invalid { why, .. } => Some(why.clone()),
+                _ => None,
+            })
+            .unwrap_or_else(|| {
+                Violation::new(
+                    Invariant::CommitRecord,
+                    "commit slots",
+                    "neither slot holds a valid record",
+                )
+            }),
+    ))
+}
+
+/// Checks a chosen record's `file_length` against the file's real length (I-3). A file
+/// shorter than its newest valid record says is corrupt: the other slot is *not* tried, since
+/// its pages may have been reused by the newer state, and a silent fall-back would lose
+/// committed data. A longer file is accepted; an interrupted transaction leaves such excess.
+pub fn check_length(record: &CommitRecord, actual: u64) -> Result<(), Violation> {
+    let committed = record.file_length.get();
+    if actual < committed {
+        return Err(Violation::new(
+            Invariant::FileLength,
+            "file",
+            format!("{actual} bytes; the commit record says {committed} (truncated)"),
+        ));
+    }
+    Ok(())
+}

@@ -1,0 +1,295 @@
+//! A store seen as terrain in the world frame: boxes, the region a view covers, scene
+//! blocks, and [`Terrain::scene`], which hands the selection to the chosen mode (`uniform`,
+//! `view_dependent`) and finishes its answer (sort, cull, neighbour levels).
+//!
+//! **Region.** An explicit window (inclusive samples), or the frustum's footprint: the
+//! quadrants whose box, from the data's lowest to highest height, may meet the frustum. In
+//! the second case, blocks whose own box misses the frustum (exact separating-axis test) are
+//! dropped at the end: they hold nothing visible. The scene then covers every visible point
+//! of the terrain exactly once.
+//!
+//! The selection asks the store for key ranges and node records; it never parses a page.
+
+use std::time::Instant;
+
+use super::camera::{Aabb, Camera, View, WorldFrame};
+use super::ranges::{self, Quadrant};
+use super::result::{Mode, Scene, SceneBlock, SceneOptions, SceneStats};
+use super::search::Search;
+use super::stitch;
+use crate::error::{Error, Result};
+use crate::format::StoredNode;
+use crate::model::{Domain, SampleRect};
+use crate::store::{Source, Store};
+
+/// A store seen as terrain in the world frame: what every scene over it shares.
+pub struct Terrain<'s, S: Source> {
+    pub(super) store: &'s Store<S>,
+    domain: Domain,
+    frame: WorldFrame,
+    root: StoredNode,
+    thresholds: Vec<f64>,
+}
+
+impl<'s, S: Source> Terrain<'s, S> {
+    /// Reads what scenes need once: the root's height range and the cluster thresholds.
+    pub fn new(store: &'s Store<S>) -> Result<Self> {
+        let root = store.node(0)?;
+        Ok(Terrain {
+            store,
+            domain: *store.domain(),
+            frame: WorldFrame::new(store.header().metadata.spacing_m),
+            root,
+            thresholds: store.clusters().iter().map(|c| c.threshold).collect(),
+        })
+    }
+
+    /// The store.
+    pub fn store(&self) -> &'s Store<S> {
+        self.store
+    }
+
+    /// The root node.
+    pub fn root(&self) -> StoredNode {
+        self.root
+    }
+
+    /// The cluster thresholds, ascending.
+    pub fn thresholds(&self) -> &[f64] {
+        &self.thresholds
+    }
+
+    /// The world frame.
+    pub fn frame(&self) -> WorldFrame {
+        self.frame
+    }
+
+    /// The geometry.
+    pub fn domain(&self) -> &Domain {
+        &self.domain
+    }
+
+    /// The box of the samples `rect` between heights `zmin` and `zmax`.
+    pub fn rect_box(&self, rect: &SampleRect, zmin: f32, zmax: f32) -> Aabb {
+        Aabb {
+            min: self
+                .frame
+                .point(rect.col0 as f64, rect.row0 as f64, f64::from(zmin)),
+            max: self
+                .frame
+                .point(rect.col1 as f64, rect.row1 as f64, f64::from(zmax)),
+        }
+    }
+
+    /// The box of a node record: its footprint clipped to the data, by its height range.
+    pub fn node_box(&self, n: &StoredNode) -> Aabb {
+        let rect = Quadrant {
+            level: n.level,
+            x: n.x,
+            y: n.y,
+        }
+        .samples(&self.domain);
+        self.rect_box(&rect, n.min_height, n.max_height)
+    }
+
+    /// The box of quadrant `q`, from the terrain's lowest to its highest height.
+    pub(super) fn quadrant_box(&self, q: &Quadrant) -> Aabb {
+        self.rect_box(
+            &q.samples(&self.domain),
+            self.root.min_height,
+            self.root.max_height,
+        )
+    }
+
+    /// The region a scene covers, as maximal aligned quadrants sorted by key, and the
+    /// samples it spans: `window` itself, or the quadrants the frustum may see.
+    pub fn region(
+        &self,
+        view: &View,
+        window: Option<SampleRect>,
+    ) -> Result<(Vec<Quadrant>, Option<SampleRect>)> {
+        let d = self.domain;
+        let data = d.data_rect();
+        let quadrants = match window {
+            Some(w) => {
+                if w.col0 > w.col1 || w.row0 > w.row1 || w.intersect(&data) != Some(w) {
+                    return Err(Error::InvalidArgument(format!(
+                        "window {},{},{},{} is not inside the data 0,0,{},{}",
+                        w.col0, w.row0, w.col1, w.row1, data.col1, data.row1
+                    )));
+                }
+                let blocks = ranges::window_blocks(&d, &w);
+                ranges::decompose(&d, ranges::window_classifier(&d, blocks))
+            }
+            None => ranges::decompose(&d, |q| view.classify(&self.quadrant_box(q))),
+        };
+        let span = window.or_else(|| {
+            quadrants
+                .iter()
+                .map(|q| q.samples(&d))
+                .reduce(|a, b| SampleRect {
+                    col0: a.col0.min(b.col0),
+                    row0: a.row0.min(b.row0),
+                    col1: a.col1.max(b.col1),
+                    row1: a.row1.max(b.row1),
+                })
+        });
+        Ok((quadrants, span))
+    }
+
+    /// The scene block of node `index`, seen from `view`.
+    pub fn node_block(&self, view: &View, index: u32, n: &StoredNode) -> SceneBlock {
+        self.node_block_at(view, index, n, self.node_box(n).distance(view.eye))
+    }
+
+    /// The scene block of node `index` at `distance` from the eye.
+    pub(super) fn node_block_at(
+        &self,
+        view: &View,
+        index: u32,
+        n: &StoredNode,
+        distance: f64,
+    ) -> SceneBlock {
+        let rect = Quadrant {
+            level: n.level,
+            x: n.x,
+            y: n.y,
+        }
+        .samples(&self.domain);
+        SceneBlock {
+            node: Some(index),
+            level: n.level,
+            x: n.x,
+            y: n.y,
+            key: n.key.0,
+            col0: rect.col0,
+            row0: rect.row0,
+            col1: rect.col1,
+            row1: rect.row1,
+            error: n.monotone_error,
+            screen_error: view.screen_error(n.monotone_error, distance),
+            distance,
+            min_height: n.min_height,
+            max_height: n.max_height,
+            payload: n.payload,
+            neighbours: [None; 4],
+        }
+    }
+
+    /// Physical block `(x, y)`, exact, its heights bounded by `zmin..=zmax`.
+    pub fn physical_block(
+        &self,
+        view: &View,
+        x: u32,
+        y: u32,
+        zmin: f32,
+        zmax: f32,
+    ) -> Result<SceneBlock> {
+        let d = self.domain;
+        let stored = self.store.stored_block(x, y)?;
+        let finest = d.finest_level();
+        let rect = Quadrant {
+            level: finest,
+            x,
+            y,
+        }
+        .samples(&d);
+        Ok(SceneBlock {
+            node: None,
+            level: finest,
+            x,
+            y,
+            key: ranges::block_key(&d, x, y),
+            col0: rect.col0,
+            row0: rect.row0,
+            col1: rect.col1,
+            row1: rect.row1,
+            error: 0.0,
+            screen_error: 0.0,
+            distance: self.rect_box(&rect, zmin, zmax).distance(view.eye),
+            min_height: zmin,
+            max_height: zmax,
+            payload: stored.payload,
+            neighbours: [None; 4],
+        })
+    }
+
+    /// The box of a scene block: its samples by its height range.
+    pub fn block_box(&self, b: &SceneBlock) -> Aabb {
+        self.rect_box(&b.rect(), b.min_height, b.max_height)
+    }
+
+    /// The root's height range: bounds every height of the terrain.
+    pub fn height_range(&self) -> (f32, f32) {
+        (self.root.min_height, self.root.max_height)
+    }
+
+    /// Sorts `blocks` by key, drops repeats and (for a frustum region) blocks whose own box
+    /// misses the frustum, and fills in neighbour levels.
+    pub fn finish(&self, view: &View, window: Option<SampleRect>, blocks: &mut Vec<SceneBlock>) {
+        blocks.sort_unstable_by_key(|b| (b.key, b.level));
+        blocks.dedup_by_key(|b| (b.key, b.level));
+        if window.is_none() {
+            blocks.retain(|b| view.intersects(&self.block_box(b)));
+        }
+        stitch::set_neighbours(&self.domain, blocks);
+    }
+
+    /// Selects the blocks `camera` needs at tolerance `options.tau`.
+    pub fn scene(&self, camera: &Camera, options: &SceneOptions) -> Result<Scene> {
+        let started = Instant::now();
+        let view = camera.view()?;
+        if !options.tau.is_finite() || options.tau < 0.0 {
+            return Err(Error::InvalidArgument(format!(
+                "tolerance {} px: must be finite and >= 0",
+                options.tau
+            )));
+        }
+        let d = self.domain;
+        let (quadrants, window) = self.region(&view, options.window)?;
+        let mut search = Search {
+            terrain: self,
+            view: &view,
+            tau: options.tau,
+            out: Vec::new(),
+            stats: SceneStats {
+                quadrants: quadrants.len() as u64,
+                ..SceneStats::default()
+            },
+        };
+        match options.mode {
+            Mode::Uniform => {
+                let p_min = match options.window {
+                    Some(w) => self
+                        .rect_box(&w, self.root.min_height, self.root.max_height)
+                        .distance(view.eye),
+                    None => quadrants
+                        .iter()
+                        .map(|q| self.quadrant_box(q).distance(view.eye))
+                        .fold(f64::INFINITY, f64::min),
+                };
+                search.uniform(&quadrants, p_min, options.gap)?;
+            }
+            Mode::View => search.view_dependent(&quadrants, options.gap)?,
+        }
+        let Search {
+            mut out, mut stats, ..
+        } = search;
+        self.finish(&view, options.window, &mut out);
+        let b = u64::from(d.block_size());
+        stats.blocks = out.len() as u64;
+        stats.samples = stats.blocks * b * b;
+        stats.triangles = stats.blocks * 2 * (b - 1) * (b - 1);
+        stats.bytes = out.iter().map(|b| u64::from(b.payload.len)).sum();
+        stats.max_error = out.iter().map(|b| b.error).fold(0.0, f64::max);
+        stats.max_screen_error = out.iter().map(|b| b.screen_error).fold(0.0, f64::max);
+        stats.schedule_ns = started.elapsed().as_nanos() as u64;
+        Ok(Scene {
+            mode: options.mode,
+            tau: options.tau,
+            window,
+            blocks: out,
+            stats,
+        })
+    }
+}

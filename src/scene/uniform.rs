@@ -1,0 +1,45 @@
+//! **Uniform mode** (seed 000 §5.1). The tolerance `τ` becomes one static bound,
+//! `ε = τ / λ · P_min`, with `P_min` the distance from the eye to the nearest point the region
+//! can hold (its box, from the data's lowest to highest height). The answer is the cluster
+//! with the largest threshold `δᵢ <= ε`, never a coarser one, scanned over the region's key
+//! ranges. When even the finest cluster is above `ε` (thresholds given without 0), the
+//! physical blocks of the region are returned: they are exact.
+
+use super::ranges::{self, KeyRange, Quadrant};
+use super::search::Search;
+use crate::error::Result;
+use crate::store::Source;
+
+impl<S: Source> Search<'_, '_, S> {
+    /// Fills the scene of `quadrants` in uniform mode; `p_min` is the nearest distance.
+    pub fn uniform(&mut self, quadrants: &[Quadrant], p_min: f64, gap: u64) -> Result<()> {
+        let d = *self.terrain.domain();
+        let allowed = self.view.allowed_error(self.tau, p_min);
+        self.stats.p_min = Some(p_min);
+        self.stats.allowed_error = Some(allowed);
+        // The largest threshold within the bound: the thresholds ascend.
+        let cluster = self
+            .terrain
+            .thresholds()
+            .partition_point(|&t| t <= allowed)
+            .checked_sub(1);
+        self.stats.cluster = cluster;
+        self.stats.threshold = Some(cluster.map_or(0.0, |c| self.terrain.thresholds()[c]));
+        let keys: Vec<KeyRange> = quadrants.iter().map(|q| q.keys(&d)).collect();
+        let (zmin, zmax) = self.terrain.height_range();
+        for run in ranges::merge(&keys, gap) {
+            match cluster {
+                Some(c) => self.scan(c, &run, |s, i, n| {
+                    s.emit(i, &n);
+                    Ok(())
+                })?,
+                None => {
+                    for q in quadrants.iter().filter(|q| run.meets(&q.keys(&d))) {
+                        self.emit_physical(q, &run, zmin, zmax)?;
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}

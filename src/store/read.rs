@@ -1,0 +1,527 @@
+//! Reading an open store: table records, payloads checked against their CRC, and range scans
+//! over the cluster indexes.
+//!
+//! Everything here reads pages through [`Pages`] and decodes them with [`crate::format`];
+//! what it hands out are plain values ([`StoredNode`], [`StoredBlock`], [`ScanEntry`]) and
+//! payload views that borrow from the source when it can lend.
+
+use std::borrow::Cow;
+use std::ops::{Range, RangeInclusive};
+
+use serde::Serialize;
+use zerocopy::FromBytes;
+
+use super::btree::{self, PageSet, Pages, Seek};
+use super::source::{self, Source};
+use super::Store;
+use crate::curve::HilbertKey;
+use crate::error::{Error, Result};
+use crate::format::payload::{self, BlockView, GridView};
+use crate::format::tables::{self, state_trees};
+use crate::format::{
+    blob, AdjacencyEntry, BlockRecord, ClusterInfo, FreeEntry, FreePage, IndexEntry, Invariant,
+    NodeRecord, PayloadRef, ScanEntry, StoredBlock, StoredNode, TreeRef, TreeSpec, Violation,
+};
+use crate::model::SampleRect;
+
+/// Where a file's bytes go, section by section.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize)]
+pub struct Layout {
+    /// Bytes per page.
+    pub page_size: u32,
+    /// Bytes in the committed file.
+    pub file_length: u64,
+    /// The two commit slots.
+    pub commit_pages: u64,
+    /// Dataset header pages.
+    pub dataset_header_pages: u64,
+    /// Cluster directory pages.
+    pub cluster_directory_pages: u64,
+    /// Node table pages.
+    pub node_table_pages: u64,
+    /// Block table pages.
+    pub block_table_pages: u64,
+    /// Free list pages.
+    pub free_list_pages: u64,
+    /// Free pages (the free list's entries): space transactions left for reuse.
+    pub free_pages: u64,
+    /// Adjacency table pages.
+    pub adjacency_pages: u64,
+    /// Index pages of each cluster.
+    pub cluster_index_pages: Vec<u64>,
+    /// Payload bytes of the physical blocks.
+    pub block_bytes: u64,
+    /// Payload bytes of the coarse grids.
+    pub grid_bytes: u64,
+}
+
+impl<S: Source> Store<S> {
+    /// The corruption error of this store's file.
+    pub(crate) fn corrupt(&self, v: Violation) -> Error {
+        v.in_file(self.src.name())
+    }
+
+    /// Page access for lookups: checks again only when the source is not stable.
+    pub(crate) fn pages(&self) -> Pages<'_, S> {
+        Pages {
+            src: &self.src,
+            page_size: self.page_size,
+            page_count: self.page_count,
+            check: !self.src.stable(),
+        }
+    }
+
+    /// Pages and bytes of each section (walks every table once).
+    pub fn layout(&self) -> Result<Layout> {
+        let pages = self.pages();
+        let mut table_pages = Vec::new();
+        for (spec, tree) in state_trees(&self.commit.roots(), &self.clusters) {
+            let mut seen = PageSet::new(self.page_count);
+            btree::walk(&pages, &tree, spec, &mut seen, &mut |_, _| Ok(()))?;
+            table_pages.push((spec, seen.len()));
+        }
+        let sum = |want: TreeSpec| -> u64 {
+            table_pages
+                .iter()
+                .filter(|(s, _)| *s == want)
+                .map(|(_, n)| n)
+                .sum()
+        };
+        let cluster_index_pages = table_pages
+            .iter()
+            .filter(|(s, _)| *s == tables::INDEX)
+            .map(|(_, n)| *n)
+            .collect();
+        let finest = self.domain().finest_level();
+        let grid_bytes = self
+            .node_records()?
+            .iter()
+            .filter(|n| n.level < finest)
+            .map(|n| u64::from(n.payload_len.get()))
+            .sum();
+        let block_bytes = self
+            .block_records()?
+            .iter()
+            .map(|b| u64::from(b.payload_len.get()))
+            .sum();
+        let blob = |b: &blob::BlobRef| blob::blob_pages(b.length.get(), self.page_size);
+        Ok(Layout {
+            page_size: self.page_size,
+            file_length: self.commit.file_length.get(),
+            commit_pages: 2,
+            dataset_header_pages: blob(&self.commit.dataset_header),
+            cluster_directory_pages: blob(&self.commit.cluster_directory),
+            node_table_pages: sum(tables::NODES),
+            block_table_pages: sum(tables::BLOCKS),
+            free_list_pages: sum(tables::FREE),
+            free_pages: self.commit.free_list.records.get(),
+            adjacency_pages: sum(tables::ADJACENCY),
+            cluster_index_pages,
+            block_bytes,
+            grid_bytes,
+        })
+    }
+
+    fn cluster(&self, cluster: usize) -> Result<&ClusterInfo> {
+        self.clusters.get(cluster).ok_or_else(|| {
+            Error::InvalidArgument(format!(
+                "cluster {cluster}: the store has {} (0..{})",
+                self.clusters.len(),
+                self.clusters.len()
+            ))
+        })
+    }
+
+    fn record<R: FromBytes>(&self, tree: &TreeRef, spec: TreeSpec, ordinal: u64) -> Result<R> {
+        btree::get_ordinal(&self.pages(), tree, spec, ordinal)?.ok_or_else(|| {
+            Error::InvalidArgument(format!(
+                "{} has {} records; no record {ordinal}",
+                spec.name,
+                tree.records.get()
+            ))
+        })
+    }
+
+    /// Every record of `tree`, in order.
+    pub(crate) fn all_records<R: FromBytes>(
+        &self,
+        tree: &TreeRef,
+        spec: TreeSpec,
+    ) -> Result<Vec<R>> {
+        let pages = self.pages();
+        let mut c = btree::seek(&pages, tree, spec, Seek::Ordinal(0))?;
+        // Opening walked the tree: it holds exactly this many records, all inside the file.
+        let mut out = Vec::with_capacity(usize::try_from(tree.records.get()).unwrap_or(0));
+        while let Some(r) = c.next_record(&pages)? {
+            out.push(r);
+        }
+        Ok(out)
+    }
+
+    /// The record of node `index`.
+    pub(crate) fn node_record(&self, index: u32) -> Result<NodeRecord> {
+        self.record(&self.commit.node_table, tables::NODES, u64::from(index))
+    }
+
+    /// Node `index` of the node table (Hilbert pre-order; 0 is the root).
+    pub fn node(&self, index: u32) -> Result<StoredNode> {
+        self.node_record(index).map(|r| r.decode())
+    }
+
+    /// Every node record, in Hilbert pre-order.
+    pub(crate) fn node_records(&self) -> Result<Vec<NodeRecord>> {
+        self.all_records(&self.commit.node_table, tables::NODES)
+    }
+
+    /// Every node, in Hilbert pre-order.
+    pub fn nodes(&self) -> Result<Vec<StoredNode>> {
+        Ok(self
+            .node_records()?
+            .iter()
+            .map(NodeRecord::decode)
+            .collect())
+    }
+
+    /// The node a scan entry names, checked to be that node (I-13).
+    pub fn node_of(&self, cluster: usize, entry: &ScanEntry) -> Result<StoredNode> {
+        let n = self.node(entry.node)?;
+        if n.key != entry.key || n.level != entry.level {
+            return Err(self.corrupt(Violation::new(
+                Invariant::ClusterIndex,
+                format!("cluster {cluster} index, key {}", entry.key.0),
+                format!("names node {}, which is not that node", entry.node),
+            )));
+        }
+        Ok(n)
+    }
+
+    /// The children of node `index` (`node`), in curve order with their indexes, checked to
+    /// be its children in the table's pre-order (I-10).
+    pub fn children(&self, index: u32, node: &StoredNode) -> Result<Vec<(u32, StoredNode)>> {
+        let end = index.saturating_add(node.subtree_len);
+        let mut out = Vec::with_capacity(4);
+        let mut c = index.saturating_add(1);
+        while c < end {
+            let child = self.node(c)?;
+            if child.parent != Some(index)
+                || child.level != node.level + 1
+                || child.subtree_len == 0
+            {
+                return Err(self.corrupt(Violation::new(
+                    Invariant::NodeTable,
+                    format!("node {c}"),
+                    format!("not a child of node {index} in pre-order"),
+                )));
+            }
+            let next = c.saturating_add(child.subtree_len);
+            out.push((c, child));
+            c = next;
+        }
+        Ok(out)
+    }
+
+    fn block_ordinal(&self, x: u32, y: u32) -> Result<u64> {
+        let d = self.domain();
+        let (cols, rows) = d.nodes_across(d.finest_level());
+        if x >= cols || y >= rows {
+            return Err(Error::InvalidArgument(format!(
+                "block ({x}, {y}) is outside the {cols} x {rows} blocks"
+            )));
+        }
+        Ok(u64::from(y) * u64::from(cols) + u64::from(x))
+    }
+
+    /// The block table's description of physical block `(x, y)` (finest-level column and
+    /// row).
+    pub fn stored_block(&self, x: u32, y: u32) -> Result<StoredBlock> {
+        let ordinal = self.block_ordinal(x, y)?;
+        let r: BlockRecord = self.record(&self.commit.block_table, tables::BLOCKS, ordinal)?;
+        Ok(r.decode())
+    }
+
+    /// Every block record, row-major.
+    pub(crate) fn block_records(&self) -> Result<Vec<BlockRecord>> {
+        self.all_records(&self.commit.block_table, tables::BLOCKS)
+    }
+
+    /// The free pages (none in a freshly built file).
+    pub fn free_pages(&self) -> Result<Vec<FreePage>> {
+        let records: Vec<FreeEntry> = self.all_records(&self.commit.free_list, tables::FREE)?;
+        Ok(records.iter().map(FreeEntry::decode).collect())
+    }
+
+    /// Reads a payload and checks its CRC (I-9).
+    pub fn payload(&self, at: PayloadRef) -> Result<Cow<'_, [u8]>> {
+        let start = 2 * u64::from(self.page_size);
+        let end = at.offset.checked_add(u64::from(at.len));
+        let where_ = || format!("payload at byte {}", at.offset);
+        if at.offset < start || end.is_none_or(|e| e > self.commit.file_length.get()) {
+            return Err(self.corrupt(Violation::new(
+                Invariant::Payload,
+                where_(),
+                format!("{} bytes do not lie within the file's pages", at.len),
+            )));
+        }
+        let len = usize::try_from(at.len).map_err(|_| Error::TooLarge {
+            what: where_(),
+            detail: format!("{} bytes do not fit in memory", at.len),
+        })?;
+        let bytes = source::read(&self.src, at.offset, len)?;
+        let actual = crate::format::crc32(&bytes);
+        if actual != at.crc {
+            return Err(self.corrupt(Violation::new(
+                Invariant::Payload,
+                where_(),
+                format!("CRC {:#010x} recorded, {actual:#010x} computed", at.crc),
+            )));
+        }
+        Ok(bytes)
+    }
+
+    /// Physical block `(x, y)`: its full-resolution samples, checked against their CRC and
+    /// read zero-copy from a mapping.
+    pub fn block(&self, x: u32, y: u32) -> Result<Block<'_>> {
+        let info = self.stored_block(x, y)?;
+        let bytes = self.payload(info.payload)?;
+        let d = self.domain();
+        let at = || format!("block ({x}, {y})");
+        let rect = d
+            .footprint(d.finest_level(), x, y)
+            .intersect(&d.data_rect())
+            .ok_or_else(|| {
+                self.corrupt(Violation::new(
+                    Invariant::BlockTable,
+                    at(),
+                    "outside the data",
+                ))
+            })?;
+        let (w, h) = (info.width, info.height);
+        if u64::from(w) != rect.col1 - rect.col0 + 1 || u64::from(h) != rect.row1 - rect.row0 + 1 {
+            return Err(self.corrupt(Violation::new(
+                Invariant::BlockTable,
+                at(),
+                format!("{w} x {h} samples; its footprint within the data is {rect:?}"),
+            )));
+        }
+        if BlockView::new(&bytes, w, h, info.void_count).is_none() {
+            return Err(self.corrupt(Violation::new(
+                Invariant::Payload,
+                at(),
+                format!("{} payload bytes for {w} x {h} samples", bytes.len()),
+            )));
+        }
+        Ok(Block { rect, info, bytes })
+    }
+
+    /// The coarse grid of `node` (a node above the finest level), checked against its CRC.
+    pub fn grid(&self, node: &StoredNode) -> Result<Grid<'_>> {
+        let d = self.domain();
+        if node.level >= d.finest_level() {
+            return Err(Error::InvalidArgument(
+                "finest-level nodes have physical blocks, not grids".into(),
+            ));
+        }
+        let bytes = self.payload(node.payload)?;
+        let size = d.block_size();
+        if !d.exists(node.level, node.x, node.y) {
+            return Err(self.corrupt(Violation::new(
+                Invariant::NodeTable,
+                format!("node at level {} ({}, {})", node.level, node.x, node.y),
+                "not a node of the domain",
+            )));
+        }
+        let dims = payload::grid_dims(d, node.level, node.x, node.y);
+        let has_voids = node.grid_has_voids;
+        if GridView::new(&bytes, size, dims, has_voids).is_none() {
+            return Err(self.corrupt(Violation::new(
+                Invariant::Payload,
+                format!("grid at byte {}", node.payload.offset),
+                format!("{} bytes for a {size} x {size} grid", bytes.len()),
+            )));
+        }
+        Ok(Grid {
+            size,
+            dims,
+            has_voids,
+            bytes,
+        })
+    }
+
+    /// The nodes of `cluster` whose footprint meets the Hilbert range `range` (keys of
+    /// finest-level cells), in Hilbert order: one seek, then a contiguous scan.
+    pub fn scan_hilbert(
+        &self,
+        cluster: usize,
+        range: RangeInclusive<u64>,
+    ) -> Result<HilbertScan<'_, S>> {
+        let c = *self.cluster(cluster)?;
+        let pages = self.pages();
+        let cursor = btree::seek(&pages, c.index(), tables::INDEX, Seek::Key(*range.start()))?;
+        Ok(HilbertScan {
+            pages,
+            cursor,
+            lo: *range.start(),
+            hi: *range.end(),
+            finest: self.domain().finest_level(),
+            done: range.is_empty(),
+        })
+    }
+
+    /// The nodes of `cluster` at ordinal positions `range` (the paper's "codes a to b").
+    pub fn scan_codes(&self, cluster: usize, range: Range<u64>) -> Result<CodeScan<'_, S>> {
+        let c = *self.cluster(cluster)?;
+        let pages = self.pages();
+        let cursor = btree::seek(&pages, c.index(), tables::INDEX, Seek::Ordinal(range.start))?;
+        Ok(CodeScan {
+            pages,
+            cursor,
+            left: range.end.saturating_sub(range.start),
+        })
+    }
+
+    /// The adjacency list of `cluster` along `edge` (0 north, 1 east, 2 south, 3 west): the
+    /// cut's nodes touching that edge of the data, in order along it.
+    pub fn adjacency(&self, cluster: usize, edge: usize) -> Result<Vec<u32>> {
+        let c = *self.cluster(cluster)?;
+        let range = c.adjacency.get(edge).ok_or_else(|| {
+            Error::InvalidArgument(format!("edge {edge}: edges are 0..4 (N, E, S, W)"))
+        })?;
+        let pages = self.pages();
+        let tree = &self.commit.adjacency;
+        let mut cursor = btree::seek(
+            &pages,
+            tree,
+            tables::ADJACENCY,
+            Seek::Ordinal(range.first.get()),
+        )?;
+        let mut out = Vec::new();
+        for _ in 0..range.count.get() {
+            match cursor.next_record::<S, AdjacencyEntry>(&pages)? {
+                Some(e) => out.push(e.node.get()),
+                None => break,
+            }
+        }
+        Ok(out)
+    }
+}
+
+/// A physical block read from a store.
+#[derive(Clone, Debug)]
+pub struct Block<'a> {
+    /// The samples it holds: its footprint clipped to the data.
+    pub rect: SampleRect,
+    /// Its entry in the block table.
+    pub info: StoredBlock,
+    bytes: Cow<'a, [u8]>,
+}
+
+impl Block<'_> {
+    /// The samples and stand-ins, in place.
+    pub fn view(&self) -> BlockView<'_> {
+        let b = &self.info;
+        BlockView::new(&self.bytes, b.width, b.height, b.void_count)
+            .unwrap_or_else(|| unreachable!("the length was checked when the block was read"))
+    }
+
+    /// The payload bytes.
+    pub fn bytes(&self) -> &[u8] {
+        &self.bytes
+    }
+}
+
+/// A coarse grid read from a store.
+#[derive(Clone, Debug)]
+pub struct Grid<'a> {
+    size: u32,
+    dims: (u32, u32),
+    has_voids: bool,
+    bytes: Cow<'a, [u8]>,
+}
+
+impl Grid<'_> {
+    /// The heights and void flags, in place.
+    pub fn view(&self) -> GridView<'_> {
+        GridView::new(&self.bytes, self.size, self.dims, self.has_voids)
+            .unwrap_or_else(|| unreachable!("the length was checked when the grid was read"))
+    }
+
+    /// The payload bytes.
+    pub fn bytes(&self) -> &[u8] {
+        &self.bytes
+    }
+}
+
+/// The iterator of [`Store::scan_hilbert`].
+pub struct HilbertScan<'a, S: Source> {
+    pages: Pages<'a, S>,
+    cursor: btree::Cursor<'a>,
+    lo: u64,
+    hi: u64,
+    finest: u8,
+    done: bool,
+}
+
+impl<S: Source> HilbertScan<'_, S> {
+    /// Index pages read so far, the seek's descent included.
+    pub fn pages_read(&self) -> u32 {
+        self.cursor.pages_read
+    }
+}
+
+impl<S: Source> Iterator for HilbertScan<'_, S> {
+    type Item = Result<ScanEntry>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        while !self.done {
+            let e: IndexEntry = match self.cursor.next_record(&self.pages) {
+                Ok(Some(e)) => e,
+                Ok(None) => break,
+                Err(err) => {
+                    self.done = true;
+                    return Some(Err(err));
+                }
+            };
+            let key = e.key.get();
+            if key > self.hi {
+                break;
+            }
+            let level = e.level.min(self.finest);
+            let span = HilbertKey::span(self.finest, level);
+            if key.saturating_add(span - 1) < self.lo {
+                continue; // the entry the seek landed on ends before the range
+            }
+            return Some(Ok(e.decode()));
+        }
+        self.done = true;
+        None
+    }
+}
+
+/// The iterator of [`Store::scan_codes`].
+pub struct CodeScan<'a, S: Source> {
+    pages: Pages<'a, S>,
+    cursor: btree::Cursor<'a>,
+    left: u64,
+}
+
+impl<S: Source> Iterator for CodeScan<'_, S> {
+    type Item = Result<ScanEntry>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        if self.left == 0 {
+            return None;
+        }
+        self.left -= 1;
+        match self.cursor.next_record::<S, IndexEntry>(&self.pages) {
+            Ok(Some(e)) => Some(Ok(e.decode())),
+            Ok(None) => {
+                self.left = 0;
+                None
+            }
+            Err(err) => {
+                self.left = 0;
+                Some(Err(err))
+            }
+        }
+    }
+}

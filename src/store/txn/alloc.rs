@@ -1,0 +1,121 @@
+//! The page allocator of one commit (format §11.3): first-fit runs of free pages that no
+//! snapshot and no durable state can reach, else pages appended past the end.
+//!
+//! A free page freed by txn `F` may still be reached by states older than `F`. The commit
+//! passes the reuse limit `L = min(base txn, oldest snapshot's txn)`: only pages with
+//! `freed_txn <= L` are handed out or cut from the end.
+
+use std::collections::BTreeMap;
+
+/// Free pages and the end of the file, for one commit.
+pub(crate) struct Alloc {
+    /// Free pages and the txn that freed them.
+    pub pool: BTreeMap<u64, u64>,
+    /// Pages freed up to this txn id can be reused now.
+    pub reuse_limit: u64,
+    /// First page past the end.
+    pub end: u64,
+    /// Pages handed out from the pool.
+    pub reused: u64,
+    /// Pages appended past the base's end.
+    pub appended: u64,
+}
+
+impl Alloc {
+    /// An allocator over `pool` for a file of `end` pages.
+    pub fn new(pool: BTreeMap<u64, u64>, reuse_limit: u64, end: u64) -> Alloc {
+        Alloc {
+            pool,
+            reuse_limit,
+            end,
+            reused: 0,
+            appended: 0,
+        }
+    }
+
+    /// `n` consecutive pages: the first reusable run in the pool, else appended.
+    pub fn extent(&mut self, n: u64) -> u64 {
+        match self.reusable_run(n) {
+            Some(first) => self.take(first, n),
+            None => self.append(n),
+        }
+    }
+
+    /// Takes the run `first .. first + n` out of the pool.
+    pub fn take(&mut self, first: u64, n: u64) -> u64 {
+        for p in first..first + n {
+            self.pool.remove(&p);
+        }
+        self.reused += n;
+        first
+    }
+
+    /// `n` pages past the end.
+    pub fn append(&mut self, n: u64) -> u64 {
+        let first = self.end;
+        self.end += n;
+        self.appended += n;
+        first
+    }
+
+    /// The first run of `n` consecutive reusable pages in the pool.
+    pub fn reusable_run(&self, n: u64) -> Option<u64> {
+        let (mut start, mut len) = (0u64, 0u64);
+        for (&p, &freed) in &self.pool {
+            if freed > self.reuse_limit {
+                len = 0;
+                continue;
+            }
+            if len > 0 && p == start + len {
+                len += 1;
+            } else {
+                start = p;
+                len = 1;
+            }
+            if len == n {
+                return Some(start);
+            }
+        }
+        None
+    }
+
+    /// Frees `page` as of txn `txn`.
+    pub fn free(&mut self, page: u64, txn: u64) {
+        self.pool.insert(page, txn);
+    }
+
+    /// Drops reusable free pages at the end of the file.
+    pub fn trim(&mut self) {
+        while self.end > 2 {
+            match self.pool.get(&(self.end - 1)) {
+                Some(&freed) if freed <= self.reuse_limit => {
+                    self.pool.remove(&(self.end - 1));
+                    self.end -= 1;
+                }
+                _ => break,
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn runs_respect_the_reuse_limit_and_the_end_is_trimmed() {
+        // Pages 5, 6 freed by txn 3; 7 by txn 9; 9, 10 by txn 2; the file has 11 pages.
+        let pool = [(5, 3), (6, 3), (7, 9), (9, 2), (10, 2)]
+            .into_iter()
+            .collect();
+        let mut a = Alloc::new(pool, 4, 11);
+        assert_eq!(a.reusable_run(3), None, "page 7 is not reusable yet");
+        assert_eq!(a.extent(2), 5);
+        assert_eq!(a.extent(3), 11, "appended");
+        a.trim();
+        assert_eq!(a.end, 14, "the appended pages end the file");
+        let mut b = Alloc::new([(9, 2), (10, 2)].into_iter().collect(), 2, 11);
+        b.trim();
+        assert_eq!(b.end, 9);
+    }
+}

@@ -1,0 +1,344 @@
+//! One commit's pages (format §11.2, steps 1–3): every changed payload, the tables and blobs
+//! of the new state, and the free list, each in pages the allocator hands out; then the new
+//! length and a sync. The caller publishes the record this returns.
+
+use std::collections::{BTreeMap, HashMap, HashSet};
+use std::sync::Arc;
+
+use serde::Serialize;
+use zerocopy::IntoBytes;
+
+use super::alloc::Alloc;
+use super::SnapshotStore;
+use crate::error::{Error, Result};
+use crate::format::blob::encode_blob;
+use crate::format::payload::{self, PayloadRef};
+use crate::format::tables::FREE;
+use crate::format::tree::{self, TreeSpec};
+use crate::format::{
+    tag, BlobRef, CommitRecord, DatasetHeader, FreeEntry, FreePage, Invariant, StateRoots, TreeRef,
+    Violation, COMMIT_PAYLOAD_SLACK, COMMIT_RECOVERY_NEEDED,
+};
+use crate::model::{ModelEditor, SampleRect};
+use crate::store::io::Io;
+use crate::store::write::tables::{self, PageSink, PayloadRefs};
+
+/// What a commit changed.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct CommitSummary {
+    /// The new state's txn id.
+    pub txn_id: u64,
+    /// Replacements in the transaction.
+    pub replacements: u64,
+    /// Physical blocks rewritten.
+    pub blocks: u64,
+    /// Coarse grids rewritten.
+    pub grids: u64,
+    /// Nodes before.
+    pub nodes_before: u64,
+    /// Nodes after.
+    pub nodes_after: u64,
+    /// Nodes new to the tree (split).
+    pub nodes_added: u64,
+    /// Nodes no longer in the tree (merged).
+    pub nodes_removed: u64,
+    /// Nodes kept whose error, `e*`, heights or valid count changed.
+    pub nodes_changed: u64,
+    /// Clusters whose cut changed, by index.
+    pub clusters_changed: Vec<usize>,
+    /// Pages written (payloads, tables, blobs), commit slot excluded.
+    pub pages_written: u64,
+    /// Of those, pages reused from the free list.
+    pub pages_reused: u64,
+    /// Pages this commit freed.
+    pub pages_freed: u64,
+    /// File length after the commit.
+    pub file_length: u64,
+}
+
+/// A [`PageSink`] that writes each tree or blob into an extent from the allocator.
+struct CommitSink<'a, I: Io> {
+    io: &'a I,
+    alloc: &'a mut Alloc,
+    page_size: u32,
+    written: u64,
+}
+
+impl<I: Io> CommitSink<'_, I> {
+    fn write_pages(&mut self, first: u64, pages: &[Vec<u8>]) -> Result<()> {
+        for (page, bytes) in (first..).zip(pages) {
+            self.io
+                .write_at(page * u64::from(self.page_size), bytes)
+                .map_err(|e| Error::io(self.io.name(), e))?;
+            self.written += 1;
+        }
+        Ok(())
+    }
+
+    /// Builds a tree of `records` into the pages from `first` on (enough of them are
+    /// reserved) and writes them.
+    fn tree_at(&mut self, first: u64, records: &[u8], spec: TreeSpec) -> Result<TreeRef> {
+        let mut pages = Vec::new();
+        let root = tree::build::<Error>(records, spec, self.page_size, first, &mut |p| {
+            pages.push(p);
+            Ok(())
+        })?;
+        self.write_pages(first, &pages)?;
+        Ok(root)
+    }
+
+    /// Writes `bytes` as a payload in a run of whole pages of its own, zero-padded.
+    fn payload(&mut self, mut bytes: Vec<u8>) -> Result<PayloadRef> {
+        let p = u64::from(self.page_size);
+        let n = (bytes.len() as u64).div_ceil(p).max(1);
+        let first = self.alloc.extent(n);
+        let r = PayloadRef::of(first * p, &bytes)
+            .ok_or_else(|| Error::Internal(format!("a payload of {} bytes", bytes.len())))?;
+        bytes.resize(usize::try_from(n * p).unwrap_or(0), 0);
+        self.io
+            .write_at(first * p, &bytes)
+            .map_err(|e| Error::io(self.io.name(), e))?;
+        self.written += n;
+        Ok(r)
+    }
+}
+
+impl<I: Io> PageSink for CommitSink<'_, I> {
+    fn tree(&mut self, records: &[u8], spec: TreeSpec) -> Result<TreeRef> {
+        let count = (records.len() / spec.record_size) as u64;
+        let n = tree::pages_needed(count, spec.record_size, self.page_size);
+        let first = self.alloc.extent(n);
+        self.tree_at(first, records, spec)
+    }
+
+    fn blob(&mut self, content: &[u8], tag: [u8; 4]) -> Result<BlobRef> {
+        let n = crate::format::blob::blob_pages(content.len() as u64, self.page_size);
+        let first = self.alloc.extent(n);
+        let (blob, pages) = encode_blob(content, tag, first, self.page_size);
+        self.write_pages(first, &pages)?;
+        Ok(blob)
+    }
+}
+
+/// Writes every page of the state `editor` holds, on top of `base`; returns its commit
+/// record (txn id + 1, sealed, flags `RECOVERY_NEEDED | PAYLOAD_SLACK`) and what changed.
+/// Nothing it writes is reachable from `base` or from a snapshot older than `reuse_limit`.
+pub(crate) fn write_state<I: Io>(
+    io: &Arc<I>,
+    base: &SnapshotStore<I>,
+    editor: &ModelEditor,
+    dirty: &[SampleRect],
+    reuse_limit: u64,
+) -> Result<(CommitRecord, CommitSummary)> {
+    let p = base.page_size();
+    let txn = base.txn_id() + 1;
+    let model = editor.model();
+    let d = *model.domain();
+    let finest = d.finest_level();
+    let tree = model.tree();
+
+    let old_nodes = base.node_records()?;
+    let old_blocks = base.block_records()?;
+    let pool = base
+        .free_pages()?
+        .iter()
+        .map(|f| (f.page, f.freed_txn))
+        .collect();
+    let mut alloc = Alloc::new(pool, reuse_limit, base.page_count());
+    let mut sink = CommitSink {
+        io: io.as_ref(),
+        alloc: &mut alloc,
+        page_size: p,
+        written: 0,
+    };
+    let meets = |r: &SampleRect| dirty.iter().any(|x| x.intersect(r).is_some());
+    let mut summary = CommitSummary {
+        txn_id: txn,
+        nodes_before: old_nodes.len() as u64,
+        nodes_after: tree.nodes().len() as u64,
+        ..CommitSummary::default()
+    };
+
+    // Payloads: changed ones are written, the others kept where they are.
+    let shapes = tables::block_shapes(model);
+    let grid_voids = tables::grid_void_flags(model);
+    let mut kept: Vec<PayloadRef> = Vec::new();
+    let mut block_ref = Vec::with_capacity(shapes.len());
+    for (i, shape) in shapes.iter().enumerate() {
+        let old = old_blocks.get(i).ok_or_else(|| {
+            base.corrupt(Violation::new(
+                Invariant::BlockTable,
+                "block table",
+                "fewer records than blocks",
+            ))
+        })?;
+        if meets(&shape.rect) {
+            block_ref.push(sink.payload(tables::encode_block(model, shape))?);
+            summary.blocks += 1;
+        } else {
+            kept.push(old.payload());
+            block_ref.push(old.payload());
+        }
+    }
+    let old_at: HashMap<(u8, u32, u32), _> = old_nodes
+        .iter()
+        .map(|n| ((n.level, n.x.get(), n.y.get()), n))
+        .collect();
+    let mut grid_ref = vec![PayloadRef::default(); tree.nodes().len()];
+    let mut seen = HashSet::with_capacity(tree.nodes().len());
+    for (i, n) in tree.nodes().iter().enumerate() {
+        let at = (n.level, n.x, n.y);
+        seen.insert(at);
+        let old = old_at.get(&at);
+        match old {
+            None => summary.nodes_added += 1,
+            Some(o) => {
+                if o.static_error.get().to_bits() != n.static_error.to_bits()
+                    || o.monotone_error.get().to_bits() != n.monotone_error.to_bits()
+                    || o.min_height.get().to_bits() != n.min_height.to_bits()
+                    || o.max_height.get().to_bits() != n.max_height.to_bits()
+                    || o.valid_samples.get() != n.valid_samples
+                {
+                    summary.nodes_changed += 1;
+                }
+            }
+        }
+        if n.level == finest {
+            continue;
+        }
+        let id = tables::node_id(i);
+        match old {
+            Some(o) if o.level < finest && !meets(&tree.footprint(id)) => {
+                kept.push(o.payload());
+                grid_ref[i] = o.payload();
+            }
+            _ => {
+                let bytes = tables::encode_grid(model, id, grid_voids[i]);
+                let (gw, gh) = payload::grid_dims(&d, n.level, n.x, n.y);
+                debug_assert_eq!(bytes.len() as u64, payload::grid_len(gw, gh, grid_voids[i]));
+                grid_ref[i] = sink.payload(bytes)?;
+                summary.grids += 1;
+            }
+        }
+    }
+    summary.nodes_removed = old_nodes
+        .iter()
+        .filter(|n| !seen.contains(&(n.level, n.x.get(), n.y.get())))
+        .count() as u64;
+    summary.clusters_changed = changed_clusters(base, editor)?;
+
+    // Tables and blobs.
+    let header = DatasetHeader::of_model(model, &base.header().metadata).encode();
+    let dataset_header = sink.blob(&header, tag::DATASET_HEADER)?;
+    let refs = PayloadRefs {
+        grid: grid_ref,
+        block: block_ref,
+        grid_voids,
+        shapes,
+    };
+    let roots = tables::write_tables(model, &refs, &mut sink)?;
+    let written = sink.written;
+
+    // What this commit frees: the old state's metadata pages, and payload pages no kept
+    // payload touches.
+    let kept_pages: HashSet<u64> = kept.iter().flat_map(|r| r.pages(p)).collect();
+    let mut freed: Vec<u64> = (2..base.page_count())
+        .filter(|&page| base.metadata_pages().contains(page))
+        .collect();
+    let old_payload_pages: HashSet<u64> = old_nodes
+        .iter()
+        .map(|n| n.payload())
+        .chain(old_blocks.iter().map(|b| b.payload()))
+        .flat_map(|r| r.pages(p))
+        .collect();
+    freed.extend(
+        old_payload_pages
+            .into_iter()
+            .filter(|pg| !kept_pages.contains(pg)),
+    );
+    summary.pages_freed = freed.len() as u64;
+    for page in freed {
+        alloc.free(page, txn);
+    }
+    alloc.trim();
+
+    let (free_list, free_pages) = write_free_list(io.as_ref(), &mut alloc, p)?;
+    summary.pages_written = written + free_pages;
+    summary.pages_reused = alloc.reused;
+
+    let length = alloc.end * u64::from(p);
+    summary.file_length = length;
+    let state = StateRoots {
+        dataset_header,
+        cluster_directory: roots.cluster_directory,
+        node_table: roots.node_table,
+        block_table: roots.block_table,
+        free_list,
+        adjacency: roots.adjacency,
+    };
+    let flags = COMMIT_RECOVERY_NEEDED | COMMIT_PAYLOAD_SLACK;
+    let record = CommitRecord::new(p, txn, length, flags, &state);
+    // Step 3: a grown file gets its length before anything refers to it; then sync.
+    let e = |err| Error::io(io.name(), err);
+    if length > io.len().map_err(e)? {
+        io.set_len(length).map_err(e)?;
+    }
+    io.sync().map_err(e)?;
+    Ok((record, summary))
+}
+
+/// Writes the free list of `alloc`'s pool, last: into a reusable run when taking it leaves
+/// the page count the list needs unchanged, else appended. Returns its root and its pages.
+fn write_free_list<I: Io>(io: &I, alloc: &mut Alloc, p: u32) -> Result<(TreeRef, u64)> {
+    let need = |count: usize| tree::pages_needed(count as u64, FREE.record_size, p);
+    let k = need(alloc.pool.len());
+    if k == 0 {
+        return Ok((tree::empty(FREE.record_size), 0));
+    }
+    let first = match alloc.reusable_run(k) {
+        Some(first) if need(alloc.pool.len() - usize::try_from(k).unwrap_or(0)) == k => {
+            alloc.take(first, k)
+        }
+        _ => alloc.append(k),
+    };
+    let records: Vec<u8> = free_entries(&alloc.pool);
+    let mut sink = CommitSink {
+        io,
+        alloc,
+        page_size: p,
+        written: 0,
+    };
+    Ok((sink.tree_at(first, &records, FREE)?, k))
+}
+
+fn free_entries(pool: &BTreeMap<u64, u64>) -> Vec<u8> {
+    let mut out = Vec::with_capacity(pool.len() * FREE.record_size);
+    for (&page, &freed_txn) in pool {
+        out.extend_from_slice(FreeEntry::encode(&FreePage { page, freed_txn }).as_bytes());
+    }
+    out
+}
+
+/// The clusters whose cut differs between `base` and the editor's model.
+fn changed_clusters<I: Io>(base: &SnapshotStore<I>, editor: &ModelEditor) -> Result<Vec<usize>> {
+    let tree = editor.model().tree();
+    let mut changed = Vec::new();
+    for (c, cluster) in editor.model().clusters().iter().enumerate() {
+        let new: Vec<(u64, u8)> = cluster
+            .nodes
+            .iter()
+            .map(|&i| (tree.node(i).key.0, tree.node(i).level))
+            .collect();
+        let old: Vec<(u64, u8)> = match base.clusters().get(c) {
+            Some(info) => base
+                .scan_codes(c, 0..info.nodes())?
+                .map(|e| e.map(|e| (e.key.0, e.level)))
+                .collect::<Result<_>>()?,
+            None => Vec::new(),
+        };
+        if new != old {
+            changed.push(c);
+        }
+    }
+    Ok(changed)
+}

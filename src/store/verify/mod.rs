@@ -1,0 +1,324 @@
+//! The validator: every numbered invariant of `format-spec/container.md`, checked by name.
+//!
+//! Verification is an explicit, typed operation. [`verify`] returns a [`VerifyReport`] with
+//! one [`CheckReport`] per [`Invariant`]: passed, failed (with located messages), or skipped
+//! because a check it depends on failed. [`VerifyMode::Fast`] checks the commit slots, every
+//! page, the shape of every table, page ownership, every payload's CRC and zero gaps, and the
+//! records' own consistency (`structure`, `payloads`). [`VerifyMode::Full`] adds the
+//! semantics (`full`): every cluster is the cut it claims to be (cover, bound, minimality),
+//! the adjacency lists are right, and the whole model (errors, ranges, grids, void stand-ins)
+//! equals a fresh build from the physical blocks.
+//!
+//! Only a file that cannot be recognised at all (no commit record with the magic, a newer
+//! major version) or that the operating system fails to read is an `Err`: the CLI's exit
+//! code 2 or 1. Anything else is a report. The validator never panics and never hangs (every
+//! page is visited at most once). It never allocates from a stored size it has not first
+//! checked against the file's real length.
+
+mod full;
+mod payloads;
+mod structure;
+
+use serde::Serialize;
+
+use super::open::{no_state, read_slots};
+use super::{Source, Store};
+use crate::error::{Error, Result};
+use crate::format::commit::{self, Slot};
+use crate::format::{tables, BlockRecord, IndexEntry, Invariant, NodeRecord, COMMIT_RECORD_LEN};
+
+/// At most this many messages are kept per check (all are counted).
+const MAX_MESSAGES: usize = 20;
+
+/// How much [`verify`] checks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum VerifyMode {
+    /// Structure: slots, pages, tables, ownership, payload checksums, records.
+    Fast,
+    /// Structure and semantics: cuts, adjacency, every error recomputed from the blocks.
+    Full,
+}
+
+/// The outcome of one check.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum CheckStatus {
+    /// The invariant holds.
+    Passed,
+    /// The invariant is broken; see the messages.
+    Failed,
+    /// Not checked: a check it depends on failed, or the mode does not include it.
+    Skipped,
+}
+
+/// One invariant's result.
+#[derive(Clone, Debug, Serialize)]
+pub struct CheckReport {
+    /// The invariant (`I-1`, `I-2`, ... in JSON).
+    pub id: Invariant,
+    /// What the invariant is about.
+    pub name: &'static str,
+    /// Passed, failed or skipped.
+    pub status: CheckStatus,
+    /// How many failures were found.
+    pub failure_count: u64,
+    /// The first failures, each located.
+    pub failures: Vec<String>,
+}
+
+/// The result of [`verify`].
+#[derive(Clone, Debug, Serialize)]
+pub struct VerifyReport {
+    /// Fast or full.
+    pub mode: VerifyMode,
+    /// Whether every check that ran passed and none was skipped for a failure.
+    pub valid: bool,
+    /// The transaction id of the commit record in use, if one was valid.
+    pub txn_id: Option<u64>,
+    /// Bytes in the file.
+    pub file_length: u64,
+    /// One entry per invariant, in id order.
+    pub checks: Vec<CheckReport>,
+}
+
+/// The reports being filled in, one per invariant.
+pub(super) struct Checks {
+    reports: Vec<CheckReport>,
+}
+
+impl Checks {
+    fn new() -> Checks {
+        Checks {
+            reports: Invariant::ALL
+                .iter()
+                .map(|&id| CheckReport {
+                    id,
+                    name: id.name(),
+                    status: CheckStatus::Skipped,
+                    failure_count: 0,
+                    failures: Vec::new(),
+                })
+                .collect(),
+        }
+    }
+
+    fn report(&mut self, id: Invariant) -> &mut CheckReport {
+        // `reports` holds one entry per invariant, in id order.
+        &mut self.reports[usize::from(id.number()) - 1]
+    }
+
+    /// Marks `id` passed, unless it already failed.
+    pub fn pass(&mut self, id: Invariant) {
+        let r = self.report(id);
+        if r.status == CheckStatus::Skipped {
+            r.status = CheckStatus::Passed;
+        }
+    }
+
+    /// Records a failure of `id`.
+    pub fn fail(&mut self, id: Invariant, message: String) {
+        let r = self.report(id);
+        r.status = CheckStatus::Failed;
+        r.failure_count += 1;
+        if r.failures.len() < MAX_MESSAGES {
+            r.failures.push(message);
+        }
+    }
+
+    /// Whether any check has failed so far.
+    pub fn any_failed(&self) -> bool {
+        self.reports.iter().any(|r| r.status == CheckStatus::Failed)
+    }
+
+    /// Takes `result` in: a corruption becomes a failure of its invariant (`Ok(None)`);
+    /// any other error (I/O, a bug) stops the verification.
+    pub fn absorb<T>(&mut self, result: Result<T>) -> Result<Option<T>> {
+        match result {
+            Ok(v) => Ok(Some(v)),
+            Err(Error::Corrupt {
+                invariant,
+                location,
+                detail,
+                ..
+            }) => {
+                self.fail(invariant, format!("{location}: {detail}"));
+                Ok(None)
+            }
+            Err(e) => Err(e),
+        }
+    }
+
+    fn finish(self, mode: VerifyMode, txn_id: Option<u64>, file_length: u64) -> VerifyReport {
+        let valid =
+            !self.any_failed() && self.reports.iter().any(|r| r.status == CheckStatus::Passed);
+        VerifyReport {
+            mode,
+            valid,
+            txn_id,
+            file_length,
+            checks: self.reports,
+        }
+    }
+}
+
+/// Verifies the container in `src` (see the module docs). `Err` only for a file that is not
+/// a recognisable fmrh container, one of a newer major version, or a failed read.
+pub fn verify<S: Source>(src: S, mode: VerifyMode) -> Result<VerifyReport> {
+    let file_length = src.len();
+    let mut checks = Checks::new();
+    let slots = read_slots(&src)?;
+    let (slot, record) = match commit::choose(&slots) {
+        Ok(x) => x,
+        Err(commit::NoState::Corrupt(v)) => {
+            checks.fail(v.invariant, format!("{}: {}", v.location, v.detail));
+            return Ok(checks.finish(mode, None, file_length));
+        }
+        Err(why) => return Err(no_state(&src, why)),
+    };
+    checks.pass(Invariant::CommitRecord);
+    checks.pass(Invariant::Version);
+    let txn = record.txn_id.get();
+    check_slots(&src, &slots, slot, &record, &mut checks)?;
+    if file_length < record.file_length.get() {
+        return Ok(checks.finish(mode, Some(txn), file_length));
+    }
+    let Some(store) = checks.absorb(Store::from_source(src))? else {
+        return Ok(checks.finish(mode, Some(txn), file_length));
+    };
+    for id in [
+        Invariant::Page,
+        Invariant::DatasetHeader,
+        Invariant::TreeShape,
+        Invariant::ClusterDirectory,
+    ] {
+        checks.pass(id);
+    }
+    let Some(loaded) = checks.absorb(Loaded::read(&store))? else {
+        return Ok(checks.finish(mode, Some(txn), file_length));
+    };
+    structure::check_free_list(&store, &loaded, &mut checks);
+    structure::check_nodes(&store, &loaded, &mut checks);
+    structure::check_blocks(&store, &loaded, &mut checks);
+    let payload_pages = payloads::check_payloads(&store, &loaded, &mut checks)?;
+    structure::check_ownership(&store, &loaded, &payload_pages, &mut checks);
+    structure::check_index_entries(&store, &loaded, &mut checks);
+    if mode == VerifyMode::Full && !checks.any_failed() {
+        full::check_cuts(&store, &loaded, &mut checks);
+        full::check_adjacency(&store, &loaded, &mut checks);
+        full::check_measured(&store, &loaded, &mut checks)?;
+    }
+    Ok(checks.finish(mode, Some(txn), file_length))
+}
+
+/// I-3 and I-4, and the zero tails of both slot pages (I-1, I-4).
+fn check_slots<S: Source>(
+    src: &S,
+    slots: &[Slot; 2],
+    slot: u8,
+    record: &crate::format::CommitRecord,
+    checks: &mut Checks,
+) -> Result<()> {
+    let txn = record.txn_id.get();
+    let file_length = src.len();
+    if file_length == record.file_length.get() {
+        checks.pass(Invariant::FileLength);
+    } else {
+        checks.fail(
+            Invariant::FileLength,
+            format!(
+                "file: {file_length} bytes; the commit record says {}{}",
+                record.file_length.get(),
+                if file_length < record.file_length.get() {
+                    " (truncated)"
+                } else {
+                    " (an interrupted transaction left pages past the end; `fmrh recover` cuts \
+                     them)"
+                }
+            ),
+        );
+    }
+    let other = 1 - slot;
+    match &slots[usize::from(other)] {
+        Slot::Empty => checks.pass(Invariant::InactiveSlot),
+        Slot::Valid(r) if r.txn_id.get() < txn => checks.pass(Invariant::InactiveSlot),
+        Slot::Valid(r) => checks.fail(
+            Invariant::InactiveSlot,
+            format!(
+                "commit slot {other}: transaction {} is not older than the active {txn}",
+                r.txn_id.get()
+            ),
+        ),
+        Slot::Foreign { major, minor, .. } => checks.fail(
+            Invariant::InactiveSlot,
+            format!("commit slot {other}: an older record of format version {major}.{minor}"),
+        ),
+        Slot::Invalid { why, .. } => checks.fail(
+            Invariant::InactiveSlot,
+            format!(
+                "commit slot {other}: neither zero nor a valid record ({why}); an interrupted \
+                 commit leaves a torn record, which `fmrh recover` clears"
+            ),
+        ),
+    }
+    // The rest of each slot page, after the record, is zero.
+    let p = u64::from(record.page_size.get());
+    let tail = usize::try_from(p).unwrap_or(0) - COMMIT_RECORD_LEN;
+    for s in 0..2u8 {
+        let at = u64::from(s) * p + COMMIT_RECORD_LEN as u64;
+        let zero = match src.read_at(at, tail) {
+            Ok(b) => crate::format::is_zero(&b),
+            Err(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => false,
+            Err(e) => return Err(Error::io(src.name(), e)),
+        };
+        if !zero {
+            checks.fail(
+                if s == slot {
+                    Invariant::CommitRecord
+                } else {
+                    Invariant::InactiveSlot
+                },
+                format!("commit slot {s}: the page after the record is not zero"),
+            );
+        }
+    }
+    Ok(())
+}
+
+/// The tables, read once.
+pub(super) struct Loaded {
+    nodes: Vec<NodeRecord>,
+    blocks: Vec<BlockRecord>,
+    free: Vec<(u64, u64)>,
+    indexes: Vec<Vec<IndexEntry>>,
+    adjacency: Vec<[Vec<u32>; 4]>,
+}
+
+impl Loaded {
+    fn read<S: Source>(store: &Store<S>) -> Result<Loaded> {
+        let nodes = store.node_records()?;
+        let blocks = store.block_records()?;
+        let free = store
+            .free_pages()?
+            .iter()
+            .map(|f| (f.page, f.freed_txn))
+            .collect();
+        let mut indexes = Vec::new();
+        let mut adjacency = Vec::new();
+        for (c, cl) in store.clusters().iter().enumerate() {
+            indexes.push(store.all_records(cl.index(), tables::INDEX)?);
+            let mut lists: [Vec<u32>; 4] = Default::default();
+            for (edge, list) in lists.iter_mut().enumerate() {
+                *list = store.adjacency(c, edge)?;
+            }
+            adjacency.push(lists);
+        }
+        Ok(Loaded {
+            nodes,
+            blocks,
+            free,
+            indexes,
+            adjacency,
+        })
+    }
+}

@@ -1,0 +1,152 @@
+//! Payloads (I-9): inside the file, aligned, disjoint, CRC, zero gaps between them, and
+//! block samples finite or the canonical void.
+
+use super::{Checks, Loaded};
+use crate::error::Result;
+use crate::format::payload::BlockView;
+use crate::format::{
+    is_zero, Invariant, PayloadRef, COMMIT_PAYLOAD_SLACK, PAYLOAD_ALIGN, VOID_BITS,
+};
+use crate::store::btree::PageSet;
+use crate::store::{Source, Store};
+
+/// Checks every payload (I-9): in the file, aligned, disjoint, CRC, zero gaps, block
+/// content. Returns the pages payloads occupy.
+pub(super) fn check_payloads<S: Source>(
+    store: &Store<S>,
+    l: &Loaded,
+    checks: &mut Checks,
+) -> Result<PageSet> {
+    let id = Invariant::Payload;
+    let d = store.domain();
+    let finest = d.finest_level();
+    let (cols, _) = d.nodes_across(finest);
+    let p = u64::from(store.page_size());
+    let mut pages = PageSet::new(store.page_count());
+    let mut runs: Vec<(PayloadRef, Payload)> = Vec::with_capacity(l.nodes.len() + l.blocks.len());
+    for (i, b) in l.blocks.iter().enumerate() {
+        runs.push((b.payload(), Payload::Block(i)));
+    }
+    for (i, n) in l.nodes.iter().enumerate() {
+        if n.level < finest {
+            runs.push((n.payload(), Payload::Grid(i)));
+        }
+    }
+    runs.sort_unstable_by_key(|r| r.0.offset);
+    let start = 2 * p;
+    let end_of_file = store.page_count() * p;
+    let mut prev_end: Option<u64> = None;
+    for &(r, what) in &runs {
+        let (offset, len) = (r.offset, r.len);
+        let at = format!("{what} payload at byte {offset}");
+        let end = r.end();
+        if offset < start || end > end_of_file || offset % PAYLOAD_ALIGN != 0 {
+            checks.fail(id, format!("{at}: misplaced or misaligned ({len} bytes)"));
+            continue;
+        }
+        match prev_end {
+            Some(pe) if offset < pe => {
+                checks.fail(id, format!("{at}: overlaps the payload before it"));
+                continue;
+            }
+            Some(pe) => zero_gap(store, pe, offset, p, checks)?,
+            None => zero_gap(store, offset - offset % p, offset, p, checks)?,
+        }
+        prev_end = Some(end);
+        for page in offset / p..end.div_ceil(p) {
+            pages.insert(page);
+        }
+        let Some(bytes) = checks.absorb(store.payload(r))? else {
+            continue;
+        };
+        if let Payload::Block(i) = what {
+            let b = &l.blocks[i];
+            let (x, y) = (i % cols as usize, i / cols as usize);
+            let Some(view) =
+                BlockView::new(&bytes, b.width.get(), b.height.get(), b.void_count.get())
+            else {
+                continue; // the length was reported under I-11
+            };
+            let mut voids = 0u32;
+            let mut bad = 0u64;
+            for s in view.samples() {
+                let v = s.get();
+                if v.is_nan() {
+                    voids += 1;
+                    bad += u64::from(v.to_bits() != VOID_BITS);
+                } else {
+                    bad += u64::from(!v.is_finite());
+                }
+            }
+            bad += view
+                .stand_ins()
+                .iter()
+                .filter(|s| !s.get().is_finite())
+                .count() as u64;
+            if voids != b.void_count.get() || bad > 0 {
+                checks.fail(id, format!("block ({x}, {y}): {voids} NaN samples for {} recorded voids, {bad} non-canonical or infinite values", b.void_count.get()));
+            }
+        }
+    }
+    if let Some(pe) = prev_end {
+        zero_gap(store, pe, pe.next_multiple_of(p), p, checks)?;
+    }
+    checks.pass(id);
+    Ok(pages)
+}
+
+#[derive(Clone, Copy, Debug)]
+enum Payload {
+    Block(usize),
+    Grid(usize),
+}
+
+impl std::fmt::Display for Payload {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Payload::Block(i) => write!(f, "block {i}"),
+            Payload::Grid(i) => write!(f, "node {i} grid"),
+        }
+    }
+}
+
+/// Checks that the bytes from `from` to `to` that share a page with a payload are zero: the
+/// tail of `from`'s page and the head of `to`'s page (whole pages between belong to someone
+/// else or to nobody, which I-8 reports).
+fn zero_gap<S: Source>(
+    store: &Store<S>,
+    from: u64,
+    to: u64,
+    p: u64,
+    checks: &mut Checks,
+) -> Result<()> {
+    if from >= to || store.commit_record().has_flag(COMMIT_PAYLOAD_SLACK) {
+        return Ok(());
+    }
+    // Only the pages the gap shares with a payload: the tail of the page holding the byte
+    // before `from`, and the head of the page holding the byte at `to`.
+    let mut ranges: Vec<(u64, u64)> = Vec::new();
+    if !from.is_multiple_of(p) {
+        ranges.push((from, to.min((from / p + 1) * p)));
+    }
+    if !to.is_multiple_of(p) {
+        let head = (from.max(to / p * p), to);
+        match ranges.last_mut() {
+            Some(last) if last.1 >= head.0 => last.1 = last.1.max(head.1),
+            _ => ranges.push(head),
+        }
+    }
+    for (a, b) in ranges {
+        // A gap lies within one page.
+        let len = usize::try_from(b - a).unwrap_or(0);
+        if let Some(bytes) = checks.absorb(crate::store::source::read(store.source(), a, len))? {
+            if !is_zero(&bytes) {
+                checks.fail(
+                    Invariant::Payload,
+                    format!("bytes {a}..{b} between payloads are not zero"),
+                );
+            }
+        }
+    }
+    Ok(())
+}

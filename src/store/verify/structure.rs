@@ -1,0 +1,300 @@
+//! The records' own consistency (fast mode): the free list (I-16), the node table (I-10), the
+//! block table (I-11), page ownership (I-8), and index entries naming their nodes (I-13).
+
+use super::{Checks, Loaded};
+use crate::curve::HilbertKey;
+use crate::format::payload;
+use crate::format::{Invariant, NODE_GRID_HAS_VOIDS};
+use crate::model::{cluster, NO_PARENT};
+use crate::store::btree::PageSet;
+use crate::store::{Source, Store};
+
+pub(super) fn check_free_list<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Checks) {
+    let mut prev = None;
+    for &(page, txn) in &l.free {
+        if page < 2 || page >= store.page_count() || prev.is_some_and(|p| page <= p) {
+            checks.fail(
+                Invariant::FreeList,
+                format!("free page {page}: out of order or outside the file"),
+            );
+        }
+        if txn > store.txn_id() {
+            checks.fail(
+                Invariant::FreeList,
+                format!("free page {page}: freed by future transaction {txn}"),
+            );
+        }
+        prev = Some(page);
+    }
+    checks.pass(Invariant::FreeList);
+}
+
+pub(super) fn check_nodes<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Checks) {
+    let id = Invariant::NodeTable;
+    let d = store.domain();
+    let finest = d.finest_level();
+    let delta_min = store.header().delta_min;
+    let nodes = &l.nodes;
+    let count = nodes.len() as u64;
+    let (cols, _) = d.nodes_across(finest);
+    for (i, n) in nodes.iter().enumerate() {
+        let at = format!("node {i}");
+        let (level, x, y) = (n.level, n.x.get(), n.y.get());
+        if level > finest || !d.exists(level, x, y) {
+            checks.fail(
+                id,
+                format!("{at}: ({level}, {x}, {y}) is not a node of the domain"),
+            );
+            continue;
+        }
+        let key = HilbertKey::of_node(finest, level, x, y).0;
+        if n.key.get() != key {
+            checks.fail(
+                id,
+                format!("{at}: key {} but (level, x, y) gives {key}", n.key.get()),
+            );
+        }
+        if i > 0 {
+            let p = &nodes[i - 1];
+            if (p.key.get(), p.level) >= (n.key.get(), level) {
+                checks.fail(id, format!("{at}: (key, level) does not increase"));
+            }
+        }
+        let sub = u64::from(n.subtree_len.get());
+        if sub == 0 || i as u64 + sub > count {
+            checks.fail(
+                id,
+                format!("{at}: subtree of {sub} nodes overruns the table"),
+            );
+            continue;
+        }
+        let parent = n.parent.get();
+        if i == 0 {
+            if level != 0 || parent != NO_PARENT || sub != count {
+                checks.fail(id, "node 0 is not the root of the whole table".into());
+            }
+        } else if parent == NO_PARENT || parent as usize >= i {
+            checks.fail(id, format!("{at}: parent {parent} does not precede it"));
+        } else {
+            let p = &nodes[parent as usize];
+            let end = parent as u64 + u64::from(p.subtree_len.get());
+            if p.level + 1 != level
+                || p.x.get() != x / 2
+                || p.y.get() != y / 2
+                || i as u64 + sub > end
+            {
+                checks.fail(id, format!("{at}: not a child of its parent {parent}"));
+            }
+        }
+        let (e, m) = (n.static_error.get(), n.monotone_error.get());
+        if !(e.is_finite() && e >= 0.0 && m.is_finite() && m >= e) {
+            checks.fail(id, format!("{at}: error {e}, e* {m}"));
+        }
+        let (lo, hi) = (n.min_height.get(), n.max_height.get());
+        if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
+            checks.fail(id, format!("{at}: height range {lo}..{hi}"));
+        }
+        if n.valid_samples.get() > d.footprint(level, x, y).samples() {
+            checks.fail(
+                id,
+                format!("{at}: more valid samples than its footprint holds"),
+            );
+        }
+        let flags = n.flags.get();
+        if flags & !NODE_GRID_HAS_VOIDS != 0
+            || (level == finest && flags != 0)
+            || n.reserved.get() != 0
+        {
+            checks.fail(
+                id,
+                format!("{at}: unknown flags {flags:#x} or reserved bits set"),
+            );
+        }
+        // Children: those kept are exactly the mask's, each right after its elder sibling's
+        // subtree.
+        let mut mask = 0u8;
+        let mut c = i as u64 + 1;
+        let end = i as u64 + sub;
+        while c < end {
+            let ch = &nodes[c as usize];
+            if ch.parent.get() as usize != i {
+                checks.fail(
+                    id,
+                    format!("{at}: node {c} lies in its subtree but is not its child"),
+                );
+                break;
+            }
+            mask |= 1 << ((ch.y.get() & 1) * 2 + (ch.x.get() & 1));
+            if ch.monotone_error.get() > m {
+                checks.fail(id, format!("{at}: child {c} has a larger e*"));
+            }
+            c += u64::from(ch.subtree_len.get().max(1));
+        }
+        if mask != n.child_mask {
+            checks.fail(
+                id,
+                format!(
+                    "{at}: child mask {:#06b}, children found {mask:#06b}",
+                    n.child_mask
+                ),
+            );
+        }
+        if sub > 1 {
+            let existing = (0..4u32)
+                .filter(|q| d.exists(level + 1, 2 * x + (q & 1), 2 * y + (q >> 1)))
+                .fold(0u8, |acc, q| acc | 1 << q);
+            if m <= delta_min || mask != existing {
+                checks.fail(
+                    id,
+                    format!("{at}: subdivided though e* {m} <= delta_min, or a child is missing"),
+                );
+            }
+        } else if level < finest && m > delta_min {
+            checks.fail(
+                id,
+                format!("{at}: a leaf above the finest level with e* {m} > delta_min {delta_min}"),
+            );
+        }
+        if level == finest {
+            if m != 0.0 {
+                checks.fail(id, format!("{at}: a physical block with error {m}"));
+            }
+            if let Some(b) = l.blocks.get((y * cols + x) as usize) {
+                if (n.payload_offset, n.payload_len, n.payload_crc)
+                    != (b.payload_offset, b.payload_len, b.payload_crc)
+                {
+                    checks.fail(id, format!("{at}: payload is not its block's"));
+                }
+            }
+        } else {
+            let (gw, gh) = payload::grid_dims(d, level, x, y);
+            let want = payload::grid_len(gw, gh, flags & NODE_GRID_HAS_VOIDS != 0);
+            if u64::from(n.payload_len.get()) != want {
+                checks.fail(
+                    id,
+                    format!(
+                        "{at}: grid payload of {} bytes, expected {want}",
+                        n.payload_len.get()
+                    ),
+                );
+            }
+        }
+    }
+    checks.pass(id);
+}
+
+pub(super) fn check_blocks<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Checks) {
+    let id = Invariant::BlockTable;
+    let d = store.domain();
+    let (cols, _) = d.nodes_across(d.finest_level());
+    for (i, b) in l.blocks.iter().enumerate() {
+        let (x, y) = (i as u32 % cols, i as u32 / cols);
+        let rect = d
+            .footprint(d.finest_level(), x, y)
+            .intersect(&d.data_rect())
+            .unwrap_or_default();
+        let (w, h, v) = (b.width.get(), b.height.get(), b.void_count.get());
+        if u64::from(w) != rect.col1 - rect.col0 + 1 || u64::from(h) != rect.row1 - rect.row0 + 1 {
+            checks.fail(
+                id,
+                format!("block ({x}, {y}): {w} x {h}, its data footprint is {rect:?}"),
+            );
+        } else if u64::from(v) > rect.samples()
+            || u64::from(b.payload_len.get()) != payload::block_len(w, h, v)
+            || b.reserved.get() != 0
+        {
+            checks.fail(
+                id,
+                format!(
+                    "block ({x}, {y}): {v} voids, {} payload bytes",
+                    b.payload_len.get()
+                ),
+            );
+        }
+    }
+    checks.pass(id);
+}
+
+pub(super) fn check_ownership<S: Source>(
+    store: &Store<S>,
+    l: &Loaded,
+    payload: &PageSet,
+    checks: &mut Checks,
+) {
+    let id = Invariant::PageOwnership;
+    let meta = store.metadata_pages();
+    let mut free = PageSet::new(store.page_count());
+    for &(page, _) in &l.free {
+        if !free.insert(page) {
+            checks.fail(
+                id,
+                format!("page {page} is listed free twice or lies outside the file"),
+            );
+        }
+    }
+    let mut orphans = 0u64;
+    let mut first_orphan = None;
+    for page in 2..store.page_count() {
+        let owners = [
+            meta.contains(page),
+            payload.contains(page),
+            free.contains(page),
+        ];
+        let n = owners.iter().filter(|&&o| o).count();
+        if n > 1 {
+            checks.fail(id, format!("page {page} is claimed by {n} structures (metadata, payload, free: {owners:?})"));
+        } else if n == 0 {
+            orphans += 1;
+            first_orphan.get_or_insert(page);
+        }
+    }
+    if let Some(first) = first_orphan {
+        checks.fail(
+            id,
+            format!("{orphans} pages belong to no structure (first: page {first})"),
+        );
+    }
+    checks.pass(id);
+}
+
+pub(super) fn check_index_entries<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Checks) {
+    for (c, (info, entries)) in store.clusters().iter().zip(&l.indexes).enumerate() {
+        let mut max = 0f64;
+        for (k, e) in entries.iter().enumerate() {
+            let at = format!("cluster {c} entry {k}");
+            match l.nodes.get(e.node.get() as usize) {
+                Some(n) if n.key == e.key && n.level == e.level && e.reserved == [0; 3] => {
+                    max = max.max(n.monotone_error.get());
+                }
+                _ => checks.fail(
+                    Invariant::ClusterIndex,
+                    format!(
+                        "{at}: names node {} with another key or level",
+                        e.node.get()
+                    ),
+                ),
+            }
+        }
+        if max != info.max_error {
+            checks.fail(
+                Invariant::ClusterDirectory,
+                format!(
+                    "cluster {c}: max error {} recorded, {max} found",
+                    info.max_error
+                ),
+            );
+        }
+        for (edge, list) in l.adjacency[c].iter().enumerate() {
+            if let Some(&bad) = list.iter().find(|&&n| n as usize >= l.nodes.len()) {
+                checks.fail(
+                    Invariant::Adjacency,
+                    format!(
+                        "cluster {c} {} edge: node {bad} does not exist",
+                        cluster::EDGES[edge]
+                    ),
+                );
+            }
+        }
+    }
+    checks.pass(Invariant::ClusterIndex);
+}

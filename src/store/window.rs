@@ -1,0 +1,120 @@
+//! Assembling full-resolution samples from the physical blocks that hold them: what
+//! `extract`, a transaction's first model and the validator's rebuild all start from.
+//!
+//! Neighbouring blocks repeat their shared edge. The assembly takes each shared sample from
+//! the first block (by row, then column) that holds it, and reports any later block whose
+//! copy differs: a valid file has none (I-15).
+
+use super::source::Source;
+use super::Store;
+use crate::error::{Error, Result};
+use crate::format::{Invariant, Violation};
+use crate::heightfield::Heightfield;
+use crate::model::SampleRect;
+
+impl<S: Source> Store<S> {
+    /// The samples of `window` (inclusive, inside the data) exactly as stored: voids NaN.
+    pub fn read_window(&self, window: SampleRect) -> Result<Heightfield> {
+        let samples = self.assemble(window, |_, _, _| {})?;
+        let (w, h) = window_size(&window);
+        let mut metadata = self.header.metadata.clone();
+        if let Some(g) = metadata.georeference.as_mut() {
+            g.origin = [
+                g.origin[0] + window.col0 as f64 * g.step[0],
+                g.origin[1] + window.row0 as f64 * g.step[1],
+            ];
+        }
+        metadata.source_format = "fmrh".into();
+        let hf = Heightfield::new(w, h, samples).map_err(|e| {
+            self.corrupt(Violation::new(
+                Invariant::Payload,
+                "window",
+                format!("stored samples: {e}"),
+            ))
+        })?;
+        Ok(hf.with_metadata(metadata))
+    }
+
+    /// The samples of `window`, row-major, from the blocks that hold them (see the module
+    /// docs). `on_disagreement(x, y, n)` hears of each block `(x, y)` whose copy of `n` shared
+    /// samples differs from the copy taken.
+    pub(crate) fn assemble(
+        &self,
+        window: SampleRect,
+        mut on_disagreement: impl FnMut(u32, u32, u64),
+    ) -> Result<Vec<f32>> {
+        let d = *self.domain();
+        let data = d.data_rect();
+        if window.col0 > window.col1
+            || window.row0 > window.row1
+            || window.intersect(&data) != Some(window)
+        {
+            return Err(Error::InvalidArgument(format!(
+                "window {},{},{},{} is not inside the data 0,0,{},{}",
+                window.col0, window.row0, window.col1, window.row1, data.col1, data.row1
+            )));
+        }
+        // Honest files hold at least four bytes per data sample; refuse to allocate more
+        // than the file could back.
+        if window.samples().saturating_mul(4) > self.commit.file_length.get() {
+            return Err(self.corrupt(Violation::new(
+                Invariant::DatasetHeader,
+                "dataset header",
+                "the data size exceeds what the file can hold",
+            )));
+        }
+        let (w, _) = window_size(&window);
+        let w = u64::from(w);
+        let total = usize::try_from(window.samples()).map_err(|_| Error::TooLarge {
+            what: "window".into(),
+            detail: format!("{} samples", window.samples()),
+        })?;
+        let mut samples = vec![f32::NAN; total];
+        let cells = u64::from(d.block_size() - 1);
+        let (cols, rows) = d.nodes_across(d.finest_level());
+        // Block columns and rows are below 2^20.
+        let bx = |c: u64| u32::try_from(c / cells).unwrap_or(u32::MAX).min(cols - 1);
+        let by = |r: u64| u32::try_from(r / cells).unwrap_or(u32::MAX).min(rows - 1);
+        let (x0, y0) = (bx(window.col0), by(window.row0));
+        for y in y0..=by(window.row1) {
+            for x in x0..=bx(window.col1) {
+                let block = self.block(x, y)?;
+                let view = block.view();
+                let r = block.rect;
+                let width = u64::from(view.width);
+                let mut disagree = 0u64;
+                for row in window.row0.max(r.row0)..=window.row1.min(r.row1) {
+                    for col in window.col0.max(r.col0)..=window.col1.min(r.col1) {
+                        let at = (row - r.row0) * width + col - r.col0;
+                        let v = view.samples()[index(at)].get();
+                        let slot = &mut samples[index((row - window.row0) * w + col - window.col0)];
+                        let shared = (col == r.col0 && x > x0) || (row == r.row0 && y > y0);
+                        if !shared {
+                            *slot = v;
+                        } else if slot.to_bits() != v.to_bits() {
+                            disagree += 1;
+                        }
+                    }
+                }
+                if disagree > 0 {
+                    on_disagreement(x, y, disagree);
+                }
+            }
+        }
+        Ok(samples)
+    }
+}
+
+/// The columns and rows of a window inside the data (each at most 2^20).
+fn window_size(window: &SampleRect) -> (u32, u32) {
+    let side = |a: u64, b: u64| u32::try_from(b - a + 1).unwrap_or(u32::MAX);
+    (
+        side(window.col0, window.col1),
+        side(window.row0, window.row1),
+    )
+}
+
+/// A sample index inside a buffer already allocated to hold it.
+fn index(i: u64) -> usize {
+    usize::try_from(i).unwrap_or(usize::MAX)
+}

@@ -1,0 +1,294 @@
+//! Writing a model to a new container, all at once.
+//!
+//! The file is laid out front to back (`format-spec/container.md` §2): the two commit slots,
+//! the dataset header, every payload in the tree's Hilbert pre-order, then the tables (nodes,
+//! blocks, each cluster's index, the adjacency table) and the cluster directory. The commit
+//! record goes into slot 0 last, once every page it points to is written. The second slot is
+//! left zero.
+
+use std::collections::HashMap;
+use std::io::{Seek, SeekFrom, Write};
+
+use rayon::prelude::*;
+use zerocopy::IntoBytes;
+
+use super::tables::{self, block_index, PageSink, PayloadRefs, TableRoots};
+use super::{SectionBytes, WriteOptions, WriteSummary};
+use crate::curve::HilbertKey;
+use crate::error::{Error, Result};
+use crate::format::blob::encode_blob;
+use crate::format::payload::{self, PayloadRef};
+use crate::format::tables::FREE;
+use crate::format::tree::{self, TreeSpec};
+use crate::format::{
+    self, tag, BlobRef, CommitRecord, DatasetHeader, StateRoots, TreeRef, PAYLOAD_ALIGN,
+};
+use crate::heightfield::Metadata;
+use crate::model::{Domain, Model};
+
+/// One payload, in file order.
+#[derive(Clone, Copy, Debug)]
+enum Item {
+    Grid { node: u32 },
+    Block { x: u32, y: u32 },
+}
+
+/// Writes the whole container to `w`, which must start empty (positioned at 0).
+pub fn write_to<W: Write + Seek>(
+    model: &Model,
+    metadata: &Metadata,
+    options: &WriteOptions,
+    w: &mut W,
+) -> Result<WriteSummary> {
+    let p = options.page_size;
+    if !format::page_size_is_valid(p) {
+        return Err(Error::InvalidArgument(format!(
+            "page size {p}: must be a power of two from {} to {}",
+            format::MIN_PAGE_SIZE,
+            format::MAX_PAGE_SIZE
+        )));
+    }
+    let mut out = PageWriter {
+        w,
+        page_size: u64::from(p),
+        written: 0,
+    };
+    let mut sections = SectionBytes {
+        commit_slots: 2 * u64::from(p),
+        ..SectionBytes::default()
+    };
+    out.write(&vec![0u8; 2 * p as usize])?;
+    let mut sink = SeqSink {
+        out: &mut out,
+        next_page: 2,
+        page_size: p,
+        bytes: HashMap::new(),
+    };
+    let header = DatasetHeader::of_model(model, metadata).encode();
+    let dataset_header = sink.blob(&header, tag::DATASET_HEADER)?;
+    sections.dataset_header = sink.bytes.remove(&tag::DATASET_HEADER).unwrap_or(0);
+
+    let refs = write_payloads(model, options, sink.out, &mut sections)?;
+    sink.next_page = sink.out.written / u64::from(p);
+    let TableRoots {
+        node_table,
+        block_table,
+        adjacency,
+        cluster_directory,
+    } = tables::write_tables(model, &refs, &mut sink)?;
+    let of = |t: [u8; 4]| sink.bytes.get(&t).copied().unwrap_or(0);
+    sections.node_table = of(tag::NODE_TABLE);
+    sections.block_table = of(tag::BLOCK_TABLE);
+    sections.cluster_index = of(tag::CLUSTER_INDEX);
+    sections.adjacency = of(tag::ADJACENCY);
+    sections.cluster_directory = of(tag::CLUSTER_DIRECTORY);
+
+    // The commit record, last.
+    let file_length = out.written;
+    let roots = StateRoots {
+        dataset_header,
+        cluster_directory,
+        node_table,
+        block_table,
+        free_list: tree::empty(FREE.record_size),
+        adjacency,
+    };
+    let record = CommitRecord::new(p, 1, file_length, 0, &roots);
+    out.w.seek(SeekFrom::Start(0)).map_err(io_err)?;
+    out.w.write_all(record.as_bytes()).map_err(io_err)?;
+    out.w.seek(SeekFrom::Start(file_length)).map_err(io_err)?;
+    Ok(WriteSummary {
+        file_length,
+        page_size: p,
+        sections,
+    })
+}
+
+/// Writes every payload in file order from the current position (page-aligned), then pads
+/// to a whole page; returns where each lies.
+fn write_payloads<W: Write>(
+    model: &Model,
+    options: &WriteOptions,
+    out: &mut PageWriter<'_, W>,
+    sections: &mut SectionBytes,
+) -> Result<PayloadRefs> {
+    let domain = *model.domain();
+    let tree = model.tree();
+    let (cols, _) = domain.nodes_across(domain.finest_level());
+    let shapes = tables::block_shapes(model);
+    let grid_voids = tables::grid_void_flags(model);
+    let items = payload_order(model);
+    let len_of = |item: &Item| match *item {
+        Item::Grid { node } => {
+            let n = tree.node(node);
+            let (gw, gh) = payload::grid_dims(&domain, n.level, n.x, n.y);
+            payload::grid_len(gw, gh, grid_voids[node as usize])
+        }
+        Item::Block { x, y } => shapes[block_index(x, y, cols)].payload_len(),
+    };
+    let start = out.written;
+    let mut offsets = Vec::with_capacity(items.len());
+    let mut at = start;
+    for item in &items {
+        at = at.next_multiple_of(PAYLOAD_ALIGN);
+        offsets.push(at);
+        at += len_of(item);
+    }
+    let progress = &*options.progress;
+    progress.start("writing payloads", at - start);
+    let mut grid = vec![PayloadRef::default(); tree.nodes().len()];
+    let mut block = vec![PayloadRef::default(); shapes.len()];
+    // Encoded in parallel a window at a time, written in order.
+    const WINDOW: usize = 256;
+    for (w_items, w_offsets) in items.chunks(WINDOW).zip(offsets.chunks(WINDOW)) {
+        let encoded: Vec<Vec<u8>> = w_items
+            .par_iter()
+            .map(|item| match *item {
+                Item::Grid { node } => tables::encode_grid(model, node, grid_voids[node as usize]),
+                Item::Block { x, y } => {
+                    tables::encode_block(model, &shapes[block_index(x, y, cols)])
+                }
+            })
+            .collect();
+        for ((item, &offset), bytes) in w_items.iter().zip(w_offsets).zip(encoded) {
+            let before = out.written;
+            out.zeros(offset - out.written)?;
+            sections.payload_padding += out.written - before;
+            out.write(&bytes)?;
+            let r = PayloadRef::of(offset, &bytes)
+                .ok_or_else(|| Error::Internal(format!("a payload of {} bytes", bytes.len())))?;
+            match *item {
+                Item::Grid { node } => {
+                    grid[node as usize] = r;
+                    sections.grids += bytes.len() as u64;
+                }
+                Item::Block { x, y } => {
+                    block[block_index(x, y, cols)] = r;
+                    sections.blocks += bytes.len() as u64;
+                }
+            }
+            progress.advance(bytes.len() as u64);
+        }
+    }
+    progress.finish();
+    let before = out.written;
+    out.pad_to_page()?;
+    sections.payload_padding += out.written - before;
+    Ok(PayloadRefs {
+        grid,
+        block,
+        grid_voids,
+        shapes,
+    })
+}
+
+/// A [`PageSink`] that appends pages in order (a fresh file), counting bytes per tag.
+struct SeqSink<'a, 'w, W: Write> {
+    out: &'a mut PageWriter<'w, W>,
+    next_page: u64,
+    page_size: u32,
+    bytes: HashMap<[u8; 4], u64>,
+}
+
+impl<W: Write> SeqSink<'_, '_, W> {
+    fn pages(&mut self, tag: [u8; 4], pages: &[Vec<u8>]) -> Result<()> {
+        for page in pages {
+            self.out.write(page)?;
+        }
+        self.next_page += pages.len() as u64;
+        *self.bytes.entry(tag).or_default() += pages.len() as u64 * u64::from(self.page_size);
+        Ok(())
+    }
+}
+
+impl<W: Write> PageSink for SeqSink<'_, '_, W> {
+    fn tree(&mut self, records: &[u8], spec: TreeSpec) -> Result<TreeRef> {
+        let mut pages = Vec::new();
+        let root = tree::build::<Error>(records, spec, self.page_size, self.next_page, &mut |p| {
+            pages.push(p);
+            Ok(())
+        })?;
+        self.pages(spec.tag, &pages)?;
+        Ok(root)
+    }
+
+    fn blob(&mut self, content: &[u8], tag: [u8; 4]) -> Result<BlobRef> {
+        let (blob, pages) = encode_blob(content, tag, self.next_page, self.page_size);
+        self.pages(tag, &pages)?;
+        Ok(blob)
+    }
+}
+
+fn io_err(e: std::io::Error) -> Error {
+    Error::io("<container being written>", e)
+}
+
+struct PageWriter<'w, W: Write> {
+    w: &'w mut W,
+    page_size: u64,
+    written: u64,
+}
+
+impl<W: Write> PageWriter<'_, W> {
+    fn write(&mut self, bytes: &[u8]) -> Result<()> {
+        self.w.write_all(bytes).map_err(io_err)?;
+        self.written += bytes.len() as u64;
+        Ok(())
+    }
+
+    fn zeros(&mut self, n: u64) -> Result<()> {
+        // Padding is less than a page or an alignment step.
+        self.write(&vec![0u8; usize::try_from(n).unwrap_or(0)])
+    }
+
+    fn pad_to_page(&mut self) -> Result<()> {
+        let pad = self.written.next_multiple_of(self.page_size) - self.written;
+        self.zeros(pad)
+    }
+}
+
+/// The payloads in file order: the tree in Hilbert pre-order, each node's grid (or, at the
+/// finest level, its block), and after each leaf above the finest level the blocks under it
+/// in Hilbert order.
+fn payload_order(model: &Model) -> Vec<Item> {
+    let d = model.domain();
+    let finest = d.finest_level();
+    let mut items = Vec::new();
+    for (i, n) in model.tree().nodes().iter().enumerate() {
+        if n.level == finest {
+            items.push(Item::Block { x: n.x, y: n.y });
+            continue;
+        }
+        items.push(Item::Grid {
+            node: tables::node_id(i),
+        });
+        if n.subtree_len == 1 {
+            blocks_under(d, n.level, n.x, n.y, &mut items);
+        }
+    }
+    items
+}
+
+fn blocks_under(d: &Domain, level: u8, x: u32, y: u32, items: &mut Vec<Item>) {
+    if !d.exists(level, x, y) {
+        return;
+    }
+    if level == d.finest_level() {
+        items.push(Item::Block { x, y });
+        return;
+    }
+    let mut children: Vec<(HilbertKey, u32, u32)> = (0..4u32)
+        .map(|q| (2 * x + (q & 1), 2 * y + (q >> 1)))
+        .map(|(cx, cy)| {
+            (
+                HilbertKey::of_node(d.finest_level(), level + 1, cx, cy),
+                cx,
+                cy,
+            )
+        })
+        .collect();
+    children.sort_unstable();
+    for (_, cx, cy) in children {
+        blocks_under(d, level + 1, cx, cy, items);
+    }
+}

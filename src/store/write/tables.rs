@@ -1,0 +1,262 @@
+//! Writing a state's tables and blobs, and encoding a model's payloads: shared by the bulk
+//! writer (a fresh file, pages in order) and by commits (pages wherever the allocator finds
+//! room), which differ only in their [`PageSink`].
+//!
+//! The bytes are [`crate::format`]'s: this file turns a [`Model`] into records and payloads
+//! and hands them to the sink.
+
+use rayon::prelude::*;
+use zerocopy::IntoBytes;
+
+use crate::error::Result;
+use crate::format::directory::{self, ClusterInfo, EdgeRange};
+use crate::format::payload::{self, PayloadRef};
+use crate::format::tables;
+use crate::format::{
+    tag, AdjacencyEntry, BlobRef, BlockRecord, IndexEntry, NodeRecord, ScanEntry, StoredBlock,
+    StoredNode, TreeRef, TreeSpec,
+};
+use crate::model::{cluster, Model, NodeGrid, SampleRect, NO_PARENT};
+
+/// Where the pages of a state's tables and blobs go.
+pub(crate) trait PageSink {
+    /// Writes `records` (`spec.record_size` bytes each) as a tree of `spec.tag` pages.
+    fn tree(&mut self, records: &[u8], spec: TreeSpec) -> Result<TreeRef>;
+    /// Writes `content` as a blob of consecutive `tag` pages.
+    fn blob(&mut self, content: &[u8], tag: [u8; 4]) -> Result<BlobRef>;
+}
+
+/// A physical block's shape: the samples it holds and how many are void.
+pub(crate) struct BlockShape {
+    pub rect: SampleRect,
+    pub void_count: u32,
+}
+
+impl BlockShape {
+    /// Samples along a row and down a column (each at most a block side).
+    pub fn size(&self) -> (u32, u32) {
+        let side = |a: u64, b: u64| u32::try_from(b - a + 1).unwrap_or(u32::MAX);
+        (
+            side(self.rect.col0, self.rect.col1),
+            side(self.rect.row0, self.rect.row1),
+        )
+    }
+
+    /// Payload bytes.
+    pub fn payload_len(&self) -> u64 {
+        let (w, h) = self.size();
+        payload::block_len(w, h, self.void_count)
+    }
+}
+
+/// Where each payload of a state lies, per node (its grid; unused at the finest level) and
+/// per physical block (row-major), with what the tables need to describe them.
+pub(crate) struct PayloadRefs {
+    pub grid: Vec<PayloadRef>,
+    pub block: Vec<PayloadRef>,
+    pub grid_voids: Vec<bool>,
+    pub shapes: Vec<BlockShape>,
+}
+
+/// The roots [`write_tables`] returns.
+pub(crate) struct TableRoots {
+    pub node_table: TreeRef,
+    pub block_table: TreeRef,
+    pub adjacency: TreeRef,
+    pub cluster_directory: BlobRef,
+}
+
+/// Writes the node table, block table, every cluster's index, the adjacency table and the
+/// cluster directory of `model`, in that order, with payloads where `refs` says.
+pub(crate) fn write_tables(
+    model: &Model,
+    refs: &PayloadRefs,
+    sink: &mut dyn PageSink,
+) -> Result<TableRoots> {
+    let domain = *model.domain();
+    let tree = model.tree();
+    let finest = domain.finest_level();
+    let (cols, _) = domain.nodes_across(finest);
+
+    let mut node_records = Vec::with_capacity(tree.nodes().len() * tables::NODES.record_size);
+    for (i, n) in tree.nodes().iter().enumerate() {
+        let at_finest = n.level == finest;
+        let stored = StoredNode {
+            key: n.key,
+            level: n.level,
+            x: n.x,
+            y: n.y,
+            child_mask: n.child_mask,
+            parent: Some(n.parent).filter(|&p| p != NO_PARENT),
+            subtree_len: n.subtree_len,
+            static_error: n.static_error,
+            monotone_error: n.monotone_error,
+            min_height: n.min_height,
+            max_height: n.max_height,
+            valid_samples: n.valid_samples,
+            payload: if at_finest {
+                refs.block[block_index(n.x, n.y, cols)]
+            } else {
+                refs.grid[i]
+            },
+            grid_has_voids: !at_finest && refs.grid_voids[i],
+        };
+        node_records.extend_from_slice(NodeRecord::encode(&stored).as_bytes());
+    }
+    let node_table = sink.tree(&node_records, tables::NODES)?;
+
+    let mut block_records = Vec::with_capacity(refs.shapes.len() * tables::BLOCKS.record_size);
+    for (s, &payload) in refs.shapes.iter().zip(&refs.block) {
+        let (width, height) = s.size();
+        let block = StoredBlock {
+            payload,
+            width,
+            height,
+            void_count: s.void_count,
+        };
+        block_records.extend_from_slice(BlockRecord::encode(&block).as_bytes());
+    }
+    let block_table = sink.tree(&block_records, tables::BLOCKS)?;
+
+    // Clusters: one index each; their edge lists go into the one adjacency table.
+    let mut clusters = Vec::with_capacity(model.clusters().len());
+    let mut adjacency_entries: Vec<u8> = Vec::new();
+    let adjacency_len = |bytes: &Vec<u8>| (bytes.len() / tables::ADJACENCY.record_size) as u64;
+    for c in model.clusters() {
+        let mut entries = Vec::with_capacity(c.nodes.len() * tables::INDEX.record_size);
+        for &i in &c.nodes {
+            let n = tree.node(i);
+            let e = ScanEntry {
+                key: n.key,
+                level: n.level,
+                node: i,
+            };
+            entries.extend_from_slice(IndexEntry::encode(&e).as_bytes());
+        }
+        let index = sink.tree(&entries, tables::INDEX)?;
+        let mut adjacency = [EdgeRange::default(); 4];
+        for (range, list) in adjacency
+            .iter_mut()
+            .zip(cluster::edge_nodes(tree, &c.nodes))
+        {
+            let first = adjacency_len(&adjacency_entries);
+            for i in list {
+                let e = AdjacencyEntry {
+                    node: zerocopy::byteorder::little_endian::U32::new(i),
+                };
+                adjacency_entries.extend_from_slice(e.as_bytes());
+            }
+            let end = adjacency_len(&adjacency_entries);
+            *range = EdgeRange {
+                first: first.into(),
+                count: (end - first).into(),
+            };
+        }
+        clusters.push(ClusterInfo::new(c.threshold, c.max_error, index, adjacency));
+    }
+    let adjacency = sink.tree(&adjacency_entries, tables::ADJACENCY)?;
+    let cluster_directory = sink.blob(&directory::encode(&clusters), tag::CLUSTER_DIRECTORY)?;
+    Ok(TableRoots {
+        node_table,
+        block_table,
+        adjacency,
+        cluster_directory,
+    })
+}
+
+/// The row-major index of block `(x, y)` among `cols` columns.
+pub(crate) fn block_index(x: u32, y: u32, cols: u32) -> usize {
+    y as usize * cols as usize + x as usize
+}
+
+/// Every physical block's data rectangle and void count, row-major.
+pub(crate) fn block_shapes(model: &Model) -> Vec<BlockShape> {
+    let d = model.domain();
+    let finest = d.finest_level();
+    let (cols, rows) = d.nodes_across(finest);
+    let data = d.data_rect();
+    let raster = model.raster();
+    (0..rows)
+        .into_par_iter()
+        .flat_map_iter(|y| {
+            (0..cols).map(move |x| {
+                let rect = d.footprint(finest, x, y).intersect(&data).unwrap_or(data);
+                let valid: u64 = (rect.row0..=rect.row1)
+                    .map(|r| raster.count_valid(r, rect.col0, rect.col1))
+                    .sum();
+                BlockShape {
+                    rect,
+                    // A block holds at most 1025² samples.
+                    void_count: u32::try_from(rect.samples() - valid).unwrap_or(u32::MAX),
+                }
+            })
+        })
+        .collect()
+}
+
+/// Per node: whether its stored (clipped) coarse grid has a void or padding sample.
+pub(crate) fn grid_void_flags(model: &Model) -> Vec<bool> {
+    let d = model.domain();
+    let tree = model.tree();
+    let data = d.data_rect();
+    tree.nodes()
+        .par_iter()
+        .enumerate()
+        .map(|(i, n)| {
+            if n.level == d.finest_level() {
+                return false;
+            }
+            let fp = tree.footprint(node_id(i));
+            if fp.intersect(&data) == Some(fp) && n.valid_samples == fp.samples() {
+                return false;
+            }
+            let s = d.stride(n.level);
+            let (gw, gh) = payload::grid_dims(d, n.level, n.x, n.y);
+            (0..u64::from(gh)).any(|j| {
+                (0..u64::from(gw))
+                    .any(|k| !model.raster().is_valid(fp.col0 + k * s, fp.row0 + j * s))
+            })
+        })
+        .collect()
+}
+
+/// A node's index in a model's tree, which holds fewer than 2^32 nodes.
+pub(crate) fn node_id(i: usize) -> u32 {
+    u32::try_from(i).unwrap_or(u32::MAX)
+}
+
+/// The payload of `node`'s coarse grid.
+pub(crate) fn encode_grid(model: &Model, node: u32, has_voids: bool) -> Vec<u8> {
+    let (g, _, _) = clipped_grid(model, node);
+    payload::encode_grid(&g.heights, &g.void, has_voids)
+}
+
+/// The grid of `node` clipped to its stored `gw × gh` (see [`payload::grid_dims`]).
+pub(crate) fn clipped_grid(model: &Model, node: u32) -> (NodeGrid, u32, u32) {
+    let n = model.tree().node(node);
+    let (gw, gh) = payload::grid_dims(model.domain(), n.level, n.x, n.y);
+    let mut g = model.node_grid(node);
+    let b = g.size as usize;
+    let inside = |k: usize| k % b < gw as usize && k / b < gh as usize;
+    let mut k = 0;
+    g.heights.retain(|_| {
+        k += 1;
+        inside(k - 1)
+    });
+    k = 0;
+    g.void.retain(|_| {
+        k += 1;
+        inside(k - 1)
+    });
+    (g, gw, gh)
+}
+
+/// The payload of the physical block of `shape`.
+pub(crate) fn encode_block(model: &Model, shape: &BlockShape) -> Vec<u8> {
+    let raster = model.raster();
+    let r = shape.rect;
+    let samples = (r.row0..=r.row1).flat_map(|row| {
+        (r.col0..=r.col1).map(move |col| (raster.value(col, row), raster.is_valid(col, row)))
+    });
+    payload::encode_block(samples, usize::try_from(r.samples()).unwrap_or(0))
+}
