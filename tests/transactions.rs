@@ -1,13 +1,17 @@
 //! Transactions: replacing samples through a `Container` gives exactly the file a fresh
 //! build of the new samples describes (same nodes, errors and cuts), the result passes
-//! `verify --full`, snapshots keep their state across commits, and an aborted transaction
-//! changes nothing.
+//! `verify --full`, snapshots keep their state across commits, an aborted transaction
+//! changes nothing, and a snapshot taken in the middle of a commit reads a state some commit
+//! made (never the writer's recovery mark, which copies a state under a new txn id).
 
 mod common;
 
 use common::txn::{build_bytes, described, paste, patch, samples_digest};
 use fmrh::model::Thresholds;
-use fmrh::store::io::SimDisk;
+use std::path::Path;
+use std::sync::{Arc, Condvar, Mutex};
+
+use fmrh::store::io::{Io, SimDisk};
 use fmrh::store::{verify, Bytes, Container};
 use fmrh::{Heightfield, Store};
 
@@ -145,4 +149,89 @@ fn crash_at_every_operation_recovers_old_or_new() {
         total + 1
     );
     assert!(olds > 0 && news > 0);
+}
+
+/// A device that stops the writer at its `pause_at`-th write until a reader has taken a
+/// snapshot, so a test can look at a commit from the middle.
+struct PausingDisk {
+    disk: SimDisk,
+    pause_at: u64,
+    writes: Mutex<u64>,
+    /// 0: running; 1: writer paused, waiting for the reader; 2: reader done.
+    gate: Arc<(Mutex<u8>, Condvar)>,
+}
+
+impl Io for PausingDisk {
+    fn len(&self) -> std::io::Result<u64> {
+        self.disk.len()
+    }
+    fn read_at(&self, offset: u64, buf: &mut [u8]) -> std::io::Result<()> {
+        self.disk.read_at(offset, buf)
+    }
+    fn write_at(&self, offset: u64, data: &[u8]) -> std::io::Result<()> {
+        let n = {
+            let mut w = self.writes.lock().unwrap();
+            *w += 1;
+            *w
+        };
+        if n == self.pause_at {
+            let (state, cv) = &*self.gate;
+            let mut s = state.lock().unwrap();
+            *s = 1;
+            cv.notify_all();
+            while *s != 2 {
+                s = cv.wait(s).unwrap();
+            }
+        }
+        self.disk.write_at(offset, data)
+    }
+    fn sync(&self) -> std::io::Result<()> {
+        self.disk.sync()
+    }
+    fn set_len(&self, len: u64) -> std::io::Result<()> {
+        self.disk.set_len(len)
+    }
+    fn name(&self) -> &Path {
+        self.disk.name()
+    }
+}
+
+/// Regression (the flaky `readers_running_scenes_see_only_whole_snapshots`): the first
+/// commit after opening publishes a recovery mark (the durable record copied under txn + 1)
+/// before writing its pages. A snapshot taken right then must read the opened state's txn,
+/// which is the one readers knew, not the mark's, which no commit returned.
+#[test]
+fn a_snapshot_in_the_middle_of_a_commit_reads_a_committed_state() {
+    let hf = terrain(130, 97);
+    let gate = Arc::new((Mutex::new(0u8), Condvar::new()));
+    let disk = PausingDisk {
+        disk: SimDisk::new(build_bytes(&hf, 17, &Thresholds::Ladder)),
+        // Write 1 is the mark's record; write 2 is the commit's first payload.
+        pause_at: 2,
+        writes: Mutex::new(0),
+        gate: Arc::clone(&gate),
+    };
+    let (container, _) = Container::open_io(disk).unwrap();
+    let opened = container.read().unwrap().txn_id();
+    let seen = std::thread::scope(|scope| {
+        let reader = scope.spawn(|| {
+            let (state, cv) = &*gate;
+            let mut s = state.lock().unwrap();
+            while *s != 1 {
+                s = cv.wait(s).unwrap();
+            }
+            let txn = container.read().unwrap().txn_id();
+            *s = 2;
+            cv.notify_all();
+            txn
+        });
+        let mut txn = container.begin_write().unwrap();
+        txn.replace_region(3, 3, &patch(20, 20, 4.0)).unwrap();
+        let summary = txn.commit().unwrap();
+        (reader.join().unwrap(), summary.txn_id)
+    });
+    let (mid_commit, committed) = seen;
+    assert_eq!(mid_commit, opened, "a snapshot read the recovery mark's txn");
+    assert_eq!(committed, opened + 2, "the mark took txn {}", opened + 1);
+    assert_eq!(container.read().unwrap().txn_id(), committed);
 }
