@@ -231,7 +231,10 @@ fn a_snapshot_in_the_middle_of_a_commit_reads_a_committed_state() {
         (reader.join().unwrap(), summary.txn_id)
     });
     let (mid_commit, committed) = seen;
-    assert_eq!(mid_commit, opened, "a snapshot read the recovery mark's txn");
+    assert_eq!(
+        mid_commit, opened,
+        "a snapshot read the recovery mark's txn"
+    );
     assert_eq!(committed, opened + 2, "the mark took txn {}", opened + 1);
     assert_eq!(container.read().unwrap().txn_id(), committed);
 }

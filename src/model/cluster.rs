@@ -72,6 +72,13 @@ pub fn validate_thresholds(thresholds: &[f64]) -> Result<Vec<f64>> {
     Ok(sorted)
 }
 
+/// The factor between a ladder rung and the next odd one: `1/√2` as the binary64
+/// `0x3FE6A09E667F3BCD`, which is `sqrt(0.5)` correctly rounded (and `FRAC_1_SQRT_2`). The
+/// spec gives the bits because `1.0 / 2f64.sqrt()` rounds one ulp lower (model §6).
+pub const LADDER_HALF_STEP: f64 = f64::from_bits(0x3FE6_A09E_667F_3BCD);
+
+const _: () = assert!(LADDER_HALF_STEP.to_bits() == std::f64::consts::FRAC_1_SQRT_2.to_bits());
+
 /// The default ladder (see the module docs), ascending, starting with 0.
 pub fn default_ladder(root_error: f64, min_positive_error: Option<f64>) -> Vec<f64> {
     let mut rungs = vec![0.0];
@@ -86,7 +93,7 @@ pub fn default_ladder(root_error: f64, min_positive_error: Option<f64>) -> Vec<f
         // root · 2^(-k/2); even rungs are exact powers of two apart.
         let mut delta = root_error * 0.5f64.powi((k / 2) as i32);
         if k % 2 == 1 {
-            delta *= std::f64::consts::FRAC_1_SQRT_2;
+            delta *= LADDER_HALF_STEP;
         }
         if delta < floor {
             break;
