@@ -129,7 +129,7 @@ mod tests {
 
     #[test]
     fn a_blob_round_trips_across_pages() {
-        let content: Vec<u8> = (0..2500u32).map(|i| i as u8).collect();
+        let content: Vec<u8> = (0..2500u32).map(|i| i.to_le_bytes()[0]).collect();
         let (blob, pages) = encode_blob(&content, tag::DATASET_HEADER, 5, 1024);
         assert_eq!(pages.len() as u64, blob_pages(2500, 1024));
         assert_eq!(check_blob_ref(&blob, 4096, 1024, 8, "b").unwrap(), 3);

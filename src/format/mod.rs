@@ -46,6 +46,9 @@
 //! old reader knows when a newer writer has superseded the state it could read
 //! ([`commit::choose`]).
 
+// Values read from a file are converted with checks, never truncated by `as`.
+#![warn(clippy::cast_possible_truncation)]
+
 pub mod blob;
 pub mod commit;
 pub mod dataset;

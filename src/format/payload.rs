@@ -117,7 +117,7 @@ pub fn grid_dims(domain: &Domain, level: u8, x: u32, y: u32) -> (u32, u32) {
         let inside = if start > last_data {
             0
         } else {
-            ((last_data - start) / s + 1).min(u64::from(b)) as u32
+            u32::try_from((last_data - start) / s + 1).map_or(b, |n| n.min(b))
         };
         if inside < b {
             inside + 1

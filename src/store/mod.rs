@@ -34,6 +34,9 @@
 //! (assembling samples from blocks), `btree` (following tree pages), `verify` (the validator),
 //! `write` (fresh files), `txn` (transactions), `io` and `source` (where bytes come from).
 
+// Values read from a file are converted with checks, never truncated by `as`.
+#![warn(clippy::cast_possible_truncation)]
+
 pub(crate) mod btree;
 pub mod io;
 mod open;

@@ -8,6 +8,10 @@
 //! operations ([`Fault`]) once or from then on, which is how the error paths of the commit
 //! protocol are tested.
 
+// An in-memory test device: offsets index a buffer already in memory, and garbage bytes are
+// meant to be truncated random words.
+#![allow(clippy::cast_possible_truncation)]
+
 use std::io;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, MutexGuard};

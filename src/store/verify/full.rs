@@ -9,7 +9,7 @@ use crate::format::payload::GridView;
 use crate::format::Invariant;
 use crate::heightfield::Heightfield;
 use crate::model::{cluster, BuildOptions, Model, Thresholds, NO_PARENT};
-use crate::store::write::tables::clipped_grid;
+use crate::store::write::tables::{clipped_grid, node_id};
 use crate::store::{Source, Store};
 
 pub(super) fn check_cuts<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Checks) {
@@ -162,8 +162,9 @@ pub(super) fn check_measured<S: Source>(
             let Some(grid) = checks.absorb(store.grid(&node))? else {
                 continue;
             };
-            let full = model.node_grid(i as u32);
-            let (clipped, gw, _) = clipped_grid(&model, i as u32);
+            let index = node_id(i);
+            let full = model.node_grid(index);
+            let (clipped, gw, _) = clipped_grid(&model, index);
             let b = full.size;
             let ok = {
                 let v: GridView<'_> = grid.view();
@@ -207,7 +208,7 @@ pub(super) fn check_measured<S: Source>(
         if b.void_count.get() == 0 {
             continue;
         }
-        let (x, y) = (i as u32 % cols, i as u32 / cols);
+        let (x, y) = super::block_xy(i, cols);
         let Some(block) = checks.absorb(store.block(x, y))? else {
             continue;
         };

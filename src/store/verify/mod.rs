@@ -285,6 +285,14 @@ fn check_slots<S: Source>(
     Ok(())
 }
 
+/// Block `i` of the row-major block table, with `cols` blocks a row (fewer than 2^20 each
+/// way, so both fit a `u32`).
+fn block_xy(i: usize, cols: u32) -> (u32, u32) {
+    let cols = cols as usize;
+    let at = |v: usize| u32::try_from(v).unwrap_or(u32::MAX);
+    (at(i % cols), at(i / cols))
+}
+
 /// The tables, read once.
 pub(super) struct Loaded {
     nodes: Vec<NodeRecord>,

@@ -116,7 +116,9 @@ pub(super) fn check_nodes<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut 
         let mut c = i as u64 + 1;
         let end = i as u64 + sub;
         while c < end {
-            let ch = &nodes[c as usize];
+            let Some(ch) = usize::try_from(c).ok().and_then(|c| nodes.get(c)) else {
+                break;
+            };
             if ch.parent.get() as usize != i {
                 checks.fail(
                     id,
@@ -188,7 +190,7 @@ pub(super) fn check_blocks<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut
     let d = store.domain();
     let (cols, _) = d.nodes_across(d.finest_level());
     for (i, b) in l.blocks.iter().enumerate() {
-        let (x, y) = (i as u32 % cols, i as u32 / cols);
+        let (x, y) = super::block_xy(i, cols);
         let rect = d
             .footprint(d.finest_level(), x, y)
             .intersect(&d.data_rect())
