@@ -113,7 +113,7 @@ impl ClusterInfo {
     }
 
     /// The root of its index.
-    pub fn index(&self) -> &TreeRef {
+    pub(crate) fn index(&self) -> &TreeRef {
         &self.index
     }
 

@@ -1,0 +1,172 @@
+//! Errors say what happened. A read the operating system fails is an I/O error wherever it
+//! happens (the commit slots, a table page, a payload, the validator), never corruption and
+//! never "not a container"; a read past the end of a file shorter than it claims is
+//! corruption (I-3); and every error names its file. A source that fails a chosen read with
+//! `EIO` stands in for a failing disk.
+
+mod common;
+
+use std::borrow::Cow;
+use std::io;
+use std::path::Path;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Mutex;
+
+use common::txn::build_bytes;
+use fmrh::model::Thresholds;
+use fmrh::store::{verify, Source};
+use fmrh::{Error, Heightfield, Invariant, Store, VerifyMode};
+
+/// Bytes that fail (with `EIO`) every read touching `bad`, once `armed_after` reads have
+/// passed. Its length is the bytes' length when made: cutting the bytes later is a file
+/// truncated under a reader.
+#[derive(Debug)]
+struct FailingSource {
+    bytes: Mutex<Vec<u8>>,
+    len: u64,
+    bad: std::ops::Range<u64>,
+    armed_after: u64,
+    reads: AtomicU64,
+}
+
+impl Source for FailingSource {
+    fn len(&self) -> u64 {
+        self.len
+    }
+
+    fn read_at(&self, offset: u64, len: usize) -> io::Result<Cow<'_, [u8]>> {
+        let n = self.reads.fetch_add(1, Ordering::Relaxed);
+        let end = offset + len as u64;
+        if n >= self.armed_after && offset < self.bad.end && end > self.bad.start {
+            return Err(io::Error::from_raw_os_error(5)); // EIO
+        }
+        self.bytes
+            .lock()
+            .unwrap()
+            .get(offset as usize..end as usize)
+            .map(|b| Cow::Owned(b.to_vec()))
+            .ok_or_else(|| io::Error::new(io::ErrorKind::UnexpectedEof, "past the end"))
+    }
+
+    fn stable(&self) -> bool {
+        false
+    }
+
+    fn name(&self) -> &Path {
+        Path::new("/disk/failing.fmrh")
+    }
+}
+
+fn container() -> Vec<u8> {
+    let hf = Heightfield::from_fn(150, 120, |x, y| ((x * 7 + y * 3) % 41) as f32).unwrap();
+    build_bytes(&hf, 17, &Thresholds::Ladder)
+}
+
+fn failing(bytes: Vec<u8>, bad: std::ops::Range<u64>, armed_after: u64) -> FailingSource {
+    FailingSource {
+        len: bytes.len() as u64,
+        bytes: Mutex::new(bytes),
+        bad,
+        armed_after,
+        reads: AtomicU64::new(0),
+    }
+}
+
+fn assert_io(e: Error, what: &str) {
+    match e {
+        Error::Io { path, source } => {
+            assert_eq!(path, Path::new("/disk/failing.fmrh"), "{what}");
+            assert_eq!(source.raw_os_error(), Some(5), "{what}");
+        }
+        other => panic!("{what}: {other} is not an I/O error"),
+    }
+}
+
+#[test]
+fn a_failed_read_of_a_commit_slot_is_an_io_error() {
+    let bytes = container();
+    for bad in [0..1, 4096..4097] {
+        let e = Store::from_source(failing(bytes.clone(), bad.clone(), 0)).unwrap_err();
+        assert_io(e, &format!("slot read at {bad:?}"));
+        let e = verify(failing(bytes.clone(), bad.clone(), 0), VerifyMode::Fast).unwrap_err();
+        assert_io(e, &format!("verify, slot read at {bad:?}"));
+    }
+}
+
+#[test]
+fn a_failed_read_of_a_table_page_or_payload_is_an_io_error() {
+    let bytes = container();
+    let store = Store::from_bytes(bytes.clone()).unwrap();
+    let root = store.node(0).unwrap();
+    let p = u64::from(store.page_size());
+    let len = bytes.len() as u64;
+    // Every page past the slots fails once opening is over: lookups, scans and payloads.
+    let opened = {
+        let s = failing(bytes.clone(), 2 * p..len, u64::MAX);
+        let st = Store::from_source(s).unwrap();
+        st.source().reads.load(Ordering::Relaxed)
+    };
+    let store = Store::from_source(failing(bytes.clone(), 2 * p..len, opened)).unwrap();
+    assert_io(store.node(0).unwrap_err(), "node lookup");
+    assert_io(store.payload(root.payload).unwrap_err(), "payload");
+    let scan = store
+        .scan_hilbert(0, 0..=u64::MAX)
+        .map(|s| s.collect::<Result<Vec<_>, _>>());
+    let e = match scan {
+        Err(e) | Ok(Err(e)) => e,
+        Ok(Ok(_)) => panic!("the scan read nothing"),
+    };
+    assert_io(e, "scan");
+    // Opening itself, when a metadata page fails.
+    let e = Store::from_source(failing(bytes.clone(), 2 * p..len, 0)).unwrap_err();
+    assert_io(e, "open");
+    // The validator stops with the I/O error rather than calling the file invalid.
+    let e = verify(failing(bytes, 2 * p..len, 2), VerifyMode::Full).unwrap_err();
+    assert_io(e, "verify");
+}
+
+#[test]
+fn a_file_cut_under_a_reader_is_corrupt_and_named() {
+    // Opened whole, then cut before the root's payload: the store's bounds say the payload
+    // lies inside the file, the read finds the end first.
+    let store = Store::from_source(failing(container(), 0..0, u64::MAX)).unwrap();
+    let root = store.node(0).unwrap();
+    store
+        .source()
+        .bytes
+        .lock()
+        .unwrap()
+        .truncate(root.payload.offset as usize);
+    match store.payload(root.payload) {
+        Err(Error::Corrupt {
+            path, invariant, ..
+        }) => {
+            assert_eq!(invariant, Invariant::FileLength);
+            assert_eq!(path, Path::new("/disk/failing.fmrh"));
+        }
+        other => panic!("{:?}", other.map(|b| b.len())),
+    }
+}
+
+#[test]
+fn every_error_names_its_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("damaged.fmrh");
+    let mut bytes = container();
+    // Damage a byte of the node table's root page (the last table page before the directory).
+    let flip = bytes.len() - 4096 - 100;
+    bytes[flip] ^= 0xff;
+    std::fs::write(&path, &bytes).unwrap();
+    let e = Store::open(&path).unwrap_err();
+    assert!(e.to_string().contains(&*path.to_string_lossy()), "{e}");
+    assert!(matches!(e, Error::Corrupt { .. }), "{e}");
+    let missing = dir.path().join("missing.fmrh");
+    let e = Store::open(&missing).unwrap_err();
+    assert!(matches!(e, Error::Io { .. }), "{e}");
+    assert!(e.to_string().contains("missing.fmrh"), "{e}");
+    let text = dir.path().join("notes.txt");
+    std::fs::write(&text, vec![b'x'; 10_000]).unwrap();
+    let e = Store::open(&text).unwrap_err();
+    assert!(matches!(e, Error::Input { .. }), "{e}");
+    assert!(e.to_string().contains("notes.txt"), "{e}");
+}
