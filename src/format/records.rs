@@ -113,11 +113,7 @@ impl NodeRecord {
             min_height: self.min_height.get(),
             max_height: self.max_height.get(),
             valid_samples: self.valid_samples.get(),
-            payload: PayloadRef {
-                offset: self.payload_offset.get(),
-                len: self.payload_len.get(),
-                crc: self.payload_crc.get(),
-            },
+            payload: self.payload(),
             grid_has_voids: self.flags.get() & NODE_GRID_HAS_VOIDS != 0,
         }
     }

@@ -25,7 +25,9 @@ use super::open::{no_state, read_slots};
 use super::{Source, Store};
 use crate::error::{Error, Result};
 use crate::format::commit::{self, Slot};
-use crate::format::{tables, BlockRecord, IndexEntry, Invariant, NodeRecord, COMMIT_RECORD_LEN};
+use crate::format::{
+    tables, BlockRecord, FreePage, IndexEntry, Invariant, NodeRecord, COMMIT_RECORD_LEN,
+};
 
 /// At most this many messages are kept per check (all are counted).
 const MAX_MESSAGES: usize = 20;
@@ -297,7 +299,7 @@ fn block_xy(i: usize, cols: u32) -> (u32, u32) {
 pub(super) struct Loaded {
     nodes: Vec<NodeRecord>,
     blocks: Vec<BlockRecord>,
-    free: Vec<(u64, u64)>,
+    free: Vec<FreePage>,
     indexes: Vec<Vec<IndexEntry>>,
     adjacency: Vec<[Vec<u32>; 4]>,
 }
@@ -306,11 +308,7 @@ impl Loaded {
     fn read<S: Source>(store: &Store<S>) -> Result<Loaded> {
         let nodes = store.node_records()?;
         let blocks = store.block_records()?;
-        let free = store
-            .free_pages()?
-            .iter()
-            .map(|f| (f.page, f.freed_txn))
-            .collect();
+        let free = store.free_pages()?;
         let mut indexes = Vec::new();
         let mut adjacency = Vec::new();
         for (c, cl) in store.clusters().iter().enumerate() {

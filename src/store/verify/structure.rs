@@ -4,14 +4,18 @@
 use super::{Checks, Loaded};
 use crate::curve::HilbertKey;
 use crate::format::payload;
-use crate::format::{Invariant, NODE_GRID_HAS_VOIDS};
+use crate::format::{FreePage, Invariant, NODE_GRID_HAS_VOIDS};
 use crate::model::{cluster, NO_PARENT};
 use crate::store::btree::PageSet;
 use crate::store::{Source, Store};
 
 pub(super) fn check_free_list<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Checks) {
     let mut prev = None;
-    for &(page, txn) in &l.free {
+    for &FreePage {
+        page,
+        freed_txn: txn,
+    } in &l.free
+    {
         if page < 2 || page >= store.page_count() || prev.is_some_and(|p| page <= p) {
             checks.fail(
                 Invariant::FreeList,
@@ -226,7 +230,7 @@ pub(super) fn check_ownership<S: Source>(
     let id = Invariant::PageOwnership;
     let meta = store.metadata_pages();
     let mut free = PageSet::new(store.page_count());
-    for &(page, _) in &l.free {
+    for &FreePage { page, .. } in &l.free {
         if !free.insert(page) {
             checks.fail(
                 id,
