@@ -8,6 +8,7 @@
 
 use std::collections::HashMap;
 use std::io::{Seek, SeekFrom, Write};
+use std::path::Path;
 
 use rayon::prelude::*;
 use zerocopy::IntoBytes;
@@ -33,13 +34,26 @@ enum Item {
     Block { x: u32, y: u32 },
 }
 
-/// Writes the whole container to `w`, which must start empty (positioned at 0).
+/// Writes the whole container to `w`, which must start empty (positioned at 0). A failed
+/// write is an I/O error about `<writer>`; [`super::write_file`] names the file.
 pub fn write_to<W: Write + Seek>(
     model: &Model,
     metadata: &Metadata,
     options: &WriteOptions,
     w: &mut W,
 ) -> Result<WriteSummary> {
+    write_named(model, metadata, options, w, Path::new("<writer>"))
+}
+
+/// [`write_to`], with I/O errors about the file `name`.
+pub(crate) fn write_named<W: Write + Seek>(
+    model: &Model,
+    metadata: &Metadata,
+    options: &WriteOptions,
+    w: &mut W,
+    name: &Path,
+) -> Result<WriteSummary> {
+    let io_err = |e| Error::io(name, e);
     let p = options.page_size;
     if !format::page_size_is_valid(p) {
         return Err(Error::InvalidArgument(format!(
@@ -50,6 +64,7 @@ pub fn write_to<W: Write + Seek>(
     }
     let mut out = PageWriter {
         w,
+        name,
         page_size: u64::from(p),
         written: 0,
     };
@@ -219,19 +234,18 @@ impl<W: Write> PageSink for SeqSink<'_, '_, W> {
     }
 }
 
-fn io_err(e: std::io::Error) -> Error {
-    Error::io("<container being written>", e)
-}
-
 struct PageWriter<'w, W: Write> {
     w: &'w mut W,
+    name: &'w Path,
     page_size: u64,
     written: u64,
 }
 
 impl<W: Write> PageWriter<'_, W> {
     fn write(&mut self, bytes: &[u8]) -> Result<()> {
-        self.w.write_all(bytes).map_err(io_err)?;
+        self.w
+            .write_all(bytes)
+            .map_err(|e| Error::io(self.name, e))?;
         self.written += bytes.len() as u64;
         Ok(())
     }

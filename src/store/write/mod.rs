@@ -113,7 +113,9 @@ pub fn write_file(
     options: &WriteOptions,
     overwrite: bool,
 ) -> Result<WriteSummary> {
-    write_atomically(path, overwrite, |w| write_to(model, metadata, options, w))
+    write_atomically(path, overwrite, |w| {
+        bulk::write_named(model, metadata, options, w, path)
+    })
 }
 
 /// How [`create`] builds and writes a container.
