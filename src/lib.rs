@@ -76,7 +76,7 @@
 //! ```
 //!
 //! Underneath: [`ingest`] reads DEMs, [`model`] builds the FMRH and its clusters,
-//! [`format`] is every byte of the file format, [`store`] reads, writes and verifies files,
+//! [`mod@format`] is every byte of the file format, [`store`] reads, writes and verifies files,
 //! [`scene`] selects blocks for cameras, and [`curve`] knows Hilbert and Morton keys and
 //! nothing of terrain. Errors say whose fault they are ([`Error`]).
 

@@ -4,7 +4,7 @@
 //! of the terrain as maximal aligned quadrants, then Hilbert key ranges), `result` (what a
 //! scene asks and answers), `terrain` (boxes, regions, and the dispatch to a mode), the modes
 //! `uniform` and `view_dependent` (the cuts, found through the clusters, over the shared
-//! `search` state), `stitch` (neighbour levels across block edges), [`reconstruct`] (the
+//! `search` state), `stitch` (neighbour levels across block edges), [`mod@reconstruct`] (the
 //! surface a scene draws, sampled back at full resolution), [`schedule`] (frames: what to
 //! load, keep and evict as the camera moves, with prefetch), [`path`] (camera paths), and
 //! [`baseline`] (naive answers kept as yardsticks). A new mode is a new file with an `impl`

@@ -8,7 +8,7 @@ use crate::format::PayloadRef;
 use crate::model::{Domain, SampleRect};
 
 /// Gap merge used when none is given: runs separated by at most this many keys are scanned
-/// as one (see [`ranges`]).
+/// as one (see [`super::ranges`]).
 pub const DEFAULT_GAP: u64 = 4;
 
 /// How the tolerance in pixels turns into blocks.
