@@ -67,8 +67,14 @@ pub enum Error {
     },
     /// An earlier write, sync or length change of this container failed, so what the file
     /// holds past its last commit is unknown; open it again to go on (recovery runs then).
-    #[error("the container had an I/O failure and refuses further use; open it again")]
-    Poisoned,
+    #[error(
+        "{}: the container had an I/O failure and refuses further use; open it again",
+        path.display()
+    )]
+    Poisoned {
+        /// The container.
+        path: PathBuf,
+    },
     /// A state fmrh's own code should never reach: a bug, to be reported, never a property of
     /// the input.
     #[error("internal error (a bug in fmrh): {0}")]

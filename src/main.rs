@@ -100,7 +100,7 @@ fn main() -> ExitCode {
         Err(e) => {
             eprintln!("fmrh: error: {e}");
             match e {
-                Error::Io { .. } | Error::Poisoned => ExitCode::from(1),
+                Error::Io { .. } | Error::Poisoned { .. } => ExitCode::from(1),
                 _ => ExitCode::from(2),
             }
         }

@@ -308,9 +308,12 @@ fn io_error_at_every_operation_poisons_and_keeps_old_or_new() {
                         assert!(matches!(error, Error::Io { .. }), "{what}: {error}");
                         assert!(c.is_poisoned(), "{what}");
                         let ops = disk.ops();
-                        assert!(matches!(c.read(), Err(Error::Poisoned)), "{what}");
-                        assert!(matches!(c.begin_write(), Err(Error::Poisoned)), "{what}");
-                        assert!(matches!(c.close(), Err(Error::Poisoned)), "{what}");
+                        assert!(matches!(c.read(), Err(Error::Poisoned { .. })), "{what}");
+                        assert!(
+                            matches!(c.begin_write(), Err(Error::Poisoned { .. })),
+                            "{what}"
+                        );
+                        assert!(matches!(c.close(), Err(Error::Poisoned { .. })), "{what}");
                         assert_eq!(disk.ops(), ops, "{what}: a poisoned container wrote");
                     }
                     // The last chance: the clean close (its handle is gone either way).

@@ -74,7 +74,7 @@ pub fn traversal<S: Source>(
             for y in ys {
                 for x in xs.clone() {
                     let key = ranges::block_key(&d, x, y);
-                    if region.meets(&KeyRange { lo: key, hi: key }) {
+                    if region.meets(&KeyRange::single(key)) {
                         out.push(terrain.physical_block(
                             &view,
                             x,
@@ -88,11 +88,7 @@ pub fn traversal<S: Source>(
             continue;
         }
         for (c, child) in store.children(i, &n)? {
-            let keys = KeyRange {
-                lo: child.key.0,
-                hi: child.key.last(finest, child.level),
-            };
-            if region.meets(&keys) {
+            if region.meets(&KeyRange::of_node(child.key, child.level, finest)) {
                 stack.push((c, child));
             }
         }

@@ -42,11 +42,11 @@ impl Quadrant {
     /// Its Hilbert keys.
     pub fn keys(&self, domain: &Domain) -> KeyRange {
         let finest = domain.finest_level();
-        let key = HilbertKey::of_node(finest, self.level, self.x, self.y);
-        KeyRange {
-            lo: key.0,
-            hi: key.last(finest, self.level),
-        }
+        KeyRange::of_node(
+            HilbertKey::of_node(finest, self.level, self.x, self.y),
+            self.level,
+            finest,
+        )
     }
 
     /// Its footprint in samples, clipped to the data.
@@ -84,6 +84,20 @@ pub struct KeyRange {
 }
 
 impl KeyRange {
+    /// The finest-level keys of the node at `level` whose key is `key` (its first cell),
+    /// with `finest` the finest level.
+    pub fn of_node(key: HilbertKey, level: u8, finest: u8) -> KeyRange {
+        KeyRange {
+            lo: key.0,
+            hi: key.last(finest, level.min(finest)),
+        }
+    }
+
+    /// The key of one finest-level block.
+    pub fn single(key: u64) -> KeyRange {
+        KeyRange { lo: key, hi: key }
+    }
+
     /// Whether the two ranges share a key.
     pub fn overlaps(&self, other: &KeyRange) -> bool {
         self.lo <= other.hi && other.lo <= self.hi

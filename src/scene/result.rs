@@ -108,10 +108,7 @@ impl SceneBlock {
 
     /// Its finest-level Hilbert keys.
     pub fn keys(&self, domain: &Domain) -> KeyRange {
-        KeyRange {
-            lo: self.key,
-            hi: HilbertKey(self.key).last(domain.finest_level(), self.level),
-        }
+        KeyRange::of_node(HilbertKey(self.key), self.level, domain.finest_level())
     }
 }
 

@@ -47,7 +47,7 @@ impl<S: Source> Search<'_, '_, S> {
         for y in ys {
             for x in xs.clone() {
                 let key = ranges::block_key(&d, x, y);
-                if run.meets(&KeyRange { lo: key, hi: key }) {
+                if run.meets(&KeyRange::single(key)) {
                     self.stats.node_reads += 1;
                     let block = self.terrain.physical_block(self.view, x, y, zmin, zmax)?;
                     self.out.push(block);
@@ -74,11 +74,7 @@ impl<S: Source> Search<'_, '_, S> {
         let mut entries = Vec::new();
         for e in scan.by_ref() {
             let e = e?;
-            let keys = KeyRange {
-                lo: e.key.0,
-                hi: e.key.last(finest, e.level.min(finest)),
-            };
-            if run.meets(&keys) {
+            if run.meets(&KeyRange::of_node(e.key, e.level, finest)) {
                 entries.push(e);
             }
         }

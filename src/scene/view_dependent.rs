@@ -74,11 +74,7 @@ impl<S: Source> Search<'_, '_, S> {
                 continue;
             }
             for (c, child) in self.children(i, &n)? {
-                let keys = KeyRange {
-                    lo: child.key.0,
-                    hi: child.key.last(finest, child.level),
-                };
-                if run.meets(&keys) {
+                if run.meets(&KeyRange::of_node(child.key, child.level, finest)) {
                     stack.push((c, child));
                 }
             }

@@ -409,8 +409,8 @@ impl Driver {
                 assert!(matches!(e, Error::Io { .. }), "a failed commit said: {e}");
                 let c = self.container.take().expect("a container is open");
                 assert!(c.is_poisoned(), "an I/O error did not poison the container");
-                assert!(matches!(c.read(), Err(Error::Poisoned)));
-                assert!(matches!(c.begin_write(), Err(Error::Poisoned)));
+                assert!(matches!(c.read(), Err(Error::Poisoned { .. })));
+                assert!(matches!(c.begin_write(), Err(Error::Poisoned { .. })));
                 let ops = self.disk.ops();
                 drop(c);
                 assert_eq!(self.disk.ops(), ops, "a poisoned container wrote");

@@ -149,7 +149,9 @@ impl<I: Io> Container<I> {
 
     fn check(&self) -> Result<()> {
         if self.shared.poisoned.load(Ordering::Acquire) {
-            return Err(Error::Poisoned);
+            return Err(Error::Poisoned {
+                path: self.shared.io.name().to_path_buf(),
+            });
         }
         Ok(())
     }
