@@ -60,6 +60,7 @@ const _: () = assert!(size_of::<PageHeader>() == PAGE_HEADER_LEN);
 
 impl PageHeader {
     /// The header at the start of `bytes`, if there are enough of them.
+    #[inline]
     pub fn read(bytes: &[u8]) -> Option<PageHeader> {
         PageHeader::read_from_prefix(bytes).ok().map(|(h, _)| h)
     }

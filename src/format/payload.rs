@@ -52,11 +52,13 @@ impl PayloadRef {
     }
 
     /// The byte just past it (saturating).
+    #[inline]
     pub fn end(&self) -> u64 {
         self.offset.saturating_add(u64::from(self.len))
     }
 
     /// The pages of `page_size` bytes it touches (none when empty).
+    #[inline]
     pub fn pages(&self, page_size: u32) -> Range<u64> {
         let p = u64::from(page_size);
         if self.len == 0 {

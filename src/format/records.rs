@@ -99,6 +99,7 @@ pub struct StoredNode {
 
 impl NodeRecord {
     /// The plain node.
+    #[inline]
     pub fn decode(&self) -> StoredNode {
         StoredNode {
             key: HilbertKey(self.key.get()),
@@ -146,6 +147,7 @@ impl NodeRecord {
     }
 
     /// Where its payload is.
+    #[inline]
     pub fn payload(&self) -> PayloadRef {
         PayloadRef {
             offset: self.payload_offset.get(),
@@ -193,6 +195,7 @@ pub struct StoredBlock {
 
 impl BlockRecord {
     /// The plain block description.
+    #[inline]
     pub fn decode(&self) -> StoredBlock {
         StoredBlock {
             payload: self.payload(),
@@ -216,6 +219,7 @@ impl BlockRecord {
     }
 
     /// Where its payload is.
+    #[inline]
     pub fn payload(&self) -> PayloadRef {
         PayloadRef {
             offset: self.payload_offset.get(),
@@ -254,6 +258,7 @@ pub struct ScanEntry {
 
 impl IndexEntry {
     /// The plain entry.
+    #[inline]
     pub fn decode(&self) -> ScanEntry {
         ScanEntry {
             key: HilbertKey(self.key.get()),
@@ -306,6 +311,7 @@ pub struct FreePage {
 
 impl FreeEntry {
     /// The plain entry.
+    #[inline]
     pub fn decode(&self) -> FreePage {
         FreePage {
             page: self.page.get(),

@@ -117,6 +117,7 @@ pub fn pages_needed(count: u64, record_size: usize, page_size: u32) -> u64 {
 }
 
 /// The key of `record` at `ordinal`: its first 8 bytes when `keyed`, else the ordinal.
+#[inline]
 pub fn record_key(record: &[u8], ordinal: u64, keyed: bool) -> u64 {
     if keyed {
         record
@@ -228,6 +229,7 @@ pub struct TreePage<'p> {
 
 impl<'p> TreePage<'p> {
     /// Views `bytes` (a whole page) as a tree page.
+    #[inline]
     pub fn new(bytes: &'p [u8]) -> TreePage<'p> {
         TreePage {
             bytes,
@@ -270,28 +272,33 @@ impl<'p> TreePage<'p> {
     }
 
     /// 0 for a leaf, else the height above the leaves.
+    #[inline]
     pub fn level(&self) -> u16 {
         self.header.level.get()
     }
 
     /// Entries (records or branch entries) the header claims.
+    #[inline]
     pub fn count(&self) -> usize {
         usize::try_from(self.header.count.get()).unwrap_or(usize::MAX)
     }
 
     /// Leaf records of `record_size` bytes that the header claims and the page holds.
+    #[inline]
     pub fn records(&self, record_size: usize) -> usize {
         let capacity = (self.bytes.len().saturating_sub(PAGE_HEADER_LEN)) / record_size.max(1);
         self.count().min(capacity)
     }
 
     /// Branch entries that the header claims and the page holds.
+    #[inline]
     pub fn branches(&self) -> usize {
         let capacity = (self.bytes.len().saturating_sub(PAGE_HEADER_LEN)) / BRANCH_ENTRY_LEN;
         self.count().min(capacity)
     }
 
     /// Branch entry `i` (zero past the page).
+    #[inline]
     pub fn branch(&self, i: usize) -> BranchEntry {
         let at = PAGE_HEADER_LEN + i * BRANCH_ENTRY_LEN;
         self.bytes
@@ -301,12 +308,14 @@ impl<'p> TreePage<'p> {
     }
 
     /// The bytes of leaf record `i`, if the page holds them.
+    #[inline]
     pub fn record(&self, i: usize, record_size: usize) -> Option<&'p [u8]> {
         let at = PAGE_HEADER_LEN + i * record_size;
         self.bytes.get(at..at + record_size)
     }
 
     /// The leaf's records, back to back (the first [`TreePage::records`] of them).
+    #[inline]
     pub fn body(&self, record_size: usize) -> &'p [u8] {
         let n = self.records(record_size);
         &self.bytes[PAGE_HEADER_LEN..PAGE_HEADER_LEN + n * record_size]
@@ -314,6 +323,7 @@ impl<'p> TreePage<'p> {
 }
 
 /// Reads a record of type `R` from the first bytes of `bytes`.
+#[inline]
 pub fn read_record<R: FromBytes>(bytes: &[u8]) -> Option<R> {
     R::read_from_prefix(bytes).ok().map(|(r, _)| r)
 }

@@ -87,7 +87,8 @@ pub fn traversal<S: Source>(
             }
             continue;
         }
-        for (c, child) in store.children(i, &n)? {
+        for child in store.children(i, &n) {
+            let (c, child) = child?;
             if region.meets(&KeyRange::of_node(child.key, child.level, finest)) {
                 stack.push((c, child));
             }

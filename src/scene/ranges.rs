@@ -86,6 +86,7 @@ pub struct KeyRange {
 impl KeyRange {
     /// The finest-level keys of the node at `level` whose key is `key` (its first cell),
     /// with `finest` the finest level.
+    #[inline]
     pub fn of_node(key: HilbertKey, level: u8, finest: u8) -> KeyRange {
         KeyRange {
             lo: key.0,
@@ -94,11 +95,13 @@ impl KeyRange {
     }
 
     /// The key of one finest-level block.
+    #[inline]
     pub fn single(key: u64) -> KeyRange {
         KeyRange { lo: key, hi: key }
     }
 
     /// Whether the two ranges share a key.
+    #[inline]
     pub fn overlaps(&self, other: &KeyRange) -> bool {
         self.lo <= other.hi && other.lo <= self.hi
     }

@@ -20,13 +20,6 @@ pub(super) struct Search<'t, 's, S: Source> {
 }
 
 impl<S: Source> Search<'_, '_, S> {
-    /// The children of node `index`, counted.
-    pub fn children(&mut self, index: u32, n: &StoredNode) -> Result<Vec<(u32, StoredNode)>> {
-        let children = self.terrain.store.children(index, n)?;
-        self.stats.node_reads += children.len() as u64;
-        Ok(children)
-    }
-
     /// Emits node `index` as a scene block.
     pub fn emit(&mut self, index: u32, n: &StoredNode) {
         let block = self.terrain.node_block(self.view, index, n);

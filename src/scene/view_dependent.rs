@@ -73,7 +73,9 @@ impl<S: Source> Search<'_, '_, S> {
                 self.emit_physical(&q, run, n.min_height, n.max_height)?;
                 continue;
             }
-            for (c, child) in self.children(i, &n)? {
+            for child in self.terrain.store().children(i, &n) {
+                let (c, child) = child?;
+                self.stats.node_reads += 1;
                 if run.meets(&KeyRange::of_node(child.key, child.level, finest)) {
                     stack.push((c, child));
                 }

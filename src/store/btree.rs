@@ -74,20 +74,37 @@ impl<'a, S: Source + ?Sized> Pages<'a, S> {
     }
 
     /// Page `page`, which must be a `tag` page past the commit slots.
+    #[inline]
     pub fn get(&self, page: u64, tag: [u8; 4]) -> Result<Cow<'a, [u8]>> {
         if page < 2 || page >= self.page_count {
-            return Err(self.corrupt(Violation::new(
-                Invariant::TreeShape,
-                format!("page {page}"),
-                format!("a reference to page {page}, outside 2..{}", self.page_count),
-            )));
+            return Err(self.outside(page));
         }
-        let p = self.page_size as usize;
-        let bytes = source::read(self.src, page * u64::from(self.page_size), p)?;
+        let offset = page * u64::from(self.page_size);
+        let bytes = match self.src.read_at(offset, self.page_size as usize) {
+            Ok(bytes) => bytes,
+            Err(e) => return Err(self.read_failed(offset, e)),
+        };
         if self.check {
             check_page(&bytes, page, tag).map_err(|v| self.corrupt(v))?;
         }
         Ok(bytes)
+    }
+
+    // The error paths stay out of line: `get` runs for every page of every lookup.
+    #[cold]
+    #[inline(never)]
+    fn outside(&self, page: u64) -> Error {
+        self.corrupt(Violation::new(
+            Invariant::TreeShape,
+            format!("page {page}"),
+            format!("a reference to page {page}, outside 2..{}", self.page_count),
+        ))
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn read_failed(&self, offset: u64, e: std::io::Error) -> Error {
+        source::read_error(self.src.name(), offset, self.page_size as usize, e)
     }
 }
 
@@ -239,6 +256,7 @@ pub(crate) enum Seek {
 }
 
 /// The number of leading `i in 0..n` for which `pred` holds (`pred` must be monotone).
+#[inline]
 fn partition(n: usize, pred: impl Fn(usize) -> bool) -> usize {
     let (mut lo, mut hi) = (0, n);
     while lo < hi {
@@ -254,6 +272,7 @@ fn partition(n: usize, pred: impl Fn(usize) -> bool) -> usize {
 
 /// The child a descent by `seek` takes from a branch page: `(entry index, child page, first
 /// ordinal under it)`.
+#[inline]
 fn descend(page: &TreePage<'_>, seek: Seek) -> (usize, u64, u64) {
     let n = page.branches().max(1);
     let above = partition(n, |i| {

@@ -53,7 +53,7 @@ use std::path::Path;
 use serde::Serialize;
 
 pub use crate::format::{ClusterInfo, FreePage, PayloadRef, ScanEntry, StoredBlock, StoredNode};
-pub use read::{Block, CodeScan, Grid, HilbertScan, Layout};
+pub use read::{Block, Children, CodeScan, Grid, HilbertScan, Layout};
 pub use source::{Bytes, FileSource, MmapSource, Source};
 pub use txn::{CommitSummary, Container, Recovery, Snapshot, WriteTxn};
 pub use verify::{verify, CheckReport, CheckStatus, VerifyMode, VerifyReport};

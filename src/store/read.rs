@@ -132,6 +132,7 @@ impl<S: Source> Store<S> {
         })
     }
 
+    #[inline]
     fn record<R: FromBytes>(&self, tree: &TreeRef, spec: TreeSpec, ordinal: u64) -> Result<R> {
         btree::get_ordinal(&self.pages(), tree, spec, ordinal)?.ok_or_else(|| {
             Error::InvalidArgument(format!(
@@ -159,11 +160,13 @@ impl<S: Source> Store<S> {
     }
 
     /// The record of node `index`.
+    #[inline]
     pub(crate) fn node_record(&self, index: u32) -> Result<NodeRecord> {
         self.record(&self.commit.node_table, tables::NODES, u64::from(index))
     }
 
     /// Node `index` of the node table (Hilbert pre-order; 0 is the root).
+    #[inline]
     pub fn node(&self, index: u32) -> Result<StoredNode> {
         self.node_record(index).map(|r| r.decode())
     }
@@ -195,29 +198,16 @@ impl<S: Source> Store<S> {
         Ok(n)
     }
 
-    /// The children of node `index` (`node`), in curve order with their indexes, checked to
-    /// be its children in the table's pre-order (I-10).
-    pub fn children(&self, index: u32, node: &StoredNode) -> Result<Vec<(u32, StoredNode)>> {
-        let end = index.saturating_add(node.subtree_len);
-        let mut out = Vec::with_capacity(4);
-        let mut c = index.saturating_add(1);
-        while c < end {
-            let child = self.node(c)?;
-            if child.parent != Some(index)
-                || child.level != node.level + 1
-                || child.subtree_len == 0
-            {
-                return Err(self.corrupt(Violation::new(
-                    Invariant::NodeTable,
-                    format!("node {c}"),
-                    format!("not a child of node {index} in pre-order"),
-                )));
-            }
-            let next = c.saturating_add(child.subtree_len);
-            out.push((c, child));
-            c = next;
+    /// The children of node `index` (`node`), in curve order with their indexes, each
+    /// checked to be its child in the table's pre-order (I-10).
+    pub fn children(&self, index: u32, node: &StoredNode) -> Children<'_, S> {
+        Children {
+            store: self,
+            parent: index,
+            level: node.level,
+            next: index.saturating_add(1),
+            end: index.saturating_add(node.subtree_len),
         }
-        Ok(out)
     }
 
     fn block_ordinal(&self, x: u32, y: u32) -> Result<u64> {
@@ -402,6 +392,46 @@ impl<S: Source> Store<S> {
             }
         }
         Ok(out)
+    }
+}
+
+/// The iterator of [`Store::children`]: hops from one child to the next over its subtree.
+pub struct Children<'s, S: Source> {
+    store: &'s Store<S>,
+    parent: u32,
+    level: u8,
+    next: u32,
+    end: u32,
+}
+
+impl<S: Source> Iterator for Children<'_, S> {
+    type Item = Result<(u32, StoredNode)>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        if self.next >= self.end {
+            return None;
+        }
+        let c = self.next;
+        let child = match self.store.node(c) {
+            Ok(n) => n,
+            Err(e) => {
+                self.next = self.end;
+                return Some(Err(e));
+            }
+        };
+        if child.parent != Some(self.parent)
+            || child.level != self.level.saturating_add(1)
+            || child.subtree_len == 0
+        {
+            self.next = self.end;
+            return Some(Err(self.store.corrupt(Violation::new(
+                Invariant::NodeTable,
+                format!("node {c}"),
+                format!("not a child of node {} in pre-order", self.parent),
+            ))));
+        }
+        self.next = c.saturating_add(child.subtree_len);
+        Some(Ok((c, child)))
     }
 }
 

@@ -38,6 +38,7 @@ pub trait Source: Send + Sync {
     fn name(&self) -> &Path;
 }
 
+#[inline]
 fn slice_at(bytes: &[u8], offset: u64, len: usize) -> io::Result<&[u8]> {
     usize::try_from(offset)
         .ok()
@@ -63,10 +64,12 @@ impl<T: AsRef<[u8]> + Send + Sync> Source for Bytes<T> {
         self.0.as_ref().len() as u64
     }
 
+    #[inline]
     fn read_at(&self, offset: u64, len: usize) -> io::Result<Cow<'_, [u8]>> {
         slice_at(self.0.as_ref(), offset, len).map(Cow::Borrowed)
     }
 
+    #[inline]
     fn stable(&self) -> bool {
         true
     }
@@ -105,10 +108,12 @@ impl Source for MmapSource {
         self.map.len() as u64
     }
 
+    #[inline]
     fn read_at(&self, offset: u64, len: usize) -> io::Result<Cow<'_, [u8]>> {
         slice_at(&self.map, offset, len).map(Cow::Borrowed)
     }
 
+    #[inline]
     fn stable(&self) -> bool {
         true
     }

@@ -57,28 +57,18 @@ impl<I: Io> Source for IoSource<I> {
         self.len
     }
 
+    #[inline]
     fn read_at(&self, offset: u64, len: usize) -> std::io::Result<Cow<'_, [u8]>> {
-        if offset.checked_add(len as u64).is_none_or(|e| e > self.len) {
-            return Err(std::io::Error::new(
-                std::io::ErrorKind::UnexpectedEof,
-                format!("{len} bytes at offset {offset} lie past the end"),
-            ));
-        }
-        let frozen = self.frozen.get();
-        if let Some(page) = frozen
+        // The common case, a table page of the open state, stays small enough to inline.
+        if let Some(page) = self
+            .frozen
+            .get()
             .and_then(|f| f.get(&offset))
             .filter(|p| p.len() == len)
         {
             return Ok(Cow::Borrowed(page));
         }
-        let mut buf = vec![0u8; len];
-        self.io.read_at(offset, &mut buf)?;
-        if frozen.is_none() && page_shaped(offset, len) {
-            lock(&self.filling)
-                .entry(offset)
-                .or_insert_with(|| buf.clone().into_boxed_slice());
-        }
-        Ok(Cow::Owned(buf))
+        self.read_device(offset, len)
     }
 
     fn stable(&self) -> bool {
@@ -87,5 +77,26 @@ impl<I: Io> Source for IoSource<I> {
 
     fn name(&self) -> &Path {
         self.io.name()
+    }
+}
+
+impl<I: Io> IoSource<I> {
+    /// Reads from the device, keeping page-shaped reads while the state is being opened.
+    fn read_device(&self, offset: u64, len: usize) -> std::io::Result<Cow<'_, [u8]>> {
+        if offset.checked_add(len as u64).is_none_or(|e| e > self.len) {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::UnexpectedEof,
+                format!("{len} bytes at offset {offset} lie past the end"),
+            ));
+        }
+        let frozen = self.frozen.get();
+        let mut buf = vec![0u8; len];
+        self.io.read_at(offset, &mut buf)?;
+        if frozen.is_none() && page_shaped(offset, len) {
+            lock(&self.filling)
+                .entry(offset)
+                .or_insert_with(|| buf.clone().into_boxed_slice());
+        }
+        Ok(Cow::Owned(buf))
     }
 }
