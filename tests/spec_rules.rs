@@ -13,12 +13,10 @@
 
 mod common;
 
-use std::io::Cursor;
-
 use common::txn::{build_bytes, patch};
-use fmrh::model::{cluster, BuildOptions, Model, Thresholds};
+use fmrh::model::{cluster, Thresholds};
 use fmrh::store::io::SimDisk;
-use fmrh::store::{verify, write_to, Bytes, CheckStatus, Container, WriteOptions};
+use fmrh::store::{verify, Bytes, CheckStatus, Container};
 use fmrh::{Error, Heightfield, Invariant, Store, VerifyMode};
 
 fn u16_at(b: &[u8], at: usize) -> u16 {
@@ -220,17 +218,7 @@ fn every_nan_is_stored_as_the_canonical_void() {
         }
     })
     .unwrap();
-    let model = Model::build(
-        field.clone(),
-        &BuildOptions {
-            block_size: 9,
-            thresholds: Thresholds::Ladder,
-        },
-    )
-    .unwrap();
-    let mut out = Cursor::new(Vec::new());
-    write_to(&model, &field.metadata, &WriteOptions::default(), &mut out).unwrap();
-    let store = Store::from_bytes(out.into_inner()).unwrap();
+    let store = Store::from_bytes(build_bytes(&field, 9, &Thresholds::Ladder)).unwrap();
     let window = store.read_window(store.domain().data_rect()).unwrap();
     for x in 0..nans.len() {
         let v = window.samples()[5 * 20 + x];
