@@ -69,6 +69,32 @@ pub struct CommitRecord {
     pub flags: U32,
     /// Zero.
     pub reserved0: U32,
+    /// The roots of the state's sections (bytes 40..168).
+    pub roots: StateRoots,
+    /// Zero.
+    pub reserved: [u8; 84],
+    /// CRC-32 of bytes `0..COMMIT_CRC_SPAN` of the record.
+    pub crc: U32,
+}
+
+const _: () = assert!(size_of::<CommitRecord>() == COMMIT_RECORD_LEN);
+
+/// The roots of every section of a state: what a commit record points to.
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    FromBytes,
+    IntoBytes,
+    KnownLayout,
+    Immutable,
+    Unaligned,
+)]
+#[repr(C)]
+pub struct StateRoots {
     /// The dataset header blob.
     pub dataset_header: BlobRef,
     /// The cluster directory blob.
@@ -82,30 +108,9 @@ pub struct CommitRecord {
     /// The adjacency table: every cluster's edge lists, back to back in the order the
     /// cluster directory's runs give.
     pub adjacency: TreeRef,
-    /// Zero.
-    pub reserved: [u8; 84],
-    /// CRC-32 of bytes `0..COMMIT_CRC_SPAN` of the record.
-    pub crc: U32,
 }
 
-const _: () = assert!(size_of::<CommitRecord>() == COMMIT_RECORD_LEN);
-
-/// The roots of every section of a state: what a commit record points to.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct StateRoots {
-    /// The dataset header blob.
-    pub dataset_header: BlobRef,
-    /// The cluster directory blob.
-    pub cluster_directory: BlobRef,
-    /// The node table.
-    pub node_table: TreeRef,
-    /// The block table.
-    pub block_table: TreeRef,
-    /// The free list.
-    pub free_list: TreeRef,
-    /// The adjacency table.
-    pub adjacency: TreeRef,
-}
+const _: () = assert!(size_of::<StateRoots>() == 128);
 
 impl CommitRecord {
     /// A sealed record of this format version for `roots`.
@@ -114,7 +119,7 @@ impl CommitRecord {
         txn_id: u64,
         file_length: u64,
         flags: u32,
-        roots: &StateRoots,
+        roots: StateRoots,
     ) -> CommitRecord {
         let mut r = CommitRecord {
             magic: MAGIC,
@@ -125,12 +130,7 @@ impl CommitRecord {
             file_length: U64::new(file_length),
             flags: U32::new(flags),
             reserved0: U32::new(0),
-            dataset_header: roots.dataset_header,
-            cluster_directory: roots.cluster_directory,
-            node_table: roots.node_table,
-            block_table: roots.block_table,
-            free_list: roots.free_list,
-            adjacency: roots.adjacency,
+            roots,
             reserved: [0; 84],
             crc: U32::new(0),
         };
@@ -153,18 +153,6 @@ impl CommitRecord {
         self.crc = U32::new(crc32(&self.as_bytes()[..COMMIT_CRC_SPAN]));
     }
 
-    /// The roots the record holds.
-    pub fn roots(&self) -> StateRoots {
-        StateRoots {
-            dataset_header: self.dataset_header,
-            cluster_directory: self.cluster_directory,
-            node_table: self.node_table,
-            block_table: self.block_table,
-            free_list: self.free_list,
-            adjacency: self.adjacency,
-        }
-    }
-
     /// Whether `flag` is set.
     pub fn has_flag(&self, flag: u32) -> bool {
         self.flags.get() & flag != 0
@@ -184,6 +172,8 @@ pub enum Slot {
         major: u16,
         /// Its minor version.
         minor: u16,
+        /// Its page size.
+        page_size: u32,
         /// Its txn id.
         txn_id: u64,
     },
@@ -211,17 +201,13 @@ impl Slot {
 
     /// The page size this slot's envelope names, if it is sealed and names an allowed one:
     /// where slot 1 lies when this is slot 0.
-    pub fn page_size(&self, bytes: &[u8]) -> Option<u32> {
-        match self {
-            Slot::Valid(r) => Some(r.page_size.get()),
-            Slot::Foreign { .. } => envelope_page_size(bytes).filter(|&p| page_size_is_valid(p)),
+    pub fn page_size(&self) -> Option<u32> {
+        match *self {
+            Slot::Valid(ref r) => Some(r.page_size.get()),
+            Slot::Foreign { page_size, .. } => Some(page_size).filter(|&p| page_size_is_valid(p)),
             _ => None,
         }
     }
-}
-
-fn envelope_page_size(bytes: &[u8]) -> Option<u32> {
-    Some(u32::from_le_bytes(bytes.get(12..16)?.try_into().ok()?))
 }
 
 /// Classifies the [`COMMIT_RECORD_LEN`] bytes of commit slot `slot`, read at byte offset
@@ -262,6 +248,7 @@ pub fn classify(bytes: &[u8], slot: u8, offset: u64) -> Slot {
         return Slot::Foreign {
             major: r.major.get(),
             minor: r.minor.get(),
+            page_size: r.page_size.get(),
             txn_id: r.txn_id.get(),
         };
     }
@@ -333,6 +320,7 @@ pub fn choose(slots: &[Slot; 2]) -> Result<(u8, CommitRecord), NoState> {
                 major,
                 minor,
                 txn_id,
+                ..
             } => Some((txn_id, major, minor)),
             _ => None,
         })

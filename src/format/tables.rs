@@ -50,9 +50,6 @@ pub const ADJACENCY: TreeSpec = TreeSpec {
     name: "adjacency list",
 };
 
-/// Every kind of table.
-pub const TABLES: [TreeSpec; 5] = [NODES, BLOCKS, FREE, INDEX, ADJACENCY];
-
 /// Every tree of a state, in the order opening checks them: the node table, the block table,
 /// the free list, each cluster's index, the adjacency table.
 pub fn state_trees(roots: &StateRoots, clusters: &[ClusterInfo]) -> Vec<(TreeSpec, TreeRef)> {

@@ -46,7 +46,7 @@ pub(crate) fn read_slots<S: Source + ?Sized>(src: &S) -> Result<[Slot; 2]> {
             Some(b) => commit::classify(&b, 1, u64::from(p)),
         })
     };
-    let named = first.as_deref().and_then(|b| slot0.page_size(b));
+    let named = slot0.page_size();
     let slot1 = match named {
         Some(p) => at(p)?,
         None => {
@@ -136,7 +136,7 @@ pub(crate) fn open<S: Source>(src: S) -> Result<Store<S>> {
     let mut seen = PageSet::new(page_count);
     let header_bytes = read_blob(
         &pages,
-        &commit.dataset_header,
+        &commit.roots.dataset_header,
         tag::DATASET_HEADER,
         MAX_DATASET_HEADER_LEN,
         "dataset header",
@@ -145,13 +145,13 @@ pub(crate) fn open<S: Source>(src: S) -> Result<Store<S>> {
     let header = DatasetHeader::decode(&header_bytes).map_err(|v| pages.corrupt(v))?;
     let dir = read_blob(
         &pages,
-        &commit.cluster_directory,
+        &commit.roots.cluster_directory,
         tag::CLUSTER_DIRECTORY,
         MAX_DIRECTORY_LEN,
         "cluster directory",
         &mut seen,
     )?;
-    let clusters = directory::decode(&dir, &header, commit.adjacency.records.get())
+    let clusters = directory::decode(&dir, &header, commit.roots.adjacency.records.get())
         .map_err(|v| pages.corrupt(v))?;
     let expect = |tree: &TreeRef, n: u64, what: &str| -> Result<()> {
         if tree.records.get() != n {
@@ -163,9 +163,9 @@ pub(crate) fn open<S: Source>(src: S) -> Result<Store<S>> {
         }
         Ok(())
     };
-    expect(&commit.node_table, header.node_count, "node table")?;
-    expect(&commit.block_table, header.block_count, "block table")?;
-    for (spec, tree) in state_trees(&commit.roots(), &clusters) {
+    expect(&commit.roots.node_table, header.node_count, "node table")?;
+    expect(&commit.roots.block_table, header.block_count, "block table")?;
+    for (spec, tree) in state_trees(&commit.roots, &clusters) {
         btree::walk(&pages, &tree, spec, &mut seen, &mut |_, _| Ok(()))?;
     }
     Ok(Store {

@@ -75,7 +75,7 @@ impl<S: Source> Store<S> {
     pub fn layout(&self) -> Result<Layout> {
         let pages = self.pages();
         let mut table_pages = Vec::new();
-        for (spec, tree) in state_trees(&self.commit.roots(), &self.clusters) {
+        for (spec, tree) in state_trees(&self.commit.roots, &self.clusters) {
             let mut seen = PageSet::new(self.page_count);
             btree::walk(&pages, &tree, spec, &mut seen, &mut |_, _| Ok(()))?;
             table_pages.push((spec, seen.len()));
@@ -109,12 +109,12 @@ impl<S: Source> Store<S> {
             page_size: self.page_size,
             file_length: self.commit.file_length.get(),
             commit_pages: 2,
-            dataset_header_pages: blob(&self.commit.dataset_header),
-            cluster_directory_pages: blob(&self.commit.cluster_directory),
+            dataset_header_pages: blob(&self.commit.roots.dataset_header),
+            cluster_directory_pages: blob(&self.commit.roots.cluster_directory),
             node_table_pages: sum(tables::NODES),
             block_table_pages: sum(tables::BLOCKS),
             free_list_pages: sum(tables::FREE),
-            free_pages: self.commit.free_list.records.get(),
+            free_pages: self.commit.roots.free_list.records.get(),
             adjacency_pages: sum(tables::ADJACENCY),
             cluster_index_pages,
             block_bytes,
@@ -162,7 +162,11 @@ impl<S: Source> Store<S> {
     /// The record of node `index`.
     #[inline]
     pub(crate) fn node_record(&self, index: u32) -> Result<NodeRecord> {
-        self.record(&self.commit.node_table, tables::NODES, u64::from(index))
+        self.record(
+            &self.commit.roots.node_table,
+            tables::NODES,
+            u64::from(index),
+        )
     }
 
     /// Node `index` of the node table (Hilbert pre-order; 0 is the root).
@@ -173,7 +177,7 @@ impl<S: Source> Store<S> {
 
     /// Every node record, in Hilbert pre-order.
     pub(crate) fn node_records(&self) -> Result<Vec<NodeRecord>> {
-        self.all_records(&self.commit.node_table, tables::NODES)
+        self.all_records(&self.commit.roots.node_table, tables::NODES)
     }
 
     /// Every node, in Hilbert pre-order.
@@ -225,18 +229,20 @@ impl<S: Source> Store<S> {
     /// row).
     pub fn stored_block(&self, x: u32, y: u32) -> Result<StoredBlock> {
         let ordinal = self.block_ordinal(x, y)?;
-        let r: BlockRecord = self.record(&self.commit.block_table, tables::BLOCKS, ordinal)?;
+        let r: BlockRecord =
+            self.record(&self.commit.roots.block_table, tables::BLOCKS, ordinal)?;
         Ok(r.decode())
     }
 
     /// Every block record, row-major.
     pub(crate) fn block_records(&self) -> Result<Vec<BlockRecord>> {
-        self.all_records(&self.commit.block_table, tables::BLOCKS)
+        self.all_records(&self.commit.roots.block_table, tables::BLOCKS)
     }
 
     /// The free pages (none in a freshly built file).
     pub fn free_pages(&self) -> Result<Vec<FreePage>> {
-        let records: Vec<FreeEntry> = self.all_records(&self.commit.free_list, tables::FREE)?;
+        let records: Vec<FreeEntry> =
+            self.all_records(&self.commit.roots.free_list, tables::FREE)?;
         Ok(records.iter().map(FreeEntry::decode).collect())
     }
 
@@ -377,7 +383,7 @@ impl<S: Source> Store<S> {
             Error::InvalidArgument(format!("edge {edge}: edges are 0..4 (N, E, S, W)"))
         })?;
         let pages = self.pages();
-        let tree = &self.commit.adjacency;
+        let tree = &self.commit.roots.adjacency;
         let mut cursor = btree::seek(
             &pages,
             tree,

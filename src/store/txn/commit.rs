@@ -277,7 +277,7 @@ pub(crate) fn write_state<I: Io>(
         adjacency: roots.adjacency,
     };
     let flags = COMMIT_RECOVERY_NEEDED | COMMIT_PAYLOAD_SLACK;
-    let record = CommitRecord::new(p, txn, length, flags, &state);
+    let record = CommitRecord::new(p, txn, length, flags, state);
     // Step 3: a grown file gets its length before anything refers to it; then sync.
     let e = |err| Error::io(io.name(), err);
     if length > io.len().map_err(e)? {

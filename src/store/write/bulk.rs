@@ -108,7 +108,7 @@ pub(crate) fn write_named<W: Write + Seek>(
         free_list: tree::empty(FREE.record_size),
         adjacency,
     };
-    let record = CommitRecord::new(p, 1, file_length, 0, &roots);
+    let record = CommitRecord::new(p, 1, file_length, 0, roots);
     out.w.seek(SeekFrom::Start(0)).map_err(io_err)?;
     out.w.write_all(record.as_bytes()).map_err(io_err)?;
     out.w.seek(SeekFrom::Start(file_length)).map_err(io_err)?;
