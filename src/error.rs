@@ -75,6 +75,24 @@ pub enum Error {
         /// The container.
         path: PathBuf,
     },
+    /// The state this reader holds was superseded, and a later commit reused pages it
+    /// reaches: the file is sound, but this reader's view of it is gone (a reader that did
+    /// not register its state, format §11.6). Open the file again.
+    #[error(
+        "{}: the state this reader holds (txn {txn}) was superseded by txn {latest}, which \
+         reused its pages ({detail}); open the file again",
+        path.display()
+    )]
+    Superseded {
+        /// The container.
+        path: PathBuf,
+        /// The txn id of the state the reader holds.
+        txn: u64,
+        /// The txn id of the file's latest state when this was found.
+        latest: u64,
+        /// What the reader found: which page or payload no longer holds its state's bytes.
+        detail: String,
+    },
     /// A state fmrh's own code should never reach: a bug, to be reported, never a property of
     /// the input.
     #[error("internal error (a bug in fmrh): {0}")]

@@ -3,7 +3,8 @@
 //!
 //! Exit status: 0 on success; 2 when the input or the arguments are unusable (malformed,
 //! corrupt or unsupported file, bad option value, size beyond limits); 1 when the system fails
-//! (I/O). `fmrh verify` has its own: 0 valid, 1 invalid, 2 unusable.
+//! (I/O); 75 when a concurrent writer got in the way of a read and it should be run again.
+//! `fmrh verify` has its own: 0 valid, 1 invalid, 2 unusable, 75 a writer is committing.
 
 mod cli;
 
@@ -21,8 +22,9 @@ use fmrh::Error;
     long_about = "fmrh turns a DEM (a grid of heights) into an FMRH: a quadtree of blocks, \
 each with a measured error, grouped into error clusters in Hilbert order, so that a view \
 becomes a few range scans. It stores the lot in one checksummed .fmrh container.\n\n\
-Exit status: 0 success, 2 unusable input or arguments, 1 system error \
-(verify: 0 valid, 1 invalid, 2 unusable)."
+Exit status: 0 success, 2 unusable input or arguments, 1 system error, 75 a concurrent \
+writer got in the way: retry (verify: 0 valid, 1 invalid, 2 unusable, 75 a writer is \
+committing: retry)."
 )]
 struct Cli {
     #[command(subcommand)]
@@ -82,6 +84,10 @@ enum Command {
     Recover(cli::recover::RecoverArgs),
 }
 
+/// Exit status of a read that met a writer it could not read past: the file is fine, run the
+/// command again (BSD `EX_TEMPFAIL`).
+const EXIT_RETRY: u8 = 75;
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match &cli.command {
@@ -101,6 +107,7 @@ fn main() -> ExitCode {
             eprintln!("fmrh: error: {e}");
             match e {
                 Error::Io { .. } | Error::Poisoned { .. } => ExitCode::from(1),
+                Error::Superseded { .. } => ExitCode::from(EXIT_RETRY),
                 _ => ExitCode::from(2),
             }
         }

@@ -4,6 +4,10 @@
 //! layout, the model or the reader makes this fail. If the change is deliberate, it is a
 //! format change: bump the version per the policy in `format-spec/container.md`, then
 //! regenerate with `FMRH_BLESS=1 cargo test --release --test golden_vectors`.
+//!
+//! Files of older minor versions stay readable: `format-spec/vectors/v1.1/` keeps the same
+//! vectors as format 1.1 wrote them (no txn tags), and they must read, verify and accept a
+//! transaction exactly as the current ones do.
 
 use std::io::Cursor;
 use std::path::PathBuf;
@@ -142,20 +146,26 @@ fn vector_commit_record_fields_sit_where_the_spec_says() {
     let bytes = build(&vectors()[1]);
     assert_eq!(&bytes[0..8], b"FMRH\r\n\x1a\n");
     assert_eq!(u16::from_le_bytes([bytes[8], bytes[9]]), 1); // major
+    assert_eq!(u16::from_le_bytes([bytes[10], bytes[11]]), 2); // minor
     assert_eq!(u32::from_le_bytes(bytes[12..16].try_into().unwrap()), 1024); // page size
     assert_eq!(u64::from_le_bytes(bytes[16..24].try_into().unwrap()), 1); // txn id
     assert_eq!(
         u64::from_le_bytes(bytes[24..32].try_into().unwrap()),
         bytes.len() as u64
     );
+    // pages_txn (1.2): the fresh file's one transaction wrote every structured page.
+    assert_eq!(u64::from_le_bytes(bytes[168..176].try_into().unwrap()), 1);
+    assert!(bytes[176..252].iter().all(|&b| b == 0));
     let crc = crc32fast::hash(&bytes[..252]);
     assert_eq!(u32::from_le_bytes(bytes[252..256].try_into().unwrap()), crc);
     assert!(
         bytes[1024..2048].iter().all(|&b| b == 0),
         "slot 1 of a fresh file is zero"
     );
-    // The dataset header blob starts at page 2: tag, then width and height.
+    // The dataset header blob starts at page 2: tag, then width and height. Its header
+    // carries the txn tag of transaction 1 at bytes 18..20.
     assert_eq!(&bytes[2048..2052], b"FMHD");
+    assert_eq!(u16::from_le_bytes([bytes[2048 + 18], bytes[2048 + 19]]), 1);
     let h = 2048 + 24;
     assert_eq!(u32::from_le_bytes(bytes[h..h + 4].try_into().unwrap()), 20);
     assert_eq!(
@@ -166,4 +176,61 @@ fn vector_commit_record_fields_sit_where_the_spec_says() {
         u32::from_le_bytes(bytes[h + 8..h + 12].try_into().unwrap()),
         9
     );
+}
+
+#[test]
+fn format_1_1_vectors_read_verify_and_take_a_transaction() {
+    use fmrh::model::SampleRect;
+    for v in vectors() {
+        let old = dir().join("v1.1").join(format!("{}.fmrh", v.name));
+        let store = fmrh::Store::open(&old).unwrap();
+        assert_eq!(store.state().format_version, (1, 1), "{}", v.name);
+        let all = store.domain().data_rect();
+        let samples = store.read_window(all).unwrap();
+        let want = v.field.samples();
+        assert_eq!(samples.samples().len(), want.len());
+        for (a, b) in samples.samples().iter().zip(want) {
+            assert!(
+                a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()),
+                "{}",
+                v.name
+            );
+        }
+        let report = fmrh::verify(
+            fmrh::store::FileSource::open(&old).unwrap(),
+            fmrh::VerifyMode::Full,
+        )
+        .unwrap();
+        assert!(report.valid, "{}: {report:?}", v.name);
+        drop(store);
+
+        // A 1.2 writer's commit on a 1.1 file writes a 1.2 state: tagged pages, pages_txn.
+        let dir = tempfile::tempdir().unwrap();
+        let copy = dir.path().join("old.fmrh");
+        std::fs::copy(&old, &copy).unwrap();
+        let container = fmrh::Container::open(&copy).unwrap();
+        let mut txn = container.begin_write().unwrap();
+        let patch = Heightfield::from_fn(2, 2, |_, _| 77.0).unwrap();
+        txn.replace_region(1, 1, &patch).unwrap();
+        let summary = txn.commit().unwrap();
+        container.close().unwrap();
+        let after = fmrh::Store::open(&copy).unwrap();
+        assert_eq!(after.state().format_version, (1, 2), "{}", v.name);
+        let r = after
+            .read_window(SampleRect {
+                col0: 1,
+                row0: 1,
+                col1: 2,
+                row1: 2,
+            })
+            .unwrap();
+        assert_eq!(r.samples(), &[77.0; 4]);
+        assert!(summary.txn_id > 1);
+        let report = fmrh::verify(
+            fmrh::store::FileSource::open(&copy).unwrap(),
+            fmrh::VerifyMode::Full,
+        )
+        .unwrap();
+        assert!(report.valid, "{}: {report:?}", v.name);
+    }
 }

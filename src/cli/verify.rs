@@ -20,7 +20,11 @@ pub struct VerifyArgs {
     json: bool,
 }
 
-/// Runs `fmrh verify`: exit 0 valid, 1 invalid, 2 unusable.
+/// Exit status when a writer was committing and some check could not be decided.
+const EXIT_BUSY: u8 = 75;
+
+/// Runs `fmrh verify`: exit 0 valid, 1 invalid, 2 unusable, 75 busy (a writer was
+/// committing: run again).
 pub fn run(args: &VerifyArgs) -> Result<ExitCode, Error> {
     let path = &args.file;
     let file = File::open(path).map_err(|e| Error::input(path, e.to_string()))?;
@@ -37,7 +41,18 @@ pub fn run(args: &VerifyArgs) -> Result<ExitCode, Error> {
         println!(
             "{}: {} ({} check, txn {})",
             path.display(),
-            if report.valid { "valid" } else { "INVALID" },
+            if report.valid {
+                "valid"
+            } else if report.busy
+                && !report
+                    .checks
+                    .iter()
+                    .any(|c| c.status == CheckStatus::Failed)
+            {
+                "BUSY: a writer is committing; run again"
+            } else {
+                "INVALID"
+            },
             match report.mode {
                 VerifyMode::Fast => "fast",
                 VerifyMode::Full => "full",
@@ -51,6 +66,7 @@ pub fn run(args: &VerifyArgs) -> Result<ExitCode, Error> {
                 CheckStatus::Passed => "ok",
                 CheckStatus::Failed => "FAILED",
                 CheckStatus::Skipped => "skipped",
+                CheckStatus::Busy => "busy",
             };
             println!("  {:<5} {:<26} {status}", c.id, c.name);
             for f in &c.failures {
@@ -64,8 +80,14 @@ pub fn run(args: &VerifyArgs) -> Result<ExitCode, Error> {
             }
         }
     }
+    let failed = report
+        .checks
+        .iter()
+        .any(|c| c.status == CheckStatus::Failed);
     Ok(if report.valid {
         ExitCode::SUCCESS
+    } else if report.busy && !failed {
+        ExitCode::from(EXIT_BUSY)
     } else {
         ExitCode::from(1)
     })

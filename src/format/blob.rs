@@ -7,7 +7,7 @@
 use zerocopy::byteorder::little_endian::U64;
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
 
-use super::page::{check_page, check_tail, encode_page, PAGE_HEADER_LEN};
+use super::page::{check_page, check_tail, encode_page, PageStamp, PAGE_HEADER_LEN};
 use super::{Invariant, Violation};
 
 /// Where a blob lives: pages `first_page ..` holding `length` content bytes.
@@ -44,11 +44,13 @@ pub fn blob_pages(length: u64, page_size: u32) -> u64 {
     length.div_ceil(content_per_page(page_size))
 }
 
-/// The sealed pages of a blob of `content` starting at page `first_page`, and its reference.
+/// The sealed pages of a blob of `content` starting at page `first_page`, written by
+/// transaction `txn`, and its reference.
 pub fn encode_blob(
     content: &[u8],
     tag: [u8; 4],
     first_page: u64,
+    txn: u64,
     page_size: u32,
 ) -> (BlobRef, Vec<Vec<u8>>) {
     let per_page = page_size as usize - PAGE_HEADER_LEN;
@@ -58,7 +60,7 @@ pub fn encode_blob(
         .map(|(chunk, page_no)| {
             // A chunk is at most `per_page` < 2^16 bytes.
             let count = u32::try_from(chunk.len()).unwrap_or(u32::MAX);
-            encode_page(page_size, tag, page_no, 0, count, chunk)
+            encode_page(page_size, tag, PageStamp { page_no, txn }, 0, count, chunk)
         })
         .collect();
     let blob = BlobRef {
@@ -91,7 +93,7 @@ pub fn check_blob_ref(
 }
 
 /// The content of page `index` (from 0) of `blob`, which is page `page_no` of the file:
-/// checks its header (I-5), its count, and its zero tail.
+/// checks its header (I-5, all but the txn tag), its count, and its zero tail.
 pub fn blob_page_content<'p>(
     page: &'p [u8],
     blob: &BlobRef,
@@ -109,7 +111,7 @@ pub fn blob_page_content<'p>(
         .saturating_sub(index.saturating_mul(per_page))
         .min(per_page);
     let at = format!("{name} page {page_no}");
-    if u64::from(h.count.get()) != want || h.level.get() != 0 || h.reserved.get() != 0 {
+    if u64::from(h.count.get()) != want || h.level.get() != 0 {
         return Err(Violation::new(
             Invariant::Page,
             at,
@@ -130,7 +132,7 @@ mod tests {
     #[test]
     fn a_blob_round_trips_across_pages() {
         let content: Vec<u8> = (0..2500u32).map(|i| i.to_le_bytes()[0]).collect();
-        let (blob, pages) = encode_blob(&content, tag::DATASET_HEADER, 5, 1024);
+        let (blob, pages) = encode_blob(&content, tag::DATASET_HEADER, 5, 1, 1024);
         assert_eq!(pages.len() as u64, blob_pages(2500, 1024));
         assert_eq!(check_blob_ref(&blob, 4096, 1024, 8, "b").unwrap(), 3);
         assert!(check_blob_ref(&blob, 4096, 1024, 7, "b").is_err());

@@ -6,10 +6,13 @@
 //! of the two valid records.
 //!
 //! ```text
-//!  0        8     10    12     16       24           32     36     40 ...   168 ... 252   256
-//!  | magic  | maj | min | page | txn_id | file_length| flags| rsvd | roots | rsvd  | crc |
-//!  └──────── the envelope: the same in every major version ───────┘              └─ CRC of 0..252
+//!  0        8     10    12     16       24           32     36     40 ...  168       176 ... 252  256
+//!  | magic  | maj | min | page | txn_id | file_length| flags| rsvd | roots | pages_txn| rsvd | crc |
+//!  └──────── the envelope: the same in every major version ───────┘                 └─ CRC of 0..252
 //! ```
+//!
+//! `pages_txn` (1.2; zero before) is the transaction that wrote every structured page the
+//! state reaches: each of those pages carries its low 16 bits (`page::txn_tag`).
 //!
 //! **The envelope.** Magic, major, minor, page size, txn id and the CRC at 252 keep their
 //! places in every major version, so a reader can tell that a newer writer has superseded the
@@ -71,8 +74,11 @@ pub struct CommitRecord {
     pub reserved0: U32,
     /// The roots of the state's sections (bytes 40..168).
     pub roots: StateRoots,
+    /// The transaction that wrote every structured page this state reaches (1.2). Zero in
+    /// older files, whose pages carry no txn tag.
+    pub pages_txn: U64,
     /// Zero.
-    pub reserved: [u8; 84],
+    pub reserved: [u8; 76],
     /// CRC-32 of bytes `0..COMMIT_CRC_SPAN` of the record.
     pub crc: U32,
 }
@@ -113,7 +119,8 @@ pub struct StateRoots {
 const _: () = assert!(size_of::<StateRoots>() == 128);
 
 impl CommitRecord {
-    /// A sealed record of this format version for `roots`.
+    /// A sealed record of this format version for `roots`, whose structured pages transaction
+    /// `txn_id` wrote.
     pub fn new(
         page_size: u32,
         txn_id: u64,
@@ -131,7 +138,8 @@ impl CommitRecord {
             flags: U32::new(flags),
             reserved0: U32::new(0),
             roots,
-            reserved: [0; 84],
+            pages_txn: U64::new(txn_id),
+            reserved: [0; 76],
             crc: U32::new(0),
         };
         r.seal();
@@ -156,6 +164,16 @@ impl CommitRecord {
     /// Whether `flag` is set.
     pub fn has_flag(&self, flag: u32) -> bool {
         self.flags.get() & flag != 0
+    }
+
+    /// The txn tag every structured page of this state carries: the low bits of `pages_txn`
+    /// in a 1.2 file, zero (the field was reserved) before.
+    pub fn page_txn_tag(&self) -> u16 {
+        if self.minor.get() >= 2 {
+            super::page::txn_tag(self.pages_txn.get())
+        } else {
+            0
+        }
     }
 }
 
@@ -268,10 +286,18 @@ pub fn classify(bytes: &[u8], slot: u8, offset: u64) -> Slot {
     if r.txn_id.get() == 0 {
         return invalid("transaction id 0".into());
     }
+    if r.minor.get() >= 2 && !(1..=r.txn_id.get()).contains(&r.pages_txn.get()) {
+        return invalid(format!(
+            "pages written by transaction {}, not one of 1..={}",
+            r.pages_txn.get(),
+            r.txn_id.get()
+        ));
+    }
     let newer_minor = r.minor.get() > FORMAT_MINOR;
     if !newer_minor
         && (r.flags.get() & !COMMIT_FLAGS_KNOWN != 0
             || r.reserved0.get() != 0
+            || (r.minor.get() < 2 && r.pages_txn.get() != 0)
             || !is_zero(&r.reserved))
     {
         return invalid("reserved fields are not zero".into());

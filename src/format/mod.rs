@@ -84,8 +84,10 @@ pub const MAGIC: [u8; 8] = *b"FMRH\r\n\x1a\n";
 pub const FORMAT_MAJOR: u16 = 1;
 
 /// Compatible additions within [`FORMAT_MAJOR`]. 1.1 added the commit record's flags
-/// ([`COMMIT_RECOVERY_NEEDED`]) and files changed by transactions.
-pub const FORMAT_MINOR: u16 = 1;
+/// ([`COMMIT_RECOVERY_NEEDED`]) and files changed by transactions. 1.2 binds every structured
+/// page to the transaction that wrote it (the page header's txn tag, the record's
+/// `pages_txn`), so a reader of an old state never takes a reused page for its own.
+pub const FORMAT_MINOR: u16 = 2;
 
 /// The page size a writer uses unless told otherwise.
 pub const DEFAULT_PAGE_SIZE: u32 = 4096;

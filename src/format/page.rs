@@ -3,11 +3,16 @@
 //!
 //! ```text
 //!  0      4      8              16     18     20     24                                P
-//!  | tag  | crc  |   page_no    | level| rsvd | count|  content ... | zero tail        |
-//!         └─ CRC-32 of bytes 8..P (number, level, count, content and tail) ──────────┘
+//!  | tag  | crc  |   page_no    | level| txn  | count|  content ... | zero tail        |
+//!         └─ CRC-32 of bytes 8..P (number, level, txn tag, count, content, tail) ────┘
 //! ```
 //!
 //! The CRC covers the page's own number, so a page written to the wrong place fails its check.
+//! Since format 1.2 it also covers the *txn tag*: the low 16 bits of the id of the transaction
+//! that wrote the page. Every structured page a state reaches was written by one transaction,
+//! the one its commit record names (`pages_txn`), so a reader that follows an old state's
+//! reference into a page a later state has reused finds the wrong tag, however valid the
+//! page's own CRC (`format-spec/container.md` §4, §11.6). Files before 1.2 hold zero there.
 
 use zerocopy::byteorder::little_endian::{U16, U32, U64};
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
@@ -50,8 +55,8 @@ pub struct PageHeader {
     pub page_no: U64,
     /// Tree pages: 0 for a leaf, else the height above the leaves. Blob pages: 0.
     pub level: U16,
-    /// Zero.
-    pub reserved: U16,
+    /// [`txn_tag`] of the transaction that wrote the page (1.2); zero in older files.
+    pub txn_tag: U16,
     /// Tree pages: records or branch entries in the page. Blob pages: content bytes.
     pub count: U32,
 }
@@ -66,12 +71,27 @@ impl PageHeader {
     }
 }
 
-/// Builds a sealed structured page of `page_size` bytes: the header (`tag`, `page_no`,
+/// The tag a page written by transaction `txn` carries: its low 16 bits.
+#[inline]
+pub fn txn_tag(txn: u64) -> u16 {
+    (txn & 0xffff) as u16
+}
+
+/// The placement of a structured page: its number, and the transaction writing it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PageStamp {
+    /// The page's number.
+    pub page_no: u64,
+    /// The transaction that writes it (its [`txn_tag`] goes into the header).
+    pub txn: u64,
+}
+
+/// Builds a sealed structured page of `page_size` bytes: the header (`tag`, the stamp,
 /// `level`, `count`), then `body`, then zeros, with the CRC filled in. `body` must fit.
 pub fn encode_page(
     page_size: u32,
     tag: [u8; 4],
-    page_no: u64,
+    stamp: PageStamp,
     level: u16,
     count: u32,
     body: &[u8],
@@ -80,9 +100,9 @@ pub fn encode_page(
     let header = PageHeader {
         tag,
         crc: U32::new(0),
-        page_no: U64::new(page_no),
+        page_no: U64::new(stamp.page_no),
         level: U16::new(level),
-        reserved: U16::new(0),
+        txn_tag: U16::new(txn_tag(stamp.txn)),
         count: U32::new(count),
     };
     bytes[..PAGE_HEADER_LEN].copy_from_slice(header.as_bytes());
@@ -93,7 +113,8 @@ pub fn encode_page(
 }
 
 /// Checks the header of structured page `page_no` (I-5: tag, CRC, own number) and returns it.
-/// `bytes` is the whole page.
+/// `bytes` is the whole page. The txn tag is the caller's to check: only the store knows which
+/// transaction its state's pages must come from.
 pub fn check_page(bytes: &[u8], page_no: u64, expected: [u8; 4]) -> Result<PageHeader, Violation> {
     let at = || format!("page {page_no}");
     let header = PageHeader::read(bytes)
@@ -147,14 +168,21 @@ mod tests {
 
     #[test]
     fn an_encoded_page_checks_and_a_moved_one_does_not() {
-        let page = encode_page(1024, tag::NODE_TABLE, 7, 1, 3, &[1, 2, 3]);
+        let stamp = PageStamp {
+            page_no: 7,
+            txn: 0x1_0005,
+        };
+        let page = encode_page(1024, tag::NODE_TABLE, stamp, 1, 3, &[1, 2, 3]);
         let h = check_page(&page, 7, tag::NODE_TABLE).unwrap();
-        assert_eq!((h.level.get(), h.count.get()), (1, 3));
+        assert_eq!((h.level.get(), h.count.get(), h.txn_tag.get()), (1, 3, 5));
         assert!(check_tail(&page, PAGE_HEADER_LEN + 3, "p").is_ok());
         assert!(check_page(&page, 8, tag::NODE_TABLE).is_err());
         assert!(check_page(&page, 7, tag::BLOCK_TABLE).is_err());
-        let mut flipped = page.clone();
-        flipped[100] ^= 1;
-        assert!(check_page(&flipped, 7, tag::NODE_TABLE).is_err());
+        for at in [18, 100] {
+            // The txn tag is covered by the CRC like the content.
+            let mut flipped = page.clone();
+            flipped[at] ^= 1;
+            assert!(check_page(&flipped, 7, tag::NODE_TABLE).is_err());
+        }
     }
 }

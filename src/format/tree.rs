@@ -14,7 +14,7 @@
 use zerocopy::byteorder::little_endian::{U16, U32, U64};
 use zerocopy::{FromBytes, FromZeros, Immutable, IntoBytes, KnownLayout, Unaligned};
 
-use super::page::{check_page, check_tail, encode_page, PageHeader, PAGE_HEADER_LEN};
+use super::page::{check_page, check_tail, encode_page, PageHeader, PageStamp, PAGE_HEADER_LEN};
 use super::{Invariant, Violation};
 
 /// The deepest B+-tree a reader follows: with 1024-byte pages, a fan-out of 41 reaches
@@ -130,7 +130,8 @@ pub fn record_key(record: &[u8], ordinal: u64, keyed: bool) -> u64 {
 }
 
 /// Bulk-builds a tree of `records` (`spec.record_size` bytes each) into pages numbered from
-/// `first_page` on, calling `emit` with each sealed page in page order; returns its root.
+/// `first_page` on, written by transaction `txn`, calling `emit` with each sealed page in page
+/// order; returns its root.
 /// Leaves are filled left to right, then each level of branches: the pages are consecutive
 /// and the root is the last.
 pub fn build<E>(
@@ -138,6 +139,7 @@ pub fn build<E>(
     spec: TreeSpec,
     page_size: u32,
     first_page: u64,
+    txn: u64,
     emit: &mut dyn FnMut(Vec<u8>) -> Result<(), E>,
 ) -> Result<TreeRef, E> {
     let size = spec.record_size;
@@ -151,7 +153,8 @@ pub fn build<E>(
         next += 1;
         // A page holds fewer than 2^16 entries.
         let count = u32::try_from(count).unwrap_or(u32::MAX);
-        emit(encode_page(page_size, spec.tag, no, level, count, body))?;
+        let stamp = PageStamp { page_no: no, txn };
+        emit(encode_page(page_size, spec.tag, stamp, level, count, body))?;
         Ok(no)
     };
     // Level 0: the leaves, each described by a branch entry for the level above.
@@ -237,8 +240,8 @@ impl<'p> TreePage<'p> {
         }
     }
 
-    /// Checks page `page_no` as a page of `spec`'s tree at `level` (I-5, I-7): header, level,
-    /// reserved field, an entry count that fits, zero tail.
+    /// Checks page `page_no` as a page of `spec`'s tree at `level` (I-5, I-7): header (all but
+    /// the txn tag, which the store checks), level, an entry count that fits, zero tail.
     pub fn checked(
         bytes: &'p [u8],
         page_no: u64,
@@ -253,9 +256,6 @@ impl<'p> TreePage<'p> {
                 "level {}, expected {level}",
                 header.level.get()
             )));
-        }
-        if header.reserved.get() != 0 {
-            return Err(bad("reserved field is not zero".into()));
         }
         let page_size = u32::try_from(bytes.len()).unwrap_or(u32::MAX);
         let (item, capacity) = if level == 0 {
@@ -346,7 +346,7 @@ mod tests {
             .flat_map(|k| [(k * 3).to_le_bytes(), k.to_le_bytes()].concat())
             .collect();
         let mut pages = Vec::new();
-        let root = build::<()>(&records, SPEC, 1024, 10, &mut |p| {
+        let root = build::<()>(&records, SPEC, 1024, 10, 1, &mut |p| {
             pages.push(p);
             Ok(())
         })

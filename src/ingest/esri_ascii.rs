@@ -117,6 +117,12 @@ pub fn read(path: &Path, options: &IngestOptions) -> Result<Heightfield> {
             ))
         }
     };
+    if !(sx.is_finite() && sy.is_finite() && sx > 0.0 && sy > 0.0) {
+        return Err(Error::input(
+            path,
+            format!("cell size {sx} × {sy}: it must be finite and positive"),
+        ));
+    }
     let mut metadata = Metadata::default();
     if let (Some(x), Some(y)) = (xll, yll) {
         let half = if centre { 0.0 } else { 0.5 };

@@ -150,9 +150,6 @@ fn check_data_extent<R: std::io::Read + std::io::Seek>(
         .ok()
         .flatten()
         .unwrap_or(1);
-    if compression != 1 {
-        return Ok(());
-    }
     let bits: u64 = dec
         .find_tag_unsigned_vec::<u64>(Tag::BitsPerSample)
         .ok()
@@ -161,10 +158,25 @@ fn check_data_extent<R: std::io::Read + std::io::Seek>(
         .unwrap_or(1);
     let have: u64 = counts.iter().fold(0u64, |a, &c| a.saturating_add(c));
     let need = (u64::from(width) * bits).div_ceil(8) * u64::from(height);
-    if have < need {
+    // The most bytes each codec can make of one stored byte: a header that claims more than
+    // its data could decode to is refused before the image buffer is sized from it.
+    let (codec, ratio) = match compression {
+        1 => ("uncompressed", 1),
+        // Deflate's ceiling is 1032:1 (a 258-byte match per 2 bits, RFC 1951).
+        8 | 32946 => ("deflate", 1032),
+        // LZW with 12-bit codes emits at most ~3,800 bytes per code of 12 bits.
+        5 => ("LZW", 2600),
+        // PackBits: at most 128 bytes from a 2-byte run.
+        32773 => ("PackBits", 64),
+        _ => return Ok(()),
+    };
+    if have.saturating_mul(ratio) < need {
         return Err(Error::input(
             path,
-            format!("uncompressed image data is {have} bytes, the image needs {need}"),
+            format!(
+                "{codec} image data is {have} bytes, which cannot hold the {need} bytes the \
+                 image needs"
+            ),
         ));
     }
     Ok(())

@@ -344,6 +344,13 @@ fn decode(data: &[u8]) -> Decoding<(u32, u32, Vec<u8>)> {
                         pred: 0,
                     });
                 }
+                // Every 8x8 block of every component costs at least 2 bits of entropy-coded
+                // data (a DC and an end-of-block code): refuse a frame the file cannot hold
+                // before its planes are allocated.
+                let blocks_min = (width.div_ceil(8) * height.div_ceil(8)) as u64;
+                if blocks_min / 4 > data.len() as u64 {
+                    return malformed("the frame is larger than the file can hold");
+                }
                 hmax = components.iter().map(|c| c.h).max().unwrap_or(1);
                 vmax = components.iter().map(|c| c.v).max().unwrap_or(1);
                 let (mcux, mcuy) = (width.div_ceil(8 * hmax), height.div_ceil(8 * vmax));

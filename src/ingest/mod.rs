@@ -211,12 +211,43 @@ fn finish(
     samples: Vec<f32>,
     metadata: Metadata,
 ) -> Result<Heightfield> {
+    check_metadata(path, &metadata)?;
     Heightfield::new(width, height, samples)
         .map(|hf| hf.with_metadata(metadata))
         .map_err(|e| match e {
             Error::InvalidArgument(reason) => Error::input(path, reason),
             other => other,
         })
+}
+
+/// Checks what a reader found about the grid's geometry: a spacing must be finite and
+/// positive (a negative or zero cell size is a damaged header, and scenes would divide by
+/// it), a georeference finite with non-zero steps.
+fn check_metadata(path: &Path, metadata: &Metadata) -> Result<()> {
+    if let Some(s) = metadata.spacing_m {
+        if !s.iter().all(|v| v.is_finite() && *v > 0.0) {
+            return Err(Error::input(
+                path,
+                format!(
+                    "sample spacing {} × {} m: it must be finite and positive",
+                    s[0], s[1]
+                ),
+            ));
+        }
+    }
+    if let Some(g) = &metadata.georeference {
+        let finite = g.origin.iter().chain(&g.step).all(|v| v.is_finite());
+        if !finite || g.step.contains(&0.0) {
+            return Err(Error::input(
+                path,
+                format!(
+                    "georeference origin {:?}, step {:?}: it must be finite, the steps non-zero",
+                    g.origin, g.step
+                ),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Metres per degree of latitude on the WGS 84 equatorial sphere, used to turn geographic

@@ -50,14 +50,23 @@ pub fn read(path: &Path, options: &IngestOptions) -> Result<Heightfield> {
         .map_err(|e| Error::input(path, e.to_string()))?;
     let (color, depth) = (info.color_type, info.bit_depth);
     let palette = info.palette.as_ref().map(|p| p.to_vec());
-    let size = reader
-        .output_buffer_size()
+    // Row by row: the buffer grows only as image data actually decodes, so a header that
+    // claims more rows than the file holds costs what the file holds, not what it claims.
+    let line = reader
+        .output_line_size(width)
         .ok_or_else(|| Error::input(path, "image too large to decode"))?;
-    let mut buf = vec![0u8; size];
-    let frame = reader
-        .next_frame(&mut buf)
-        .map_err(|e| png_error(path, e))?;
-    let line = frame.line_size;
+    let mut buf = Vec::new();
+    for _ in 0..height {
+        let row = reader
+            .next_row()
+            .map_err(|e| png_error(path, e))?
+            .ok_or_else(|| Error::input(path, "truncated: the image data ends early"))?;
+        let data = row.data();
+        if data.len() != line {
+            return Err(Error::input(path, "a decoded row has the wrong length"));
+        }
+        buf.extend_from_slice(data);
+    }
     let (w, h) = (width as usize, height as usize);
     let mut samples = Vec::with_capacity(w * h);
 

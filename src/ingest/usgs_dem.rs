@@ -23,6 +23,8 @@ const FIRST_RECORD_ELEVATIONS: usize = 146;
 const NEXT_RECORD_ELEVATIONS: usize = 170;
 const PROFILE_HEADER: usize = 144;
 const VOID: i64 = -32767;
+/// A grid may have at most this many cells per elevation the profiles hold (at most 3/4 void).
+const MAX_BOX_PER_ELEVATION: u64 = 4;
 
 struct Fields<'a> {
     path: &'a Path,
@@ -166,6 +168,23 @@ pub fn read(path: &Path, options: &IngestOptions) -> Result<Heightfield> {
     }
     let (width, height) = (columns as u64, rows_f as u64);
     check_dimensions(width, height).map_err(|e| Error::input(path, e.to_string()))?;
+    // The grid is the profiles' bounding box, sized from their y values: bound it by what the
+    // file holds before allocating it. A quadrangle's profiles fill most of their box (a UTM
+    // footprint is a slightly rotated rectangle); a box more than MAX_VOID_SHARE void is a
+    // damaged or hostile file, not a DEM.
+    let elevations: u64 = profiles.iter().map(|p| p.count as u64).sum();
+    let cells = width * height;
+    if cells > elevations.max(width).saturating_mul(MAX_BOX_PER_ELEVATION) {
+        return Err(Error::input(
+            path,
+            format!(
+                "the profiles' y values span {height} rows × {width} columns ({cells} cells), \
+                 but they hold {elevations} elevations: the grid would be more than \
+                 {}% void",
+                100 - 100 / MAX_BOX_PER_ELEVATION
+            ),
+        ));
+    }
 
     // Pass 2: elevations into the grid, north row first.
     let mut samples = vec![f32::NAN; (width * height) as usize];

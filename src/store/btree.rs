@@ -14,11 +14,15 @@ use crate::error::{Error, Result};
 use crate::format::tree::{read_record, record_key, TreePage};
 use crate::format::{page::check_page, Invariant, TreeRef, TreeSpec, Violation, MAX_TREE_DEPTH};
 
-/// A set of page numbers, one bit each, sized by the real file (never by a stored count).
+/// A set of page numbers, one bit each, sized by the real file (never by a stored count),
+/// with the CRC each page had when it was added (what a reader of an unstable source checks
+/// every later read against).
 #[derive(Clone, Debug)]
 pub struct PageSet {
     bits: Vec<u64>,
     pages: u64,
+    /// `(page, crc)`, sorted by page once [`PageSet::seal`]ed.
+    crcs: Vec<(u64, u32)>,
 }
 
 impl PageSet {
@@ -27,7 +31,29 @@ impl PageSet {
         PageSet {
             bits: vec![0; usize::try_from(pages.div_ceil(64)).unwrap_or(0)],
             pages,
+            crcs: Vec::new(),
         }
+    }
+
+    /// Notes the CRC of a checked structured page (bytes 4..8 of its header).
+    pub fn note_crc(&mut self, page: u64, bytes: &[u8]) {
+        if let Some(crc) = bytes.get(4..8).and_then(|b| b.try_into().ok()) {
+            self.crcs.push((page, u32::from_le_bytes(crc)));
+        }
+    }
+
+    /// Sorts the noted CRCs for lookup.
+    pub fn seal(&mut self) {
+        self.crcs.sort_unstable();
+    }
+
+    /// The CRC page `page` had when noted.
+    #[inline]
+    pub fn crc(&self, page: u64) -> Option<u32> {
+        self.crcs
+            .binary_search_by_key(&page, |&(p, _)| p)
+            .ok()
+            .map(|i| self.crcs[i].1)
     }
 
     fn word(page: u64) -> (usize, u64) {
@@ -63,8 +89,21 @@ pub(crate) struct Pages<'a, S: Source + ?Sized> {
     pub src: &'a S,
     pub page_size: u32,
     pub page_count: u64,
-    /// Check tag, number and CRC on every read.
+    /// Check tag, number, CRC and txn tag on every read.
     pub check: bool,
+    /// The state read: its txn id, and the txn tag each of its pages carries (format §4).
+    pub state: Binding,
+    /// The pages as the state was opened: every later read must find the same CRC.
+    pub known: Option<&'a PageSet>,
+}
+
+/// What binds a page to the state a reader holds.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Binding {
+    /// The txn id of the state.
+    pub txn: u64,
+    /// The txn tag its structured pages carry.
+    pub txn_tag: u16,
 }
 
 impl<'a, S: Source + ?Sized> Pages<'a, S> {
@@ -85,9 +124,44 @@ impl<'a, S: Source + ?Sized> Pages<'a, S> {
             Err(e) => return Err(self.read_failed(offset, e)),
         };
         if self.check {
-            check_page(&bytes, page, tag).map_err(|v| self.corrupt(v))?;
+            let h = check_page(&bytes, page, tag).map_err(|v| self.corrupt(v))?;
+            if h.txn_tag.get() != self.state.txn_tag {
+                return Err(self.unbound(page, h.txn_tag.get()));
+            }
+            if let Some(known) = self.known {
+                if known.crc(page) != Some(h.crc.get()) {
+                    return Err(self.changed(page));
+                }
+            }
         }
         Ok(bytes)
+    }
+
+    /// A valid page with another transaction's tag: a later state reused it, or (if the state
+    /// is still the latest) a stale or misplaced page.
+    #[cold]
+    #[inline(never)]
+    fn unbound(&self, page: u64, found: u16) -> Error {
+        let v = Violation::new(
+            Invariant::Page,
+            format!("page {page}"),
+            format!(
+                "carries txn tag {found:#06x}; the state's pages carry {:#06x}",
+                self.state.txn_tag
+            ),
+        );
+        super::open::superseded_or_corrupt(self.src, self.state.txn, v)
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn changed(&self, page: u64) -> Error {
+        let v = Violation::new(
+            Invariant::Page,
+            format!("page {page}"),
+            "is not the page this state was opened with",
+        );
+        super::open::superseded_or_corrupt(self.src, self.state.txn, v)
     }
 
     // The error paths stay out of line: `get` runs for every page of every lookup.
@@ -178,6 +252,7 @@ fn walk_page<S: Source + ?Sized>(
         )));
     }
     let bytes = pages.get(page_no, spec.tag)?;
+    seen.note_crc(page_no, &bytes);
     let page = TreePage::checked(&bytes, page_no, spec, level).map_err(|v| pages.corrupt(v))?;
     let first_ordinal = state.next_ordinal;
     if level == 0 {

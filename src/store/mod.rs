@@ -39,6 +39,7 @@
 
 pub(crate) mod btree;
 pub mod io;
+pub mod lock;
 mod open;
 mod read;
 pub mod source;
@@ -77,6 +78,7 @@ pub struct Store<S: Source = FileSource> {
     header: DatasetHeader,
     clusters: Vec<ClusterInfo>,
     metadata_pages: btree::PageSet,
+    registered: bool,
 }
 
 /// The state a store reads, as its commit record describes it.
@@ -211,6 +213,20 @@ impl<S: Source> Store<S> {
     /// Which slot (0 or 1) holds the commit record in use.
     pub(crate) fn commit_slot(&self) -> u8 {
         self.slot
+    }
+
+    /// What binds pages to this store's state.
+    pub(crate) fn binding(&self) -> btree::Binding {
+        btree::Binding {
+            txn: self.txn_id(),
+            txn_tag: self.commit.page_txn_tag(),
+        }
+    }
+
+    /// Whether this store registered its state against page reuse by writers in other
+    /// processes (format §11.6): then no commit reuses a page it reaches while it lives.
+    pub fn is_registered(&self) -> bool {
+        self.registered
     }
 
     /// The metadata pages found while opening (blobs and every table page).

@@ -1,11 +1,24 @@
-//! Opening a container: read the two commit slots, choose the state (format §3), then check
-//! every metadata page that state reaches before anything else is read.
+//! Opening a container: read the two commit slots, choose the state (format §3), register it
+//! against page reuse by writers in other processes (§11.6), then check every metadata page
+//! that state reaches before anything else is read.
+//!
+//! **Registering.** A reader registers the txn id it chose, then reads the slots again. If the
+//! state is still the latest, no commit that could reuse its pages had started before the
+//! registration took effect (a commit reuses pages of state `t` only from base `t + 1` on,
+//! and a writer computes what it may reuse after its base is published), so from then on
+//! every page it reaches stays as it is. Otherwise it tries again with the newer state.
+//!
+//! **Without registering** (memory, or a system without OFD locks), every structured page is
+//! bound to the state by its txn tag (§4), payloads by their CRCs, and a page found unbound
+//! while a later state exists makes the open start again with the latest state. Tags have 16
+//! bits, so after the walk the reader reads the slots once more: if fewer than 2^16 - 1
+//! commits have passed since its pages were written, no page it read can carry a reused tag.
 //!
 //! The bytes are decoded by [`crate::format`]; this file only decides what to read. The
 //! dataset header and the cluster directory are decoded here, before a [`Store`] exists, so
 //! a store always holds a checked header.
 
-use super::btree::{self, PageSet, Pages};
+use super::btree::{self, Binding, PageSet, Pages};
 use super::source::Source;
 use super::Store;
 use crate::error::{Error, Result};
@@ -112,6 +125,7 @@ fn read_blob<S: Source + ?Sized>(
             )));
         }
         let page = pages.get(page_no, tag)?;
+        seen.note_crc(page_no, &page);
         let content = blob_page_content(&page, blob, i, tag, pages.page_size, name)
             .map_err(|v| pages.corrupt(v))?;
         out.extend_from_slice(content);
@@ -119,19 +133,118 @@ fn read_blob<S: Source + ?Sized>(
     Ok(out)
 }
 
+/// How many times opening starts again because a writer published a newer state (or, for an
+/// unregistered reader, reused a page) while it chose. Each round takes microseconds and a
+/// commit at least one `fsync`, so this is never reached unless commits never stop.
+const OPEN_ATTEMPTS: u32 = 100;
+
+/// The txn id of the state a reader would open from `src` now, if any.
+pub(crate) fn latest_txn<S: Source + ?Sized>(src: &S) -> Result<Option<u64>> {
+    let slots = read_slots(src)?;
+    Ok(commit::choose(&slots).ok().map(|(_, r)| r.txn_id.get()))
+}
+
+/// The error for bytes of the state `txn` that do not hold what the state says (`v`): the
+/// state was superseded and its pages reused when the file's latest state is newer, else
+/// corruption.
+pub(crate) fn superseded_or_corrupt<S: Source + ?Sized>(src: &S, txn: u64, v: Violation) -> Error {
+    match latest_txn(src) {
+        Ok(Some(latest)) if latest > txn => Error::Superseded {
+            path: src.name().to_path_buf(),
+            txn,
+            latest,
+            detail: format!("{}: {}", v.location, v.detail),
+        },
+        _ => v.in_file(src.name()),
+    }
+}
+
+/// Chooses the state and registers it (see the module docs). Returns the slot, the record,
+/// and whether it is registered.
+fn choose_state<S: Source + ?Sized>(src: &S) -> Result<(u8, crate::format::CommitRecord, bool)> {
+    let mut attempts = 0;
+    loop {
+        let slots = read_slots(src)?;
+        let (slot, commit) = commit::choose(&slots).map_err(|why| no_state(src, why))?;
+        let txn = commit.txn_id.get();
+        if !src
+            .register_reader(txn)
+            .map_err(|e| Error::io(src.name(), e))?
+        {
+            return Ok((slot, commit, false));
+        }
+        let latest = latest_txn(src)?;
+        if latest == Some(txn) {
+            return Ok((slot, commit, true));
+        }
+        attempts += 1;
+        if attempts >= OPEN_ATTEMPTS {
+            return Err(Error::Superseded {
+                path: src.name().to_path_buf(),
+                txn,
+                latest: latest.unwrap_or(txn),
+                detail: format!("a writer published {attempts} states while this reader chose one"),
+            });
+        }
+    }
+}
+
 /// Opens the state `src` holds, checking every metadata page it reaches (see the docs of
 /// [`crate::store`] for what that costs).
 pub(crate) fn open<S: Source>(src: S) -> Result<Store<S>> {
-    let slots = read_slots(&src)?;
-    let (slot, commit) = commit::choose(&slots).map_err(|why| no_state(&src, why))?;
+    let mut attempts = 0;
+    loop {
+        match open_once(&src) {
+            Ok(opened) => return Ok(opened.into_store(src)),
+            Err(Error::Superseded { .. }) if attempts + 1 < OPEN_ATTEMPTS => attempts += 1,
+            Err(e) => return Err(e),
+        }
+    }
+}
+
+/// What opening found, before the store owns its source.
+struct Opened {
+    page_size: u32,
+    page_count: u64,
+    slot: u8,
+    commit: crate::format::CommitRecord,
+    header: DatasetHeader,
+    clusters: Vec<crate::format::ClusterInfo>,
+    metadata_pages: PageSet,
+    registered: bool,
+}
+
+impl Opened {
+    fn into_store<S: Source>(self, src: S) -> Store<S> {
+        Store {
+            src,
+            page_size: self.page_size,
+            page_count: self.page_count,
+            slot: self.slot,
+            commit: self.commit,
+            header: self.header,
+            clusters: self.clusters,
+            metadata_pages: self.metadata_pages,
+            registered: self.registered,
+        }
+    }
+}
+
+fn open_once<S: Source>(src: &S) -> Result<Opened> {
+    let (slot, commit, registered) = choose_state(src)?;
     commit::check_length(&commit, src.len()).map_err(|v| v.in_file(src.name()))?;
     let page_size = commit.page_size.get();
     let page_count = commit.file_length.get() / u64::from(page_size);
     let pages = Pages {
-        src: &src,
+        src,
         page_size,
         page_count,
         check: true,
+        state: Binding {
+            txn: commit.txn_id.get(),
+            txn_tag: commit.page_txn_tag(),
+        },
+        known: None,
     };
     let mut seen = PageSet::new(page_count);
     let header_bytes = read_blob(
@@ -168,8 +281,21 @@ pub(crate) fn open<S: Source>(src: S) -> Result<Store<S>> {
     for (spec, tree) in state_trees(&commit.roots, &clusters) {
         btree::walk(&pages, &tree, spec, &mut seen, &mut |_, _| Ok(()))?;
     }
-    Ok(Store {
-        src,
+    if !registered && commit.minor.get() >= 2 {
+        // A tag repeats every 2^16 transactions: if that many could have committed since the
+        // state's pages were written, a page read above might carry a reused tag.
+        let latest = latest_txn(src)?.unwrap_or(0);
+        if latest.saturating_add(1) >= commit.pages_txn.get().saturating_add(0xffff) {
+            return Err(Error::Superseded {
+                path: src.name().to_path_buf(),
+                txn: commit.txn_id.get(),
+                latest,
+                detail: "2^16 transactions committed since its pages were written".into(),
+            });
+        }
+    }
+    seen.seal();
+    Ok(Opened {
         page_size,
         page_count,
         slot,
@@ -177,5 +303,6 @@ pub(crate) fn open<S: Source>(src: S) -> Result<Store<S>> {
         header,
         clusters,
         metadata_pages: seen,
+        registered,
     })
 }

@@ -63,11 +63,14 @@ impl<S: Source> Store<S> {
 
     /// Page access for lookups: checks again only when the source is not stable.
     pub(crate) fn pages(&self) -> Pages<'_, S> {
+        let check = !self.src.stable();
         Pages {
             src: &self.src,
             page_size: self.page_size,
             page_count: self.page_count,
-            check: !self.src.stable(),
+            check,
+            state: self.binding(),
+            known: check.then_some(&self.metadata_pages),
         }
     }
 
@@ -265,11 +268,18 @@ impl<S: Source> Store<S> {
         let bytes = source::read(&self.src, at.offset, len)?;
         let actual = crate::format::crc32(&bytes);
         if actual != at.crc {
-            return Err(self.corrupt(Violation::new(
+            // The CRC in the record binds the payload to the state (a Merkle reference): a
+            // later state that reused the pages is told apart from damage by the slots.
+            let v = Violation::new(
                 Invariant::Payload,
                 where_(),
                 format!("CRC {:#010x} recorded, {actual:#010x} computed", at.crc),
-            )));
+            );
+            return Err(super::open::superseded_or_corrupt(
+                &self.src,
+                self.txn_id(),
+                v,
+            ));
         }
         Ok(bytes)
     }

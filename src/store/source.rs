@@ -36,6 +36,67 @@ pub trait Source: Send + Sync {
 
     /// What errors call the source: its path, or a description such as `<memory>`.
     fn name(&self) -> &Path;
+
+    /// Registers this source as a reader of state `txn`, so that writers in other processes
+    /// keep every page that state reaches (format §11.6), and drops any earlier registration
+    /// of this source. `Ok(false)` when the source cannot register: its bytes are not a file
+    /// a writer changes in place (memory), or the system has no open-file-description locks.
+    /// The default registers nothing.
+    fn register_reader(&self, txn: u64) -> io::Result<bool> {
+        let _ = txn;
+        Ok(false)
+    }
+
+    /// Whether a writer holds the file open (a commit may be running): `None` when the
+    /// source cannot tell.
+    fn writer_present(&self) -> io::Result<Option<bool>> {
+        Ok(None)
+    }
+}
+
+/// A borrowed source reads what it borrows (the validator opens a store on a source it keeps).
+impl<S: Source + ?Sized> Source for &S {
+    fn len(&self) -> u64 {
+        (**self).len()
+    }
+
+    #[inline]
+    fn read_at(&self, offset: u64, len: usize) -> io::Result<Cow<'_, [u8]>> {
+        (**self).read_at(offset, len)
+    }
+
+    #[inline]
+    fn stable(&self) -> bool {
+        (**self).stable()
+    }
+
+    fn name(&self) -> &Path {
+        (**self).name()
+    }
+
+    fn register_reader(&self, txn: u64) -> io::Result<bool> {
+        (**self).register_reader(txn)
+    }
+
+    fn writer_present(&self) -> io::Result<Option<bool>> {
+        (**self).writer_present()
+    }
+}
+
+/// A file's registration as a reader (see [`super::lock`]): the txn id it holds, 0 for none.
+#[derive(Debug, Default)]
+struct Registration(std::sync::atomic::AtomicU64);
+
+impl Registration {
+    fn register(&self, file: &File, txn: u64) -> io::Result<bool> {
+        use std::sync::atomic::Ordering;
+        let previous = Some(self.0.load(Ordering::Acquire)).filter(|&t| t != 0);
+        let done = super::lock::register_reader(file, txn, previous)?;
+        if done {
+            self.0.store(txn, Ordering::Release);
+        }
+        Ok(done)
+    }
 }
 
 #[inline]
@@ -83,6 +144,9 @@ impl<T: AsRef<[u8]> + Send + Sync> Source for Bytes<T> {
 #[derive(Debug)]
 pub struct MmapSource {
     map: Mmap,
+    /// Kept open: the reader's registration lives as long as the file does.
+    file: File,
+    registration: Registration,
     path: PathBuf,
 }
 
@@ -91,13 +155,16 @@ impl MmapSource {
     ///
     /// # Safety
     /// The caller promises what [`super::Store::open_mapped`] documents: nobody modifies or
-    /// truncates the file while the mapping lives.
+    /// truncates the pages a registered state reaches while the mapping lives.
     pub unsafe fn new(file: &File, path: &Path) -> Result<MmapSource> {
         // SAFETY: forwarded to our caller's contract (no concurrent modification or
-        // truncation of the file for the mapping's lifetime).
+        // truncation of what the mapping is used to read, for its lifetime).
         let map = unsafe { Mmap::map(file) }.map_err(|e| Error::io(path, e))?;
         Ok(MmapSource {
             map,
+            // The same open file description, so the registration is this file's.
+            file: file.try_clone().map_err(|e| Error::io(path, e))?,
+            registration: Registration::default(),
             path: path.to_path_buf(),
         })
     }
@@ -121,6 +188,14 @@ impl Source for MmapSource {
     fn name(&self) -> &Path {
         &self.path
     }
+
+    fn register_reader(&self, txn: u64) -> io::Result<bool> {
+        self.registration.register(&self.file, txn)
+    }
+
+    fn writer_present(&self) -> io::Result<Option<bool>> {
+        super::lock::writer_present(&self.file)
+    }
 }
 
 /// A file read with positioned reads: safe whatever other processes do to the file (a
@@ -129,6 +204,7 @@ impl Source for MmapSource {
 pub struct FileSource {
     file: File,
     len: u64,
+    registration: Registration,
     path: PathBuf,
 }
 
@@ -139,6 +215,7 @@ impl FileSource {
         Ok(FileSource {
             file,
             len,
+            registration: Registration::default(),
             path: path.to_path_buf(),
         })
     }
@@ -176,6 +253,14 @@ impl Source for FileSource {
 
     fn name(&self) -> &Path {
         &self.path
+    }
+
+    fn register_reader(&self, txn: u64) -> io::Result<bool> {
+        self.registration.register(&self.file, txn)
+    }
+
+    fn writer_present(&self) -> io::Result<Option<bool>> {
+        super::lock::writer_present(&self.file)
     }
 }
 

@@ -37,6 +37,12 @@ pub trait Io: Send + Sync {
     fn set_len(&self, len: u64) -> io::Result<()>;
     /// A name for messages.
     fn name(&self) -> &Path;
+    /// The lowest txn id `<= up_to` that readers in other processes hold (format §11.6), if
+    /// any. Devices no other process reads have none.
+    fn oldest_reader(&self, up_to: u64) -> io::Result<Option<u64>> {
+        let _ = up_to;
+        Ok(None)
+    }
 }
 
 /// A real file: `pread`/`pwrite`, `fsync` (`File::sync_all`), `ftruncate`.
@@ -66,6 +72,15 @@ impl FileIo {
                 ))
             }
             Err(std::fs::TryLockError::Error(e)) => return Err(e),
+        }
+        // Also marks the file as a writer's for readers in other processes, who can then
+        // tell a running commit from damage (`verify`), without taking any lock that would
+        // stand in a writer's way.
+        if !super::lock::hold_writer(&file)? {
+            return Err(io::Error::new(
+                io::ErrorKind::WouldBlock,
+                "another writer has the file open (it is locked)",
+            ));
         }
         Ok(FileIo {
             file,
@@ -114,6 +129,10 @@ impl Io for FileIo {
 
     fn name(&self) -> &Path {
         &self.path
+    }
+
+    fn oldest_reader(&self, up_to: u64) -> io::Result<Option<u64>> {
+        super::lock::oldest_reader(&self.file, up_to)
     }
 }
 

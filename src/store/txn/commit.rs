@@ -54,6 +54,10 @@ pub struct CommitSummary {
     pub pages_freed: u64,
     /// File length after the commit.
     pub file_length: u64,
+    /// `L` of format §11.3: pages freed by states up to this txn id could be reused. Below
+    /// the base when a snapshot or a registered reader in another process held an older
+    /// state.
+    pub reuse_limit: u64,
 }
 
 /// A [`PageSink`] that writes each tree or blob into an extent from the allocator.
@@ -61,6 +65,8 @@ struct CommitSink<'a, I: Io> {
     io: &'a I,
     alloc: &'a mut Alloc,
     page_size: u32,
+    /// The transaction writing: every structured page carries its tag.
+    txn: u64,
     written: u64,
 }
 
@@ -79,10 +85,11 @@ impl<I: Io> CommitSink<'_, I> {
     /// reserved) and writes them.
     fn tree_at(&mut self, first: u64, records: &[u8], spec: TreeSpec) -> Result<TreeRef> {
         let mut pages = Vec::new();
-        let root = tree::build::<Error>(records, spec, self.page_size, first, &mut |p| {
-            pages.push(p);
-            Ok(())
-        })?;
+        let root =
+            tree::build::<Error>(records, spec, self.page_size, first, self.txn, &mut |p| {
+                pages.push(p);
+                Ok(())
+            })?;
         self.write_pages(first, &pages)?;
         Ok(root)
     }
@@ -114,7 +121,7 @@ impl<I: Io> PageSink for CommitSink<'_, I> {
     fn blob(&mut self, content: &[u8], tag: [u8; 4]) -> Result<BlobRef> {
         let n = crate::format::blob::blob_pages(content.len() as u64, self.page_size);
         let first = self.alloc.extent(n);
-        let (blob, pages) = encode_blob(content, tag, first, self.page_size);
+        let (blob, pages) = encode_blob(content, tag, first, self.txn, self.page_size);
         self.write_pages(first, &pages)?;
         Ok(blob)
     }
@@ -149,6 +156,7 @@ pub(crate) fn write_state<I: Io>(
         io: io.as_ref(),
         alloc: &mut alloc,
         page_size: p,
+        txn,
         written: 0,
     };
     let meets = |r: &SampleRect| dirty.iter().any(|x| x.intersect(r).is_some());
@@ -262,7 +270,7 @@ pub(crate) fn write_state<I: Io>(
     }
     alloc.trim();
 
-    let (free_list, free_pages) = write_free_list(io.as_ref(), &mut alloc, p)?;
+    let (free_list, free_pages) = write_free_list(io.as_ref(), &mut alloc, p, txn)?;
     summary.pages_written = written + free_pages;
     summary.pages_reused = alloc.reused;
 
@@ -289,7 +297,7 @@ pub(crate) fn write_state<I: Io>(
 
 /// Writes the free list of `alloc`'s pool, last: into a reusable run when taking it leaves
 /// the page count the list needs unchanged, else appended. Returns its root and its pages.
-fn write_free_list<I: Io>(io: &I, alloc: &mut Alloc, p: u32) -> Result<(TreeRef, u64)> {
+fn write_free_list<I: Io>(io: &I, alloc: &mut Alloc, p: u32, txn: u64) -> Result<(TreeRef, u64)> {
     let need = |count: usize| tree::pages_needed(count as u64, FREE.record_size, p);
     let k = need(alloc.pool.len());
     if k == 0 {
@@ -306,6 +314,7 @@ fn write_free_list<I: Io>(io: &I, alloc: &mut Alloc, p: u32) -> Result<(TreeRef,
         io,
         alloc,
         page_size: p,
+        txn,
         written: 0,
     };
     Ok((sink.tree_at(first, &records, FREE)?, k))

@@ -246,6 +246,22 @@ impl<I: Io> Container<I> {
     fn oldest_reader(&self) -> Option<u64> {
         lock(&self.shared.readers).keys().next().copied()
     }
+
+    /// `L` of format §11.3 for a commit on the durable state `base`: the oldest state that a
+    /// snapshot of this container or a registered reader in another process holds, or `base`.
+    /// Asked after `base` is durable, so a reader that registers later and finds `base` still
+    /// the latest is counted, and one that finds a newer state does not read `base`.
+    fn reuse_limit(&self, base: u64) -> Result<u64> {
+        let io = &self.shared.io;
+        let outside = io
+            .oldest_reader(base)
+            .map_err(|e| Error::io(io.name(), e))?;
+        Ok([Some(base), self.oldest_reader(), outside]
+            .into_iter()
+            .flatten()
+            .min()
+            .unwrap_or(base))
+    }
 }
 
 impl<I: Io> Drop for Container<I> {
@@ -362,9 +378,7 @@ impl<I: Io> WriteTxn<'_, I> {
                 let marked = r.copy_as(r.txn_id.get() + 1, r.flags.get() | COMMIT_RECOVERY_NEEDED);
                 Arc::new(container.publish(&base, &marked)?)
             };
-            let limit = container
-                .oldest_reader()
-                .map_or(base.txn_id(), |r| r.min(base.txn_id()));
+            let limit = container.reuse_limit(base.txn_id())?;
             let editor = self
                 .cache
                 .editor
@@ -375,6 +389,7 @@ impl<I: Io> WriteTxn<'_, I> {
             let store = container.publish(&base, &record)?;
             *lock(&container.shared.current) = Arc::new(store);
             summary.replacements = self.replacements;
+            summary.reuse_limit = limit;
             Ok(summary)
         });
         if result.is_err() {

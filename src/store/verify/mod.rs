@@ -21,7 +21,7 @@ mod structure;
 
 use serde::Serialize;
 
-use super::open::{no_state, read_slots};
+use super::open::{latest_txn, no_state, read_slots};
 use super::{Source, Store};
 use crate::error::{Error, Result};
 use crate::format::commit::{self, Slot};
@@ -52,6 +52,10 @@ pub enum CheckStatus {
     Failed,
     /// Not checked: a check it depends on failed, or the mode does not include it.
     Skipped,
+    /// Not decided: it is about the file around the state (its length, the other commit
+    /// slot), and a writer had the file open or committed while it was checked, so what was
+    /// read may be a commit in progress. Run the validator again.
+    Busy,
 }
 
 /// One invariant's result.
@@ -78,6 +82,12 @@ pub struct VerifyReport {
     pub valid: bool,
     /// The transaction id of the commit record in use, if one was valid.
     pub txn_id: Option<u64>,
+    /// Whether some check could not be decided because a writer was committing (see
+    /// [`CheckStatus::Busy`]): the state itself was checked, run again for the rest.
+    pub busy: bool,
+    /// Whether the validator registered the state it read, so that no writer in another
+    /// process could reuse its pages meanwhile (format §11.6).
+    pub registered: bool,
     /// Bytes in the file.
     pub file_length: u64,
     /// One entry per invariant, in id order.
@@ -128,6 +138,41 @@ impl Checks {
         }
     }
 
+    /// Takes in the file-level checks `other` made: as they are, or, when `busy`, with every
+    /// failure turned into [`CheckStatus::Busy`].
+    fn merge(&mut self, other: Checks, busy: bool) {
+        for theirs in other.reports {
+            let mine = self.report(theirs.id);
+            match theirs.status {
+                CheckStatus::Failed if busy => {
+                    if mine.status != CheckStatus::Failed {
+                        mine.status = CheckStatus::Busy;
+                    }
+                    // The messages would blame damage or an interrupted transaction; neither
+                    // is known while a writer runs.
+                    mine.failures.push(format!(
+                        "not decided: {} while a writer had the file open or committed; run \
+                         again",
+                        match theirs.id {
+                            Invariant::FileLength => "the file's length changed",
+                            _ => "the other commit slot was being written",
+                        }
+                    ));
+                }
+                CheckStatus::Failed => {
+                    mine.status = CheckStatus::Failed;
+                    mine.failure_count += theirs.failure_count;
+                    mine.failures.extend(theirs.failures);
+                }
+                CheckStatus::Passed if mine.status == CheckStatus::Skipped => {
+                    mine.status = CheckStatus::Passed;
+                }
+                _ => {}
+            }
+            mine.failures.truncate(MAX_MESSAGES);
+        }
+    }
+
     /// Whether any check has failed so far.
     pub fn any_failed(&self) -> bool {
         self.reports.iter().any(|r| r.status == CheckStatus::Failed)
@@ -152,12 +197,16 @@ impl Checks {
     }
 
     fn finish(self, mode: VerifyMode, txn_id: Option<u64>, file_length: u64) -> VerifyReport {
-        let valid =
-            !self.any_failed() && self.reports.iter().any(|r| r.status == CheckStatus::Passed);
+        let busy = self.reports.iter().any(|r| r.status == CheckStatus::Busy);
+        let valid = !self.any_failed()
+            && !busy
+            && self.reports.iter().any(|r| r.status == CheckStatus::Passed);
         VerifyReport {
             mode,
             valid,
             txn_id,
+            busy,
+            registered: false,
             file_length,
             checks: self.reports,
         }
@@ -166,6 +215,13 @@ impl Checks {
 
 /// Verifies the container in `src` (see the module docs). `Err` only for a file that is not
 /// a recognisable fmrh container, one of a newer major version, or a failed read.
+///
+/// **While a writer commits.** The store registers the state it verifies (format §11.6), so
+/// the state's own checks read one consistent state whatever a writer in another process
+/// does. What lies around the state (the file's length, the other commit slot, I-3 and I-4)
+/// is the writer's to change while it commits: if such a check fails while a writer has the
+/// file open, or after a newer state was published, it is reported [`CheckStatus::Busy`]
+/// rather than failed, and the report is not valid.
 pub fn verify<S: Source>(src: S, mode: VerifyMode) -> Result<VerifyReport> {
     let file_length = src.len();
     let mut checks = Checks::new();
@@ -180,14 +236,38 @@ pub fn verify<S: Source>(src: S, mode: VerifyMode) -> Result<VerifyReport> {
     };
     checks.pass(Invariant::CommitRecord);
     checks.pass(Invariant::Version);
-    let txn = record.txn_id.get();
-    check_slots(&src, &slots, slot, &record, &mut checks)?;
-    if file_length < record.file_length.get() {
-        return Ok(checks.finish(mode, Some(txn), file_length));
-    }
-    let Some(store) = checks.absorb(Store::from_source(src))? else {
-        return Ok(checks.finish(mode, Some(txn), file_length));
+    let opened = if file_length < record.file_length.get() {
+        None
+    } else {
+        checks.absorb(Store::from_source(&src))?
     };
+    // The state the store registered (a writer may have published a newer one meanwhile).
+    let (slot, record, slots) = match &opened {
+        Some(store) if store.txn_id() != record.txn_id.get() => (
+            store.commit_slot(),
+            *store.commit_record(),
+            read_slots(&src)?,
+        ),
+        _ => (slot, record, slots),
+    };
+    let txn = record.txn_id.get();
+    let mut around = Checks::new();
+    check_slots(&src, &slots, slot, &record, &mut around)?;
+    if let Some(store) = &opened {
+        verify_state(store, mode, &mut checks)?;
+    }
+    // Were the checks around the state reading a commit in progress?
+    let busy = around.any_failed()
+        && (src.writer_present().map_err(|e| Error::io(src.name(), e))? == Some(true)
+            || latest_txn(&src)? != Some(txn));
+    checks.merge(around, busy);
+    let mut report = checks.finish(mode, Some(txn), file_length);
+    report.registered = opened.as_ref().is_some_and(|s| s.is_registered());
+    Ok(report)
+}
+
+/// Every check of the state `store` holds.
+fn verify_state<S: Source>(store: &Store<S>, mode: VerifyMode, checks: &mut Checks) -> Result<()> {
     for id in [
         Invariant::Page,
         Invariant::DatasetHeader,
@@ -196,21 +276,21 @@ pub fn verify<S: Source>(src: S, mode: VerifyMode) -> Result<VerifyReport> {
     ] {
         checks.pass(id);
     }
-    let Some(loaded) = checks.absorb(Loaded::read(&store))? else {
-        return Ok(checks.finish(mode, Some(txn), file_length));
+    let Some(loaded) = checks.absorb(Loaded::read(store))? else {
+        return Ok(());
     };
-    structure::check_free_list(&store, &loaded, &mut checks);
-    structure::check_nodes(&store, &loaded, &mut checks);
-    structure::check_blocks(&store, &loaded, &mut checks);
-    let payload_pages = payloads::check_payloads(&store, &loaded, &mut checks)?;
-    structure::check_ownership(&store, &loaded, &payload_pages, &mut checks);
-    structure::check_index_entries(&store, &loaded, &mut checks);
+    structure::check_free_list(store, &loaded, checks);
+    structure::check_nodes(store, &loaded, checks);
+    structure::check_blocks(store, &loaded, checks);
+    let payload_pages = payloads::check_payloads(store, &loaded, checks)?;
+    structure::check_ownership(store, &loaded, &payload_pages, checks);
+    structure::check_index_entries(store, &loaded, checks);
     if mode == VerifyMode::Full && !checks.any_failed() {
-        full::check_cuts(&store, &loaded, &mut checks);
-        full::check_adjacency(&store, &loaded, &mut checks);
-        full::check_measured(&store, &loaded, &mut checks)?;
+        full::check_cuts(store, &loaded, checks);
+        full::check_adjacency(store, &loaded, checks);
+        full::check_measured(store, &loaded, checks)?;
     }
-    Ok(checks.finish(mode, Some(txn), file_length))
+    Ok(())
 }
 
 /// I-3 and I-4, and the zero tails of both slot pages (I-1, I-4).

@@ -27,6 +27,9 @@ use crate::format::{
 use crate::heightfield::Metadata;
 use crate::model::{Domain, Model};
 
+/// The transaction id of a freshly built file's one state: every page of it carries its tag.
+const FIRST_TXN: u64 = 1;
+
 /// One payload, in file order.
 #[derive(Clone, Copy, Debug)]
 enum Item {
@@ -108,7 +111,7 @@ pub(crate) fn write_named<W: Write + Seek>(
         free_list: tree::empty(FREE.record_size),
         adjacency,
     };
-    let record = CommitRecord::new(p, 1, file_length, 0, roots);
+    let record = CommitRecord::new(p, FIRST_TXN, file_length, 0, roots);
     out.w.seek(SeekFrom::Start(0)).map_err(io_err)?;
     out.w.write_all(record.as_bytes()).map_err(io_err)?;
     out.w.seek(SeekFrom::Start(file_length)).map_err(io_err)?;
@@ -219,7 +222,8 @@ impl<W: Write> SeqSink<'_, '_, W> {
 impl<W: Write> PageSink for SeqSink<'_, '_, W> {
     fn tree(&mut self, records: &[u8], spec: TreeSpec) -> Result<TreeRef> {
         let mut pages = Vec::new();
-        let root = tree::build::<Error>(records, spec, self.page_size, self.next_page, &mut |p| {
+        let (first, txn) = (self.next_page, FIRST_TXN);
+        let root = tree::build::<Error>(records, spec, self.page_size, first, txn, &mut |p| {
             pages.push(p);
             Ok(())
         })?;
@@ -228,7 +232,7 @@ impl<W: Write> PageSink for SeqSink<'_, '_, W> {
     }
 
     fn blob(&mut self, content: &[u8], tag: [u8; 4]) -> Result<BlobRef> {
-        let (blob, pages) = encode_blob(content, tag, self.next_page, self.page_size);
+        let (blob, pages) = encode_blob(content, tag, self.next_page, FIRST_TXN, self.page_size);
         self.pages(tag, &pages)?;
         Ok(blob)
     }
