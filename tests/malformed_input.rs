@@ -3,6 +3,8 @@
 //! and property tests flip, cut and replace bytes of real files of every format.
 
 mod common;
+#[path = "common/hostile.rs"]
+mod hostile;
 
 use std::path::{Path, PathBuf};
 
@@ -215,6 +217,67 @@ fn usgs_dems() {
     bad[858..864].copy_from_slice(b"999999"); // more profiles than the file holds
     let f = write(dir.path(), "profiles.dem", &bad);
     assert_input_error(load_default(&f), &f);
+}
+
+/// Regression (issue 13): a 1 MB file whose profiles' northings span 2^20 rows allocated a
+/// 4 GiB grid and aborted; 256 such profiles built for 45 s into a 2.2 GB container. The grid
+/// is now bounded by the elevations the file holds.
+#[test]
+fn usgs_dem_profiles_spanning_more_than_they_hold_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    for n in [2, 256, 1024] {
+        let f = write(
+            dir.path(),
+            &format!("bomb{n}.dem"),
+            &hostile::usgs_dem_bomb(n),
+        );
+        let err = load_default(&f).unwrap_err();
+        assert!(err.to_string().contains("elevations"), "{err}");
+        assert_input_error(Err(err), &f);
+    }
+    // A well-formed small DEM with staggered profiles (a rotated quadrangle) still reads.
+    let ok = hostile::usgs_dem(&[
+        (0.0, vec![1, 2, 3, 4]),
+        (30.0, vec![5, 6, 7, 8]),
+        (60.0, vec![9, 10, 11]),
+    ]);
+    let f = write(dir.path(), "ok.dem", &ok);
+    let hf = load_default(&f).unwrap();
+    assert_eq!((hf.width(), hf.height()), (3, 5));
+    assert_eq!(hf.void_count(), 4);
+}
+
+/// Regression (issue 13): negative, zero or infinite spacing was accepted and reached scenes.
+#[test]
+fn spacing_must_be_finite_and_positive() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    for (i, spacing) in ["[-30, 0]", "[30, 0]", "[0, 30]", "[30, -30]", "[1e400, 30]"]
+        .iter()
+        .enumerate()
+    {
+        let json = format!(r#"{{"width": 2, "height": 1, "spacing_m": {spacing}}}"#);
+        let j = write(d, &format!("s{i}.json"), json.as_bytes());
+        let f = write(d, &format!("s{i}.f32"), &[0u8; 8]);
+        // 1e400 fails in the sidecar's JSON (it names the .json), the others in the checks.
+        let named = if spacing.contains("1e400") { &j } else { &f };
+        assert_input_error(load_default(&j), named);
+    }
+    for cell in ["cellsize -1", "cellsize 0", "dx 1\ndy -1", "cellsize inf"] {
+        let text = format!("ncols 2\nnrows 1\nxllcorner 0\nyllcorner 0\n{cell}\n1 2\n");
+        let f = write(d, "neg.asc", text.as_bytes());
+        assert_input_error(load_default(&f), &f);
+    }
+    write(
+        d,
+        "fine.json",
+        br#"{"width": 2, "height": 1, "spacing_m": [30, 30]}"#,
+    );
+    let f = write(d, "fine.f32", &[0u8; 8]);
+    assert_eq!(
+        load_default(&f).unwrap().metadata.spacing_m,
+        Some([30.0, 30.0])
+    );
 }
 
 #[test]

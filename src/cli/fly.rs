@@ -61,9 +61,9 @@ pub fn run(args: &FlyArgs) -> Result<ExitCode, Error> {
         ..Camera::looking_at(glam::DVec3::ZERO, glam::DVec3::X)
     };
     let cameras = path::parse(&text, &template)?;
-    if args.view.mmap {
-        // SAFETY: the --mmap contract, stated in its help: nobody modifies the file while
-        // this command runs.
+    if args.view.mmap && fmrh::store::lock::SUPPORTED {
+        // SAFETY: the --mmap contract, stated in its help: the state is registered, so fmrh
+        // writers leave its pages alone, and no other tool modifies the file meanwhile.
         let store = unsafe { Store::open_mapped(&args.file) }?;
         replay(args, Arc::new(store), &cameras)
     } else {

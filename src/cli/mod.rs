@@ -114,8 +114,8 @@ pub fn print_json<T: Serialize>(value: &T) -> Result<(), Error> {
     Ok(())
 }
 
-/// Opens a container for the read-only commands. Positioned reads, not a mapping: a command
-/// line tool cannot promise that nobody else touches the file (see `Store::open_mapped`).
+/// Opens a container for the read-only commands: positioned reads, the state registered
+/// against reuse by writers in other processes (see `Store::open`).
 pub fn open(path: &Path) -> Result<Store<FileSource>, Error> {
     Store::open(path)
 }

@@ -29,9 +29,10 @@ pub struct ViewArgs {
     /// Runs of Hilbert keys separated by at most this many keys are scanned as one.
     #[arg(long, default_value_t = DEFAULT_GAP)]
     pub gap: u64,
-    /// Map the file instead of reading it page by page: much faster scheduling, but the
-    /// file must not be modified or truncated while fmrh runs (a truncation kills the
-    /// process with SIGBUS). fmrh's own writers never modify a container in place.
+    /// Map the file instead of reading it page by page: much faster scheduling. The state
+    /// read is registered (Linux), so fmrh writers in other processes leave its pages alone;
+    /// where readers cannot register, this falls back to page reads. Other tools must not
+    /// modify the file meanwhile.
     #[arg(long)]
     pub mmap: bool,
 }
@@ -139,9 +140,9 @@ pub fn run(args: &SceneArgs) -> Result<ExitCode, Error> {
         .as_deref()
         .map(|p| super::sidecar::F32Output::new(p, args.force))
         .transpose()?;
-    if args.view.mmap {
-        // SAFETY: the --mmap contract, stated in its help: nobody modifies the file while
-        // this command runs.
+    if args.view.mmap && fmrh::store::lock::SUPPORTED {
+        // SAFETY: the --mmap contract, stated in its help: the state is registered, so fmrh
+        // writers leave its pages alone, and no other tool modifies the file meanwhile.
         let store = unsafe { fmrh::Store::open_mapped(&args.file) }?;
         run_on(args, &store, camera, options, output)
     } else {

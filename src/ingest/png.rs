@@ -67,6 +67,8 @@ pub fn read(path: &Path, options: &IngestOptions) -> Result<Heightfield> {
         }
         buf.extend_from_slice(data);
     }
+    // The rest of the stream up to IEND: a file cut after its last row is still truncated.
+    reader.finish().map_err(|e| png_error(path, e))?;
     let (w, h) = (width as usize, height as usize);
     let mut samples = Vec::with_capacity(w * h);
 

@@ -124,7 +124,9 @@ impl<'a, S: Source + ?Sized> Pages<'a, S> {
             Err(e) => return Err(self.read_failed(offset, e)),
         };
         if self.check {
-            let h = check_page(&bytes, page, tag).map_err(|v| self.corrupt(v))?;
+            // A page that fails its own checks may be one a later state reused for something
+            // else (a reader that did not register): the slots tell.
+            let h = check_page(&bytes, page, tag).map_err(|v| self.reused_or_corrupt(v))?;
             if h.txn_tag.get() != self.state.txn_tag {
                 return Err(self.unbound(page, h.txn_tag.get()));
             }
@@ -135,6 +137,12 @@ impl<'a, S: Source + ?Sized> Pages<'a, S> {
             }
         }
         Ok(bytes)
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn reused_or_corrupt(&self, v: Violation) -> Error {
+        super::open::superseded_or_corrupt(self.src, self.state.txn, v)
     }
 
     /// A valid page with another transaction's tag: a later state reused it, or (if the state

@@ -14,19 +14,24 @@
 //!
 //! # The API contract, LMDB style
 //!
-//! * [`Store::open`] reads with positioned reads. It is safe under any concurrent activity:
-//!   a page changed under it fails its checksum and reports corruption.
-//! * [`Store::open_mapped`] maps the file. It is `unsafe` because a mapping turns someone
-//!   else's writes into undefined behaviour: while the store lives, no process may modify or
-//!   truncate the file (truncation raises `SIGBUS`). `fmrh build` never writes a file in
-//!   place (it renames a new file over the old one), but a [`Container`] does.
+//! * [`Store::open`] reads with positioned reads and *registers* the state it reads (format
+//!   §11.6: a shared lock the kernel keeps, on Linux), so that no [`Container`] in any process
+//!   reuses a page of it while the store lives: it reads exactly its state while writers
+//!   commit. Where it cannot register ([`Store::is_registered`] is false), it is still safe:
+//!   a page a later state reused fails its binding (format §4) and the read returns
+//!   [`crate::Error::Superseded`] (open again), never another state's bytes.
+//! * [`Store::open_mapped`] maps the file and registers like [`Store::open`]. It is `unsafe`
+//!   because a mapping turns someone else's writes into undefined behaviour: fmrh's writers
+//!   leave a registered state's pages alone, but a tool that ignores the registration, or a
+//!   writer on a system without it, may change or cut them (a cut raises `SIGBUS`).
 //! * [`Store::from_bytes`] reads a container in memory (tests, fuzzing, network buffers).
 //! * [`Container::read`] hands out snapshots of a file a writer has open: the safe way to read
 //!   while transactions commit.
 //!
 //! All of them give the same API, because everything above the [`Source`] works on `&[u8]`.
 //! Errors name the file: [`crate::Error::Corrupt`] for a broken invariant, `Io` when the
-//! operating system fails a read.
+//! operating system fails a read, [`crate::Error::Superseded`] when an unregistered reader's
+//! state was reused by a later commit.
 //!
 //! # Rooms
 //!
@@ -128,18 +133,40 @@ impl Store<MmapSource> {
     /// zero-copy.
     ///
     /// # Safety
-    /// While the returned store (or anything borrowed from it) lives, the file must not be
-    /// modified or truncated, by this process or any other. A write would change bytes the
-    /// store has already checked (undefined behaviour for the zero-copy views). A truncation
-    /// raises `SIGBUS` on the next access. `fmrh build` never modifies a container in place,
-    /// but a [`Container`] does (its transactions reuse free pages and cut the file's end):
-    /// never map a file that a container has open; take [`Container::read`] snapshots
-    /// instead. Use [`Store::open`] when this cannot be promised.
+    /// While the returned store (or anything borrowed from it) lives, no process may modify
+    /// or cut the pages its state reaches. A write would change bytes the store has already
+    /// checked (undefined behaviour for the zero-copy views); a cut raises `SIGBUS` on the next
+    /// access. fmrh's own writers keep that promise for a *registered* store
+    /// ([`Store::is_registered`], format §11.6): a [`Container`] never reuses or cuts a page
+    /// of a state a live reader registered, and `fmrh build` never writes a file in place. So
+    /// the caller promises that no other tool writes the file, and, if the store is not
+    /// registered, that no writer has the file open. Use [`Store::open`] when this cannot be
+    /// promised.
     pub unsafe fn open_mapped(path: &Path) -> Result<Self> {
         let file = File::open(path).map_err(|e| crate::Error::io(path, e))?;
-        // SAFETY: our caller upholds the no-modification contract stated above.
-        let src = unsafe { MmapSource::new(&file, path) }?;
-        Store::from_source(src)
+        let mut attempts = 0;
+        loop {
+            // SAFETY: our caller upholds the no-modification contract stated above.
+            let src = unsafe { MmapSource::new(&file, path) }?;
+            let mapped = src.len();
+            match Store::from_source(src) {
+                // A writer grew the file and published a state past the mapping's end after
+                // it was made: map again. A file truly shorter than its state keeps its length.
+                Err(crate::Error::Corrupt {
+                    invariant: crate::format::Invariant::FileLength,
+                    ..
+                }) if attempts < 100
+                    && file
+                        .metadata()
+                        .map_err(|e| crate::Error::io(path, e))?
+                        .len()
+                        > mapped =>
+                {
+                    attempts += 1;
+                }
+                other => return other,
+            }
+        }
     }
 }
 

@@ -232,7 +232,14 @@ impl Opened {
 
 fn open_once<S: Source>(src: &S) -> Result<Opened> {
     let (slot, commit, registered) = choose_state(src)?;
-    commit::check_length(&commit, src.len()).map_err(|v| v.in_file(src.name()))?;
+    // The state may be newer than the length the source saw when it was opened: a writer
+    // grows the file before it publishes a record.
+    let len = if commit.file_length.get() > src.len() {
+        src.refresh_len().map_err(|e| Error::io(src.name(), e))?
+    } else {
+        src.len()
+    };
+    commit::check_length(&commit, len).map_err(|v| v.in_file(src.name()))?;
     let page_size = commit.page_size.get();
     let page_count = commit.file_length.get() / u64::from(page_size);
     let pages = Pages {

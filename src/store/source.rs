@@ -47,6 +47,12 @@ pub trait Source: Send + Sync {
         Ok(false)
     }
 
+    /// The length now, for a source whose length can change (a file a writer grows): what
+    /// [`Source::len`] says from then on. The default is [`Source::len`], fixed.
+    fn refresh_len(&self) -> io::Result<u64> {
+        Ok(self.len())
+    }
+
     /// Whether a writer holds the file open (a commit may be running): `None` when the
     /// source cannot tell.
     fn writer_present(&self) -> io::Result<Option<bool>> {
@@ -76,6 +82,10 @@ impl<S: Source + ?Sized> Source for &S {
 
     fn register_reader(&self, txn: u64) -> io::Result<bool> {
         (**self).register_reader(txn)
+    }
+
+    fn refresh_len(&self) -> io::Result<u64> {
+        (**self).refresh_len()
     }
 
     fn writer_present(&self) -> io::Result<Option<bool>> {
@@ -203,7 +213,8 @@ impl Source for MmapSource {
 #[derive(Debug)]
 pub struct FileSource {
     file: File,
-    len: u64,
+    /// The file's length when last looked at (it changes under a writer).
+    len: std::sync::atomic::AtomicU64,
     registration: Registration,
     path: PathBuf,
 }
@@ -214,7 +225,7 @@ impl FileSource {
         let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
         Ok(FileSource {
             file,
-            len,
+            len: len.into(),
             registration: Registration::default(),
             path: path.to_path_buf(),
         })
@@ -229,13 +240,13 @@ impl FileSource {
 
 impl Source for FileSource {
     fn len(&self) -> u64 {
-        self.len
+        self.len.load(std::sync::atomic::Ordering::Acquire)
     }
 
     fn read_at(&self, offset: u64, len: usize) -> io::Result<Cow<'_, [u8]>> {
         if offset
             .checked_add(len as u64)
-            .is_none_or(|end| end > self.len)
+            .is_none_or(|end| end > self.len())
         {
             return Err(io::Error::new(
                 io::ErrorKind::UnexpectedEof,
@@ -253,6 +264,12 @@ impl Source for FileSource {
 
     fn name(&self) -> &Path {
         &self.path
+    }
+
+    fn refresh_len(&self) -> io::Result<u64> {
+        let len = self.file.metadata()?.len();
+        self.len.store(len, std::sync::atomic::Ordering::Release);
+        Ok(len)
     }
 
     fn register_reader(&self, txn: u64) -> io::Result<bool> {

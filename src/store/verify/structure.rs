@@ -82,7 +82,8 @@ pub(super) fn check_nodes<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut 
         } else {
             let p = &nodes[parent as usize];
             let end = parent as u64 + u64::from(p.subtree_len.get());
-            if p.level + 1 != level
+            // The parent's level comes from the file too: 255 has no child level.
+            if p.level.checked_add(1) != Some(level)
                 || p.x.get() != x / 2
                 || p.y.get() != y / 2
                 || i as u64 + sub > end
@@ -145,7 +146,12 @@ pub(super) fn check_nodes<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut 
                 ),
             );
         }
-        if sub > 1 {
+        if sub > 1 && level == finest {
+            checks.fail(
+                id,
+                format!("{at}: a physical block with a subtree of {sub} nodes"),
+            );
+        } else if sub > 1 {
             let existing = (0..4u32)
                 .filter(|q| d.exists(level + 1, 2 * x + (q & 1), 2 * y + (q >> 1)))
                 .fold(0u8, |acc, q| acc | 1 << q);

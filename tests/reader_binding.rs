@@ -1,0 +1,155 @@
+//! Every structured page is bound to the state that wrote it (format 1.2, container.md §4,
+//! §11.6): a reader of an old state that follows a reference into a page a later commit reused
+//! gets `Error::Superseded`, never that page's bytes as its own; the same mismatch in the
+//! latest state is corruption (I-5), reported as such; and a registered reader never meets
+//! reuse at all, because the writer keeps its pages.
+
+use std::borrow::Cow;
+use std::io;
+use std::path::Path;
+
+use fmrh::model::SampleRect;
+use fmrh::store::{FileSource, Source};
+use fmrh::{Container, CreateOptions, Error, Heightfield, Store};
+
+/// A file source that does not register its state: what a reader on a system without
+/// open-file-description locks, or a tool that bypasses them, is.
+struct Unregistered(FileSource);
+
+impl Source for Unregistered {
+    fn len(&self) -> u64 {
+        self.0.len()
+    }
+    fn read_at(&self, offset: u64, len: usize) -> io::Result<Cow<'_, [u8]>> {
+        self.0.read_at(offset, len)
+    }
+    fn stable(&self) -> bool {
+        false
+    }
+    fn name(&self) -> &Path {
+        self.0.name()
+    }
+    fn refresh_len(&self) -> io::Result<u64> {
+        self.0.refresh_len()
+    }
+}
+
+fn field() -> Heightfield {
+    Heightfield::from_fn(300, 260, |x, y| ((x * 13 + y * 7) % 101) as f32 * 0.5).unwrap()
+}
+
+/// Commits four replacements and returns each commit's (reuse limit, pages reused).
+fn commit_four(path: &Path) -> Vec<(u64, u64)> {
+    let container = Container::open(path).unwrap();
+    let out = (0..4)
+        .map(|i| {
+            let mut txn = container.begin_write().unwrap();
+            let patch = Heightfield::from_fn(40, 30, |x, _| 500.0 + i as f32 + x as f32).unwrap();
+            txn.replace_region(20 + 50 * i, 100, &patch).unwrap();
+            let s = txn.commit().unwrap();
+            (s.reuse_limit, s.pages_reused)
+        })
+        .collect();
+    container.close().unwrap();
+    out
+}
+
+#[test]
+fn an_old_state_reading_a_reused_page_gets_superseded_never_data() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("t.fmrh");
+    fmrh::create(&path, field(), &CreateOptions::default()).unwrap();
+    let old = Store::from_source(Unregistered(FileSource::open(&path).unwrap())).unwrap();
+    assert!(!old.is_registered());
+    let txn = old.txn_id();
+    let before = old.read_window(old.domain().data_rect()).unwrap();
+
+    let commits = commit_four(&path);
+    assert!(
+        commits.iter().any(|&(_, reused)| reused > 0),
+        "no commit reused a page: {commits:?}"
+    );
+    // Nobody registered state 1, so the writer was free to reuse its pages.
+    assert!(commits.iter().skip(1).all(|&(limit, _)| limit > txn));
+
+    match old.nodes() {
+        Err(Error::Superseded {
+            txn: held, latest, ..
+        }) => assert!(held == txn && latest > txn, "{held} {latest}"),
+        other => panic!("the old node table read as {:?}", other.map(|n| n.len())),
+    }
+    // Whatever else the old store reads is its own state's, or the same error.
+    match old.read_window(old.domain().data_rect()) {
+        Ok(w) => assert_eq!(w.samples(), before.samples()),
+        Err(Error::Superseded { .. }) => {}
+        Err(e) => panic!("expected Superseded, got {e}"),
+    }
+    // Opening again reads the latest state, whole.
+    let new = Store::open(&path).unwrap();
+    assert!(new.txn_id() > txn);
+    let w = new
+        .read_window(SampleRect {
+            col0: 20,
+            row0: 100,
+            col1: 20,
+            row1: 100,
+        })
+        .unwrap();
+    assert_eq!(w.samples(), &[500.0]);
+}
+
+#[test]
+fn a_registered_reader_keeps_its_state_while_commits_go_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("t.fmrh");
+    fmrh::create(&path, field(), &CreateOptions::default()).unwrap();
+    let reader = Store::open(&path).unwrap();
+    if !fmrh::store::lock::SUPPORTED {
+        assert!(!reader.is_registered());
+        return;
+    }
+    assert!(reader.is_registered());
+    let before = reader.read_window(reader.domain().data_rect()).unwrap();
+    for (limit, _) in commit_four(&path) {
+        assert_eq!(
+            limit,
+            reader.txn_id(),
+            "a commit ignored the registered reader"
+        );
+    }
+    let after = reader.read_window(reader.domain().data_rect()).unwrap();
+    assert_eq!(after.samples(), before.samples());
+    assert_eq!(
+        reader.nodes().unwrap().len() as u64,
+        reader.header().node_count
+    );
+}
+
+#[test]
+fn a_wrong_txn_tag_in_the_latest_state_is_corruption() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("t.fmrh");
+    fmrh::create(&path, field(), &CreateOptions::default()).unwrap();
+    let mut bytes = std::fs::read(&path).unwrap();
+    let p = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+    // The node table's root (commit record bytes 72..80): give it another transaction's tag
+    // and a CRC that matches, as a stale page from an older state would have.
+    let root = u64::from_le_bytes(bytes[72..80].try_into().unwrap()) as usize;
+    let page = &mut bytes[root * p..(root + 1) * p];
+    assert_eq!(&page[..4], b"FMNT");
+    page[18..20].copy_from_slice(&7u16.to_le_bytes());
+    let crc = crc32fast::hash(&page[8..]);
+    page[4..8].copy_from_slice(&crc.to_le_bytes());
+    match Store::from_bytes(&bytes[..]) {
+        Err(Error::Corrupt {
+            invariant, detail, ..
+        }) => {
+            assert_eq!(invariant, fmrh::Invariant::Page);
+            assert!(detail.contains("txn tag"), "{detail}");
+        }
+        Err(e) => panic!("expected I-5, got {e}"),
+        Ok(_) => panic!("a page of another transaction was accepted"),
+    }
+    let report = fmrh::verify(fmrh::store::Bytes(&bytes[..]), fmrh::VerifyMode::Fast).unwrap();
+    assert!(!report.valid && !report.busy);
+}
