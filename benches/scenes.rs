@@ -140,8 +140,8 @@ fn bench_store<S: Source>(
 }
 
 /// The same τ = 1 view scene (selection and loading) from the three ways to read a file:
-/// a mapping, positioned reads (`Store::open_read`), and a snapshot of a `Container` (the
-/// live, transactional file).
+/// a mapping, positioned reads (`Store::open`), and a snapshot of a `Container` (the
+/// live, transactional file); and what opening the file costs each way.
 fn bench_sources(c: &mut Criterion, path: &std::path::Path) {
     let (_, cam) = cameras()[0];
     let view = SceneOptions::new(1.0);
@@ -166,6 +166,14 @@ fn bench_sources(c: &mut Criterion, path: &std::path::Path) {
     both(&mut g, "mmap", &mapped, &cam, &view);
     let pread = Store::open(path).unwrap();
     both(&mut g, "pread", &pread, &cam, &view);
+    // Opening: slots, registration (format §11.6) and the check of every metadata page.
+    g.bench_function("pread/open", |b| {
+        b.iter(|| Store::open(path).unwrap().txn_id())
+    });
+    g.bench_function("mmap/open", |b| {
+        // SAFETY: as above.
+        b.iter(|| unsafe { Store::open_mapped(path) }.unwrap().txn_id())
+    });
     let container = fmrh::store::Container::open(path).unwrap();
     let snapshot = container.read().unwrap();
     both(&mut g, "snapshot", &snapshot, &cam, &view);
