@@ -19,7 +19,7 @@ mod common;
 
 use std::collections::{BTreeMap, HashSet};
 use std::hash::{DefaultHasher, Hasher};
-use std::io::Read as _;
+use std::io::{Read as _, Write as _};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -339,4 +339,59 @@ fn a_killed_reader_is_reclaimed() {
     let s = commit(10.0);
     assert!(s.pages_reused > 0, "freed pages are reused again");
     container.close().unwrap();
+}
+
+/// `verify` while a writer holds the file: what a commit in progress leaves around the state
+/// (here, pages appended past the committed length) is "busy", never "invalid"; the same bytes
+/// with no writer are reported under I-3, as a crashed writer's leftovers.
+#[test]
+fn verify_while_a_writer_commits_is_busy_never_invalid() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("t.fmrh");
+    let hf = Heightfield::from_fn(200, 150, |x, y| (x + y) as f32).unwrap();
+    fmrh::create(&file, hf, &CreateOptions::default()).unwrap();
+    let append = |bytes: usize| {
+        let mut f = std::fs::OpenOptions::new()
+            .append(true)
+            .open(&file)
+            .unwrap();
+        f.write_all(&vec![0xA5; bytes]).unwrap();
+    };
+    let verify = || {
+        Command::new(fmrh_bin())
+            .args(["verify", "--full"])
+            .arg(&file)
+            .output()
+            .unwrap()
+    };
+    let container = Container::open(&file).unwrap();
+    let mut txn = container.begin_write().unwrap();
+    txn.replace_region(5, 5, &Heightfield::from_fn(3, 3, |_, _| 9.0).unwrap())
+        .unwrap();
+    txn.commit().unwrap();
+    // The next commit's pages, written but not yet published.
+    append(8192);
+    let out = verify();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(75), "{text}");
+    assert!(text.contains("BUSY") && !text.contains("INVALID"), "{text}");
+    assert!(!text.contains("interrupted"), "{text}");
+    let report = fmrh::verify(
+        fmrh::store::FileSource::open(&file).unwrap(),
+        fmrh::VerifyMode::Fast,
+    )
+    .unwrap();
+    assert!(report.busy && !report.valid);
+    // The clean close cuts the excess: valid again.
+    container.close().unwrap();
+    assert_eq!(verify().status.code(), Some(0));
+    // With no writer, the same excess is a crashed writer's leftover: I-3.
+    append(8192);
+    let out = verify();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(1), "{text}");
+    assert!(
+        text.contains("INVALID") && text.contains("interrupted"),
+        "{text}"
+    );
 }
