@@ -108,7 +108,7 @@ fn bytes_that_are_not_a_container_are_unusable() {
 
 #[test]
 fn random_bit_flips_in_a_real_container_are_detected() {
-    let path = common::data("srtm3-srtmpy/N22W160.f32");
+    let path = common::data("gdal-rs-dem-hills/dem_hills.f32");
     let field = fmrh::ingest::load(&path, &Default::default()).unwrap();
     let model = Model::build(field.clone(), &BuildOptions::default()).unwrap();
     let mut out = Cursor::new(Vec::new());

@@ -120,8 +120,10 @@ fn geotiffs() {
     assert_input_error(load_default(&f), &f);
     let f = write(dir.path(), "empty.tif", &tiff_header(4, 4, 16, 1));
     assert_input_error(load_default(&f), &f);
-    let real = std::fs::read(data("pysheds-dem/dem.tif")).unwrap();
-    for cut in [8, 100, 1000, real.len() / 2, real.len() - 1] {
+    // A real float GeoTIFF (bundled), cut in its header, its tags and its image data (which
+    // fills most of the file; its last bytes are not image data).
+    let real = std::fs::read(data("gdal-rs-dem-hills/dem-hills.tiff")).unwrap();
+    for cut in [8, 100, 1000, real.len() / 2, real.len() * 3 / 4] {
         let f = write(dir.path(), "cut.tif", &real[..cut]);
         assert_input_error(load_default(&f), &f);
     }
@@ -293,7 +295,7 @@ fn real_files() -> Vec<(PathBuf, &'static str)> {
         (data("gdal-rs-dem-hills/dem-hills.tiff"), "x.tiff"),
         (data("puget-sound-east-512/ps-e.lg.png"), "x.png"),
         (data("mount-st-helens-usgs/SainteHelens.dem"), "x.dem"),
-        (data("pysheds-dem/pysheds_dem.f32"), "x.f32"),
+        (data("puget-sound-east-512/ps-e_lg.f32"), "x.f32"),
         (data("srtm1-asmyasnikov/S46W066.hgt.gz"), "N00E000.hgt.gz"),
     ]
 }

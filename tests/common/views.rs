@@ -43,8 +43,14 @@ pub fn fixture(source: Heightfield, options: &BuildOptions) -> Fixture {
 
 /// Puget Sound 1k from the shared data, at its documented 160 m spacing.
 pub fn puget_1k() -> Heightfield {
-    let path = super::data("puget-sound-1k/ps_height_1k.f32");
-    let mut hf = fmrh::ingest::load(&path, &Default::default()).expect("Puget 1k loads");
+    // The bundled 16-bit PNG at 0.1 m: bit for bit the shared `.f32` (the large-data suite's
+    // ingest tests check that).
+    let path = super::data("puget-sound-1k/ps_height_1k.png");
+    let options = fmrh::ingest::IngestOptions {
+        z_scale: 0.1,
+        ..Default::default()
+    };
+    let mut hf = fmrh::ingest::load(&path, &options).expect("Puget 1k loads");
     hf.metadata.spacing_m = Some([160.0, 160.0]);
     hf
 }
