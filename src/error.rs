@@ -116,6 +116,23 @@ impl Error {
         }
     }
 
+    /// What kind of error this is, as a stable lowercase word for machine-readable output
+    /// (`fmrh --json`): `io`, `input`, `unsupported`, `too_large`, `invalid_argument`,
+    /// `corrupt`, `poisoned`, `superseded` or `internal`.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Error::Io { .. } => "io",
+            Error::Input { .. } => "input",
+            Error::Unsupported { .. } => "unsupported",
+            Error::TooLarge { .. } => "too_large",
+            Error::InvalidArgument(_) => "invalid_argument",
+            Error::Corrupt { .. } => "corrupt",
+            Error::Poisoned { .. } => "poisoned",
+            Error::Superseded { .. } => "superseded",
+            Error::Internal(_) => "internal",
+        }
+    }
+
     /// An I/O error about `path`.
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         Error::Io {

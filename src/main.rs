@@ -84,11 +84,41 @@ enum Command {
     Recover(cli::recover::RecoverArgs),
 }
 
+impl Command {
+    /// Whether the command was asked for JSON output.
+    fn json(&self) -> bool {
+        match self {
+            Command::Build(a) => a.json,
+            Command::Info(a) => a.json,
+            Command::Verify(a) => a.json,
+            Command::Scan(a) => a.json,
+            Command::Scene(a) => a.json,
+            Command::Fly(a) => a.json,
+            Command::Replace(a) => a.json,
+            Command::Recover(a) => a.json,
+            Command::Extract(_) => false,
+        }
+    }
+}
+
 /// Exit status of a read that met a writer it could not read past: the file is fine, run the
 /// command again (BSD `EX_TEMPFAIL`).
 const EXIT_RETRY: u8 = 75;
 
 fn main() -> ExitCode {
+    // A closed output pipe (`fmrh info F | head -1`) ends the process quietly, as it does `cat`
+    // or `gdalinfo`, instead of a panic in `println!`.
+    #[cfg(unix)]
+    // SAFETY: `signal` with `SIG_DFL` only restores the default action; it runs first thing in
+    // main, before any other thread exists.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+    // Ctrl-C or SIGTERM during a write removes the temporary file it was writing.
+    let _ = ctrlc::set_handler(|| {
+        fmrh::store::write::remove_temporary_files();
+        std::process::exit(130);
+    });
     let cli = Cli::parse();
     let result = match &cli.command {
         Command::Build(args) => cli::build::run(args),
@@ -105,6 +135,11 @@ fn main() -> ExitCode {
         Ok(code) => code,
         Err(e) => {
             eprintln!("fmrh: error: {e}");
+            if cli.command.json() {
+                // --json promises JSON on stdout, failures included.
+                let out = serde_json::json!({ "error": e.to_string(), "kind": e.kind() });
+                println!("{out}");
+            }
             match e {
                 Error::Io { .. } | Error::Poisoned { .. } => ExitCode::from(1),
                 Error::Superseded { .. } => ExitCode::from(EXIT_RETRY),

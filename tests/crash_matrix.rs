@@ -189,7 +189,7 @@ fn crash_anywhere_in_a_real_workload_recovers_old_or_new() {
             let (c, _) = Container::open_io(disk.clone()).unwrap();
             disk.power_off_after(at);
             let done = match run(&c, &txns) {
-                Ok(n) => c.close().map(|()| n),
+                Ok(n) => c.close().map(|_| n),
                 Err(e) => {
                     std::mem::forget(c); // the process died: no clean close
                     Err(e)
@@ -318,7 +318,7 @@ fn io_error_at_every_operation_poisons_and_keeps_old_or_new() {
                     }
                     // The last chance: the clean close (its handle is gone either way).
                     None => match c.close() {
-                        Ok(()) => {
+                        Ok(_) => {
                             assert!(disk.count(kind) < n, "{what}: the fault fired unseen");
                             break;
                         }

@@ -47,7 +47,7 @@ pub struct BuildArgs {
     quiet: bool,
     /// Print the report as JSON.
     #[arg(long)]
-    json: bool,
+    pub json: bool,
     /// Ground distance between samples in metres, DX or DX,DY (east, south). Overrides what
     /// the source says; scenes use it to place the terrain in the world.
     #[arg(long, value_delimiter = ',')]

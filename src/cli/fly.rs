@@ -35,7 +35,7 @@ pub struct FlyArgs {
     prefetch: bool,
     /// Print every frame as JSON.
     #[arg(long)]
-    json: bool,
+    pub json: bool,
 }
 
 #[derive(Serialize)]
@@ -140,12 +140,13 @@ fn print_text(r: &Report) {
             s.prefetch_hits
         );
     }
+    // The frames the table above numbers 0, 9, 99 and the last (seed 000's frames 1, 10, 100).
     println!("\nseed 000 Table 2 form: loaded triangles and schedule time");
     for i in [0usize, 9, 99, r.frames.len().saturating_sub(1)] {
         if let Some(f) = r.frames.get(i) {
             println!(
                 "  frame {:>5}: {:>9} triangles, {:>8.1} us",
-                f.frame + 1,
+                f.frame,
                 f.stats.loaded_triangles,
                 (f.stats.schedule_ns + f.stats.load_ns) as f64 / 1e3
             );

@@ -15,7 +15,7 @@ pub struct InfoArgs {
     file: PathBuf,
     /// Print JSON.
     #[arg(long)]
-    json: bool,
+    pub json: bool,
 }
 
 /// What `info --json` prints. The golden vectors in `format-spec/vectors/` pin it.

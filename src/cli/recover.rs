@@ -15,7 +15,7 @@ pub struct RecoverArgs {
     file: PathBuf,
     /// Print the report as JSON.
     #[arg(long)]
-    json: bool,
+    pub json: bool,
 }
 
 /// Runs `fmrh recover`.

@@ -24,7 +24,7 @@ pub struct ReplaceArgs {
     patch: PathBuf,
     /// Print the report as JSON.
     #[arg(long)]
-    json: bool,
+    pub json: bool,
     #[command(flatten)]
     ingest: super::IngestArgs,
 }
@@ -40,6 +40,9 @@ struct ReplaceReport {
     recovery: Recovery,
     #[serde(flatten)]
     summary: CommitSummary,
+    /// The txn id after the clean close, which records the committed state again without the
+    /// recovery mark: the file's txn id from then on (what `fmrh info` shows).
+    closed_txn: u64,
     /// From the start of the transaction to the durable commit: reading the model, measuring
     /// the changed bands, writing, and both syncs.
     commit_time_ms: f64,
@@ -74,7 +77,7 @@ pub fn run(args: &ReplaceArgs) -> Result<ExitCode, Error> {
     txn.replace_region(col0, row0, &patch)?;
     let summary = txn.commit()?;
     let commit_time_ms = started.elapsed().as_secs_f64() * 1e3;
-    container.close()?;
+    let closed_txn = container.close()?;
     let report = ReplaceReport {
         file: args.file.display().to_string(),
         patch: args.patch.display().to_string(),
@@ -83,6 +86,7 @@ pub fn run(args: &ReplaceArgs) -> Result<ExitCode, Error> {
         height: patch.height(),
         recovery,
         summary,
+        closed_txn,
         commit_time_ms,
     };
     if args.json {
@@ -107,8 +111,9 @@ fn print_text(r: &ReplaceReport) {
         r.width, r.height, r.at[0], r.at[1], r.file
     );
     println!(
-        "committed txn {} in {:.2} ms (reading and measuring the model included)",
-        s.txn_id, r.commit_time_ms
+        "committed txn {} in {:.2} ms (reading and measuring the model included); the clean \
+         close then recorded the same state, unmarked, as txn {} (what `fmrh info` shows)",
+        s.txn_id, r.commit_time_ms, r.closed_txn
     );
     println!("  blocks rewritten   {}", s.blocks);
     println!("  grids rewritten    {}", s.grids);

@@ -24,7 +24,7 @@ pub struct ScanArgs {
     codes: Option<String>,
     /// Print JSON.
     #[arg(long)]
-    json: bool,
+    pub json: bool,
 }
 
 #[derive(Serialize)]

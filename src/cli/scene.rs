@@ -103,7 +103,7 @@ pub struct SceneArgs {
     force: bool,
     /// Print the scene as JSON.
     #[arg(long)]
-    json: bool,
+    pub json: bool,
 }
 
 /// The JSON report.

@@ -17,7 +17,7 @@ pub struct VerifyArgs {
     full: bool,
     /// Print the report as JSON.
     #[arg(long)]
-    json: bool,
+    pub json: bool,
 }
 
 /// Exit status when a writer was committing and some check could not be decided.

@@ -194,23 +194,27 @@ impl<I: Io> Container<I> {
         })
     }
 
-    /// Commits an unmarked copy of the current state (a clean close), if it is marked.
-    pub fn close(self) -> Result<()> {
+    /// Closes the container cleanly: if the current state is marked recovery-needed (any
+    /// commit marks it, format §11.2), commits an unmarked copy of it, which takes the next txn
+    /// id. Returns the txn id of the state the file holds afterwards: what `fmrh info` shows.
+    pub fn close(self) -> Result<u64> {
         self.close_ref()
     }
 
-    fn close_ref(&self) -> Result<()> {
+    fn close_ref(&self) -> Result<u64> {
         self.check()?;
         let _writer = lock(&self.shared.writer);
         let base = Arc::clone(&lock(&self.shared.current));
         let record = base.commit_record();
-        if record.has_flag(COMMIT_RECOVERY_NEEDED) {
-            let flags = record.flags.get() & COMMIT_PAYLOAD_SLACK;
-            let copy = record.copy_as(record.txn_id.get() + 1, flags);
-            let store = self.guard(|| self.publish(&base, &copy))?;
-            *lock(&self.shared.current) = Arc::new(store);
+        if !record.has_flag(COMMIT_RECOVERY_NEEDED) {
+            return Ok(base.txn_id());
         }
-        Ok(())
+        let flags = record.flags.get() & COMMIT_PAYLOAD_SLACK;
+        let copy = record.copy_as(record.txn_id.get() + 1, flags);
+        let store = self.guard(|| self.publish(&base, &copy))?;
+        let txn = store.txn_id();
+        *lock(&self.shared.current) = Arc::new(store);
+        Ok(txn)
     }
 
     /// Runs `f`, poisoning the container if it fails.

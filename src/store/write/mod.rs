@@ -17,7 +17,7 @@ use std::sync::Arc;
 
 use serde::Serialize;
 
-pub use atomic::write_atomically;
+pub use atomic::{remove_temporary_files, write_atomically};
 pub use bulk::write_to;
 
 use crate::error::Result;

@@ -1,0 +1,191 @@
+//! The command line behaves like its neighbours (`cat`, `gdalinfo`): a closed output pipe ends
+//! it quietly, created files honour the umask, what a killed build left is cleaned up by the
+//! next build of the same output, `--json` prints JSON even for an error, and the txn id a
+//! `replace` reports is the one `info` shows afterwards.
+
+#![cfg(unix)]
+
+mod common;
+
+use std::os::unix::fs::PermissionsExt;
+use std::os::unix::process::ExitStatusExt;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+
+use common::data;
+
+fn fmrh() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_fmrh"))
+}
+
+/// A small container built from a bundled DEM, in `dir`.
+fn container(dir: &Path) -> PathBuf {
+    let out = dir.join("hills.fmrh");
+    let status = fmrh()
+        .arg("build")
+        .arg(data("gdal-rs-dem-hills/dem-hills.tiff"))
+        .arg("-o")
+        .arg(&out)
+        .stderr(Stdio::null())
+        .status()
+        .unwrap();
+    assert!(status.success());
+    out
+}
+
+#[test]
+fn a_closed_output_pipe_ends_quietly() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = container(dir.path());
+    let f = file.to_str().unwrap();
+    for args in [
+        vec!["info", f],
+        vec!["info", "--json", f],
+        vec!["verify", "--json", f],
+        vec!["scan", f, "--cluster", "0", "--hilbert", "0..=1000000"],
+        vec![
+            "scene",
+            f,
+            "--eye",
+            "100,300,400",
+            "--target",
+            "150,100,150",
+            "--tau",
+            "1",
+        ],
+    ] {
+        // A pipe whose reading end is closed before the command writes a byte.
+        let (reader, writer) = std::io::pipe().unwrap();
+        drop(reader);
+        let out = fmrh()
+            .args(&args)
+            .stdout(writer)
+            .stderr(Stdio::piped())
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
+        // Killed by SIGPIPE (13), as `cat` is: the shell reports 141.
+        assert_eq!(
+            out.status.signal(),
+            Some(13),
+            "{args:?}: {:?} {stderr}",
+            out.status
+        );
+    }
+}
+
+#[test]
+fn created_files_honour_the_umask() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = data("gdal-rs-dem-hills/dem-hills.tiff");
+    for (umask, mode) in [("022", 0o644), ("077", 0o600), ("002", 0o664)] {
+        let out = dir.path().join(format!("u{umask}.fmrh"));
+        let script = format!("umask {umask} && exec \"$0\" build \"$1\" -o \"$2\"",);
+        let status = Command::new("sh")
+            .arg("-c")
+            .arg(script)
+            .arg(env!("CARGO_BIN_EXE_fmrh"))
+            .arg(&input)
+            .arg(&out)
+            .stderr(Stdio::null())
+            .status()
+            .unwrap();
+        assert!(status.success());
+        let got = std::fs::metadata(&out).unwrap().permissions().mode() & 0o777;
+        assert_eq!(got, mode, "umask {umask}: mode {got:o}");
+    }
+}
+
+#[test]
+fn the_next_build_removes_what_a_killed_build_left() {
+    let dir = tempfile::tempdir().unwrap();
+    // What a build of out.fmrh killed with SIGKILL leaves: its temporary file, unlocked.
+    let stale = dir.path().join(".out.fmrh.Xk3m9Q.fmrh-tmp");
+    std::fs::write(&stale, vec![0u8; 1 << 20]).unwrap();
+    // Another output's temporary file is not this build's business.
+    let other = dir.path().join(".other.fmrh.Zz9.fmrh-tmp");
+    std::fs::write(&other, b"x").unwrap();
+    let out = dir.path().join("out.fmrh");
+    let status = fmrh()
+        .arg("build")
+        .arg(data("gdal-rs-dem-hills/dem-hills.tiff"))
+        .arg("-o")
+        .arg(&out)
+        .stderr(Stdio::null())
+        .status()
+        .unwrap();
+    assert!(status.success());
+    assert!(
+        !stale.exists(),
+        "the killed build's temporary file is still there"
+    );
+    assert!(other.exists() && out.exists());
+    let names: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(names.len(), 2, "{names:?}");
+}
+
+#[test]
+fn json_output_is_json_even_for_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = dir.path().join("notes.txt");
+    std::fs::write(&text, b"not a container").unwrap();
+    let missing = dir.path().join("missing.fmrh");
+    for (args, kind, code) in [
+        (vec!["verify", "--json", text.to_str().unwrap()], "input", 2),
+        (vec!["info", "--json", missing.to_str().unwrap()], "io", 1),
+        (
+            vec!["build", "--json", "--dry-run", text.to_str().unwrap()],
+            "input",
+            2,
+        ),
+    ] {
+        let out = fmrh().args(&args).output().unwrap();
+        assert_eq!(out.status.code(), Some(code), "{args:?}");
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout)
+            .unwrap_or_else(|e| panic!("{args:?}: not JSON ({e}): {:?}", out.stdout));
+        assert_eq!(v["kind"], kind, "{args:?}: {v}");
+        assert!(v["error"].as_str().is_some_and(|m| !m.is_empty()));
+    }
+}
+
+#[test]
+fn replace_reports_the_txn_that_info_shows() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = container(dir.path());
+    let patch = dir.path().join("patch.asc");
+    std::fs::write(
+        &patch,
+        "ncols 2\nnrows 2\nxllcorner 0\nyllcorner 0\ncellsize 1\n150 151\n152 153\n",
+    )
+    .unwrap();
+    let json = |args: &[&str]| -> serde_json::Value {
+        let out = fmrh().args(args).output().unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        serde_json::from_slice(&out.stdout).unwrap()
+    };
+    let f = file.to_str().unwrap();
+    let r = json(&[
+        "replace",
+        f,
+        "--at",
+        "10,10",
+        patch.to_str().unwrap(),
+        "--json",
+    ]);
+    let info = json(&["info", "--json", f]);
+    let closed = r["closed_txn"].as_u64().unwrap();
+    assert_eq!(closed, r["txn_id"].as_u64().unwrap() + 1, "{r}");
+    let shown = info["state"]["txn_id"]
+        .as_u64()
+        .or_else(|| info["txn_id"].as_u64())
+        .unwrap();
+    assert_eq!(closed, shown);
+}
