@@ -18,18 +18,24 @@ fn fmrh() -> Command {
     Command::new(env!("CARGO_BIN_EXE_fmrh"))
 }
 
-/// A small container built from a bundled DEM, in `dir`.
-fn container(dir: &Path) -> PathBuf {
-    let out = dir.join("hills.fmrh");
+/// Builds `out` from a small bundled DEM.
+fn build(out: &Path) {
     let status = fmrh()
         .arg("build")
         .arg(data("gdal-rs-dem-hills/dem-hills.tiff"))
         .arg("-o")
-        .arg(&out)
+        .arg(out)
+        .stdout(Stdio::null())
         .stderr(Stdio::null())
         .status()
         .unwrap();
     assert!(status.success());
+}
+
+/// A small container built from a bundled DEM, in `dir`.
+fn container(dir: &Path) -> PathBuf {
+    let out = dir.join("hills.fmrh");
+    build(&out);
     out
 }
 
@@ -107,15 +113,7 @@ fn the_next_build_removes_what_a_killed_build_left() {
     let other = dir.path().join(".other.fmrh.Zz9.fmrh-tmp");
     std::fs::write(&other, b"x").unwrap();
     let out = dir.path().join("out.fmrh");
-    let status = fmrh()
-        .arg("build")
-        .arg(data("gdal-rs-dem-hills/dem-hills.tiff"))
-        .arg("-o")
-        .arg(&out)
-        .stderr(Stdio::null())
-        .status()
-        .unwrap();
-    assert!(status.success());
+    build(&out);
     assert!(
         !stale.exists(),
         "the killed build's temporary file is still there"
