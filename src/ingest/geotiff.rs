@@ -168,6 +168,8 @@ fn check_data_extent<R: std::io::Read + std::io::Seek>(
         5 => ("LZW", 2600),
         // PackBits: at most 128 bytes from a 2-byte run.
         32773 => ("PackBits", 64),
+        // ZSTD: an RLE block makes up to 128 KiB from 4 bytes.
+        50000 => ("ZSTD", 32_768),
         _ => return Ok(()),
     };
     if have.saturating_mul(ratio) < need {

@@ -37,7 +37,8 @@ pub enum Format {
     F32,
     /// SRTM `.hgt` or `.hgt.gz`: 1201² or 3601² big-endian `i16`, -32768 void.
     Hgt,
-    /// GeoTIFF, one band of 8/16/32-bit integers or 32/64-bit floats, GDAL_NODATA honoured.
+    /// GeoTIFF, one band of 8/16/32-bit integers or 32/64-bit floats, uncompressed, deflate,
+    /// LZW, PackBits or ZSTD, GDAL_NODATA honoured.
     Geotiff,
     /// PNG: 8/16-bit grey or grey palette, or Terrain-RGB / Terrarium colour.
     Png,
