@@ -82,6 +82,15 @@ enum Command {
     /// length and a torn record in the unused commit slot, which `verify` reports (I-3, I-4).
     /// Any writer's open recovers the file; this command does only that, then closes it.
     Recover(cli::recover::RecoverArgs),
+    /// Print a shell completion script (bash, zsh, fish, elvish, powershell) to standard output.
+    ///
+    /// e.g. `fmrh completions bash > ~/.local/share/bash-completion/completions/fmrh`.
+    Completions {
+        /// The shell.
+        shell: clap_complete::Shell,
+    },
+    /// Print the manual page (roff) to standard output: `fmrh man | man -l -`.
+    Man,
 }
 
 impl Command {
@@ -96,7 +105,7 @@ impl Command {
             Command::Fly(a) => a.json,
             Command::Replace(a) => a.json,
             Command::Recover(a) => a.json,
-            Command::Extract(_) => false,
+            Command::Extract(_) | Command::Completions { .. } | Command::Man => false,
         }
     }
 }
@@ -130,6 +139,18 @@ fn main() -> ExitCode {
         Command::Fly(args) => cli::fly::run(args),
         Command::Replace(args) => cli::replace::run(args),
         Command::Recover(args) => cli::recover::run(args),
+        Command::Completions { shell } => {
+            let mut command = <Cli as clap::CommandFactory>::command();
+            clap_complete::generate(*shell, &mut command, "fmrh", &mut std::io::stdout());
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Man => {
+            let command = <Cli as clap::CommandFactory>::command();
+            clap_mangen::Man::new(command)
+                .render(&mut std::io::stdout())
+                .map(|()| ExitCode::SUCCESS)
+                .map_err(|e| Error::io("<stdout>", e))
+        }
     };
     match result {
         Ok(code) => code,

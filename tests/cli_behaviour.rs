@@ -1,7 +1,9 @@
 //! The command line behaves like its neighbours (`cat`, `gdalinfo`): a closed output pipe ends
 //! it quietly, created files honour the umask, what a killed build left is cleaned up by the
-//! next build of the same output, `--json` prints JSON even for an error, and the txn id a
-//! `replace` reports is the one `info` shows afterwards.
+//! next build of the same output, `--json` prints JSON even for an error, the txn id a
+//! `replace` reports is the one `info` shows afterwards, `-` is standard output where that
+//! makes sense (and refused where it does not), and completions and the man page come from
+//! the parser.
 
 #![cfg(unix)]
 
@@ -186,4 +188,87 @@ fn replace_reports_the_txn_that_info_shows() {
         .or_else(|| info["txn_id"].as_u64())
         .unwrap();
     assert_eq!(closed, shown);
+}
+
+#[test]
+fn completions_and_the_man_page_come_from_the_parser() {
+    for shell in ["bash", "zsh", "fish"] {
+        let out = fmrh().args(["completions", shell]).output().unwrap();
+        assert!(out.status.success(), "{shell}");
+        let text = String::from_utf8_lossy(&out.stdout);
+        for sub in ["build", "verify", "scene", "replace"] {
+            assert!(text.contains(sub), "{shell}: no {sub}");
+        }
+    }
+    // The bash script is valid bash.
+    let script = fmrh()
+        .args(["completions", "bash"])
+        .output()
+        .unwrap()
+        .stdout;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("fmrh.bash");
+    std::fs::write(&path, script).unwrap();
+    assert!(Command::new("bash")
+        .arg("-n")
+        .arg(&path)
+        .status()
+        .unwrap()
+        .success());
+    let man = fmrh().arg("man").output().unwrap();
+    assert!(man.status.success());
+    let roff = String::from_utf8_lossy(&man.stdout);
+    assert!(
+        roff.contains(".TH fmrh 1") && roff.contains("replace"),
+        "{roff}"
+    );
+    assert_eq!(
+        fmrh()
+            .args(["completions", "tcsh"])
+            .status()
+            .unwrap()
+            .code(),
+        Some(2)
+    );
+}
+
+#[test]
+fn dash_is_standard_output_where_it_makes_sense() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = container(dir.path());
+    // extract -o -: the raw samples on stdout, the same bytes as the .f32 a file output gets.
+    let out = fmrh()
+        .arg("extract")
+        .arg(&file)
+        .args(["-o", "-"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let f32_path = dir.path().join("x.f32");
+    let status = fmrh()
+        .arg("extract")
+        .arg(&file)
+        .arg("-o")
+        .arg(&f32_path)
+        .stderr(Stdio::null())
+        .status()
+        .unwrap();
+    assert!(status.success());
+    assert_eq!(out.stdout, std::fs::read(&f32_path).unwrap());
+    assert_eq!(out.stdout.len(), 333 * 218 * 4);
+    // build -o -: a container needs a file; refused, and no file named "-" appears.
+    let out = fmrh()
+        .current_dir(dir.path())
+        .arg("build")
+        .arg(data("gdal-rs-dem-hills/dem-hills.tiff"))
+        .args(["-o", "-"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("standard output"));
+    assert!(!dir.path().join("-").exists());
 }

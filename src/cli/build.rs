@@ -123,6 +123,13 @@ fn parse_spacing(values: &[f64]) -> Result<[f64; 2], Error> {
 
 /// Runs `fmrh build`.
 pub fn run(args: &BuildArgs) -> Result<ExitCode, Error> {
+    if args.output.as_deref() == Some(std::path::Path::new("-")) {
+        return Err(Error::InvalidArgument(
+            "-o -: a container cannot go to standard output (it is written with seeks, synced \
+             and renamed into place); give a file name"
+                .into(),
+        ));
+    }
     let t0 = Instant::now();
     let mut heightfield = ingest::load(&args.input, &args.ingest.options())?;
     if let Some(spacing) = &args.spacing {

@@ -55,8 +55,17 @@ pub struct F32Output {
 }
 
 impl F32Output {
-    /// Refuses a `.json` output name, and existing files unless `force`.
+    /// Refuses a `.json` output name, and existing files unless `force`. `-` is standard
+    /// output: the raw samples only (a sidecar has nowhere to go; its size line goes to
+    /// standard error).
     pub fn new(output: &Path, force: bool) -> Result<F32Output, Error> {
+        if output == Path::new("-") {
+            return Ok(F32Output {
+                f32_path: output.to_path_buf(),
+                json_path: PathBuf::new(),
+                force,
+            });
+        }
         if output.extension().is_some_and(|e| e == "json") {
             return Err(Error::InvalidArgument(
                 "the output is the .f32 file; its .json sidecar is written beside it".into(),
@@ -133,6 +142,20 @@ impl F32Output {
         let mut raw = Vec::with_capacity(samples.len() * 4);
         for v in samples {
             raw.extend_from_slice(&v.to_le_bytes());
+        }
+        if self.f32_path == Path::new("-") {
+            let mut out = std::io::stdout().lock();
+            out.write_all(&raw)
+                .and_then(|()| out.flush())
+                .map_err(|e| Error::io("<stdout>", e))?;
+            eprintln!(
+                "fmrh: wrote {} x {} samples ({} void) to standard output as raw little-endian \
+                 f32, row-major",
+                hf.width(),
+                hf.height(),
+                samples.len() as u64 - valid
+            );
+            return Ok(());
         }
         for (path, bytes) in [(&self.f32_path, &raw), (&self.json_path, &json)] {
             write_atomically(path, self.force, |w| {
