@@ -24,6 +24,22 @@ const GT_MODEL_TYPE: u16 = 1024;
 const GT_RASTER_TYPE: u16 = 1025;
 const GEOGRAPHIC_TYPE: u16 = 2048;
 const PROJECTED_CS_TYPE: u16 = 3072;
+/// GeoKey ProjLinearUnitsGeoKey: the unit of a projected CRS's coordinates (an EPSG unit code).
+const PROJ_LINEAR_UNITS: u16 = 3076;
+
+/// Metres per unit of the EPSG linear unit `code`, for the units projected CRSs use.
+fn metres_per_unit(code: u16) -> Option<f64> {
+    Some(match code {
+        9001 => 1.0,             // metre
+        9002 => 0.3048,          // international foot
+        9003 => 1200.0 / 3937.0, // US survey foot
+        9005 => 0.304_797_265_4, // Clarke's foot
+        9030 => 1852.0,          // nautical mile
+        9036 => 1000.0,          // kilometre
+        9093 => 1609.344,        // statute mile
+        _ => return None,
+    })
+}
 
 fn tiff_error(path: &Path, e: tiff::TiffError) -> Error {
     match e {
@@ -236,12 +252,18 @@ fn georeference<R: std::io::Read + std::io::Seek>(
         (_, Some(code)) if code != 32767 => (Some(format!("EPSG:{code}")), true),
         _ => (None, key(GT_MODEL_TYPE) == Some(2)),
     };
-    metadata.spacing_m = Some(if geographic {
+    metadata.spacing_m = if geographic {
         let centre_lat = origin[1] + step[1] * f64::from(height - 1) / 2.0;
-        geographic_spacing([scale[0], scale[1]], centre_lat)
+        Some(geographic_spacing([scale[0], scale[1]], centre_lat))
     } else {
-        [scale[0], scale[1]]
-    });
+        // A projected CRS's coordinates are in its linear unit: feet and US survey feet are
+        // common (state plane systems). Without the key, metres (the GeoTIFF default); with
+        // a unit this reader does not know, the spacing is left unknown, never guessed.
+        match key(PROJ_LINEAR_UNITS) {
+            None => Some([scale[0], scale[1]]),
+            Some(unit) => metres_per_unit(unit).map(|m| [scale[0] * m, scale[1] * m]),
+        }
+    };
     metadata.georeference = Some(Georeference { crs, origin, step });
     Ok(metadata)
 }

@@ -140,6 +140,20 @@ pub fn hold_writer(file: &File) -> io::Result<bool> {
     }
 }
 
+/// Drops the writer mark of [`hold_writer`] (closing the file drops it too, but a child
+/// process forked meanwhile shares the open file until it execs).
+pub fn release_writer(file: &File) -> io::Result<()> {
+    #[cfg(target_os = "linux")]
+    {
+        ofd::set(file, ofd::UNLOCK, LOCK_BASE, 1).map(|_| ())
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        let _ = file;
+        Ok(())
+    }
+}
+
 /// Whether a writer (another open file) holds the container open: `None` where this system
 /// cannot tell.
 pub fn writer_present(file: &File) -> io::Result<Option<bool>> {

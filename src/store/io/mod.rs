@@ -89,6 +89,17 @@ impl FileIo {
     }
 }
 
+impl Drop for FileIo {
+    fn drop(&mut self) {
+        // Release the locks on the open file description itself, not only by closing our
+        // descriptor: a child process that another thread forked meanwhile shares the
+        // description until it execs, and would keep the file locked against the next writer
+        // for that moment. Best effort: closing releases them in any case.
+        let _ = super::lock::release_writer(&self.file);
+        let _ = self.file.unlock();
+    }
+}
+
 impl Io for FileIo {
     fn len(&self) -> io::Result<u64> {
         Ok(self.file.metadata()?.len())

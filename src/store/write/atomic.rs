@@ -121,6 +121,13 @@ fn write_and_persist<T>(
     temp.as_file()
         .sync_all()
         .map_err(|e| Error::io(temp.path(), e))?;
+    // Unlock before the rename: the lock belongs to the open file description, which a child
+    // process forked meanwhile by another thread shares until it execs. Held across the
+    // rename, it would make the new file look locked (to a writer's `Container::open`) for
+    // that moment.
+    temp.as_file()
+        .unlock()
+        .map_err(|e| Error::io(temp.path(), e))?;
     let persisted = if overwrite {
         temp.persist(path).map_err(|e| Error::io(path, e.error))?
     } else {
