@@ -2,8 +2,8 @@
 //! it quietly, created files honour the umask, what a killed build left is cleaned up by the
 //! next build of the same output, `--json` prints JSON even for an error, the txn id a
 //! `replace` reports is the one `info` shows afterwards, `-` is standard output where that
-//! makes sense (and refused where it does not), and completions and the man page come from
-//! the parser.
+//! makes sense (and refused where it does not), completions and the man page come from the
+//! parser, and `info` shows the height range and the bounds.
 
 #![cfg(unix)]
 
@@ -271,4 +271,38 @@ fn dash_is_standard_output_where_it_makes_sense() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("standard output"));
     assert!(!dir.path().join("-").exists());
+}
+
+#[test]
+fn info_shows_the_height_range_and_the_bounds() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("n43e007.fmrh");
+    let status = fmrh()
+        .arg("build")
+        .arg(data("srtm3-pyhgtmap/N43E007.hgt.gz"))
+        .arg("-o")
+        .arg(&out)
+        .stdout(Stdio::null())
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let info = fmrh().arg("info").arg("--json").arg(&out).output().unwrap();
+    let v: serde_json::Value = serde_json::from_slice(&info.stdout).unwrap();
+    // The tile's provenance says -16 .. 2060 m.
+    assert_eq!(v["height_range"], serde_json::json!([-16.0, 2060.0]));
+    // 1201 samples 3" apart centred on whole degrees: the cells reach 1.5" past 7°E..8°E.
+    let half = 1.5 / 3600.0;
+    let want = [7.0 - half, 43.0 - half, 8.0 + half, 44.0 + half];
+    let got: Vec<f64> = v["georeference"]["lon_lat_bounds"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
+    for (g, w) in got.iter().zip(want) {
+        assert!((g - w).abs() < 1e-9, "{got:?} vs {want:?}");
+    }
+    let text = fmrh().arg("info").arg(&out).output().unwrap();
+    let text = String::from_utf8_lossy(&text.stdout);
+    assert!(text.contains("heights     -16 .. 2060 metres"), "{text}");
 }

@@ -40,6 +40,8 @@ struct Info {
     padding_samples: u64,
     valid_samples: u64,
     void_samples: u64,
+    /// The lowest and highest valid height (the root's range); none when every sample is void.
+    height_range: Option<[f32; 2]>,
     spacing_m: Option<[f64; 2]>,
     georeference: Option<GeoInfo>,
     units: Option<String>,
@@ -58,14 +60,35 @@ struct GeoInfo {
     crs: Option<String>,
     origin: [f64; 2],
     step: [f64; 2],
+    /// The outer edges of the samples' cells in CRS units: `[min x, min y, max x, max y]`.
+    bounds: [f64; 4],
+    /// The same in degrees, `[west, south, east, north]`, when the CRS is geographic
+    /// (longitude, latitude); projected CRSs would need a projection library.
+    lon_lat_bounds: Option<[f64; 4]>,
 }
 
-impl From<&Georeference> for GeoInfo {
-    fn from(g: &Georeference) -> Self {
+impl GeoInfo {
+    fn of(g: &Georeference, width: u32, height: u32) -> GeoInfo {
+        // The origin is the centre of sample (0, 0); a cell reaches half a step each way.
+        let edges = |o: f64, step: f64, n: u32| {
+            let (a, b) = (o - step / 2.0, o + (f64::from(n) - 0.5) * step);
+            (a.min(b), a.max(b))
+        };
+        let (x0, x1) = edges(g.origin[0], g.step[0], width);
+        let (y0, y1) = edges(g.origin[1], g.step[1], height);
+        let bounds = [x0, y0, x1, y1];
+        let geographic = g.crs.as_deref().is_some_and(|c| {
+            matches!(
+                c,
+                "EPSG:4326" | "EPSG:4269" | "EPSG:4258" | "EPSG:4267" | "EPSG:4979"
+            ) || c.starts_with("geographic")
+        });
         GeoInfo {
             crs: g.crs.clone(),
             origin: g.origin,
             step: g.step,
+            bounds,
+            lon_lat_bounds: geographic.then_some(bounds),
         }
     }
 }
@@ -174,8 +197,16 @@ pub fn run(args: &InfoArgs) -> Result<ExitCode, Error> {
         padding_samples: d.padding_samples(),
         valid_samples: h.valid_samples,
         void_samples: h.void_samples,
+        height_range: nodes
+            .first()
+            .filter(|_| h.valid_samples > 0)
+            .map(|root| [root.min_height, root.max_height]),
         spacing_m: h.metadata.spacing_m,
-        georeference: h.metadata.georeference.as_ref().map(GeoInfo::from),
+        georeference: h
+            .metadata
+            .georeference
+            .as_ref()
+            .map(|g| GeoInfo::of(g, d.width(), d.height())),
         units: h.metadata.units.clone(),
         source_format: h.metadata.source_format.clone(),
         delta_min: h.delta_min,
@@ -210,8 +241,16 @@ fn print_info(path: &std::path::Path, i: &Info) {
         "  grid        {} x {} samples ({} valid, {} void), from {}",
         i.width, i.height, i.valid_samples, i.void_samples, i.source_format
     );
-    if let Some(s) = i.spacing_m {
-        println!("  spacing     {} m x {} m", s[0], s[1]);
+    match i.height_range {
+        Some([lo, hi]) => println!(
+            "  heights     {lo} .. {hi} {}",
+            i.units.as_deref().unwrap_or("(units unknown)")
+        ),
+        None => println!("  heights     none (every sample is void)"),
+    }
+    match i.spacing_m {
+        Some(s) => println!("  spacing     {} m x {} m", s[0], s[1]),
+        None => println!("  spacing     unknown (scenes take samples as 1 m apart)"),
     }
     if let Some(g) = &i.georeference {
         println!(
@@ -220,6 +259,14 @@ fn print_info(path: &std::path::Path, i: &Info) {
             g.origin,
             g.step
         );
+        let b = g.bounds;
+        println!(
+            "  bounds      x {} .. {}, y {} .. {} (CRS units)",
+            b[0], b[2], b[1], b[3]
+        );
+        if let Some([w, s, e, n]) = g.lon_lat_bounds {
+            println!("  lon/lat     {w} .. {e} E, {s} .. {n} N");
+        }
     }
     println!(
         "  blocks      {} a side, {} levels, {} physical blocks, padded to {}",
