@@ -3,7 +3,8 @@
 //! next build of the same output, `--json` prints JSON even for an error, the txn id a
 //! `replace` reports is the one `info` shows afterwards, `-` is standard output where that
 //! makes sense (and refused where it does not), completions and the man page come from the
-//! parser, and `info` shows the height range and the bounds.
+//! parser, `info` shows the height range and the bounds, and a build says when it does not
+//! know the spacing.
 
 #![cfg(unix)]
 
@@ -305,4 +306,36 @@ fn info_shows_the_height_range_and_the_bounds() {
     let text = fmrh().arg("info").arg(&out).output().unwrap();
     let text = String::from_utf8_lossy(&text.stdout);
     assert!(text.contains("heights     -16 .. 2060 metres"), "{text}");
+}
+
+#[test]
+fn a_build_without_a_known_spacing_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("ps-e.fmrh");
+    // An 8-bit palette PNG: no georeference, no spacing.
+    let unknown = fmrh()
+        .arg("build")
+        .arg(data("puget-sound-east-512/ps-e.lg.png"))
+        .arg("-o")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(unknown.status.success());
+    let warning = String::from_utf8_lossy(&unknown.stderr);
+    assert!(
+        warning.contains("warning") && warning.contains("--spacing"),
+        "{warning}"
+    );
+    let info = fmrh().arg("info").arg(&out).output().unwrap();
+    assert!(String::from_utf8_lossy(&info.stdout).contains("spacing     unknown"));
+    // Given, no warning.
+    let known = fmrh()
+        .arg("build")
+        .arg(data("puget-sound-east-512/ps-e.lg.png"))
+        .args(["--spacing", "30", "--force", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(known.status.success());
+    assert!(!String::from_utf8_lossy(&known.stderr).contains("warning"));
 }

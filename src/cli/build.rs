@@ -136,6 +136,14 @@ pub fn run(args: &BuildArgs) -> Result<ExitCode, Error> {
         heightfield.metadata.spacing_m = Some(parse_spacing(spacing)?);
     }
     let ingest_time = t0.elapsed();
+    if heightfield.metadata.spacing_m.is_none() {
+        // Scenes measure distances in metres: without a spacing they take samples as 1 m apart.
+        eprintln!(
+            "fmrh: warning: {} says nothing of the distance between its samples; scenes will \
+             take them as 1 m apart. Give --spacing DX[,DY] (metres) if that is wrong.",
+            args.input.display()
+        );
+    }
     let metadata = heightfield.metadata.clone();
     let options = BuildOptions {
         block_size: args.block_size,
