@@ -21,11 +21,11 @@ fn fmrh() -> Command {
     Command::new(env!("CARGO_BIN_EXE_fmrh"))
 }
 
-/// Builds `out` from a small bundled DEM.
-fn build(out: &Path) {
+/// Builds `out` from the bundled DEM `input` (a path inside `data/`).
+fn build_from(input: &str, out: &Path) {
     let status = fmrh()
         .arg("build")
-        .arg(data("gdal-rs-dem-hills/dem-hills.tiff"))
+        .arg(data(input))
         .arg("-o")
         .arg(out)
         .stdout(Stdio::null())
@@ -33,6 +33,11 @@ fn build(out: &Path) {
         .status()
         .unwrap();
     assert!(status.success());
+}
+
+/// Builds `out` from a small bundled DEM.
+fn build(out: &Path) {
+    build_from("gdal-rs-dem-hills/dem-hills.tiff", out);
 }
 
 /// A small container built from a bundled DEM, in `dir`.
@@ -278,15 +283,7 @@ fn dash_is_standard_output_where_it_makes_sense() {
 fn info_shows_the_height_range_and_the_bounds() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("n43e007.fmrh");
-    let status = fmrh()
-        .arg("build")
-        .arg(data("srtm3-pyhgtmap/N43E007.hgt.gz"))
-        .arg("-o")
-        .arg(&out)
-        .stdout(Stdio::null())
-        .status()
-        .unwrap();
-    assert!(status.success());
+    build_from("srtm3-pyhgtmap/N43E007.hgt.gz", &out);
     let info = fmrh().arg("info").arg("--json").arg(&out).output().unwrap();
     let v: serde_json::Value = serde_json::from_slice(&info.stdout).unwrap();
     // The tile's provenance says -16 .. 2060 m.

@@ -9,6 +9,8 @@
 mod common;
 #[path = "common/hostile.rs"]
 mod hostile;
+#[path = "common/tiff.rs"]
+mod tiff;
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::io::Write;
@@ -17,6 +19,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use common::data;
 use fmrh::ingest::{load, IngestOptions};
+use tiff::Value;
 
 struct Counting;
 
@@ -71,17 +74,6 @@ fn peak_of(path: &Path) -> (Result<fmrh::Heightfield, fmrh::Error>, usize) {
     (r, PEAK.load(Ordering::Relaxed) - base)
 }
 
-fn png_chunk(kind: &[u8; 4], body: &[u8]) -> Vec<u8> {
-    let mut c = (body.len() as u32).to_be_bytes().to_vec();
-    c.extend_from_slice(kind);
-    c.extend_from_slice(body);
-    let mut crc = crc32fast::Hasher::new();
-    crc.update(kind);
-    crc.update(body);
-    c.extend(crc.finalize().to_be_bytes());
-    c
-}
-
 /// A 16-bit grey PNG whose header claims `w × h` but whose data holds `rows` rows.
 fn png_claiming(w: u32, h: u32, rows: usize) -> Vec<u8> {
     let mut ihdr = w.to_be_bytes().to_vec();
@@ -93,44 +85,28 @@ fn png_claiming(w: u32, h: u32, rows: usize) -> Vec<u8> {
     let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::best());
     z.write_all(&raw).unwrap();
     let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
-    png.extend(png_chunk(b"IHDR", &ihdr));
-    png.extend(png_chunk(b"IDAT", &z.finish().unwrap()));
-    png.extend(png_chunk(b"IEND", &[]));
+    png.extend(hostile::png_chunk(b"IHDR", &ihdr));
+    png.extend(hostile::png_chunk(b"IDAT", &z.finish().unwrap()));
+    png.extend(hostile::png_chunk(b"IEND", &[]));
     png
 }
 
-/// A little-endian one-strip GeoTIFF of `w × h` f32 whose strip is `data` under compression
-/// `compression` (1 none, 8 deflate).
+/// A one-strip GeoTIFF of `w × h` f32 whose strip is `data` under compression `compression`
+/// (1 none, 8 deflate).
 fn tiff_claiming(w: u32, h: u32, compression: u16, data: &[u8]) -> Vec<u8> {
-    let entries: [(u16, u16, u32); 10] = [
-        (256, 4, w),
-        (257, 4, h),
-        (258, 3, 32),
-        (259, 3, u32::from(compression)),
-        (262, 3, 1),
-        (273, 4, 8),
-        (277, 3, 1),
-        (278, 4, h),
-        (279, 4, data.len() as u32),
-        (339, 3, 3),
-    ];
-    let mut t = b"II*\0".to_vec();
-    t.extend((8 + data.len() as u32).to_le_bytes());
-    t.extend_from_slice(data);
-    t.extend((entries.len() as u16).to_le_bytes());
-    for (tag, kind, value) in entries {
-        t.extend(tag.to_le_bytes());
-        t.extend(kind.to_le_bytes());
-        t.extend(1u32.to_le_bytes());
-        if kind == 3 {
-            t.extend((value as u16).to_le_bytes());
-            t.extend([0, 0]);
-        } else {
-            t.extend(value.to_le_bytes());
-        }
-    }
-    t.extend(0u32.to_le_bytes());
-    t
+    tiff::tiff(
+        vec![
+            (256, Value::Long(vec![w])),
+            (257, Value::Long(vec![h])),
+            (258, Value::Short(vec![32])),
+            (259, Value::Short(vec![compression])),
+            (262, Value::Short(vec![1])),
+            (277, Value::Short(vec![1])),
+            (278, Value::Long(vec![h])),
+            (339, Value::Short(vec![3])),
+        ],
+        &[data.to_vec()],
+    )
 }
 
 /// A baseline JPEG header claiming `w × h` grey pixels, with little scan data.

@@ -129,23 +129,12 @@ fn geotiffs() {
     }
 }
 
-fn png_chunk(kind: &[u8; 4], body: &[u8]) -> Vec<u8> {
-    let mut c = (body.len() as u32).to_be_bytes().to_vec();
-    c.extend(kind);
-    c.extend(body);
-    let mut h = crc32fast::Hasher::new();
-    h.update(kind);
-    h.update(body);
-    c.extend(h.finalize().to_be_bytes());
-    c
-}
-
 fn png_header(width: u32, height: u32, depth: u8, color: u8) -> Vec<u8> {
     let mut ihdr = width.to_be_bytes().to_vec();
     ihdr.extend(height.to_be_bytes());
     ihdr.extend([depth, color, 0, 0, 0]);
     let mut b = b"\x89PNG\r\n\x1a\n".to_vec();
-    b.extend(png_chunk(b"IHDR", &ihdr));
+    b.extend(hostile::png_chunk(b"IHDR", &ihdr));
     b
 }
 
@@ -153,7 +142,7 @@ fn png_header(width: u32, height: u32, depth: u8, color: u8) -> Vec<u8> {
 fn pngs() {
     let dir = tempfile::tempdir().unwrap();
     let mut huge = png_header(1_000_000, 1_000_000, 16, 0);
-    huge.extend(png_chunk(b"IEND", &[]));
+    huge.extend(hostile::png_chunk(b"IEND", &[]));
     let f = write(dir.path(), "huge.png", &huge);
     assert_input_error(load_default(&f), &f);
     let real = std::fs::read(data("puget-sound-east-512/ps-e.lg.png")).unwrap();

@@ -1,6 +1,9 @@
 //! Hostile inputs built in code: files whose headers claim far more than they hold. Shared by
 //! the malformed-input tests and the peak-memory test.
 
+// Each test file that includes this uses a subset of it.
+#![allow(dead_code)]
+
 /// A USGS ASCII DEM (the 1024-byte record layout of `src/ingest/usgs_dem.rs`) with 30 m
 /// resolution and one profile per `(y, elevations)`: profile `i` is column `i + 1`, its first
 /// elevation at northing `y`.
@@ -54,4 +57,16 @@ pub fn usgs_dem_bomb(n: usize) -> Vec<u8> {
         })
         .collect();
     usgs_dem(&profiles)
+}
+
+/// A PNG chunk: length, kind, body, CRC.
+pub fn png_chunk(kind: &[u8; 4], body: &[u8]) -> Vec<u8> {
+    let mut c = (body.len() as u32).to_be_bytes().to_vec();
+    c.extend(kind);
+    c.extend(body);
+    let mut h = crc32fast::Hasher::new();
+    h.update(kind);
+    h.update(body);
+    c.extend(h.finalize().to_be_bytes());
+    c
 }
