@@ -80,12 +80,14 @@
 //! [`scene`] selects blocks for cameras, and [`curve`] knows Hilbert and Morton keys and
 //! nothing of terrain. Errors say whose fault they are ([`Error`]).
 
+pub mod crs;
 pub mod curve;
 pub mod error;
 pub mod format;
 pub mod heightfield;
 pub mod ingest;
 pub mod model;
+pub mod progress;
 pub mod scene;
 pub mod store;
 

@@ -3,8 +3,9 @@
 //! next build of the same output, `--json` prints JSON even for an error, the txn id a
 //! `replace` reports is the one `info` shows afterwards, `-` is standard output where that
 //! makes sense (and refused where it does not), completions and the man page come from the
-//! parser, `info` shows the height range and the bounds, and a build says when it does not
-//! know the spacing.
+//! parser, `info` shows the height range and the bounds (in longitude/latitude for projected
+//! CRSs too), a build says when it does not know the spacing, and scenes then need
+//! `--spacing`.
 
 #![cfg(unix)]
 
@@ -335,4 +336,165 @@ fn a_build_without_a_known_spacing_says_so() {
         .unwrap();
     assert!(known.status.success());
     assert!(!String::from_utf8_lossy(&known.stderr).contains("warning"));
+}
+
+/// A scene over a file whose spacing is unknown is refused until `--spacing` says it: a
+/// camera in metres over samples of unknown size would see the wrong terrain.
+#[test]
+fn scenes_over_an_unknown_spacing_need_spacing() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("ps-e.fmrh");
+    build_from("puget-sound-east-512/ps-e.lg.png", &out);
+    let scene = |extra: &[&str]| {
+        fmrh()
+            .arg("scene")
+            .arg(&out)
+            .args([
+                "--eye",
+                "256,900,300",
+                "--target",
+                "256,256,0",
+                "--tau",
+                "1",
+                "--json",
+            ])
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let refused = scene(&[]);
+    assert_eq!(refused.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        err.contains("--spacing") && err.contains("unknown"),
+        "{err}"
+    );
+    let json: serde_json::Value = serde_json::from_slice(&refused.stdout).unwrap();
+    assert_eq!(json["kind"], "invalid_argument");
+    let in_samples = scene(&["--spacing", "1"]);
+    assert!(in_samples.status.success());
+    // 30 m apart, the same camera is 30 times nearer in samples: more detail, more blocks.
+    let in_metres = scene(&["--spacing", "30"]);
+    assert!(in_metres.status.success());
+    let blocks = |o: &std::process::Output| {
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        v["blocks"].as_array().map_or(0, Vec::len)
+    };
+    assert!(blocks(&in_samples) > 0 && blocks(&in_metres) > 0);
+    assert_ne!(blocks(&in_samples), blocks(&in_metres));
+    let bad = scene(&["--spacing", "-3"]);
+    assert_eq!(bad.status.code(), Some(2));
+    // fly the same.
+    let path = dir.path().join("path.csv");
+    std::fs::write(
+        &path,
+        "eye_x,eye_y,eye_z,target_x,target_y,target_z\n256,900,300,256,256,0\n256,800,300,256,256,0\n",
+    )
+    .unwrap();
+    let fly = |extra: &[&str]| {
+        fmrh()
+            .arg("fly")
+            .arg(&out)
+            .arg("--path")
+            .arg(&path)
+            .args(["--tau", "1"])
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    assert_eq!(fly(&[]).status.code(), Some(2));
+    assert!(fly(&["--spacing", "1"]).status.success());
+}
+
+/// A projected CRS's bounds are given in longitude and latitude too, through the inverse
+/// projection; DTED and a renamed `.hgt` given `--tile` build with their spacing.
+#[test]
+fn projected_bounds_dted_and_tile_names() {
+    let dir = tempfile::tempdir().unwrap();
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/georef");
+    let out = dir.path().join("feet.fmrh");
+    let built = fmrh()
+        .arg("build")
+        .arg(fixtures.join("us_feet.tif"))
+        .arg("-o")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(built.status.success());
+    assert!(!String::from_utf8_lossy(&built.stderr).contains("warning"));
+    let info = fmrh().arg("info").arg("--json").arg(&out).output().unwrap();
+    let v: serde_json::Value = serde_json::from_slice(&info.stdout).unwrap();
+    let spacing = v["spacing_m"][0].as_f64().unwrap();
+    assert!(
+        (spacing - 100.0 * 1200.0 / 3937.0).abs() < 1e-6,
+        "{spacing}"
+    );
+    // gdaltransform -s_srs EPSG:2927 -t_srs EPSG:4326 puts (1040000, 639600) at
+    // 122.9096° W, 47.0621° N and (1040600, 640000) at 122.9071° W, 47.0632° N.
+    let b: Vec<f64> = v["georeference"]["lon_lat_bounds"]
+        .as_array()
+        .expect("lon/lat bounds")
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
+    let want = [-122.9096, 47.0621, -122.9071, 47.0632];
+    for (g, w) in b.iter().zip(want) {
+        assert!((g - w).abs() < 2e-4, "{b:?} vs {want:?}");
+    }
+
+    let dted = dir.path().join("dted.fmrh");
+    let built = fmrh()
+        .arg("build")
+        .arg(fixtures.join("n43e007.dt0"))
+        .arg("-o")
+        .arg(&dted)
+        .output()
+        .unwrap();
+    assert!(
+        built.status.success(),
+        "{}",
+        String::from_utf8_lossy(&built.stderr)
+    );
+    let info = fmrh()
+        .arg("info")
+        .arg("--json")
+        .arg(&dted)
+        .output()
+        .unwrap();
+    let v: serde_json::Value = serde_json::from_slice(&info.stdout).unwrap();
+    assert_eq!(v["source_format"], "dted");
+    assert!(v["spacing_m"].is_array());
+
+    let renamed = dir.path().join("my tile.hgt.gz");
+    std::fs::copy(data("srtm1-asmyasnikov/S46W066.hgt.gz"), &renamed).unwrap();
+    let hgt = dir.path().join("hgt.fmrh");
+    let bare = fmrh()
+        .arg("build")
+        .arg(&renamed)
+        .arg("--dry-run")
+        .output()
+        .unwrap();
+    let warning = String::from_utf8_lossy(&bare.stderr);
+    assert!(
+        warning.contains("warning") && warning.contains("--tile"),
+        "{warning}"
+    );
+    let placed = fmrh()
+        .arg("build")
+        .arg(&renamed)
+        .args(["--tile", "S46W066", "-o"])
+        .arg(&hgt)
+        .output()
+        .unwrap();
+    assert!(placed.status.success());
+    assert!(!String::from_utf8_lossy(&placed.stderr).contains("warning"));
+    let bad = fmrh()
+        .arg("build")
+        .arg(&renamed)
+        .args(["--tile", "S46W", "-o"])
+        .arg(&hgt)
+        .arg("--force")
+        .output()
+        .unwrap();
+    assert_eq!(bad.status.code(), Some(2));
 }

@@ -70,8 +70,10 @@ fn srtm_voids_are_nan_and_counted() {
         .georeference
         .expect("georeference from the file name");
     assert_eq!(geo.origin, [-160.0, 23.0]);
+    // 3" of arc on the WGS 84 ellipsoid at 22.5° N: 92.281 m north-south, 85.747 m east-west.
     let spacing = hf.metadata.spacing_m.unwrap();
-    assert!((spacing[1] - 92.766).abs() < 0.01, "{spacing:?}");
+    assert!((spacing[1] - 92.281).abs() < 0.01, "{spacing:?}");
+    assert!((spacing[0] - 85.747).abs() < 0.01, "{spacing:?}");
 }
 
 #[test]

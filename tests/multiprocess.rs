@@ -66,7 +66,9 @@ fn samples_hash(samples: &[f32]) -> u64 {
     hash(&bytes)
 }
 
-const SCENE: [&str; 8] = [
+/// The files here have no spacing: the camera is placed in samples (`--spacing 1`).
+const SCENE: [&str; 9] = [
+    "--spacing=1",
     "--eye",
     "500,1300,600",
     "--target",
@@ -293,6 +295,7 @@ fn a_killed_reader_is_reclaimed() {
         .arg("scene")
         .arg(&file)
         .args([
+            "--spacing=1",
             "--eye",
             "512,1500,300",
             "--target",

@@ -8,7 +8,7 @@
 
 use libfuzzer_sys::fuzz_target;
 
-const NAMES: [&str; 8] = [
+const NAMES: [&str; 9] = [
     "N10E010.hgt",
     "N10E010.hgt.gz",
     "x.tif",
@@ -17,6 +17,7 @@ const NAMES: [&str; 8] = [
     "x.asc",
     "x.dem",
     "x.json",
+    "x.dt1",
 ];
 
 fuzz_target!(|data: &[u8]| {

@@ -110,7 +110,7 @@ fn peak_memory_bytes() -> Option<u64> {
 }
 
 /// `--spacing`: one or two finite positive distances.
-fn parse_spacing(values: &[f64]) -> Result<[f64; 2], Error> {
+pub fn parse_spacing(values: &[f64]) -> Result<[f64; 2], Error> {
     let ok = |v: f64| v.is_finite() && v > 0.0;
     match values {
         [d] if ok(*d) => Ok([*d, *d]),
@@ -130,17 +130,36 @@ pub fn run(args: &BuildArgs) -> Result<ExitCode, Error> {
                 .into(),
         ));
     }
+    // One bar for every phase, unless told to be quiet or writing JSON; it draws only on a
+    // terminal.
+    let bar = (!args.quiet && !args.json).then(|| std::sync::Arc::new(super::progress::Bar::new()));
+    let silent = fmrh::progress::Silent;
+    let progress: &dyn fmrh::progress::Progress = match &bar {
+        Some(b) => &**b,
+        None => &silent,
+    };
     let t0 = Instant::now();
-    let mut heightfield = ingest::load(&args.input, &args.ingest.options())?;
+    if let Some(b) = &bar {
+        b.spin(&format!("reading {}", args.input.display()));
+    }
+    let loaded = ingest::load(&args.input, &args.ingest.options());
+    progress.finish();
+    let mut heightfield = loaded?;
     if let Some(spacing) = &args.spacing {
         heightfield.metadata.spacing_m = Some(parse_spacing(spacing)?);
     }
     let ingest_time = t0.elapsed();
     if heightfield.metadata.spacing_m.is_none() {
         // Scenes measure distances in metres: without a spacing they take samples as 1 m apart.
+        let hint = if heightfield.metadata.source_format == "srtm-hgt" {
+            " Its name holds no tile name (such as N44W072): give --tile to place it."
+        } else {
+            ""
+        };
         eprintln!(
-            "fmrh: warning: {} says nothing of the distance between its samples; scenes will \
-             take them as 1 m apart. Give --spacing DX[,DY] (metres) if that is wrong.",
+            "fmrh: warning: {} says nothing of the distance between its samples (no CRS, or a \
+             unit fmrh does not know). Scenes over it will need --spacing; give --spacing \
+             DX[,DY] (metres) here to record it.{hint}",
             args.input.display()
         );
     }
@@ -153,7 +172,7 @@ pub fn run(args: &BuildArgs) -> Result<ExitCode, Error> {
         },
     };
     let t1 = Instant::now();
-    let model = Model::build(heightfield, &options)?;
+    let model = Model::build_with_progress(heightfield, &options, progress)?;
     let build_time = t1.elapsed();
     let output = match &args.output {
         Some(path) if !args.dry_run => {
@@ -162,8 +181,8 @@ pub fn run(args: &BuildArgs) -> Result<ExitCode, Error> {
                 page_size: args.page_size,
                 ..WriteOptions::default()
             };
-            if !args.quiet && !args.json {
-                options.progress = std::sync::Arc::new(super::progress::Bar::new());
+            if let Some(b) = &bar {
+                options.progress = b.clone();
             }
             let summary = write_file(&model, &metadata, path, &options, args.force)?;
             let raw = 4 * u64::from(model.domain().width()) * u64::from(model.domain().height());

@@ -19,6 +19,9 @@ pub struct ExtractArgs {
     /// Replace existing output files.
     #[arg(long)]
     force: bool,
+    /// No progress bar.
+    #[arg(long, short)]
+    quiet: bool,
 }
 
 /// Runs `fmrh extract`.
@@ -30,7 +33,11 @@ pub fn run(args: &ExtractArgs) -> Result<ExitCode, Error> {
         None => data,
     };
     let out = super::sidecar::F32Output::new(&args.output, args.force)?;
-    let hf = store.read_window(window)?;
+    let hf = if args.quiet {
+        store.read_window(window)?
+    } else {
+        store.read_window_with_progress(window, &super::progress::Bar::new())?
+    };
     out.write(&hf, window, "fmrh extract", &args.file, &store)?;
     Ok(ExitCode::SUCCESS)
 }

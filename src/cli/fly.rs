@@ -82,6 +82,7 @@ fn replay<S: fmrh::store::Source + 'static>(
         cache_radius: args.cache_radius,
         memory_budget: args.budget,
         prefetch: args.prefetch,
+        spacing_m: args.view.spacing(&store, &args.file)?,
     };
     let mut scheduler = Scheduler::new(store, options)?;
     let mut frames = Vec::with_capacity(cameras.len());

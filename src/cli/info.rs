@@ -3,6 +3,7 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
+use fmrh::crs::Crs;
 use serde::Serialize;
 
 use fmrh::heightfield::Georeference;
@@ -62,9 +63,39 @@ struct GeoInfo {
     step: [f64; 2],
     /// The outer edges of the samples' cells in CRS units: `[min x, min y, max x, max y]`.
     bounds: [f64; 4],
-    /// The same in degrees, `[west, south, east, north]`, when the CRS is geographic
-    /// (longitude, latitude); projected CRSs would need a projection library.
+    /// The same in degrees, `[west, south, east, north]`: for a geographic CRS the bounds
+    /// themselves, for a projected CRS whose EPSG code is known the box around the
+    /// bounds' edges projected back (16 points an edge, as their sides may curve).
     lon_lat_bounds: Option<[f64; 4]>,
+}
+
+/// The longitude/latitude box of `bounds` (`[min x, min y, max x, max y]`) in CRS `name`.
+fn lon_lat_bounds(name: &str, b: [f64; 4]) -> Option<[f64; 4]> {
+    if name == "geographic (arc-seconds)" {
+        return Some(b.map(|v| v / 3600.0));
+    }
+    let crs = Crs::parse(name)?;
+    const STEPS: u32 = 16;
+    let mut out = [
+        f64::INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::NEG_INFINITY,
+    ];
+    for i in 0..=STEPS {
+        let t = f64::from(i) / f64::from(STEPS);
+        let (x, y) = (b[0] + t * (b[2] - b[0]), b[1] + t * (b[3] - b[1]));
+        for (px, py) in [(x, b[1]), (x, b[3]), (b[0], y), (b[2], y)] {
+            let [lon, lat] = crs.to_lon_lat(px, py)?;
+            out = [
+                out[0].min(lon),
+                out[1].min(lat),
+                out[2].max(lon),
+                out[3].max(lat),
+            ];
+        }
+    }
+    Some(out)
 }
 
 impl GeoInfo {
@@ -77,18 +108,13 @@ impl GeoInfo {
         let (x0, x1) = edges(g.origin[0], g.step[0], width);
         let (y0, y1) = edges(g.origin[1], g.step[1], height);
         let bounds = [x0, y0, x1, y1];
-        let geographic = g.crs.as_deref().is_some_and(|c| {
-            matches!(
-                c,
-                "EPSG:4326" | "EPSG:4269" | "EPSG:4258" | "EPSG:4267" | "EPSG:4979"
-            ) || c.starts_with("geographic")
-        });
+        let lon_lat_bounds = g.crs.as_deref().and_then(|c| lon_lat_bounds(c, bounds));
         GeoInfo {
             crs: g.crs.clone(),
             origin: g.origin,
             step: g.step,
             bounds,
-            lon_lat_bounds: geographic.then_some(bounds),
+            lon_lat_bounds,
         }
     }
 }
@@ -250,7 +276,7 @@ fn print_info(path: &std::path::Path, i: &Info) {
     }
     match i.spacing_m {
         Some(s) => println!("  spacing     {} m x {} m", s[0], s[1]),
-        None => println!("  spacing     unknown (scenes take samples as 1 m apart)"),
+        None => println!("  spacing     unknown (scenes need --spacing)"),
     }
     if let Some(g) = &i.georeference {
         println!(

@@ -39,6 +39,8 @@ pub enum FormatArg {
     Asc,
     /// USGS ASCII DEM (`.dem`), 1024-byte records, UTM or geographic profiles.
     UsgsDem,
+    /// DTED levels 0–2 (`.dt0`, `.dt1`, `.dt2`).
+    Dted,
 }
 
 impl From<FormatArg> for Format {
@@ -51,6 +53,7 @@ impl From<FormatArg> for Format {
             FormatArg::Jpeg => Format::Jpeg,
             FormatArg::Asc => Format::Asc,
             FormatArg::UsgsDem => Format::UsgsDem,
+            FormatArg::Dted => Format::Dted,
         }
     }
 }
@@ -91,6 +94,10 @@ pub struct IngestArgs {
     /// A raw value that marks a void, besides the format's own nodata.
     #[arg(long, allow_negative_numbers = true)]
     nodata: Option<f64>,
+    /// The 1° tile an `.hgt` file holds (e.g. N44W072, its south-west corner), when the
+    /// file's name does not say: it places the tile and gives its spacing in metres.
+    #[arg(long, value_name = "NAME")]
+    tile: Option<String>,
 }
 
 impl IngestArgs {
@@ -102,6 +109,7 @@ impl IngestArgs {
             z_scale: self.z_scale,
             z_offset: self.z_offset,
             nodata: self.nodata,
+            tile: self.tile.clone(),
         }
     }
 }

@@ -35,6 +35,11 @@ pub struct ViewArgs {
     /// modify the file meanwhile.
     #[arg(long)]
     pub mmap: bool,
+    /// Ground distance between samples in metres, DX or DX,DY (east, south), where cameras
+    /// are placed. Required when the file does not record it (`info` says "spacing
+    /// unknown"); `--spacing 1` measures the world in samples. Overrides the file's.
+    #[arg(long, value_delimiter = ',')]
+    pub spacing: Option<Vec<f64>>,
 }
 
 /// `--mode`.
@@ -60,6 +65,28 @@ impl ViewArgs {
             w.trim().parse().map_err(|_| bad())?,
             h.trim().parse().map_err(|_| bad())?,
         ])
+    }
+
+    /// The spacing to place `file`'s terrain with: `--spacing`, else the file's own; an error
+    /// when neither is known, since a camera in metres over samples of unknown size sees the
+    /// wrong terrain.
+    pub fn spacing<S: fmrh::store::Source>(
+        &self,
+        store: &fmrh::Store<S>,
+        file: &std::path::Path,
+    ) -> Result<Option<[f64; 2]>, Error> {
+        if let Some(s) = &self.spacing {
+            return super::build::parse_spacing(s).map(Some);
+        }
+        if store.header().metadata.spacing_m.is_none() {
+            return Err(Error::InvalidArgument(format!(
+                "{}: the distance between samples is unknown (its source did not say), so a \
+                 camera in metres cannot be placed; give --spacing DX[,DY] in metres \
+                 (--spacing 1 measures the world in samples), or rebuild with --spacing",
+                file.display()
+            )));
+        }
+        Ok(None)
     }
 
     /// The scene options (without a window).
@@ -157,7 +184,7 @@ fn run_on<S: fmrh::store::Source>(
     options: SceneOptions,
     output: Option<super::sidecar::F32Output>,
 ) -> Result<ExitCode, Error> {
-    let terrain = Terrain::new(store)?;
+    let terrain = Terrain::with_spacing(store, args.view.spacing(store, &args.file)?)?;
     let scene = terrain.scene(&camera, &options)?;
     let mut uncovered = None;
     if let Some(out) = &output {

@@ -4,7 +4,7 @@ use std::fs::File;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use fmrh::store::{verify, CheckStatus, FileSource, VerifyMode};
+use fmrh::store::{verify_with_progress, CheckStatus, FileSource, VerifyMode};
 use fmrh::Error;
 
 #[derive(clap::Args)]
@@ -18,6 +18,9 @@ pub struct VerifyArgs {
     /// Print the report as JSON.
     #[arg(long)]
     pub json: bool,
+    /// No progress bar.
+    #[arg(long, short)]
+    quiet: bool,
 }
 
 /// Exit status when a writer was committing and some check could not be decided.
@@ -34,7 +37,11 @@ pub fn run(args: &VerifyArgs) -> Result<ExitCode, Error> {
     } else {
         VerifyMode::Fast
     };
-    let report = verify(src, mode)?;
+    let report = if args.quiet || args.json {
+        verify_with_progress(src, mode, &fmrh::progress::Silent)?
+    } else {
+        verify_with_progress(src, mode, &super::progress::Bar::new())?
+    };
     if args.json {
         super::print_json(&report)?;
     } else {

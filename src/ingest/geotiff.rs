@@ -14,32 +14,25 @@ use tiff::decoder::{Decoder, DecodingResult, Limits};
 use tiff::tags::Tag;
 use tiff::ColorType;
 
-use super::{finish, geographic_spacing, IngestOptions};
+use super::{finish, IngestOptions};
+use crate::crs::{Crs, CrsKind};
 use crate::error::{Error, Result};
 use crate::heightfield::{check_dimensions, Georeference, Heightfield, Metadata, MAX_SAMPLES};
 
-/// GeoKey: 1 = geographic, 2 = projected model.
+/// GeoKey GTModelTypeGeoKey: 1 = projected, 2 = geographic, 3 = geocentric.
 const GT_MODEL_TYPE: u16 = 1024;
+const MODEL_PROJECTED: u16 = 1;
+const MODEL_GEOGRAPHIC: u16 = 2;
+/// GeoKey value: user-defined (the parameters follow in other keys).
+const USER_DEFINED: u16 = 32767;
 /// GeoKey: 1 = pixel is area, 2 = pixel is point.
 const GT_RASTER_TYPE: u16 = 1025;
 const GEOGRAPHIC_TYPE: u16 = 2048;
 const PROJECTED_CS_TYPE: u16 = 3072;
 /// GeoKey ProjLinearUnitsGeoKey: the unit of a projected CRS's coordinates (an EPSG unit code).
 const PROJ_LINEAR_UNITS: u16 = 3076;
-
-/// Metres per unit of the EPSG linear unit `code`, for the units projected CRSs use.
-fn metres_per_unit(code: u16) -> Option<f64> {
-    Some(match code {
-        9001 => 1.0,             // metre
-        9002 => 0.3048,          // international foot
-        9003 => 1200.0 / 3937.0, // US survey foot
-        9005 => 0.304_797_265_4, // Clarke's foot
-        9030 => 1852.0,          // nautical mile
-        9036 => 1000.0,          // kilometre
-        9093 => 1609.344,        // statute mile
-        _ => return None,
-    })
-}
+/// GeoKey ProjLinearUnitSizeGeoKey: metres per unit of a user-defined linear unit (a double).
+const PROJ_LINEAR_UNIT_SIZE: u16 = 3077;
 
 fn tiff_error(path: &Path, e: tiff::TiffError) -> Error {
     match e {
@@ -215,26 +208,20 @@ fn georeference<R: std::io::Read + std::io::Seek>(
     height: u32,
 ) -> Result<Metadata> {
     let mut metadata = Metadata::default();
-    let (Ok(scale), Ok(tie)) = (
-        dec.get_tag_f64_vec(Tag::ModelPixelScaleTag),
-        dec.get_tag_f64_vec(Tag::ModelTiepointTag),
-    ) else {
-        return Ok(metadata);
-    };
-    if scale.len() < 2 || tie.len() < 6 || scale[0] <= 0.0 || scale[1] <= 0.0 {
-        return Err(Error::input(
-            path,
-            "malformed ModelPixelScale or ModelTiepoint tag",
-        ));
-    }
     let keys = dec
         .get_tag_u16_vec(Tag::GeoKeyDirectoryTag)
         .unwrap_or_default();
-    let key = |id: u16| -> Option<u16> {
-        keys.get(4..)?
-            .chunks_exact(4)
-            .find(|k| k[0] == id && k[1] == 0)
-            .map(|k| k[3])
+    let doubles = dec
+        .get_tag_f64_vec(Tag::GeoDoubleParamsTag)
+        .unwrap_or_default();
+    let entry = |id: u16| keys.get(4..)?.chunks_exact(4).find(|k| k[0] == id);
+    // A SHORT key is stored in the directory itself (location 0).
+    let key = |id: u16| entry(id).filter(|k| k[1] == 0).map(|k| k[3]);
+    // A DOUBLE key points into GeoDoubleParams.
+    let double_key = |id: u16| {
+        entry(id)
+            .filter(|k| k[1] == Tag::GeoDoubleParamsTag.to_u16())
+            .and_then(|k| doubles.get(usize::from(k[3])).copied())
     };
     // Pixel-is-area: the tie point is the corner of pixel (i, j), half a pixel from its centre.
     let half = if key(GT_RASTER_TYPE) == Some(2) {
@@ -242,28 +229,92 @@ fn georeference<R: std::io::Read + std::io::Seek>(
     } else {
         0.5
     };
-    let origin = [
-        tie[3] + (half - tie[0]) * scale[0],
-        tie[4] - (half - tie[1]) * scale[1],
-    ];
-    let step = [scale[0], -scale[1]];
-    let (crs, geographic) = match (key(PROJECTED_CS_TYPE), key(GEOGRAPHIC_TYPE)) {
-        (Some(code), _) if code != 32767 => (Some(format!("EPSG:{code}")), false),
-        (_, Some(code)) if code != 32767 => (Some(format!("EPSG:{code}")), true),
-        _ => (None, key(GT_MODEL_TYPE) == Some(2)),
-    };
-    metadata.spacing_m = if geographic {
-        let centre_lat = origin[1] + step[1] * f64::from(height - 1) / 2.0;
-        Some(geographic_spacing([scale[0], scale[1]], centre_lat))
-    } else {
-        // A projected CRS's coordinates are in its linear unit: feet and US survey feet are
-        // common (state plane systems). Without the key, metres (the GeoTIFF default); with
-        // a unit this reader does not know, the spacing is left unknown, never guessed.
-        match key(PROJ_LINEAR_UNITS) {
-            None => Some([scale[0], scale[1]]),
-            Some(unit) => metres_per_unit(unit).map(|m| [scale[0] * m, scale[1] * m]),
+    // The affine map from (column, row) of a pixel's corner (or centre, pixel-is-point) to CRS
+    // coordinates: either a scale and a tie point, or a full 4×4 ModelTransformation.
+    let (origin, step) = match (
+        dec.get_tag_f64_vec(Tag::ModelPixelScaleTag),
+        dec.get_tag_f64_vec(Tag::ModelTiepointTag),
+        dec.get_tag_f64_vec(Tag::ModelTransformationTag),
+    ) {
+        (Ok(scale), Ok(tie), _) => {
+            let ok = |v: f64| v.is_finite() && v != 0.0;
+            if scale.len() < 2 || tie.len() < 6 || !ok(scale[0]) || !ok(scale[1]) {
+                return Err(Error::input(
+                    path,
+                    "malformed ModelPixelScale or ModelTiepoint tag",
+                ));
+            }
+            // y = tie_y - (j - tie_j) · scale_y: a negative scale_y is a south-up grid.
+            let step = [scale[0], -scale[1]];
+            let origin = [
+                tie[3] + (half - tie[0]) * step[0],
+                tie[4] + (half - tie[1]) * step[1],
+            ];
+            (origin, step)
         }
+        (_, _, Ok(m)) => {
+            if m.len() < 16 {
+                return Err(Error::input(path, "malformed ModelTransformation tag"));
+            }
+            // x = m0·i + m1·j + m3, y = m4·i + m5·j + m7.
+            if m[1] != 0.0 || m[4] != 0.0 {
+                return Err(Error::unsupported(
+                    path,
+                    format!(
+                        "the grid is rotated or sheared (ModelTransformation terms {} and {}); \
+                         fmrh stores grids whose rows run east-west: resample it first, \
+                         e.g. with gdalwarp",
+                        m[1], m[4]
+                    ),
+                ));
+            }
+            let step = [m[0], m[5]];
+            if !step.iter().all(|v| v.is_finite() && *v != 0.0) {
+                return Err(Error::input(path, "malformed ModelTransformation tag"));
+            }
+            ([m[3] + half * step[0], m[7] + half * step[1]], step)
+        }
+        _ => return Ok(metadata),
     };
-    metadata.georeference = Some(Georeference { crs, origin, step });
+    let model_type = key(GT_MODEL_TYPE);
+    let code = |k: u16| key(k).filter(|&c| c != 0 && c != USER_DEFINED);
+    let (name, crs) = match (code(PROJECTED_CS_TYPE), code(GEOGRAPHIC_TYPE)) {
+        (Some(c), _) => (Some(format!("EPSG:{c}")), Crs::from_epsg(u32::from(c))),
+        (None, Some(c)) if model_type != Some(MODEL_PROJECTED) => {
+            (Some(format!("EPSG:{c}")), Crs::from_epsg(u32::from(c)))
+        }
+        _ => (None, None),
+    };
+    // What the coordinates are: the CRS's kind from its code when the registry knows it,
+    // else the model type key; a projected unit from ProjLinearUnits (an EPSG unit code, or
+    // user-defined with its size in metres), else from the registry. Nothing known leaves the
+    // spacing unknown, never guessed.
+    let kind = match (crs.as_ref().map(|c| c.kind), model_type) {
+        (Some(kind), _) => kind,
+        (None, Some(MODEL_GEOGRAPHIC)) => CrsKind::Geographic,
+        (None, Some(MODEL_PROJECTED)) => CrsKind::Projected {
+            metres_per_unit: None,
+        },
+        _ => CrsKind::Other,
+    };
+    // The key, when present, decides (even when it names a unit fmrh does not know).
+    let linear_unit = match key(PROJ_LINEAR_UNITS) {
+        Some(USER_DEFINED) => Some(double_key(PROJ_LINEAR_UNIT_SIZE)),
+        Some(unit) => Some(crate::crs::epsg_linear_unit(u32::from(unit))),
+        None => None,
+    };
+    let kind = match kind {
+        CrsKind::Projected { metres_per_unit } => CrsKind::Projected {
+            metres_per_unit: linear_unit.unwrap_or(metres_per_unit),
+        },
+        other => other,
+    };
+    let centre_lat = origin[1] + step[1] * f64::from(height - 1) / 2.0;
+    metadata.spacing_m = kind.spacing(step, centre_lat);
+    metadata.georeference = Some(Georeference {
+        crs: name,
+        origin,
+        step,
+    });
     Ok(metadata)
 }

@@ -15,6 +15,7 @@
 //! height `(r · z_scale + z_offset)`, computed in `f64` and rounded once to `f32`. The defaults
 //! 1 and 0 leave raw values unchanged.
 
+mod dted;
 mod esri_ascii;
 mod geotiff;
 mod jpeg;
@@ -28,7 +29,7 @@ use std::io::Read;
 use std::path::Path;
 
 use crate::error::{Error, Result};
-use crate::heightfield::{Heightfield, Metadata};
+use crate::heightfield::{Georeference, Heightfield, Metadata};
 
 /// The input formats fmrh reads.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -48,6 +49,8 @@ pub enum Format {
     Asc,
     /// USGS ASCII DEM (`.dem`), 1024-byte records, UTM or geographic profiles.
     UsgsDem,
+    /// DTED levels 0–2 (`.dt0`, `.dt1`, `.dt2`): WGS 84 grids, signed-magnitude `i16`.
+    Dted,
 }
 
 impl Format {
@@ -61,6 +64,7 @@ impl Format {
             Format::Jpeg => "jpeg",
             Format::Asc => "esri-ascii",
             Format::UsgsDem => "usgs-dem",
+            Format::Dted => "dted",
         }
     }
 }
@@ -87,6 +91,9 @@ pub struct IngestOptions {
     pub z_offset: f64,
     /// A raw value that marks a void, in addition to the format's own.
     pub nodata: Option<f64>,
+    /// The 1° tile an `.hgt` holds, named as SRTM names it (`N44W072`: the south-west
+    /// corner), for a file whose name does not say.
+    pub tile: Option<String>,
 }
 
 impl Default for IngestOptions {
@@ -97,6 +104,7 @@ impl Default for IngestOptions {
             z_scale: 1.0,
             z_offset: 0.0,
             nodata: None,
+            tile: None,
         }
     }
 }
@@ -121,6 +129,13 @@ impl IngestOptions {
         if self.nodata.is_some_and(f64::is_nan) {
             return Err(Error::InvalidArgument("nodata must be a number".into()));
         }
+        if let Some(tile) = &self.tile {
+            if parse_tile_name(tile).is_none_or(|_| tile.trim().len() != 7) {
+                return Err(Error::InvalidArgument(format!(
+                    "tile {tile:?}: expected a 1° tile name such as N44W072 or S16E166"
+                )));
+            }
+        }
         Ok(())
     }
 }
@@ -140,6 +155,7 @@ pub fn load(path: &Path, options: &IngestOptions) -> Result<Heightfield> {
         Format::Jpeg => jpeg::read(path, options)?,
         Format::Asc => esri_ascii::read(path, options)?,
         Format::UsgsDem => usgs_dem::read(path, options)?,
+        Format::Dted => dted::read(path, options)?,
     };
     hf.metadata.source_format = format.name().to_string();
     Ok(hf)
@@ -163,6 +179,9 @@ pub fn detect(path: &Path) -> Result<Format> {
         (".jpeg", Format::Jpeg),
         (".asc", Format::Asc),
         (".dem", Format::UsgsDem),
+        (".dt0", Format::Dted),
+        (".dt1", Format::Dted),
+        (".dt2", Format::Dted),
     ];
     if let Some(&(_, f)) = by_name.iter().find(|(ext, _)| name.ends_with(ext)) {
         return Ok(f);
@@ -178,12 +197,47 @@ pub fn detect(path: &Path) -> Result<Format> {
         Ok(Format::Geotiff)
     } else if head.starts_with(&[0xFF, 0xD8]) {
         Ok(Format::Jpeg)
+    } else if head.starts_with(b"UHL1") {
+        Ok(Format::Dted)
     } else {
         Err(Error::input(
             path,
             "cannot tell the format from the name or contents; give --format",
         ))
     }
+}
+
+/// `(south latitude, west longitude)` of the 1° tile named in `name` as SRTM names it
+/// (`N44W072`, `s16E166`), wherever it stands, as long as it is not part of a longer word or
+/// number.
+pub fn parse_tile_name(name: &str) -> Option<(i32, i32)> {
+    let b = name.as_bytes();
+    let digits = |b: &[u8]| -> Option<i32> {
+        b.iter().try_fold(0i32, |acc, &c| {
+            c.is_ascii_digit().then(|| acc * 10 + i32::from(c - b'0'))
+        })
+    };
+    (0..b.len().saturating_sub(6)).find_map(|i| {
+        if i > 0 && b[i - 1].is_ascii_alphanumeric() {
+            return None;
+        }
+        if b.get(i + 7).is_some_and(u8::is_ascii_digit) {
+            return None;
+        }
+        let lat = digits(&b[i + 1..i + 3])?;
+        let lon = digits(&b[i + 4..i + 7])?;
+        let lat = match b[i].to_ascii_uppercase() {
+            b'N' => lat,
+            b'S' => -lat,
+            _ => return None,
+        };
+        let lon = match b[i + 3].to_ascii_uppercase() {
+            b'E' => lon,
+            b'W' => -lon,
+            _ => return None,
+        };
+        ((-90..90).contains(&lat) && (-180..180).contains(&lon)).then_some((lat, lon))
+    })
 }
 
 /// Reads at most `limit` bytes of `path`; more is an error (the caller's size check failed).
@@ -209,16 +263,43 @@ fn finish(
     path: &Path,
     width: u32,
     height: u32,
-    samples: Vec<f32>,
-    metadata: Metadata,
+    mut samples: Vec<f32>,
+    mut metadata: Metadata,
 ) -> Result<Heightfield> {
     check_metadata(path, &metadata)?;
+    if let Some(g) = &mut metadata.georeference {
+        north_up(g, &mut samples, width as usize, height as usize);
+    }
     Heightfield::new(width, height, samples)
         .map(|hf| hf.with_metadata(metadata))
         .map_err(|e| match e {
             Error::InvalidArgument(reason) => Error::input(path, reason),
             other => other,
         })
+}
+
+/// Turns a south-up grid (rows running north, `step[1] > 0`) or an east-to-west one
+/// (`step[0] < 0`) into fmrh's orientation, row 0 north and column 0 west, by reversing the
+/// rows or the columns, and moves the georeference's origin to the new first sample.
+fn north_up(g: &mut Georeference, samples: &mut [f32], width: usize, height: usize) {
+    if width == 0 || samples.len() != width * height {
+        return; // Heightfield::new refuses it
+    }
+    if g.step[1] > 0.0 {
+        for y in 0..height / 2 {
+            let (top, bottom) = samples.split_at_mut((height - 1 - y) * width);
+            top[y * width..(y + 1) * width].swap_with_slice(&mut bottom[..width]);
+        }
+        g.origin[1] += g.step[1] * (height - 1) as f64;
+        g.step[1] = -g.step[1];
+    }
+    if g.step[0] < 0.0 {
+        for row in samples.chunks_exact_mut(width) {
+            row.reverse();
+        }
+        g.origin[0] += g.step[0] * (width - 1) as f64;
+        g.step[0] = -g.step[0];
+    }
 }
 
 /// Checks what a reader found about the grid's geometry: a spacing must be finite and
@@ -249,17 +330,4 @@ fn check_metadata(path: &Path, metadata: &Metadata) -> Result<()> {
         }
     }
     Ok(())
-}
-
-/// Metres per degree of latitude on the WGS 84 equatorial sphere, used to turn geographic
-/// sample spacing into ground distance at the grid's centre latitude.
-const METRES_PER_DEGREE: f64 = 6_378_137.0 * std::f64::consts::PI / 180.0;
-
-/// Ground spacing `[east, south]` in metres for a geographic grid of `step_deg` degrees at
-/// latitude `lat`.
-fn geographic_spacing(step_deg: [f64; 2], lat: f64) -> [f64; 2] {
-    [
-        step_deg[0].abs() * METRES_PER_DEGREE * lat.to_radians().cos(),
-        step_deg[1].abs() * METRES_PER_DEGREE,
-    ]
 }

@@ -4,8 +4,10 @@
 //! The side comes from the (decompressed) length: 1201² samples for SRTM3 and 3601² for SRTM1.
 //! Any other length is an error. The georeference comes from the name, as in `N44W072.hgt`:
 //! that names the tile's south-west corner, and samples are grid-registered, so row 0 lies on
-//! latitude 45 and column 0 on longitude -72. A name that does not parse leaves the tile without
-//! a georeference.
+//! latitude 45 and column 0 on longitude -72. The tile name may stand anywhere in the file
+//! name (`srtm_N44W072_v3.hgt`); for a file renamed beyond that (`my tile.hgt`) the
+//! [`IngestOptions::tile`] option names it. Without either, the tile has no georeference and
+//! its spacing is unknown: a degree of longitude depends on the latitude.
 
 use std::fs::File;
 use std::io::Read;
@@ -14,7 +16,8 @@ use std::path::Path;
 use byteorder::{BigEndian, ByteOrder};
 use flate2::read::GzDecoder;
 
-use super::{finish, geographic_spacing, read_limited, IngestOptions};
+use super::{finish, parse_tile_name, read_limited, IngestOptions};
+use crate::crs::geographic_spacing;
 use crate::error::{Error, Result};
 use crate::heightfield::{Georeference, Heightfield, Metadata};
 
@@ -66,7 +69,12 @@ pub fn read(path: &Path, options: &IngestOptions) -> Result<Heightfield> {
         units: Some("metres".into()),
         ..Metadata::default()
     };
-    if let Some((lat, lon)) = parse_tile_name(path) {
+    let name = path.file_name().map(|n| n.to_string_lossy());
+    let corner = match &options.tile {
+        Some(tile) => parse_tile_name(tile),
+        None => name.as_deref().and_then(parse_tile_name),
+    };
+    if let Some((lat, lon)) = corner {
         let step = 1.0 / f64::from(side - 1);
         metadata.georeference = Some(Georeference {
             crs: Some("EPSG:4326".into()),
@@ -78,44 +86,21 @@ pub fn read(path: &Path, options: &IngestOptions) -> Result<Heightfield> {
     finish(path, side, side, samples, metadata)
 }
 
-/// `(south latitude, west longitude)` from a name like `N44W072...` or `s16e166...`.
-fn parse_tile_name(path: &Path) -> Option<(i32, i32)> {
-    let name = path.file_name()?.to_str()?.as_bytes();
-    if name.len() < 7 {
-        return None;
-    }
-    let digits = |b: &[u8]| -> Option<i32> {
-        b.iter().try_fold(0i32, |acc, &c| {
-            c.is_ascii_digit().then(|| acc * 10 + i32::from(c - b'0'))
-        })
-    };
-    let lat = digits(&name[1..3])?;
-    let lon = digits(&name[4..7])?;
-    let lat = match name[0].to_ascii_uppercase() {
-        b'N' => lat,
-        b'S' => -lat,
-        _ => return None,
-    };
-    let lon = match name[3].to_ascii_uppercase() {
-        b'E' => lon,
-        b'W' => -lon,
-        _ => return None,
-    };
-    ((-90..90).contains(&lat) && (-180..180).contains(&lon)).then_some((lat, lon))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
     fn tile_names() {
-        assert_eq!(parse_tile_name(Path::new("N44W072.hgt")), Some((44, -72)));
-        assert_eq!(
-            parse_tile_name(Path::new("/x/s16E166.hgt.gz")),
-            Some((-16, 166))
-        );
-        assert_eq!(parse_tile_name(Path::new("tile.hgt")), None);
-        assert_eq!(parse_tile_name(Path::new("N99W072.hgt")), None);
+        assert_eq!(parse_tile_name("N44W072.hgt"), Some((44, -72)));
+        assert_eq!(parse_tile_name("s16E166.hgt.gz"), Some((-16, 166)));
+        assert_eq!(parse_tile_name("srtm_N44W072_v3.hgt"), Some((44, -72)));
+        assert_eq!(parse_tile_name("my N44W072.hgt"), Some((44, -72)));
+        assert_eq!(parse_tile_name("tile.hgt"), None);
+        assert_eq!(parse_tile_name("N99W072.hgt"), None);
+        assert_eq!(parse_tile_name("XN44W072.hgt"), None, "inside a word");
+        assert_eq!(parse_tile_name("N44W0721.hgt"), None, "more digits");
+        assert_eq!(parse_tile_name("N44W072"), Some((44, -72)));
+        assert_eq!(parse_tile_name("é N44W072"), Some((44, -72)));
     }
 }

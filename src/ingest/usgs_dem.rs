@@ -15,6 +15,7 @@
 use std::path::Path;
 
 use super::{finish, read_limited, IngestOptions};
+use crate::crs::geographic_spacing;
 use crate::error::{Error, Result};
 use crate::heightfield::{check_dimensions, Georeference, Heightfield, Metadata, MAX_SIDE};
 
@@ -219,19 +220,50 @@ pub fn read(path: &Path, options: &IngestOptions) -> Result<Heightfield> {
         }
     }
 
-    let metres_per_unit = match ground_units {
-        1 => Some(0.3048),
-        2 => Some(1.0),
-        _ => None,
+    // The CRS: UTM zones as their EPSG codes by horizontal datum (record A's element 25 at
+    // byte 890, blank in old files, which are NAD27), so `info` can give longitude and
+    // latitude; geographic profiles count arc-seconds.
+    let datum = f.text(890, 6, "horizontal datum").ok().and_then(|t| {
+        if t.is_empty() {
+            Some(1)
+        } else {
+            t.parse::<i64>().ok()
+        }
+    });
+    let (crs, spacing_m) = match (planimetric, ground_units) {
+        (1, _) if (1..=60).contains(&zone) => {
+            let base = match datum {
+                Some(1) => Some(26700),
+                Some(3) => Some(32600),
+                Some(4) => Some(26900),
+                _ => None,
+            };
+            let metres = match ground_units {
+                1 => Some(0.3048),
+                2 => Some(1.0),
+                _ => None,
+            };
+            (
+                Some(base.map_or(format!("UTM zone {zone}"), |b| format!("EPSG:{}", b + zone))),
+                metres.map(|m| [res[0] * m, res[1] * m]),
+            )
+        }
+        (0, 3) => {
+            let centre_lat = (top + bottom) / 2.0 / 3600.0;
+            (
+                Some("geographic (arc-seconds)".to_string()),
+                Some(geographic_spacing(
+                    [res[0] / 3600.0, res[1] / 3600.0],
+                    centre_lat,
+                )),
+            )
+        }
+        _ => (None, None),
     };
     let metadata = Metadata {
-        spacing_m: metres_per_unit.map(|m| [res[0] * m, res[1] * m]),
+        spacing_m,
         georeference: Some(Georeference {
-            crs: match planimetric {
-                1 => Some(format!("UTM zone {zone}")),
-                0 => Some("geographic (arc-seconds)".to_string()),
-                _ => None,
-            },
+            crs,
             origin: [x_first, top],
             step: [res[0], -res[1]],
         }),

@@ -73,6 +73,15 @@ pub struct NodeGrid {
 impl Model {
     /// Builds the model of `heightfield` (consumed: its buffer becomes the mended raster).
     pub fn build(heightfield: Heightfield, options: &BuildOptions) -> Result<Model> {
+        Model::build_with_progress(heightfield, options, &crate::progress::Silent)
+    }
+
+    /// As [`Model::build`], telling `progress` how the measuring (most of the time) advances.
+    pub fn build_with_progress(
+        heightfield: Heightfield,
+        options: &BuildOptions,
+        progress: &dyn crate::progress::Progress,
+    ) -> Result<Model> {
         let domain = Domain::new(
             heightfield.width(),
             heightfield.height(),
@@ -83,7 +92,7 @@ impl Model {
             Thresholds::Ladder => None,
         };
         let raster = MendedRaster::new(heightfield);
-        let measured = Measurements::measure(&raster, &domain);
+        let measured = Measurements::measure_with_progress(&raster, &domain, progress);
         let thresholds = explicit.clone().unwrap_or_else(|| {
             cluster::default_ladder(measured.root_error(), measured.min_positive_error())
         });

@@ -88,14 +88,31 @@ pub struct Measurements {
 impl Measurements {
     /// Measures every level of `domain` over `raster` and computes monotone errors.
     pub fn measure(raster: &MendedRaster, domain: &Domain) -> Measurements {
-        Measurements::from_stats(
-            (0..domain.levels())
-                .map(|level| {
-                    let (cols, rows) = domain.nodes_across(level);
-                    (cols, rows, measure_level(raster, domain, level))
-                })
-                .collect(),
-        )
+        Measurements::measure_with_progress(raster, domain, &crate::progress::Silent)
+    }
+
+    /// As [`Measurements::measure`], telling `progress` of each level measured (each costs
+    /// about one pass over the samples).
+    pub fn measure_with_progress(
+        raster: &MendedRaster,
+        domain: &Domain,
+        progress: &dyn crate::progress::Progress,
+    ) -> Measurements {
+        progress.start(
+            "measuring levels",
+            u64::from(domain.levels()),
+            crate::progress::Unit::Steps,
+        );
+        let levels = (0..domain.levels())
+            .map(|level| {
+                let (cols, rows) = domain.nodes_across(level);
+                let stats = measure_level(raster, domain, level);
+                progress.advance(1);
+                (cols, rows, stats)
+            })
+            .collect();
+        progress.finish();
+        Measurements::from_stats(levels)
     }
 
     /// The measurements of per-level node statistics `(cols, rows, stats)` (row-major),

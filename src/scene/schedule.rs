@@ -70,6 +70,9 @@ pub struct ScheduleOptions {
     pub memory_budget: u64,
     /// Run the prefetch thread.
     pub prefetch: bool,
+    /// Ground spacing `[east, south]` in metres, instead of the store's (see
+    /// [`Terrain::with_spacing`]).
+    pub spacing_m: Option<[f64; 2]>,
 }
 
 impl ScheduleOptions {
@@ -81,6 +84,7 @@ impl ScheduleOptions {
             cache_radius: 0.0,
             memory_budget: 256 << 20,
             prefetch: false,
+            spacing_m: None,
         }
     }
 }
@@ -163,7 +167,7 @@ impl<S: Source + 'static> Scheduler<S> {
                 )));
             }
         }
-        Terrain::new(&store)?; // the root must be readable
+        Terrain::with_spacing(&store, options.spacing_m)?; // the root must be readable
         let prefetcher = options
             .prefetch
             .then(|| Prefetcher::start(Arc::clone(&store), options));
@@ -207,7 +211,7 @@ impl<S: Source + 'static> Scheduler<S> {
     pub fn frame(&mut self, camera: &Camera) -> Result<Frame> {
         let started = Instant::now();
         let store = Arc::clone(&self.store);
-        let terrain = Terrain::new(&store)?;
+        let terrain = Terrain::with_spacing(&store, self.options.spacing_m)?;
         let scene = terrain.scene(camera, &self.options.scene)?;
         let index = self.frames;
         let visible: HashSet<BlockId> = scene.blocks.iter().map(BlockId::of).collect();
@@ -438,7 +442,7 @@ fn warm<S: Source>(
     camera: Camera,
     have: &HashSet<BlockId>,
 ) {
-    let Ok(terrain) = Terrain::new(store) else {
+    let Ok(terrain) = Terrain::with_spacing(store, options.spacing_m) else {
         return;
     };
     let Ok(scene) = terrain.scene(&camera, &options.scene) else {

@@ -33,12 +33,24 @@ pub struct Terrain<'s, S: Source> {
 
 impl<'s, S: Source> Terrain<'s, S> {
     /// Reads what scenes need once: the root's height range and the cluster thresholds.
+    ///
+    /// The world frame's spacing is the one the store records. **When the store does not know
+    /// its spacing** (`store.header().metadata.spacing_m` is `None`: a PNG, a grid with no
+    /// CRS), samples are taken as 1 m apart, and a camera placed in metres sees the wrong
+    /// terrain. Check, and use [`Terrain::with_spacing`]; the CLI refuses such scenes
+    /// without `--spacing`.
     pub fn new(store: &'s Store<S>) -> Result<Self> {
+        Terrain::with_spacing(store, None)
+    }
+
+    /// As [`Terrain::new`], with the ground spacing `[east, south]` in metres given by the
+    /// caller instead of the store when `spacing_m` is `Some`.
+    pub fn with_spacing(store: &'s Store<S>, spacing_m: Option<[f64; 2]>) -> Result<Self> {
         let root = store.node(0)?;
         Ok(Terrain {
             store,
             domain: *store.domain(),
-            frame: WorldFrame::new(store.header().metadata.spacing_m),
+            frame: WorldFrame::new(spacing_m.or(store.header().metadata.spacing_m)),
             root,
             thresholds: store.clusters().iter().map(|c| c.threshold).collect(),
         })

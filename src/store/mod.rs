@@ -62,7 +62,9 @@ pub use crate::format::{ClusterInfo, FreePage, PayloadRef, ScanEntry, StoredBloc
 pub use read::{Block, Children, CodeScan, Grid, HilbertScan, Layout};
 pub use source::{Bytes, FileSource, MmapSource, Source};
 pub use txn::{CommitSummary, Container, Recovery, Snapshot, WriteTxn};
-pub use verify::{verify, CheckReport, CheckStatus, VerifyMode, VerifyReport};
+pub use verify::{
+    verify, verify_with_progress, CheckReport, CheckStatus, VerifyMode, VerifyReport,
+};
 pub use write::{
     create, write_atomically, write_file, write_to, CreateOptions, Progress, SectionBytes,
     WriteOptions, WriteSummary,

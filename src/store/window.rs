@@ -11,11 +11,21 @@ use crate::error::{Error, Result};
 use crate::format::{Invariant, Violation};
 use crate::heightfield::Heightfield;
 use crate::model::SampleRect;
+use crate::progress::{Progress, Unit};
 
 impl<S: Source> Store<S> {
     /// The samples of `window` (inclusive, inside the data) exactly as stored: voids NaN.
     pub fn read_window(&self, window: SampleRect) -> Result<Heightfield> {
-        let samples = self.assemble(window, |_, _, _| {})?;
+        self.read_window_with_progress(window, &crate::progress::Silent)
+    }
+
+    /// As [`Store::read_window`], telling `progress` of each block assembled.
+    pub fn read_window_with_progress(
+        &self,
+        window: SampleRect,
+        progress: &dyn Progress,
+    ) -> Result<Heightfield> {
+        let samples = self.assemble(window, |_, _, _| {}, progress)?;
         let (w, h) = window_size(&window);
         let mut metadata = self.header.metadata.clone();
         if let Some(g) = metadata.georeference.as_mut() {
@@ -42,6 +52,7 @@ impl<S: Source> Store<S> {
         &self,
         window: SampleRect,
         mut on_disagreement: impl FnMut(u32, u32, u64),
+        progress: &dyn Progress,
     ) -> Result<Vec<f32>> {
         let d = *self.domain();
         let data = d.data_rect();
@@ -76,6 +87,8 @@ impl<S: Source> Store<S> {
         let bx = |c: u64| u32::try_from(c / cells).unwrap_or(u32::MAX).min(cols - 1);
         let by = |r: u64| u32::try_from(r / cells).unwrap_or(u32::MAX).min(rows - 1);
         let (x0, y0) = (bx(window.col0), by(window.row0));
+        let blocks = u64::from(bx(window.col1) - x0 + 1) * u64::from(by(window.row1) - y0 + 1);
+        progress.start("assembling blocks", blocks, Unit::Steps);
         for y in y0..=by(window.row1) {
             for x in x0..=bx(window.col1) {
                 let block = self.block(x, y)?;
@@ -99,8 +112,10 @@ impl<S: Source> Store<S> {
                 if disagree > 0 {
                     on_disagreement(x, y, disagree);
                 }
+                progress.advance(1);
             }
         }
+        progress.finish();
         Ok(samples)
     }
 }

@@ -9,6 +9,7 @@ use crate::format::payload::GridView;
 use crate::format::Invariant;
 use crate::heightfield::Heightfield;
 use crate::model::{cluster, BuildOptions, Model, Thresholds, NO_PARENT};
+use crate::progress::Progress;
 use crate::store::write::tables::{clipped_grid, node_id};
 use crate::store::{Source, Store};
 
@@ -97,6 +98,7 @@ pub(super) fn check_measured<S: Source>(
     store: &Store<S>,
     l: &Loaded,
     checks: &mut Checks,
+    progress: &dyn Progress,
 ) -> Result<()> {
     let id = Invariant::Measured;
     let d = *store.domain();
@@ -104,7 +106,11 @@ pub(super) fn check_measured<S: Source>(
     let (cols, _) = d.nodes_across(finest);
     // Assemble the samples; blocks that share an edge must agree on it.
     let mut disagreements = Vec::new();
-    let assembled = store.assemble(d.data_rect(), |x, y, n| disagreements.push((x, y, n)));
+    let assembled = store.assemble(
+        d.data_rect(),
+        |x, y, n| disagreements.push((x, y, n)),
+        progress,
+    );
     let Some(samples) = checks.absorb(assembled)? else {
         return Ok(());
     };
@@ -125,7 +131,7 @@ pub(super) fn check_measured<S: Source>(
         block_size: d.block_size(),
         thresholds: Thresholds::Explicit(store.clusters().iter().map(|c| c.threshold).collect()),
     };
-    let model = match Model::build(hf, &options) {
+    let model = match Model::build_with_progress(hf, &options, progress) {
         Ok(m) => m,
         Err(e) => {
             checks.fail(id, format!("rebuilding: {e}"));

@@ -223,6 +223,16 @@ impl Checks {
 /// file open, or after a newer state was published, it is reported [`CheckStatus::Busy`]
 /// rather than failed, and the report is not valid.
 pub fn verify<S: Source>(src: S, mode: VerifyMode) -> Result<VerifyReport> {
+    verify_with_progress(src, mode, &crate::progress::Silent)
+}
+
+/// As [`verify`], telling `progress` how its long phases advance (payload bytes checked;
+/// with [`VerifyMode::Full`], blocks assembled and levels re-measured).
+pub fn verify_with_progress<S: Source>(
+    src: S,
+    mode: VerifyMode,
+    progress: &dyn crate::progress::Progress,
+) -> Result<VerifyReport> {
     let file_length = src.len();
     let mut checks = Checks::new();
     let slots = read_slots(&src)?;
@@ -254,7 +264,7 @@ pub fn verify<S: Source>(src: S, mode: VerifyMode) -> Result<VerifyReport> {
     let mut around = Checks::new();
     check_slots(&src, &slots, slot, &record, &mut around)?;
     if let Some(store) = &opened {
-        verify_state(store, mode, &mut checks)?;
+        verify_state(store, mode, &mut checks, progress)?;
     }
     // Were the checks around the state reading a commit in progress?
     let busy = around.any_failed()
@@ -267,7 +277,12 @@ pub fn verify<S: Source>(src: S, mode: VerifyMode) -> Result<VerifyReport> {
 }
 
 /// Every check of the state `store` holds.
-fn verify_state<S: Source>(store: &Store<S>, mode: VerifyMode, checks: &mut Checks) -> Result<()> {
+fn verify_state<S: Source>(
+    store: &Store<S>,
+    mode: VerifyMode,
+    checks: &mut Checks,
+    progress: &dyn crate::progress::Progress,
+) -> Result<()> {
     for id in [
         Invariant::Page,
         Invariant::DatasetHeader,
@@ -282,13 +297,13 @@ fn verify_state<S: Source>(store: &Store<S>, mode: VerifyMode, checks: &mut Chec
     structure::check_free_list(store, &loaded, checks);
     structure::check_nodes(store, &loaded, checks);
     structure::check_blocks(store, &loaded, checks);
-    let payload_pages = payloads::check_payloads(store, &loaded, checks)?;
+    let payload_pages = payloads::check_payloads(store, &loaded, checks, progress)?;
     structure::check_ownership(store, &loaded, &payload_pages, checks);
     structure::check_index_entries(store, &loaded, checks);
     if mode == VerifyMode::Full && !checks.any_failed() {
         full::check_cuts(store, &loaded, checks);
         full::check_adjacency(store, &loaded, checks);
-        full::check_measured(store, &loaded, checks)?;
+        full::check_measured(store, &loaded, checks, progress)?;
     }
     Ok(())
 }

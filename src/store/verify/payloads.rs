@@ -7,6 +7,7 @@ use crate::format::payload::BlockView;
 use crate::format::{
     is_zero, Invariant, PayloadRef, COMMIT_PAYLOAD_SLACK, PAYLOAD_ALIGN, VOID_BITS,
 };
+use crate::progress::{Progress, Unit};
 use crate::store::btree::PageSet;
 use crate::store::{Source, Store};
 
@@ -16,6 +17,7 @@ pub(super) fn check_payloads<S: Source>(
     store: &Store<S>,
     l: &Loaded,
     checks: &mut Checks,
+    progress: &dyn Progress,
 ) -> Result<PageSet> {
     let id = Invariant::Payload;
     let d = store.domain();
@@ -36,8 +38,11 @@ pub(super) fn check_payloads<S: Source>(
     let start = 2 * p;
     let end_of_file = store.page_count() * p;
     let mut prev_end: Option<u64> = None;
+    let total: u64 = runs.iter().map(|r| u64::from(r.0.len)).sum();
+    progress.start("checking payloads", total, Unit::Bytes);
     for &(r, what) in &runs {
         let (offset, len) = (r.offset, r.len);
+        progress.advance(u64::from(len));
         let at = format!("{what} payload at byte {offset}");
         let end = r.end();
         if offset < start || end > end_of_file || offset % PAYLOAD_ALIGN != 0 {

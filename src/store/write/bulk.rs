@@ -153,7 +153,7 @@ fn write_payloads<W: Write>(
         at += len_of(item);
     }
     let progress = &*options.progress;
-    progress.start("writing payloads", at - start);
+    progress.start("writing payloads", at - start, super::Unit::Bytes);
     let mut grid = vec![PayloadRef::default(); tree.nodes().len()];
     let mut block = vec![PayloadRef::default(); shapes.len()];
     // Encoded in parallel a window at a time, written in order.

@@ -25,22 +25,7 @@ use crate::format::DEFAULT_PAGE_SIZE;
 use crate::heightfield::{Heightfield, Metadata};
 use crate::model::{BuildOptions, Model, Thresholds, DEFAULT_BLOCK_SIZE};
 
-/// Hears how a long write advances (the command line draws a progress bar with it). Every
-/// method does nothing unless implemented.
-pub trait Progress: Send + Sync {
-    /// A phase of `total` units (bytes) starts.
-    fn start(&self, _phase: &str, _total: u64) {}
-    /// `n` more units are done.
-    fn advance(&self, _n: u64) {}
-    /// The phase is over.
-    fn finish(&self) {}
-}
-
-/// A [`Progress`] that ignores everything.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct Silent;
-
-impl Progress for Silent {}
+pub use crate::progress::{Progress, Silent, Unit};
 
 /// How to write a container.
 #[derive(Clone)]
