@@ -30,3 +30,25 @@ pub trait Progress: Send + Sync {
 pub struct Silent;
 
 impl Progress for Silent {}
+
+/// A phase in progress: finished when dropped, so an early return (an error) still ends it.
+pub struct Phase<'a>(&'a dyn Progress);
+
+impl<'a> Phase<'a> {
+    /// Starts phase `name` of `total` units on `progress`.
+    pub fn start(progress: &'a dyn Progress, name: &str, total: u64, unit: Unit) -> Phase<'a> {
+        progress.start(name, total, unit);
+        Phase(progress)
+    }
+
+    /// `n` more units are done.
+    pub fn advance(&self, n: u64) {
+        self.0.advance(n);
+    }
+}
+
+impl Drop for Phase<'_> {
+    fn drop(&mut self) {
+        self.0.finish();
+    }
+}

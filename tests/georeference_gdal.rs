@@ -75,3 +75,43 @@ fn nodata(dir: &Path, name: &str) -> Option<f64> {
     let info: serde_json::Value = serde_json::from_slice(&out.stdout).expect("gdalinfo -json");
     info["bands"][0]["noDataValue"].as_f64()
 }
+
+/// A renamed `.hgt` placed with `--tile` gets the spacing GDAL implies for the tile under its
+/// own name (GDAL itself cannot place the renamed file).
+#[test]
+fn a_renamed_hgt_with_its_tile_name_reads_as_gdal_reads_the_original() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let original = root.join("data/srtm1-asmyasnikov/S46W066.hgt.gz");
+    let out = Command::new("python3")
+        .arg(georef::committed().join("gdal_expected.py"))
+        .arg(format!("/vsigzip/{}", original.display()))
+        .env("CPL_VSIL_GZIP_WRITE_PROPERTIES", "NO")
+        .output()
+        .expect("python3 and gdalinfo (apt-get install gdal-bin)");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let want = v
+        .as_object()
+        .and_then(|o| o.values().next())
+        .expect("one entry");
+    let dir = tempfile::tempdir().unwrap();
+    let renamed = dir.path().join("my tile.hgt.gz");
+    std::fs::copy(&original, &renamed).unwrap();
+    let options = fmrh::ingest::IngestOptions {
+        tile: Some("S46W066".into()),
+        ..Default::default()
+    };
+    let hf = fmrh::ingest::load(&renamed, &options).unwrap();
+    let got = hf.metadata.spacing_m.expect("spacing");
+    for (g, w) in got.iter().zip(want["spacing_m"].as_array().unwrap()) {
+        let w = w.as_f64().unwrap();
+        assert!(
+            (g - w).abs() <= 1e-3 * w,
+            "spacing {got:?}, gdalinfo implies {w}"
+        );
+    }
+}

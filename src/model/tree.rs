@@ -98,7 +98,8 @@ impl Measurements {
         domain: &Domain,
         progress: &dyn crate::progress::Progress,
     ) -> Measurements {
-        progress.start(
+        let phase = crate::progress::Phase::start(
+            progress,
             "measuring levels",
             u64::from(domain.levels()),
             crate::progress::Unit::Steps,
@@ -107,11 +108,11 @@ impl Measurements {
             .map(|level| {
                 let (cols, rows) = domain.nodes_across(level);
                 let stats = measure_level(raster, domain, level);
-                progress.advance(1);
+                phase.advance(1);
                 (cols, rows, stats)
             })
             .collect();
-        progress.finish();
+        drop(phase);
         Measurements::from_stats(levels)
     }
 

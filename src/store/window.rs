@@ -11,7 +11,7 @@ use crate::error::{Error, Result};
 use crate::format::{Invariant, Violation};
 use crate::heightfield::Heightfield;
 use crate::model::SampleRect;
-use crate::progress::{Progress, Unit};
+use crate::progress::{Phase, Progress, Unit};
 
 impl<S: Source> Store<S> {
     /// The samples of `window` (inclusive, inside the data) exactly as stored: voids NaN.
@@ -88,7 +88,7 @@ impl<S: Source> Store<S> {
         let by = |r: u64| u32::try_from(r / cells).unwrap_or(u32::MAX).min(rows - 1);
         let (x0, y0) = (bx(window.col0), by(window.row0));
         let blocks = u64::from(bx(window.col1) - x0 + 1) * u64::from(by(window.row1) - y0 + 1);
-        progress.start("assembling blocks", blocks, Unit::Steps);
+        let phase = Phase::start(progress, "assembling blocks", blocks, Unit::Steps);
         for y in y0..=by(window.row1) {
             for x in x0..=bx(window.col1) {
                 let block = self.block(x, y)?;
@@ -112,10 +112,9 @@ impl<S: Source> Store<S> {
                 if disagree > 0 {
                     on_disagreement(x, y, disagree);
                 }
-                progress.advance(1);
+                phase.advance(1);
             }
         }
-        progress.finish();
         Ok(samples)
     }
 }

@@ -7,7 +7,7 @@ use crate::format::payload::BlockView;
 use crate::format::{
     is_zero, Invariant, PayloadRef, COMMIT_PAYLOAD_SLACK, PAYLOAD_ALIGN, VOID_BITS,
 };
-use crate::progress::{Progress, Unit};
+use crate::progress::{Phase, Progress, Unit};
 use crate::store::btree::PageSet;
 use crate::store::{Source, Store};
 
@@ -39,10 +39,10 @@ pub(super) fn check_payloads<S: Source>(
     let end_of_file = store.page_count() * p;
     let mut prev_end: Option<u64> = None;
     let total: u64 = runs.iter().map(|r| u64::from(r.0.len)).sum();
-    progress.start("checking payloads", total, Unit::Bytes);
+    let phase = Phase::start(progress, "checking payloads", total, Unit::Bytes);
     for &(r, what) in &runs {
         let (offset, len) = (r.offset, r.len);
-        progress.advance(u64::from(len));
+        phase.advance(u64::from(len));
         let at = format!("{what} payload at byte {offset}");
         let end = r.end();
         if offset < start || end > end_of_file || offset % PAYLOAD_ALIGN != 0 {
@@ -93,6 +93,7 @@ pub(super) fn check_payloads<S: Source>(
             }
         }
     }
+    drop(phase);
     if let Some(pe) = prev_end {
         zero_gap(store, pe, pe.next_multiple_of(p), p, checks)?;
     }

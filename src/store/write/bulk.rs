@@ -152,8 +152,12 @@ fn write_payloads<W: Write>(
         offsets.push(at);
         at += len_of(item);
     }
-    let progress = &*options.progress;
-    progress.start("writing payloads", at - start, super::Unit::Bytes);
+    let phase = crate::progress::Phase::start(
+        &*options.progress,
+        "writing payloads",
+        at - start,
+        super::Unit::Bytes,
+    );
     let mut grid = vec![PayloadRef::default(); tree.nodes().len()];
     let mut block = vec![PayloadRef::default(); shapes.len()];
     // Encoded in parallel a window at a time, written in order.
@@ -173,6 +177,8 @@ fn write_payloads<W: Write>(
             out.zeros(offset - out.written)?;
             sections.payload_padding += out.written - before;
             out.write(&bytes)?;
+            // The padding counts too: the total announced is the payload area's length.
+            phase.advance(out.written - before);
             let r = PayloadRef::of(offset, &bytes)
                 .ok_or_else(|| Error::Internal(format!("a payload of {} bytes", bytes.len())))?;
             match *item {
@@ -185,10 +191,9 @@ fn write_payloads<W: Write>(
                     sections.blocks += bytes.len() as u64;
                 }
             }
-            progress.advance(bytes.len() as u64);
         }
     }
-    progress.finish();
+    drop(phase);
     let before = out.written;
     out.pad_to_page()?;
     sections.payload_padding += out.written - before;
