@@ -1,6 +1,6 @@
 //! The command line behaves like its neighbours (`cat`, `gdalinfo`): a closed output pipe ends
 //! it quietly, created files honour the umask, what a killed build left is cleaned up by the
-//! next build of the same output, `--json` prints JSON even for an error, the txn id a
+//! next build of the same output, SIGTERM and SIGINT remove the file being written, `--json` prints JSON even for an error, the txn id a
 //! `replace` reports is the one `info` shows afterwards, `-` is standard output where that
 //! makes sense (and refused where it does not), completions and the man page come from the
 //! parser, `info` shows the height range and the bounds (in longitude/latitude for projected
@@ -133,6 +133,66 @@ fn the_next_build_removes_what_a_killed_build_left() {
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .collect();
     assert_eq!(names.len(), 2, "{names:?}");
+}
+
+/// SIGTERM or SIGINT in the middle of a build: the build stops, its temporary file is gone,
+/// and the output is either absent or a complete container (had the rename already happened),
+/// never half written. The signal is sent the moment the temporary file appears: a 2049² field
+/// takes long enough to write that it lands during the write.
+#[test]
+fn a_signal_during_a_build_leaves_no_temporary_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("big.f32");
+    let side = 2049u32;
+    let samples: Vec<u8> = (0..side * side)
+        .flat_map(|i| ((((i % side) * 7 + (i / side) * 13) % 1000) as f32).to_le_bytes())
+        .collect();
+    std::fs::write(&input, samples).unwrap();
+    std::fs::write(
+        dir.path().join("big.json"),
+        format!(r#"{{"width": {side}, "height": {side}, "dtype": "float32"}}"#),
+    )
+    .unwrap();
+    for (signal, name) in [(libc::SIGTERM, "term"), (libc::SIGINT, "int")] {
+        let out = dir.path().join(format!("{name}.fmrh"));
+        let mut child = fmrh()
+            .arg("build")
+            .arg(&input)
+            .args(["--spacing", "1", "-o"])
+            .arg(&out)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let temp_exists = || {
+            std::fs::read_dir(dir.path()).unwrap().any(|e| {
+                e.unwrap()
+                    .file_name()
+                    .to_string_lossy()
+                    .ends_with(".fmrh-tmp")
+            })
+        };
+        let mut signalled = false;
+        while child.try_wait().unwrap().is_none() {
+            if temp_exists() {
+                // SAFETY: kill(2) on our own child's pid, which has not been reaped yet.
+                unsafe { libc::kill(child.id() as i32, signal) };
+                signalled = true;
+                break;
+            }
+            std::thread::yield_now();
+        }
+        let status = child.wait().unwrap();
+        assert!(signalled, "{name}: the build ended before its write began");
+        assert!(!temp_exists(), "{name}: the temporary file is left behind");
+        if out.exists() {
+            // The rename won the race: then the file must be whole.
+            let v = fmrh().arg("verify").arg(&out).output().unwrap();
+            assert!(v.status.success(), "{name}: a partial output");
+        } else {
+            assert_eq!(status.code(), Some(130), "{name}: {status:?}");
+        }
+    }
 }
 
 #[test]
