@@ -160,6 +160,11 @@ impl Crs {
         Ok(Crs { epsg, kind, proj4 })
     }
 
+    /// The name a WKT gives its CRS (the root's first string), for display.
+    pub fn wkt_name(text: &str) -> Option<String> {
+        wkt::parse(text).ok()?.string(0).map(str::to_owned)
+    }
+
     /// A CRS from the name a georeference carries: `EPSG:n`, or WKT.
     pub fn parse(name: &str) -> Option<Crs> {
         let name = name.trim();
@@ -497,6 +502,10 @@ mod tests {
         let prj = r#"PROJCS["NAD_1983_HARN_StatePlane_Washington_South_FIPS_4602_Feet",GEOGCS["GCS_North_American_1983_HARN",DATUM["D_North_American_1983_HARN",SPHEROID["GRS_1980",6378137.0,298.257222101]],PRIMEM["Greenwich",0.0],UNIT["Degree",0.0174532925199433]],PROJECTION["Lambert_Conformal_Conic"],PARAMETER["False_Easting",1640416.666666667],PARAMETER["Standard_Parallel_1",45.83333333333334],UNIT["Foot_US",0.3048006096012192]]"#;
         let crs = Crs::from_wkt(prj).expect("parses");
         assert_eq!(crs.epsg, None);
+        assert_eq!(
+            Crs::wkt_name(prj).as_deref(),
+            Some("NAD_1983_HARN_StatePlane_Washington_South_FIPS_4602_Feet")
+        );
         let m = crs.metres_per_unit().expect("unit");
         assert!((m - US_FT).abs() < 1e-12);
         assert_eq!(

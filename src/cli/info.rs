@@ -69,6 +69,18 @@ struct GeoInfo {
     lon_lat_bounds: Option<[f64; 4]>,
 }
 
+/// A CRS for the text report: a WKT shown by its name (the JSON report has it whole).
+fn crs_label(crs: &str) -> String {
+    if crs.contains('[') {
+        match Crs::wkt_name(crs) {
+            Some(name) => format!("\"{name}\" (WKT)"),
+            None => "(WKT)".into(),
+        }
+    } else {
+        crs.to_owned()
+    }
+}
+
 /// The longitude/latitude box of `bounds` (`[min x, min y, max x, max y]`) in CRS `name`.
 fn lon_lat_bounds(name: &str, b: [f64; 4]) -> Option<[f64; 4]> {
     if name == "geographic (arc-seconds)" {
@@ -281,7 +293,7 @@ fn print_info(path: &std::path::Path, i: &Info) {
     if let Some(g) = &i.georeference {
         println!(
             "  georef      {} origin {:?} step {:?}",
-            g.crs.as_deref().unwrap_or("(no CRS)"),
+            g.crs.as_deref().map_or("(no CRS)".into(), crs_label),
             g.origin,
             g.step
         );
