@@ -80,6 +80,7 @@
 //! [`scene`] selects blocks for cameras, and [`curve`] knows Hilbert and Morton keys and
 //! nothing of terrain. Errors say whose fault they are ([`Error`]).
 
+pub mod codec;
 pub mod crs;
 pub mod curve;
 pub mod error;

@@ -1,0 +1,539 @@
+//! Block codecs: a grid of `f32` heights (voids as NaN) to bytes and back, bit for bit.
+//!
+//! Terrain heights are smooth, and most sources store them on a lattice: SRTM in whole
+//! metres, a 16-bit PNG at 0.1 m, a USGS DEM at 1 m. A general-purpose compressor (DEFLATE,
+//! zstd) sees neither: on 65² blocks of real DEMs it keeps 11–62 % of the raw bytes. This
+//! module tries, per block, the encodings that do see them and keeps the smallest:
+//!
+//! | id | encoding | when |
+//! |---|---|---|
+//! | 0 | raw little-endian `f32` | nothing smaller |
+//! | 1 | constant: one `f32`'s bits | every sample has the same bits (sea, an all-void block) |
+//! | 2 | lattice: integers `k` with `h = (k · q) as f32` exactly, predicted in 2D | every real sample lies on a lattice step `q` of [`LATTICE_STEPS`] |
+//! | 3 | pco on the `f32` values | floats off any lattice |
+//! | 4 | pco on 2D-predicted residuals of the `f32` bits | floats off any lattice |
+//!
+//! **The 2D predictor** is the planar (Lorenzo) predictor `left + up - up_left`, which is
+//! exact on any plane: residuals on terrain are small and centred on zero. **pco**
+//! (pcodec, a pure-Rust codec for numeric columns) then codes the residuals with binning and
+//! tANS. Measured on 65² blocks (`cargo bench --bench codecs`), this keeps 29 % of Puget
+//! Sound 1k's bytes where zstd keeps 57 % and plain pco 33 %, and decodes at about 1 GB/s.
+//!
+//! **Voids** are the canonical NaN (`0x7FC00000`). The lattice encoding lists them in a
+//! bitmap and predicts through them; any other NaN bits, `-0.0`, or infinities send the block
+//! to an encoding that keeps bits as they are (1, 3, 4 or 0), so every encoding round-trips
+//! bit for bit.
+//!
+//! **Hostile bytes.** [`decode`] writes into a buffer of the declared size and never
+//! allocates from a length in the input: a stream that claims more or fewer samples than the
+//! block holds, trailing bytes, an unknown id or a bad lattice step is a [`DecodeError`],
+//! never a panic. (The payload CRC catches corruption before decoding; this is the second
+//! line.)
+//!
+//! The module knows nothing of files: the format stores its output as payload bytes.
+
+use pco::standalone::{simple_compress, DecompressorItem, FileDecompressor};
+use pco::{ChunkConfig, DeltaSpec};
+
+/// The bits of a void sample.
+pub const VOID_BITS: u32 = 0x7FC0_0000;
+
+/// The lattice steps a lossless encoding tries, coarsest first: whole units and the binary
+/// and decimal fractions sources quantise to.
+pub const LATTICE_STEPS: [f64; 9] = [1.0, 0.5, 0.25, 0.125, 0.1, 0.05, 0.01, 0.001, 0.0001];
+
+/// The largest lattice index `|k|` stored: beyond it the block is not a lattice.
+const MAX_LATTICE_INDEX: f64 = (1u64 << 40) as f64;
+
+/// An encoding's id, the first byte of every encoded block.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
+pub enum Encoding {
+    /// Raw little-endian `f32`.
+    Raw = 0,
+    /// One `f32`'s bits for every sample.
+    Constant = 1,
+    /// Integers on a lattice step, 2D-predicted, pco-coded.
+    Lattice = 2,
+    /// pco on the `f32` values.
+    FloatPco = 3,
+    /// pco on 2D-predicted residuals of the `f32` bits.
+    FloatPredicted = 4,
+}
+
+impl Encoding {
+    /// The encoding of id `byte`.
+    pub fn from_id(byte: u8) -> Option<Encoding> {
+        Some(match byte {
+            0 => Encoding::Raw,
+            1 => Encoding::Constant,
+            2 => Encoding::Lattice,
+            3 => Encoding::FloatPco,
+            4 => Encoding::FloatPredicted,
+            _ => return None,
+        })
+    }
+
+    /// The encoding `bytes` (an encoded block) uses.
+    pub fn of(bytes: &[u8]) -> Option<Encoding> {
+        bytes.first().and_then(|&b| Encoding::from_id(b))
+    }
+}
+
+/// Why bytes do not decode to a block.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum DecodeError {
+    /// Empty input, or an id no encoding has.
+    #[error("unknown block encoding {0:?}")]
+    UnknownEncoding(Option<u8>),
+    /// The bytes end before the encoding's fixed part does, or go on after it.
+    #[error("{encoding:?} block of {len} bytes: {detail}")]
+    Length {
+        /// The encoding.
+        encoding: Encoding,
+        /// The input's length.
+        len: usize,
+        /// What is wrong.
+        detail: String,
+    },
+    /// A lattice step that is not finite and positive.
+    #[error("lattice step {0} is not finite and positive")]
+    Step(f64),
+    /// The pco stream is damaged or holds the wrong count.
+    #[error("pco stream: {0}")]
+    Pco(String),
+}
+
+/// Encodes a `width`-wide row-major block, picking the smallest encoding.
+///
+/// # Panics
+/// If `samples.len()` is not a multiple of a non-zero `width` (a caller's bug).
+pub fn encode(samples: &[f32], width: usize) -> Vec<u8> {
+    assert!(
+        width > 0 && samples.len().is_multiple_of(width),
+        "encode: {} samples in rows of {width}",
+        samples.len()
+    );
+    let Some(&first) = samples.first() else {
+        return vec![Encoding::Raw as u8];
+    };
+    if samples.iter().all(|v| v.to_bits() == first.to_bits()) {
+        let mut out = vec![Encoding::Constant as u8];
+        out.extend_from_slice(&first.to_bits().to_le_bytes());
+        return out;
+    }
+    let mut best = raw(samples);
+    let mut keep = |candidate: Option<Vec<u8>>| {
+        if let Some(c) = candidate {
+            if c.len() < best.len() {
+                best = c;
+            }
+        }
+    };
+    match LATTICE_STEPS.iter().find(|&&q| on_lattice(samples, q)) {
+        // On a lattice the float encodings cannot win by much; skip their cost.
+        Some(&q) => keep(lattice(samples, width, q)),
+        None => {
+            keep(float_pco(samples));
+            keep(float_predicted(samples, width));
+        }
+    }
+    best
+}
+
+/// Decodes `bytes` into `out`, a `width`-wide block of `out.len()` samples.
+pub fn decode(bytes: &[u8], width: usize, out: &mut [f32]) -> Result<(), DecodeError> {
+    let encoding =
+        Encoding::of(bytes).ok_or(DecodeError::UnknownEncoding(bytes.first().copied()))?;
+    let body = &bytes[1..];
+    let length = |detail: String| DecodeError::Length {
+        encoding,
+        len: bytes.len(),
+        detail,
+    };
+    if width == 0 || !out.len().is_multiple_of(width) {
+        return Err(length(format!(
+            "{} samples do not make rows of {width}",
+            out.len()
+        )));
+    }
+    match encoding {
+        Encoding::Raw => {
+            if body.len() != 4 * out.len() {
+                return Err(length(format!(
+                    "{} samples need {} bytes",
+                    out.len(),
+                    4 * out.len()
+                )));
+            }
+            for (o, b) in out.iter_mut().zip(body.chunks_exact(4)) {
+                *o = f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
+            }
+        }
+        Encoding::Constant => {
+            let bits: [u8; 4] = body
+                .try_into()
+                .map_err(|_| length("a constant is 4 bytes".into()))?;
+            out.fill(f32::from_bits(u32::from_le_bytes(bits)));
+        }
+        Encoding::Lattice => {
+            let n = out.len();
+            let bitmap_len = n.div_ceil(8);
+            if body.len() < 9 {
+                return Err(length("shorter than its step and flags".into()));
+            }
+            let q = f64::from_le_bytes(body[..8].try_into().unwrap_or([0; 8]));
+            if !(q.is_finite() && q > 0.0) {
+                return Err(DecodeError::Step(q));
+            }
+            let (voids, rest) = match body[8] {
+                0 => (None, &body[9..]),
+                1 if body.len() >= 9 + bitmap_len => {
+                    (Some(&body[9..9 + bitmap_len]), &body[9 + bitmap_len..])
+                }
+                flag => return Err(length(format!("void flag {flag}, or a short bitmap"))),
+            };
+            let mut residuals = vec![0i64; n];
+            pco_decode(rest, &mut residuals)?;
+            let mut k = vec![0i64; n];
+            for i in 0..n {
+                let p = predict(&k, i, width);
+                let void = voids.is_some_and(|m| m[i / 8] >> (i % 8) & 1 == 1);
+                k[i] = if void {
+                    p
+                } else {
+                    p.wrapping_add(residuals[i])
+                };
+                if k[i].unsigned_abs() > MAX_LATTICE_INDEX as u64 {
+                    return Err(DecodeError::Pco(format!(
+                        "lattice index {} at sample {i} is out of range",
+                        k[i]
+                    )));
+                }
+                out[i] = if void {
+                    f32::from_bits(VOID_BITS)
+                } else {
+                    (k[i] as f64 * q) as f32
+                };
+            }
+        }
+        Encoding::FloatPco => pco_decode(body, out)?,
+        Encoding::FloatPredicted => {
+            let mut residuals = vec![0u32; out.len()];
+            pco_decode(body, &mut residuals)?;
+            let mut u = vec![0u32; out.len()];
+            for i in 0..out.len() {
+                let r = residuals[i];
+                let d = ((r >> 1) as i32 ^ -((r & 1) as i32)) as u32;
+                u[i] = predict_u32(&u, i, width).wrapping_add(d);
+                out[i] = from_ordered(u[i]);
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Whether every real sample of `samples` is exactly `(k · q) as f32` for an integer `k`
+/// within range, and every void the canonical NaN; `-0.0` is not on a lattice (it would
+/// come back as `+0.0`), nor any other NaN or an infinity.
+fn on_lattice(samples: &[f32], q: f64) -> bool {
+    samples.iter().all(|&v| {
+        if v.is_nan() {
+            return v.to_bits() == VOID_BITS;
+        }
+        let k = (f64::from(v) / q).round();
+        k.abs() <= MAX_LATTICE_INDEX
+            && (k * q) as f32 == v
+            && !(v == 0.0 && v.is_sign_negative())
+            && v.is_finite()
+    })
+}
+
+fn raw(samples: &[f32]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(1 + 4 * samples.len());
+    out.push(Encoding::Raw as u8);
+    for v in samples {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+    out
+}
+
+/// The planar prediction of cell `i` from its decoded neighbours.
+fn predict(k: &[i64], i: usize, width: usize) -> i64 {
+    match (i % width, i / width) {
+        (0, 0) => 0,
+        (_, 0) => k[i - 1],
+        (0, _) => k[i - width],
+        _ => k[i - 1]
+            .wrapping_add(k[i - width])
+            .wrapping_sub(k[i - width - 1]),
+    }
+}
+
+fn predict_u32(u: &[u32], i: usize, width: usize) -> u32 {
+    match (i % width, i / width) {
+        (0, 0) => 0,
+        (_, 0) => u[i - 1],
+        (0, _) => u[i - width],
+        _ => u[i - 1]
+            .wrapping_add(u[i - width])
+            .wrapping_sub(u[i - width - 1]),
+    }
+}
+
+fn lattice(samples: &[f32], width: usize, q: f64) -> Option<Vec<u8>> {
+    let n = samples.len();
+    let mut k = vec![0i64; n];
+    let mut residuals = vec![0i64; n];
+    let mut bitmap = vec![0u8; n.div_ceil(8)];
+    let mut any_void = false;
+    for i in 0..n {
+        let p = predict(&k, i, width);
+        if samples[i].is_nan() {
+            // Predicted through: the void costs a zero residual and a bitmap bit.
+            k[i] = p;
+            bitmap[i / 8] |= 1 << (i % 8);
+            any_void = true;
+        } else {
+            k[i] = (f64::from(samples[i]) / q).round() as i64;
+            residuals[i] = k[i].wrapping_sub(p);
+        }
+    }
+    let config = ChunkConfig::default().with_delta_spec(DeltaSpec::NoOp);
+    let coded = simple_compress(&residuals, &config).ok()?;
+    let mut out = Vec::with_capacity(10 + bitmap.len() + coded.len());
+    out.push(Encoding::Lattice as u8);
+    out.extend_from_slice(&q.to_le_bytes());
+    if any_void {
+        out.push(1);
+        out.extend_from_slice(&bitmap);
+    } else {
+        out.push(0);
+    }
+    out.extend_from_slice(&coded);
+    Some(out)
+}
+
+fn float_pco(samples: &[f32]) -> Option<Vec<u8>> {
+    let coded = simple_compress(samples, &ChunkConfig::default()).ok()?;
+    let mut out = Vec::with_capacity(1 + coded.len());
+    out.push(Encoding::FloatPco as u8);
+    out.extend_from_slice(&coded);
+    Some(out)
+}
+
+/// `f32` bits mapped so that integer order is float order (negative floats reversed).
+fn to_ordered(v: f32) -> u32 {
+    let b = v.to_bits();
+    if b & 0x8000_0000 != 0 {
+        !b
+    } else {
+        b | 0x8000_0000
+    }
+}
+
+fn from_ordered(u: u32) -> f32 {
+    f32::from_bits(if u & 0x8000_0000 != 0 {
+        u & 0x7FFF_FFFF
+    } else {
+        !u
+    })
+}
+
+fn float_predicted(samples: &[f32], width: usize) -> Option<Vec<u8>> {
+    let u: Vec<u32> = samples.iter().map(|&v| to_ordered(v)).collect();
+    let residuals: Vec<u32> = (0..u.len())
+        .map(|i| {
+            let d = u[i].wrapping_sub(predict_u32(&u, i, width)) as i32;
+            ((d << 1) ^ (d >> 31)) as u32
+        })
+        .collect();
+    let config = ChunkConfig::default().with_delta_spec(DeltaSpec::NoOp);
+    let coded = simple_compress(&residuals, &config).ok()?;
+    let mut out = Vec::with_capacity(1 + coded.len());
+    out.push(Encoding::FloatPredicted as u8);
+    out.extend_from_slice(&coded);
+    Some(out)
+}
+
+/// Decodes a pco stream of exactly `out.len()` numbers into `out`: no allocation sized by
+/// the stream, no bytes after its end.
+fn pco_decode<T: pco::data_types::Number>(src: &[u8], out: &mut [T]) -> Result<(), DecodeError> {
+    let err = |e: pco::errors::PcoError| DecodeError::Pco(e.to_string());
+    let (file, mut rest) = FileDecompressor::new(src).map_err(err)?;
+    let mut done = 0usize;
+    loop {
+        match file.chunk_decompressor::<T, &[u8]>(rest).map_err(err)? {
+            DecompressorItem::Chunk(mut chunk) => {
+                let n = chunk.n();
+                if n > out.len() - done {
+                    return Err(DecodeError::Pco(format!(
+                        "a chunk of {n} numbers past the block's {}",
+                        out.len()
+                    )));
+                }
+                let progress = chunk.read(&mut out[done..done + n]).map_err(err)?;
+                if progress.n_processed != n || !progress.finished {
+                    return Err(DecodeError::Pco(format!(
+                        "a chunk of {n} numbers decoded {}",
+                        progress.n_processed
+                    )));
+                }
+                done += n;
+                rest = chunk.into_src();
+            }
+            DecompressorItem::EndOfData(tail) => {
+                if done != out.len() {
+                    return Err(DecodeError::Pco(format!(
+                        "{done} numbers for a block of {}",
+                        out.len()
+                    )));
+                }
+                if !tail.is_empty() {
+                    return Err(DecodeError::Pco(format!(
+                        "{} bytes after the end of the stream",
+                        tail.len()
+                    )));
+                }
+                return Ok(());
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn round_trip(samples: &[f32], width: usize) -> Encoding {
+        let bytes = encode(samples, width);
+        let mut out = vec![0.0f32; samples.len()];
+        decode(&bytes, width, &mut out).expect("decodes");
+        for (i, (a, b)) in samples.iter().zip(&out).enumerate() {
+            assert_eq!(a.to_bits(), b.to_bits(), "sample {i}: {a} became {b}");
+        }
+        Encoding::of(&bytes).expect("an encoding")
+    }
+
+    #[test]
+    fn each_encoding_is_chosen_where_it_fits() {
+        let w = 65;
+        let flat = vec![12.5f32; w * w];
+        assert_eq!(round_trip(&flat, w), Encoding::Constant);
+        let void = vec![f32::from_bits(VOID_BITS); w * w];
+        assert_eq!(round_trip(&void, w), Encoding::Constant);
+        let ints: Vec<f32> = (0..w * w)
+            .map(|i| ((i % w) * 3 + (i / w) * 2 + (i * 7919) % 5) as f32)
+            .collect();
+        assert_eq!(round_trip(&ints, w), Encoding::Lattice);
+        let tenths: Vec<f32> = (0..w * w)
+            .map(|i| ((i % w) as f64 * 0.1 + (i / w) as f64 * 0.3) as f32)
+            .collect();
+        assert_eq!(round_trip(&tenths, w), Encoding::Lattice);
+        let smooth: Vec<f32> = (0..w * w)
+            .map(|i| ((i % w) as f32 * 0.0173).sin() * 100.0 + (i / w) as f32 * 0.311)
+            .collect();
+        assert!(matches!(
+            round_trip(&smooth, w),
+            Encoding::FloatPco | Encoding::FloatPredicted
+        ));
+    }
+
+    #[test]
+    fn hard_values_come_back_bit_for_bit() {
+        let w = 8;
+        let mut v: Vec<f32> = (0..64).map(|i| i as f32).collect();
+        v[3] = -0.0;
+        v[9] = f32::from_bits(1); // the smallest subnormal
+        v[10] = -f32::from_bits(0x007F_FFFF);
+        v[17] = f32::MAX;
+        v[18] = -f32::MAX;
+        v[30] = f32::from_bits(VOID_BITS);
+        v[31] = f32::from_bits(0x7FC0_0001); // a NaN with a payload
+        v[40] = f32::from_bits(0xFFC0_0000); // a negative NaN
+        assert_ne!(round_trip(&v, w), Encoding::Lattice);
+        // Canonical voids alone stay on the lattice.
+        let mut v: Vec<f32> = (0..64).map(|i| (i * i) as f32).collect();
+        v[5] = f32::from_bits(VOID_BITS);
+        v[63] = f32::from_bits(VOID_BITS);
+        assert_eq!(round_trip(&v, w), Encoding::Lattice);
+        // A single fractional sample in integer data moves the lattice to its step.
+        let mut v: Vec<f32> = (0..64).map(|i| (i % 8 + i / 8) as f32).collect();
+        v[20] += 0.5;
+        round_trip(&v, w);
+        // Rows of one, columns of one.
+        round_trip(&[1.0, 2.0, 4.0, 8.0], 1);
+        round_trip(&[1.0, 2.0, 4.0, 8.0], 4);
+    }
+
+    #[test]
+    fn hostile_bytes_are_errors() {
+        let w = 9;
+        let v: Vec<f32> = (0..81).map(|i| (i % 9 * 2 + i / 9) as f32).collect();
+        let good = encode(&v, w);
+        assert_eq!(Encoding::of(&good), Some(Encoding::Lattice));
+        let mut out = vec![0.0f32; 81];
+        let bad = |bytes: &[u8], out: &mut [f32]| decode(bytes, w, out).is_err();
+        assert!(bad(&[], &mut out));
+        assert!(bad(&[9], &mut out));
+        assert!(bad(&good[..good.len() - 1], &mut out));
+        let mut longer = good.clone();
+        longer.push(0);
+        assert!(bad(&longer, &mut out));
+        // The same stream for a block of another size.
+        assert!(bad(&good, &mut vec![0.0; 72]));
+        assert!(bad(&good, &mut vec![0.0; 90]));
+        // A step of zero, NaN, negative.
+        for q in [0.0f64, f64::NAN, -1.0] {
+            let mut b = good.clone();
+            b[1..9].copy_from_slice(&q.to_le_bytes());
+            assert!(bad(&b, &mut out));
+        }
+        assert!(bad(&[1, 0, 0], &mut out));
+        assert!(bad(&[0, 0, 0, 0], &mut out));
+    }
+
+    proptest::proptest! {
+        /// Any samples, any shape: encode then decode gives the same bits.
+        #[test]
+        fn any_block_round_trips(
+            bits in proptest::collection::vec(proptest::prelude::any::<u32>(), 1..200),
+            width in 1usize..20,
+            lattice in proptest::bool::ANY,
+        ) {
+            let n = bits.len() / width * width;
+            proptest::prop_assume!(n > 0);
+            let samples: Vec<f32> = bits[..n]
+                .iter()
+                .map(|&b| if lattice { ((b % 2000) as f32 - 1000.0) * 0.25 } else { f32::from_bits(b) })
+                .collect();
+            round_trip(&samples, width);
+        }
+
+        /// A real encoding with any byte changed, or cut anywhere, decodes or fails.
+        #[test]
+        fn damaged_encodings_decode_or_fail(at in 0usize..4000, value in proptest::prelude::any::<u8>(), cut in 0usize..4000, kind in 0usize..3) {
+            let w = 33;
+            let samples: Vec<f32> = (0..w * w)
+                .map(|i| match kind {
+                    0 => ((i % w) * 3 + (i / w) * 5 % 7) as f32,
+                    1 => ((i % w) as f32 * 0.0173).sin() * 100.0 + (i / w) as f32 * 0.311,
+                    _ => if i % 17 == 0 { f32::from_bits(VOID_BITS) } else { (i % 97) as f32 * 0.1 },
+                })
+                .collect();
+            let mut bytes = encode(&samples, w);
+            let at = at % bytes.len();
+            bytes[at] = value;
+            bytes.truncate(cut.max(1));
+            let mut out = vec![0.0f32; w * w];
+            let _ = decode(&bytes, w, &mut out);
+        }
+
+        /// Any bytes decode or fail; nothing panics.
+        #[test]
+        fn any_bytes_decode_or_fail(bytes in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..300), width in 1usize..12, rows in 1usize..12) {
+            let mut out = vec![0.0f32; width * rows];
+            let _ = decode(&bytes, width, &mut out);
+        }
+    }
+}
