@@ -115,6 +115,15 @@ fn readers_running_scenes_see_only_whole_snapshots() {
                 }
             });
         }
+        // Readers stop when the writer is done, or when it panics: a failing commit must fail
+        // the test, not leave the readers looping.
+        struct DoneOnDrop<'a>(&'a AtomicBool);
+        impl Drop for DoneOnDrop<'_> {
+            fn drop(&mut self) {
+                self.0.store(true, Ordering::Release);
+            }
+        }
+        let _done = DoneOnDrop(&done);
         let mut rng = Rng::new(7);
         for i in 0..24u32 {
             let (col0, row0) = (rng.next_u64() % 440, rng.next_u64() % 440);

@@ -145,15 +145,15 @@ fn vector_commit_record_fields_sit_where_the_spec_says() {
     // Spot checks against the byte table of format-spec/container.md §2.
     let bytes = build(&vectors()[1]);
     assert_eq!(&bytes[0..8], b"FMRH\r\n\x1a\n");
-    assert_eq!(u16::from_le_bytes([bytes[8], bytes[9]]), 1); // major
-    assert_eq!(u16::from_le_bytes([bytes[10], bytes[11]]), 2); // minor
+    assert_eq!(u16::from_le_bytes([bytes[8], bytes[9]]), 2); // major
+    assert_eq!(u16::from_le_bytes([bytes[10], bytes[11]]), 0); // minor
     assert_eq!(u32::from_le_bytes(bytes[12..16].try_into().unwrap()), 1024); // page size
     assert_eq!(u64::from_le_bytes(bytes[16..24].try_into().unwrap()), 1); // txn id
     assert_eq!(
         u64::from_le_bytes(bytes[24..32].try_into().unwrap()),
         bytes.len() as u64
     );
-    // pages_txn (1.2): the fresh file's one transaction wrote every structured page.
+    // pages_txn (1.2 and 2.x): the fresh file's one transaction wrote every structured page.
     assert_eq!(u64::from_le_bytes(bytes[168..176].try_into().unwrap()), 1);
     assert!(bytes[176..252].iter().all(|&b| b == 0));
     let crc = crc32fast::hash(&bytes[..252]);
@@ -178,59 +178,48 @@ fn vector_commit_record_fields_sit_where_the_spec_says() {
     );
 }
 
+/// Format 1.x files (the 1.1 and 1.2 vectors, kept as they were written) are read sample for
+/// sample and pass `verify --full`, and a write is refused with a message that says to
+/// rebuild, before anything is written (format §8).
 #[test]
-fn format_1_1_vectors_read_verify_and_take_a_transaction() {
-    use fmrh::model::SampleRect;
-    for v in vectors() {
-        let old = dir().join("v1.1").join(format!("{}.fmrh", v.name));
-        let store = fmrh::Store::open(&old).unwrap();
-        assert_eq!(store.state().format_version, (1, 1), "{}", v.name);
-        let all = store.domain().data_rect();
-        let samples = store.read_window(all).unwrap();
-        let want = v.field.samples();
-        assert_eq!(samples.samples().len(), want.len());
-        for (a, b) in samples.samples().iter().zip(want) {
-            assert!(
-                a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()),
-                "{}",
-                v.name
-            );
-        }
-        let report = fmrh::verify(
-            fmrh::store::FileSource::open(&old).unwrap(),
-            fmrh::VerifyMode::Full,
-        )
-        .unwrap();
-        assert!(report.valid, "{}: {report:?}", v.name);
-        drop(store);
-
-        // A 1.2 writer's commit on a 1.1 file writes a 1.2 state: tagged pages, pages_txn.
-        let dir = tempfile::tempdir().unwrap();
-        let copy = dir.path().join("old.fmrh");
-        std::fs::copy(&old, &copy).unwrap();
-        let container = fmrh::Container::open(&copy).unwrap();
-        let mut txn = container.begin_write().unwrap();
-        let patch = Heightfield::from_fn(2, 2, |_, _| 77.0).unwrap();
-        txn.replace_region(1, 1, &patch).unwrap();
-        let summary = txn.commit().unwrap();
-        container.close().unwrap();
-        let after = fmrh::Store::open(&copy).unwrap();
-        assert_eq!(after.state().format_version, (1, 2), "{}", v.name);
-        let r = after
-            .read_window(SampleRect {
-                col0: 1,
-                row0: 1,
-                col1: 2,
-                row1: 2,
-            })
+fn format_1_vectors_read_verify_and_refuse_writes() {
+    for (minor, folder) in [(1u16, "v1.1"), (2, "v1.2")] {
+        for v in vectors() {
+            let old = dir().join(folder).join(format!("{}.fmrh", v.name));
+            let store = fmrh::Store::open(&old).unwrap();
+            assert_eq!(store.state().format_version, (1, minor), "{}", v.name);
+            let all = store.domain().data_rect();
+            let samples = store.read_window(all).unwrap();
+            let want = v.field.samples();
+            assert_eq!(samples.samples().len(), want.len());
+            for (a, b) in samples.samples().iter().zip(want) {
+                assert!(
+                    a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()),
+                    "{}",
+                    v.name
+                );
+            }
+            let report = fmrh::verify(
+                fmrh::store::FileSource::open(&old).unwrap(),
+                fmrh::VerifyMode::Full,
+            )
             .unwrap();
-        assert_eq!(r.samples(), &[77.0; 4]);
-        assert!(summary.txn_id > 1);
-        let report = fmrh::verify(
-            fmrh::store::FileSource::open(&copy).unwrap(),
-            fmrh::VerifyMode::Full,
-        )
-        .unwrap();
-        assert!(report.valid, "{}: {report:?}", v.name);
+            assert!(report.valid, "{}: {report:?}", v.name);
+            drop(store);
+
+            let dir = tempfile::tempdir().unwrap();
+            let copy = dir.path().join("old.fmrh");
+            std::fs::copy(&old, &copy).unwrap();
+            let before = std::fs::read(&copy).unwrap();
+            let err = fmrh::Container::open(&copy)
+                .err()
+                .expect("a 1.x file is read-only");
+            assert!(
+                matches!(err, fmrh::Error::Unsupported { .. })
+                    && err.to_string().contains("rebuild"),
+                "{err}"
+            );
+            assert_eq!(std::fs::read(&copy).unwrap(), before, "the refusal wrote");
+        }
     }
 }

@@ -92,7 +92,7 @@ fn every_phase_finishes_and_adds_up() {
     assert_eq!(phases.len(), 1);
     assert_eq!(
         (phases[0].0.as_str(), phases[0].2),
-        ("writing payloads", Unit::Bytes)
+        ("coding and writing payloads", Unit::Bytes)
     );
     assert!(phases[0].1 > 0);
 

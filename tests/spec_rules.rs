@@ -14,6 +14,7 @@
 mod common;
 
 use common::txn::{build_bytes, patch};
+use fmrh::format::FORMAT_MAJOR;
 use fmrh::model::{cluster, Thresholds};
 use fmrh::store::io::SimDisk;
 use fmrh::store::{verify, Bytes, CheckStatus, Container};
@@ -64,13 +65,16 @@ fn check(report: &fmrh::VerifyReport, id: Invariant) -> CheckStatus {
 fn a_newer_major_versions_record_makes_the_file_unsupported() {
     let clean = fresh();
     let p = u32_at(&clean, 12);
-    // Slot 1: a sealed record of major 2 with a higher txn id than slot 0's (1).
+    let (current, newer) = (FORMAT_MAJOR, FORMAT_MAJOR + 1);
+    // Slot 1: a sealed record of the next major with a higher txn id than slot 0's (1).
     let mut file = clean.clone();
-    put_record(&mut file, p as usize, record_like(&clean, 2, 2, p));
+    put_record(&mut file, p as usize, record_like(&clean, newer, 2, p));
     match Store::from_bytes(file.clone()) {
-        Err(Error::Unsupported { reason, .. }) => assert!(reason.contains("2."), "{reason}"),
+        Err(Error::Unsupported { reason, .. }) => {
+            assert!(reason.contains(&format!("{newer}.")), "{reason}")
+        }
         other => panic!(
-            "a superseded 1.x state was opened: {:?}",
+            "a superseded state was opened: {:?}",
             other.map(|s| s.txn_id())
         ),
     }
@@ -78,19 +82,19 @@ fn a_newer_major_versions_record_makes_the_file_unsupported() {
         verify(Bytes(&file), VerifyMode::Full),
         Err(Error::Unsupported { .. })
     ));
-    // In slot 0 too, with slot 1 holding the older 1.x state.
+    // In slot 0 too, with slot 1 holding the older state of the current major.
     let mut file = clean.clone();
     let older = clean[..256].to_vec();
     put_record(&mut file, p as usize, older);
-    put_record(&mut file, 0, record_like(&clean, 2, 7, p));
+    put_record(&mut file, 0, record_like(&clean, newer, 7, p));
     assert!(matches!(
         Store::from_bytes(file),
         Err(Error::Unsupported { .. })
     ));
-    // A major-2 record *older* than the valid 1.x one does not hide it.
+    // A newer major's record *older* than the valid one does not hide it.
     let mut file = clean.clone();
-    put_record(&mut file, 0, record_like(&clean, 1, 5, p));
-    put_record(&mut file, p as usize, record_like(&clean, 2, 4, p));
+    put_record(&mut file, 0, record_like(&clean, current, 5, p));
+    put_record(&mut file, p as usize, record_like(&clean, newer, 4, p));
     let store = Store::from_bytes(file.clone()).unwrap();
     assert_eq!(store.txn_id(), 5);
     let report = verify(Bytes(&file), VerifyMode::Fast).unwrap();
@@ -105,7 +109,11 @@ fn a_slot_1_record_of_another_page_size_is_invalid() {
     for other in [1024u32, 8192] {
         let mut file = clean.clone();
         // A newer, sealed, otherwise valid record at offset P naming another page size.
-        put_record(&mut file, p as usize, record_like(&clean, 1, 2, other));
+        put_record(
+            &mut file,
+            p as usize,
+            record_like(&clean, FORMAT_MAJOR, 2, other),
+        );
         let store = Store::from_bytes(file.clone()).unwrap();
         assert_eq!(store.txn_id(), 1, "page size {other}: slot 1 was taken");
         let report = verify(Bytes(&file), VerifyMode::Full).unwrap();
@@ -113,7 +121,11 @@ fn a_slot_1_record_of_another_page_size_is_invalid() {
         assert!(!report.valid);
         // Slot 1 with the right page size is taken.
         let mut file = clean.clone();
-        put_record(&mut file, p as usize, record_like(&clean, 1, 2, p));
+        put_record(
+            &mut file,
+            p as usize,
+            record_like(&clean, FORMAT_MAJOR, 2, p),
+        );
         assert_eq!(Store::from_bytes(file).unwrap().txn_id(), 2);
     }
 }

@@ -25,8 +25,8 @@ use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
 use super::blob::BlobRef;
 use super::tree::TreeRef;
 use super::{
-    crc32, is_zero, page_size_is_valid, Invariant, Violation, FORMAT_MAJOR, FORMAT_MINOR, MAGIC,
-    MAX_PAGE_SIZE, MIN_PAGE_SIZE,
+    crc32, is_zero, page_size_is_valid, Invariant, Violation, FORMAT_MAJOR, FORMAT_MINOR,
+    LAST_MINOR_OF_1, MAGIC, MAX_PAGE_SIZE, MIN_PAGE_SIZE,
 };
 
 /// Bytes of a commit record at the start of its slot page; the rest of the page is zero.
@@ -161,6 +161,16 @@ impl CommitRecord {
         self.crc = U32::new(crc32(&self.as_bytes()[..COMMIT_CRC_SPAN]));
     }
 
+    /// Whether its pages carry txn tags and the record `pages_txn` (format 1.2 and 2.x).
+    pub fn binds_pages(&self) -> bool {
+        self.major.get() >= 2 || self.minor.get() >= 2
+    }
+
+    /// Whether its payloads are stored coded (format 2.x; 1.x stores them raw).
+    pub fn payloads_coded(&self) -> bool {
+        self.major.get() >= 2
+    }
+
     /// Whether `flag` is set.
     pub fn has_flag(&self, flag: u32) -> bool {
         self.flags.get() & flag != 0
@@ -169,7 +179,7 @@ impl CommitRecord {
     /// The txn tag every structured page of this state carries: the low bits of `pages_txn`
     /// in a 1.2 file, zero (the field was reserved) before.
     pub fn page_txn_tag(&self) -> u16 {
-        if self.minor.get() >= 2 {
+        if self.binds_pages() {
             super::page::txn_tag(self.pages_txn.get())
         } else {
             0
@@ -262,7 +272,7 @@ pub fn classify(bytes: &[u8], slot: u8, offset: u64) -> Slot {
             r.crc.get()
         ));
     }
-    if r.major.get() != FORMAT_MAJOR {
+    if !(1..=FORMAT_MAJOR).contains(&r.major.get()) {
         return Slot::Foreign {
             major: r.major.get(),
             minor: r.minor.get(),
@@ -286,18 +296,21 @@ pub fn classify(bytes: &[u8], slot: u8, offset: u64) -> Slot {
     if r.txn_id.get() == 0 {
         return invalid("transaction id 0".into());
     }
-    if r.minor.get() >= 2 && !(1..=r.txn_id.get()).contains(&r.pages_txn.get()) {
+    if r.binds_pages() && !(1..=r.txn_id.get()).contains(&r.pages_txn.get()) {
         return invalid(format!(
             "pages written by transaction {}, not one of 1..={}",
             r.pages_txn.get(),
             r.txn_id.get()
         ));
     }
-    let newer_minor = r.minor.get() > FORMAT_MINOR;
+    let newer_minor = match r.major.get() {
+        FORMAT_MAJOR => r.minor.get() > FORMAT_MINOR,
+        _ => r.minor.get() > LAST_MINOR_OF_1,
+    };
     if !newer_minor
         && (r.flags.get() & !COMMIT_FLAGS_KNOWN != 0
             || r.reserved0.get() != 0
-            || (r.minor.get() < 2 && r.pages_txn.get() != 0)
+            || (!r.binds_pages() && r.pages_txn.get() != 0)
             || !is_zero(&r.reserved))
     {
         return invalid("reserved fields are not zero".into());

@@ -37,8 +37,8 @@
 //!
 //! ## Versioning policy
 //!
-//! [`FORMAT_MAJOR`] changes when an older reader would misread a file. Readers refuse any
-//! other major version. [`FORMAT_MINOR`] changes when fields or structures are *added* in space
+//! [`FORMAT_MAJOR`] changes when an older reader would misread a file. Readers refuse a newer
+//! major version; this one reads 1.x as well (read-only). [`FORMAT_MINOR`] changes when fields or structures are *added* in space
 //! that older versions require to be zero, or under new page tags. A reader opens any minor
 //! version of its major. It ignores what it does not know, and it checks reserved bytes for
 //! zero only in files whose minor version is not newer than its own. The commit record's
@@ -80,14 +80,22 @@ pub use tree::{TreeRef, TreeSpec, MAX_TREE_DEPTH};
 /// transfers, as PNG's signature does.
 pub const MAGIC: [u8; 8] = *b"FMRH\r\n\x1a\n";
 
-/// Incompatible revisions of the format. This reader reads major version 1 only.
-pub const FORMAT_MAJOR: u16 = 1;
+/// Incompatible revisions of the format. Writers write 2; readers read 1 and 2.
+///
+/// 2.0 stores payloads coded ([`payload::store_block`], [`crate::codec`]) where 1.x stored
+/// raw `f32`: a 1.x reader would misread them. Everything else is as in 1.2. A 1.x file is
+/// read as it is, and refused for writing (it would mix raw and coded payloads): rebuild it
+/// with `fmrh build` to write it.
+pub const FORMAT_MAJOR: u16 = 2;
 
-/// Compatible additions within [`FORMAT_MAJOR`]. 1.1 added the commit record's flags
+/// Compatible additions within [`FORMAT_MAJOR`]: none yet in 2.
+pub const FORMAT_MINOR: u16 = 0;
+
+/// The last minor version of major 1. 1.1 added the commit record's flags
 /// ([`COMMIT_RECOVERY_NEEDED`]) and files changed by transactions. 1.2 binds every structured
 /// page to the transaction that wrote it (the page header's txn tag, the record's
 /// `pages_txn`), so a reader of an old state never takes a reused page for its own.
-pub const FORMAT_MINOR: u16 = 2;
+pub const LAST_MINOR_OF_1: u16 = 2;
 
 /// The page size a writer uses unless told otherwise.
 pub const DEFAULT_PAGE_SIZE: u32 = 4096;

@@ -19,6 +19,14 @@
 //!
 //! Payloads start on multiples of [`super::PAYLOAD_ALIGN`] bytes, and the bytes between them
 //! are zero. A record finds its payload by a [`PayloadRef`]: offset, length and CRC.
+//!
+//! **Stored form.** Format 1.x stores the layouts above as they are. Format 2 stores them
+//! coded ([`crate::codec`]): a block as `u32` length of the samples' encoding, the samples'
+//! encoding (rows of `width`), then the stand-ins' encoding (one row) if there are voids; a
+//! grid as `u32` length of the heights' encoding, the heights' encoding (rows of `gw`), then
+//! the void bitmap as it is. [`store_block`] and [`store_grid`] code; [`load_block`] and
+//! [`load_grid`] give back the layout above, which the views read. The CRC covers the stored
+//! bytes, so damage is caught before any decoding.
 
 use std::ops::Range;
 
@@ -27,6 +35,7 @@ use zerocopy::byteorder::little_endian::F32;
 use zerocopy::FromBytes;
 
 use super::VOID_BITS;
+use crate::codec;
 use crate::model::Domain;
 
 /// Where a payload is: its byte offset in the container, its length, and the CRC-32 of its
@@ -102,6 +111,96 @@ pub fn encode_grid(heights: &[f32], void: &[bool], has_voids: bool) -> Vec<u8> {
         bytes.extend_from_slice(&bitmap);
     }
     bytes
+}
+
+/// Format 2: the stored (coded) form of a block's layout `raw` (see the module docs).
+pub fn store_block(raw: &[u8], width: u32, height: u32, void_count: u32) -> Vec<u8> {
+    let n = width as usize * height as usize;
+    let floats: Vec<f32> = raw
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect();
+    let (samples, stand_ins) = floats.split_at(n.min(floats.len()));
+    let a = codec::encode(samples, width.max(1) as usize);
+    let mut out = Vec::with_capacity(4 + a.len() + 8);
+    out.extend_from_slice(&u32::try_from(a.len()).unwrap_or(u32::MAX).to_le_bytes());
+    out.extend_from_slice(&a);
+    if void_count > 0 && !stand_ins.is_empty() {
+        out.extend_from_slice(&codec::encode(stand_ins, stand_ins.len()));
+    }
+    out
+}
+
+/// Format 2: a block's layout from its stored form, or why it does not decode.
+pub fn load_block(
+    stored: &[u8],
+    width: u32,
+    height: u32,
+    void_count: u32,
+) -> Result<Vec<u8>, String> {
+    let n = width as usize * height as usize;
+    let (a, b) = split_stored(stored)?;
+    let mut floats = vec![0f32; n + void_count as usize];
+    let (samples, stand_ins) = floats.split_at_mut(n);
+    codec::decode(a, width.max(1) as usize, samples).map_err(|e| format!("samples: {e}"))?;
+    if void_count > 0 {
+        codec::decode(b, void_count as usize, stand_ins).map_err(|e| format!("stand-ins: {e}"))?;
+    } else if !b.is_empty() {
+        return Err(format!(
+            "{} bytes after the samples of a block without voids",
+            b.len()
+        ));
+    }
+    Ok(floats.iter().flat_map(|v| v.to_le_bytes()).collect())
+}
+
+/// Format 2: the stored form of a grid's layout `raw` of `gw × gh` heights (see the module
+/// docs).
+pub fn store_grid(raw: &[u8], gw: u32, gh: u32) -> Vec<u8> {
+    let n = gw as usize * gh as usize;
+    let heights: Vec<f32> = raw[..(4 * n).min(raw.len())]
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect();
+    let a = codec::encode(&heights, gw.max(1) as usize);
+    let mut out = Vec::with_capacity(4 + a.len() + raw.len().saturating_sub(4 * n));
+    out.extend_from_slice(&u32::try_from(a.len()).unwrap_or(u32::MAX).to_le_bytes());
+    out.extend_from_slice(&a);
+    out.extend_from_slice(raw.get(4 * n..).unwrap_or(&[]));
+    out
+}
+
+/// Format 2: a grid's layout from its stored form, or why it does not decode.
+pub fn load_grid(stored: &[u8], gw: u32, gh: u32, has_voids: bool) -> Result<Vec<u8>, String> {
+    let n = gw as usize * gh as usize;
+    let (a, bitmap) = split_stored(stored)?;
+    let want = if has_voids { n.div_ceil(8) } else { 0 };
+    if bitmap.len() != want {
+        return Err(format!("{} bitmap bytes, {want} expected", bitmap.len()));
+    }
+    let mut heights = vec![0f32; n];
+    codec::decode(a, gw.max(1) as usize, &mut heights).map_err(|e| format!("heights: {e}"))?;
+    let mut out: Vec<u8> = heights.iter().flat_map(|v| v.to_le_bytes()).collect();
+    out.extend_from_slice(bitmap);
+    Ok(out)
+}
+
+/// The bytes of the first coded part and what follows it.
+fn split_stored(stored: &[u8]) -> Result<(&[u8], &[u8]), String> {
+    let (len, rest) = stored
+        .split_first_chunk::<4>()
+        .ok_or_else(|| format!("{} bytes: shorter than its length field", stored.len()))?;
+    let len = u32::from_le_bytes(*len) as usize;
+    if len > rest.len() {
+        return Err(format!("a part of {len} bytes in {} bytes", rest.len()));
+    }
+    Ok(rest.split_at(len))
+}
+
+/// The most bytes the stored form of a layout of `raw_len` bytes takes: the length field,
+/// and each coded part's encoding id (raw coding is the fallback).
+pub fn max_stored_len(raw_len: u64) -> u64 {
+    raw_len + 4 + 2
 }
 
 /// Bytes of a physical block's payload.

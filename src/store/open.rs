@@ -95,7 +95,7 @@ pub(crate) fn no_state<S: Source + ?Sized>(src: &S, why: NoState) -> Error {
             src.name(),
             format!(
                 "format version {major}.{minor} (a newer writer's state); this reader reads \
-                 {FORMAT_MAJOR}.x"
+                 1.x and {FORMAT_MAJOR}.x"
             ),
         ),
         NoState::Corrupt(v) => v.in_file(src.name()),
@@ -288,7 +288,7 @@ fn open_once<S: Source>(src: &S) -> Result<Opened> {
     for (spec, tree) in state_trees(&commit.roots, &clusters) {
         btree::walk(&pages, &tree, spec, &mut seen, &mut |_, _| Ok(()))?;
     }
-    if !registered && commit.minor.get() >= 2 {
+    if !registered && commit.binds_pages() {
         // A tag repeats every 2^16 transactions: if that many could have committed since the
         // state's pages were written, a page read above might carry a reused tag.
         let latest = latest_txn(src)?.unwrap_or(0);

@@ -284,8 +284,8 @@ impl<S: Source> Store<S> {
         Ok(bytes)
     }
 
-    /// Physical block `(x, y)`: its full-resolution samples, checked against their CRC and
-    /// read zero-copy from a mapping.
+    /// Physical block `(x, y)`: its full-resolution samples, checked against their CRC, then
+    /// decoded (format 2; a 1.x file's are read zero-copy from a mapping).
     pub fn block(&self, x: u32, y: u32) -> Result<Block<'_>> {
         let info = self.stored_block(x, y)?;
         let bytes = self.payload(info.payload)?;
@@ -309,6 +309,13 @@ impl<S: Source> Store<S> {
                 format!("{w} x {h} samples; its footprint within the data is {rect:?}"),
             )));
         }
+        let bytes = if self.commit.payloads_coded() {
+            let decoded = payload::load_block(&bytes, w, h, info.void_count)
+                .map_err(|e| self.corrupt(Violation::new(Invariant::Payload, at(), e)))?;
+            Cow::Owned(decoded)
+        } else {
+            bytes
+        };
         if BlockView::new(&bytes, w, h, info.void_count).is_none() {
             return Err(self.corrupt(Violation::new(
                 Invariant::Payload,
@@ -338,6 +345,18 @@ impl<S: Source> Store<S> {
         }
         let dims = payload::grid_dims(d, node.level, node.x, node.y);
         let has_voids = node.grid_has_voids;
+        let bytes = if self.commit.payloads_coded() {
+            let decoded = payload::load_grid(&bytes, dims.0, dims.1, has_voids).map_err(|e| {
+                self.corrupt(Violation::new(
+                    Invariant::Payload,
+                    format!("grid at byte {}", node.payload.offset),
+                    e,
+                ))
+            })?;
+            Cow::Owned(decoded)
+        } else {
+            bytes
+        };
         if GridView::new(&bytes, size, dims, has_voids).is_none() {
             return Err(self.corrupt(Violation::new(
                 Invariant::Payload,
@@ -469,7 +488,8 @@ impl Block<'_> {
             .unwrap_or_else(|| unreachable!("the length was checked when the block was read"))
     }
 
-    /// The payload bytes.
+    /// The block's layout (`format/payload.rs`): the samples then the stand-ins, as
+    /// little-endian `f32`, decoded from the stored payload.
     pub fn bytes(&self) -> &[u8] {
         &self.bytes
     }
@@ -491,7 +511,8 @@ impl Grid<'_> {
             .unwrap_or_else(|| unreachable!("the length was checked when the grid was read"))
     }
 
-    /// The payload bytes.
+    /// The grid's layout (`format/payload.rs`): heights then the void bitmap, decoded from
+    /// the stored payload.
     pub fn bytes(&self) -> &[u8] {
         &self.bytes
     }

@@ -65,9 +65,19 @@ impl<S: Source> Store<S> {
                 window.col0, window.row0, window.col1, window.row1, data.col1, data.row1
             )));
         }
-        // Honest files hold at least four bytes per data sample; refuse to allocate more
-        // than the file could back.
-        if window.samples().saturating_mul(4) > self.commit.file_length.get() {
+        // Refuse to allocate more than the file could back. A 1.x file holds four bytes per
+        // data sample. A 2.x file codes its payloads (a constant block takes a few bytes), so
+        // the bound is per block instead: each block of the window has its record and a
+        // stored payload of at least the length field and an encoding.
+        let cells = u64::from(d.block_size() - 1);
+        let blocks = (window.col1 / cells - window.col0 / cells + 1)
+            * (window.row1 / cells - window.row0 / cells + 1);
+        let needed = if self.commit.payloads_coded() {
+            blocks.saturating_mul(MIN_CODED_BLOCK_BYTES)
+        } else {
+            window.samples().saturating_mul(4)
+        };
+        if needed > self.commit.file_length.get() {
             return Err(self.corrupt(Violation::new(
                 Invariant::DatasetHeader,
                 "dataset header",
@@ -81,7 +91,6 @@ impl<S: Source> Store<S> {
             detail: format!("{} samples", window.samples()),
         })?;
         let mut samples = vec![f32::NAN; total];
-        let cells = u64::from(d.block_size() - 1);
         let (cols, rows) = d.nodes_across(d.finest_level());
         // Block columns and rows are below 2^20.
         let bx = |c: u64| u32::try_from(c / cells).unwrap_or(u32::MAX).min(cols - 1);
@@ -118,6 +127,10 @@ impl<S: Source> Store<S> {
         Ok(samples)
     }
 }
+
+/// The fewest bytes a block of a 2.x file takes: its 32-byte record, and a stored payload of
+/// a 4-byte length and a 5-byte constant encoding.
+const MIN_CODED_BLOCK_BYTES: u64 = 32 + 4 + 5;
 
 /// The columns and rows of a window inside the data (each at most 2^20).
 fn window_size(window: &SampleRect) -> (u32, u32) {

@@ -12,7 +12,7 @@ use super::alloc::Alloc;
 use super::SnapshotStore;
 use crate::error::{Error, Result};
 use crate::format::blob::encode_blob;
-use crate::format::payload::{self, PayloadRef};
+use crate::format::payload::PayloadRef;
 use crate::format::tables::FREE;
 use crate::format::tree::{self, TreeSpec};
 use crate::format::{
@@ -222,8 +222,6 @@ pub(crate) fn write_state<I: Io>(
             }
             _ => {
                 let bytes = tables::encode_grid(model, id, grid_voids[i]);
-                let (gw, gh) = payload::grid_dims(&d, n.level, n.x, n.y);
-                debug_assert_eq!(bytes.len() as u64, payload::grid_len(gw, gh, grid_voids[i]));
                 grid_ref[i] = sink.payload(bytes)?;
                 summary.grids += 1;
             }

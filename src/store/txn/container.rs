@@ -103,6 +103,21 @@ impl<I: Io> Container<I> {
         let io = Arc::new(io);
         let store = load(&io)?;
         let record = *store.commit_record();
+        if !record.payloads_coded() {
+            // Before anything is written, recovery included: a 2.x writer's coded payloads
+            // beside a 1.x file's raw ones would be misread by either reader.
+            return Err(Error::unsupported(
+                io.name(),
+                format!(
+                    "format {}.{} is read-only for this fmrh (it writes format {}): rebuild \
+                     it to change it, e.g. `fmrh extract FILE -o all.f32` then `fmrh build \
+                     all.json -o NEW.fmrh`",
+                    record.major.get(),
+                    record.minor.get(),
+                    crate::format::FORMAT_MAJOR
+                ),
+            ));
+        }
         let committed = record.file_length.get();
         let len = io.len().map_err(|e| Error::io(io.name(), e))?;
         let marked = record.has_flag(COMMIT_RECOVERY_NEEDED);

@@ -64,9 +64,36 @@ pub(super) fn check_payloads<S: Source>(
         let Some(bytes) = checks.absorb(store.payload(r))? else {
             continue;
         };
+        if let Payload::Grid(i) = what {
+            // A coded grid must decode to its layout.
+            let n = &l.nodes[i];
+            if store.commit_record().payloads_coded() {
+                let (gw, gh) = crate::format::payload::grid_dims(d, n.level, n.x.get(), n.y.get());
+                let voids = n.flags.get() & crate::format::NODE_GRID_HAS_VOIDS != 0;
+                if let Err(e) = crate::format::payload::load_grid(&bytes, gw, gh, voids) {
+                    checks.fail(id, format!("{at}: {e}"));
+                }
+            }
+        }
         if let Payload::Block(i) = what {
             let b = &l.blocks[i];
             let (x, y) = (i % cols as usize, i / cols as usize);
+            let bytes = if store.commit_record().payloads_coded() {
+                match crate::format::payload::load_block(
+                    &bytes,
+                    b.width.get(),
+                    b.height.get(),
+                    b.void_count.get(),
+                ) {
+                    Ok(decoded) => std::borrow::Cow::Owned(decoded),
+                    Err(e) => {
+                        checks.fail(id, format!("block ({x}, {y}): {e}"));
+                        continue;
+                    }
+                }
+            } else {
+                bytes
+            };
             let Some(view) =
                 BlockView::new(&bytes, b.width.get(), b.height.get(), b.void_count.get())
             else {

@@ -180,19 +180,28 @@ pub(super) fn check_nodes<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut 
             }
         } else {
             let (gw, gh) = payload::grid_dims(d, level, x, y);
-            let want = payload::grid_len(gw, gh, flags & NODE_GRID_HAS_VOIDS != 0);
-            if u64::from(n.payload_len.get()) != want {
+            let raw = payload::grid_len(gw, gh, flags & NODE_GRID_HAS_VOIDS != 0);
+            let len = u64::from(n.payload_len.get());
+            // 1.x stores the layout as it is; 2.x codes it, within the stored form's bound.
+            if !payload_len_fits(store, n.payload_len.get(), raw) {
                 checks.fail(
                     id,
-                    format!(
-                        "{at}: grid payload of {} bytes, expected {want}",
-                        n.payload_len.get()
-                    ),
+                    format!("{at}: grid payload of {len} bytes for a layout of {raw}"),
                 );
             }
         }
     }
     checks.pass(id);
+}
+
+/// Whether a payload of `len` bytes can hold a layout of `raw` bytes: exactly in 1.x, within
+/// the stored form's bound in 2.x.
+fn payload_len_fits<S: Source>(store: &Store<S>, len: u32, raw: u64) -> bool {
+    if store.commit_record().payloads_coded() {
+        u64::from(len) <= payload::max_stored_len(raw)
+    } else {
+        u64::from(len) == raw
+    }
 }
 
 pub(super) fn check_blocks<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Checks) {
@@ -212,7 +221,7 @@ pub(super) fn check_blocks<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut
                 format!("block ({x}, {y}): {w} x {h}, its data footprint is {rect:?}"),
             );
         } else if u64::from(v) > rect.samples()
-            || u64::from(b.payload_len.get()) != payload::block_len(w, h, v)
+            || !payload_len_fits(store, b.payload_len.get(), payload::block_len(w, h, v))
             || b.reserved.get() != 0
         {
             checks.fail(

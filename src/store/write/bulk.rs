@@ -136,33 +136,27 @@ fn write_payloads<W: Write>(
     let shapes = tables::block_shapes(model);
     let grid_voids = tables::grid_void_flags(model);
     let items = payload_order(model);
-    let len_of = |item: &Item| match *item {
+    // Progress counts the samples' layout bytes coded and written (the coded lengths are
+    // not known ahead).
+    let raw_len = |item: &Item| match *item {
         Item::Grid { node } => {
             let n = tree.node(node);
             let (gw, gh) = payload::grid_dims(&domain, n.level, n.x, n.y);
             payload::grid_len(gw, gh, grid_voids[node as usize])
         }
-        Item::Block { x, y } => shapes[block_index(x, y, cols)].payload_len(),
+        Item::Block { x, y } => shapes[block_index(x, y, cols)].raw_len(),
     };
-    let start = out.written;
-    let mut offsets = Vec::with_capacity(items.len());
-    let mut at = start;
-    for item in &items {
-        at = at.next_multiple_of(PAYLOAD_ALIGN);
-        offsets.push(at);
-        at += len_of(item);
-    }
     let phase = crate::progress::Phase::start(
         &*options.progress,
-        "writing payloads",
-        at - start,
+        "coding and writing payloads",
+        items.iter().map(raw_len).sum(),
         super::Unit::Bytes,
     );
     let mut grid = vec![PayloadRef::default(); tree.nodes().len()];
     let mut block = vec![PayloadRef::default(); shapes.len()];
-    // Encoded in parallel a window at a time, written in order.
+    // Coded in parallel a window at a time, written in order, each on the next aligned byte.
     const WINDOW: usize = 256;
-    for (w_items, w_offsets) in items.chunks(WINDOW).zip(offsets.chunks(WINDOW)) {
+    for w_items in items.chunks(WINDOW) {
         let encoded: Vec<Vec<u8>> = w_items
             .par_iter()
             .map(|item| match *item {
@@ -172,13 +166,13 @@ fn write_payloads<W: Write>(
                 }
             })
             .collect();
-        for ((item, &offset), bytes) in w_items.iter().zip(w_offsets).zip(encoded) {
+        for (item, bytes) in w_items.iter().zip(encoded) {
+            let offset = out.written.next_multiple_of(PAYLOAD_ALIGN);
             let before = out.written;
             out.zeros(offset - out.written)?;
             sections.payload_padding += out.written - before;
             out.write(&bytes)?;
-            // The padding counts too: the total announced is the payload area's length.
-            phase.advance(out.written - before);
+            phase.advance(raw_len(item));
             let r = PayloadRef::of(offset, &bytes)
                 .ok_or_else(|| Error::Internal(format!("a payload of {} bytes", bytes.len())))?;
             match *item {

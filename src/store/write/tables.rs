@@ -42,8 +42,8 @@ impl BlockShape {
         )
     }
 
-    /// Payload bytes.
-    pub fn payload_len(&self) -> u64 {
+    /// Bytes of the block's layout before coding.
+    pub fn raw_len(&self) -> u64 {
         let (w, h) = self.size();
         payload::block_len(w, h, self.void_count)
     }
@@ -225,10 +225,14 @@ pub(crate) fn node_id(i: usize) -> u32 {
     u32::try_from(i).unwrap_or(u32::MAX)
 }
 
-/// The payload of `node`'s coarse grid.
+/// The stored payload of `node`'s coarse grid (format 2: coded).
 pub(crate) fn encode_grid(model: &Model, node: u32, has_voids: bool) -> Vec<u8> {
-    let (g, _, _) = clipped_grid(model, node);
-    payload::encode_grid(&g.heights, &g.void, has_voids)
+    let (g, gw, gh) = clipped_grid(model, node);
+    payload::store_grid(
+        &payload::encode_grid(&g.heights, &g.void, has_voids),
+        gw,
+        gh,
+    )
 }
 
 /// The grid of `node` clipped to its stored `gw × gh` (see [`payload::grid_dims`]).
@@ -251,12 +255,14 @@ pub(crate) fn clipped_grid(model: &Model, node: u32) -> (NodeGrid, u32, u32) {
     (g, gw, gh)
 }
 
-/// The payload of the physical block of `shape`.
+/// The stored payload of the physical block of `shape` (format 2: coded).
 pub(crate) fn encode_block(model: &Model, shape: &BlockShape) -> Vec<u8> {
     let raster = model.raster();
     let r = shape.rect;
     let samples = (r.row0..=r.row1).flat_map(|row| {
         (r.col0..=r.col1).map(move |col| (raster.value(col, row), raster.is_valid(col, row)))
     });
-    payload::encode_block(samples, usize::try_from(r.samples()).unwrap_or(0))
+    let raw = payload::encode_block(samples, usize::try_from(r.samples()).unwrap_or(0));
+    let (w, h) = shape.size();
+    payload::store_block(&raw, w, h, shape.void_count)
 }
