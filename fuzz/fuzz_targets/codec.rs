@@ -1,6 +1,7 @@
 //! Fuzz target: block codecs. The first two bytes give a block's width and rows (1..=64).
-//! Then, by the third byte's low bit, either the rest is an encoded block, which must decode
-//! or fail with an error (never panic, never write past the block), or the rest is samples
+//! Then, by the third byte's low bit, either the rest is an encoded block (and a stored block
+//! and grid payload), which must decode or fail with an error (never panic, never write past
+//! the block), or the rest is samples
 //! (`f32` bits, or lattice values), which must encode and decode back bit for bit.
 //!
 //! cargo fuzz run --sanitizer none codec
@@ -17,6 +18,11 @@ fuzz_target!(|data: &[u8]| {
     if mode & 1 == 0 {
         let mut out = vec![0.0f32; width * rows];
         let _ = fmrh::codec::decode(rest, width, &mut out);
+        // The stored payload forms around the codes (format 2.0, container.md §7).
+        let (w, h) = (width as u32, rows as u32);
+        let voids = u32::from(mode >> 2) % (w * h + 1);
+        let _ = fmrh::format::payload::load_block(rest, w, h, voids);
+        let _ = fmrh::format::payload::load_grid(rest, w, h, mode & 2 != 0);
         return;
     }
     let n = width * rows;
