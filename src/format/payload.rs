@@ -36,6 +36,7 @@ use zerocopy::FromBytes;
 
 use super::VOID_BITS;
 use crate::codec;
+use crate::model::domain::MAX_BLOCK_SIZE;
 use crate::model::Domain;
 
 /// Where a payload is: its byte offset in the container, its length, and the CRC-32 of its
@@ -138,7 +139,11 @@ pub fn load_block(
     height: u32,
     void_count: u32,
 ) -> Result<Vec<u8>, String> {
+    check_shape(width, height)?;
     let n = width as usize * height as usize;
+    if void_count as usize > n {
+        return Err(format!("{void_count} voids in {width} x {height} samples"));
+    }
     let (a, b) = split_stored(stored)?;
     let mut floats = vec![0f32; n + void_count as usize];
     let (samples, stand_ins) = floats.split_at_mut(n);
@@ -172,6 +177,7 @@ pub fn store_grid(raw: &[u8], gw: u32, gh: u32) -> Vec<u8> {
 
 /// Format 2: a grid's layout from its stored form, or why it does not decode.
 pub fn load_grid(stored: &[u8], gw: u32, gh: u32, has_voids: bool) -> Result<Vec<u8>, String> {
+    check_shape(gw, gh)?;
     let n = gw as usize * gh as usize;
     let (a, bitmap) = split_stored(stored)?;
     let want = if has_voids { n.div_ceil(8) } else { 0 };
@@ -183,6 +189,18 @@ pub fn load_grid(stored: &[u8], gw: u32, gh: u32, has_voids: bool) -> Result<Vec
     let mut out: Vec<u8> = heights.iter().flat_map(|v| v.to_le_bytes()).collect();
     out.extend_from_slice(bitmap);
     Ok(out)
+}
+
+/// Refuses a block or grid shape no domain has, before anything is sized from it: the
+/// shapes come from records, and a damaged record must not make a decoder allocate
+/// gigabytes.
+fn check_shape(width: u32, height: u32) -> Result<(), String> {
+    if width == 0 || height == 0 || width > MAX_BLOCK_SIZE || height > MAX_BLOCK_SIZE {
+        return Err(format!(
+            "{width} x {height} samples: a block or grid has 1 to {MAX_BLOCK_SIZE} a side"
+        ));
+    }
+    Ok(())
 }
 
 /// The bytes of the first coded part and what follows it.
@@ -369,5 +387,52 @@ impl<'a> GridView<'a> {
             .flat_map(|j| (0..b).map(move |i| (i, j)))
             .map(|(i, j)| self.height(i, j))
             .collect()
+    }
+}
+
+#[cfg(test)]
+mod stored_tests {
+    use super::*;
+
+    /// Regression (found by the open_verify fuzz target): a damaged block record's void count
+    /// or shape made the decoder size a buffer from it (gigabytes) before anything was read.
+    #[test]
+    fn shapes_from_records_are_checked_before_allocating() {
+        let raw = encode_block((0..81).map(|i| (i as f32, true)), 81);
+        let stored = store_block(&raw, 9, 9, 0);
+        assert_eq!(load_block(&stored, 9, 9, 0).expect("decodes"), raw);
+        // Refused by the shape check itself, not later by a decoder that had allocated.
+        let refused = |r: Result<Vec<u8>, String>, why: &str| {
+            assert!(r.as_ref().is_err_and(|e| e.contains(why)), "{r:?}")
+        };
+        refused(load_block(&stored, 9, 9, u32::MAX), "voids in");
+        refused(load_block(&stored, 9, 9, 82), "voids in");
+        refused(load_block(&stored, 1 << 20, 9, 0), "a side");
+        refused(load_block(&stored, 0, 9, 0), "a side");
+        refused(load_grid(&stored, u32::MAX, u32::MAX, true), "a side");
+    }
+
+    #[test]
+    fn stored_forms_round_trip() {
+        let samples: Vec<(f32, bool)> = (0..9 * 7)
+            .map(|i| ((i % 9) as f32 * 0.5 + (i / 9) as f32, i % 11 != 3))
+            .collect();
+        let voids = u32::try_from(samples.iter().filter(|s| !s.1).count()).expect("63 at most");
+        let raw = encode_block(samples.into_iter(), 63);
+        let stored = store_block(&raw, 9, 7, voids);
+        assert!(stored.len() < raw.len());
+        assert_eq!(load_block(&stored, 9, 7, voids).expect("decodes"), raw);
+        let heights: Vec<f32> = (0..25).map(|i| i as f32).collect();
+        let void: Vec<bool> = (0..25).map(|i| i % 7 == 0).collect();
+        let raw = encode_grid(&heights, &void, true);
+        let stored = store_grid(&raw, 5, 5);
+        assert_eq!(load_grid(&stored, 5, 5, true).expect("decodes"), raw);
+        assert!(
+            load_grid(&stored, 5, 5, false).is_err(),
+            "the bitmap is not expected"
+        );
+        let mut longer = stored.clone();
+        longer.push(0);
+        assert!(load_grid(&longer, 5, 5, true).is_err());
     }
 }
