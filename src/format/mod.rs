@@ -104,8 +104,18 @@ pub const MIN_PAGE_SIZE: u32 = 1024;
 /// The largest page size.
 pub const MAX_PAGE_SIZE: u32 = 65536;
 
-/// Payloads start on multiples of this many bytes.
+/// Payloads of a 1.x file start on multiples of this many bytes (they were viewed in place as
+/// `f32`). A 2.x file's payloads are decoded, not viewed, and start on any byte.
 pub const PAYLOAD_ALIGN: u64 = 8;
+
+/// The alignment of payload offsets in a file whose payloads are `coded` (2.x) or not (1.x).
+pub fn payload_align(coded: bool) -> u64 {
+    if coded {
+        1
+    } else {
+        PAYLOAD_ALIGN
+    }
+}
 /// Longest string in the dataset header (CRS, units, source format), in bytes.
 pub const MAX_STRING_LEN: u32 = 4096;
 /// The bits of the `f32` a physical block stores for a void sample (the canonical quiet NaN).

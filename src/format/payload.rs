@@ -17,8 +17,8 @@
 //! [`super::NODE_GRID_HAS_VOIDS`] flag is set, a bitmap of `ceil(gw·gh / 8)` bytes follows
 //! (bit `k % 8` of byte `k / 8` set when stored sample `k` stands for a void or for padding).
 //!
-//! Payloads start on multiples of [`super::PAYLOAD_ALIGN`] bytes, and the bytes between them
-//! are zero. A record finds its payload by a [`PayloadRef`]: offset, length and CRC.
+//! Payloads start on any byte in 2.x and on multiples of [`super::PAYLOAD_ALIGN`] bytes in
+//! 1.x ([`super::payload_align`]), and the bytes between them are zero. A record finds its payload by a [`PayloadRef`]: offset, length and CRC.
 //!
 //! **Stored form.** Format 1.x stores the layouts above as they are. Format 2 stores them
 //! coded ([`crate::codec`]): a block as `u32` length of the samples' encoding, the samples'

@@ -5,7 +5,7 @@ use super::{Checks, Loaded};
 use crate::error::Result;
 use crate::format::payload::BlockView;
 use crate::format::{
-    is_zero, Invariant, PayloadRef, COMMIT_PAYLOAD_SLACK, PAYLOAD_ALIGN, VOID_BITS,
+    is_zero, payload_align, Invariant, PayloadRef, COMMIT_PAYLOAD_SLACK, VOID_BITS,
 };
 use crate::progress::{Phase, Progress, Unit};
 use crate::store::btree::PageSet;
@@ -38,6 +38,7 @@ pub(super) fn check_payloads<S: Source>(
     let start = 2 * p;
     let end_of_file = store.page_count() * p;
     let mut prev_end: Option<u64> = None;
+    let align = payload_align(store.commit_record().payloads_coded());
     let total: u64 = runs.iter().map(|r| u64::from(r.0.len)).sum();
     let phase = Phase::start(progress, "checking payloads", total, Unit::Bytes);
     for &(r, what) in &runs {
@@ -45,7 +46,7 @@ pub(super) fn check_payloads<S: Source>(
         phase.advance(u64::from(len));
         let at = format!("{what} payload at byte {offset}");
         let end = r.end();
-        if offset < start || end > end_of_file || offset % PAYLOAD_ALIGN != 0 {
+        if offset < start || end > end_of_file || offset % align != 0 {
             checks.fail(id, format!("{at}: misplaced or misaligned ({len} bytes)"));
             continue;
         }

@@ -21,9 +21,7 @@ use crate::format::blob::encode_blob;
 use crate::format::payload::{self, PayloadRef};
 use crate::format::tables::FREE;
 use crate::format::tree::{self, TreeSpec};
-use crate::format::{
-    self, tag, BlobRef, CommitRecord, DatasetHeader, StateRoots, TreeRef, PAYLOAD_ALIGN,
-};
+use crate::format::{self, tag, BlobRef, CommitRecord, DatasetHeader, StateRoots, TreeRef};
 use crate::heightfield::Metadata;
 use crate::model::{Domain, Model};
 
@@ -167,7 +165,8 @@ fn write_payloads<W: Write>(
             })
             .collect();
         for (item, bytes) in w_items.iter().zip(encoded) {
-            let offset = out.written.next_multiple_of(PAYLOAD_ALIGN);
+            // 2.x payloads are coded, decoded on read: no alignment, back to back.
+            let offset = out.written.next_multiple_of(format::payload_align(true));
             let before = out.written;
             out.zeros(offset - out.written)?;
             sections.payload_padding += out.written - before;
