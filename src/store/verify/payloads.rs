@@ -38,29 +38,37 @@ pub(super) fn check_payloads<S: Source>(
     let start = 2 * p;
     let end_of_file = store.page_count() * p;
     let mut prev_end: Option<u64> = None;
-    let align = payload_align(store.commit_record().payloads_coded());
+    let coded = store.commit_record().payloads_coded();
+    let align = payload_align(coded);
     let total: u64 = runs.iter().map(|r| u64::from(r.0.len)).sum();
     let phase = Phase::start(progress, "checking payloads", total, Unit::Bytes);
+    let mut prev: Option<PayloadRef> = None;
     for &(r, what) in &runs {
         let (offset, len) = (r.offset, r.len);
-        phase.advance(u64::from(len));
         let at = format!("{what} payload at byte {offset}");
-        let end = r.end();
-        if offset < start || end > end_of_file || offset % align != 0 {
-            checks.fail(id, format!("{at}: misplaced or misaligned ({len} bytes)"));
-            continue;
-        }
-        match prev_end {
-            Some(pe) if offset < pe => {
-                checks.fail(id, format!("{at}: overlaps the payload before it"));
+        // Records with identical payloads may share one (format §7): its place is checked
+        // once, its content against every record's own shape.
+        let shared = coded && prev == Some(r);
+        prev = Some(r);
+        phase.advance(u64::from(len));
+        if !shared {
+            let end = r.end();
+            if offset < start || end > end_of_file || offset % align != 0 {
+                checks.fail(id, format!("{at}: misplaced or misaligned ({len} bytes)"));
                 continue;
             }
-            Some(pe) => zero_gap(store, pe, offset, p, checks)?,
-            None => zero_gap(store, offset - offset % p, offset, p, checks)?,
-        }
-        prev_end = Some(end);
-        for page in offset / p..end.div_ceil(p) {
-            pages.insert(page);
+            match prev_end {
+                Some(pe) if offset < pe => {
+                    checks.fail(id, format!("{at}: overlaps the payload before it"));
+                    continue;
+                }
+                Some(pe) => zero_gap(store, pe, offset, p, checks)?,
+                None => zero_gap(store, offset - offset % p, offset, p, checks)?,
+            }
+            prev_end = Some(end);
+            for page in offset / p..end.div_ceil(p) {
+                pages.insert(page);
+            }
         }
         let Some(bytes) = checks.absorb(store.payload(r))? else {
             continue;

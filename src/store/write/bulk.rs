@@ -25,6 +25,11 @@ use crate::format::{self, tag, BlobRef, CommitRecord, DatasetHeader, StateRoots,
 use crate::heightfield::Metadata;
 use crate::model::{Domain, Model};
 
+/// Payloads of at most this many bytes are stored once however many records have them.
+/// Longer identical payloads are rare; keeping every payload's bytes to find them would cost
+/// the whole file's size in memory.
+const MAX_SHARED_PAYLOAD: usize = 256;
+
 /// The transaction id of a freshly built file's one state: every page of it carries its tag.
 const FIRST_TXN: u64 = 1;
 
@@ -152,6 +157,9 @@ fn write_payloads<W: Write>(
     );
     let mut grid = vec![PayloadRef::default(); tree.nodes().len()];
     let mut block = vec![PayloadRef::default(); shapes.len()];
+    // Small payloads that repeat (sea, void and flat blocks code to a few bytes, the same
+    // ones by the thousand) are stored once and shared by every record that has them.
+    let mut small: HashMap<Vec<u8>, PayloadRef> = HashMap::new();
     // Coded in parallel a window at a time, written in order, each on the next aligned byte.
     const WINDOW: usize = 256;
     for w_items in items.chunks(WINDOW) {
@@ -165,24 +173,35 @@ fn write_payloads<W: Write>(
             })
             .collect();
         for (item, bytes) in w_items.iter().zip(encoded) {
-            // 2.x payloads are coded, decoded on read: no alignment, back to back.
-            let offset = out.written.next_multiple_of(format::payload_align(true));
-            let before = out.written;
-            out.zeros(offset - out.written)?;
-            sections.payload_padding += out.written - before;
-            out.write(&bytes)?;
             phase.advance(raw_len(item));
-            let r = PayloadRef::of(offset, &bytes)
-                .ok_or_else(|| Error::Internal(format!("a payload of {} bytes", bytes.len())))?;
+            let shared = (bytes.len() <= MAX_SHARED_PAYLOAD)
+                .then(|| small.get(&bytes).copied())
+                .flatten();
+            let r = match shared {
+                Some(r) => r,
+                None => {
+                    // 2.x payloads are coded, decoded on read: no alignment, back to back.
+                    let offset = out.written.next_multiple_of(format::payload_align(true));
+                    let before = out.written;
+                    out.zeros(offset - out.written)?;
+                    sections.payload_padding += out.written - before;
+                    out.write(&bytes)?;
+                    let r = PayloadRef::of(offset, &bytes).ok_or_else(|| {
+                        Error::Internal(format!("a payload of {} bytes", bytes.len()))
+                    })?;
+                    match *item {
+                        Item::Grid { .. } => sections.grids += bytes.len() as u64,
+                        Item::Block { .. } => sections.blocks += bytes.len() as u64,
+                    }
+                    if bytes.len() <= MAX_SHARED_PAYLOAD {
+                        small.insert(bytes, r);
+                    }
+                    r
+                }
+            };
             match *item {
-                Item::Grid { node } => {
-                    grid[node as usize] = r;
-                    sections.grids += bytes.len() as u64;
-                }
-                Item::Block { x, y } => {
-                    block[block_index(x, y, cols)] = r;
-                    sections.blocks += bytes.len() as u64;
-                }
+                Item::Grid { node } => grid[node as usize] = r,
+                Item::Block { x, y } => block[block_index(x, y, cols)] = r,
             }
         }
     }
