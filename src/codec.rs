@@ -225,7 +225,7 @@ pub fn decode(bytes: &[u8], width: usize, out: &mut [f32]) -> Result<(), DecodeE
             for i in 0..out.len() {
                 let r = residuals[i];
                 let d = ((r >> 1) as i32 ^ -((r & 1) as i32)) as u32;
-                u[i] = predict_u32(&u, i, width).wrapping_add(d);
+                u[i] = predict(&u, i, width).wrapping_add(d);
                 out[i] = from_ordered(u[i]);
             }
         }
@@ -258,26 +258,38 @@ fn raw(samples: &[f32]) -> Vec<u8> {
     out
 }
 
-/// The planar prediction of cell `i` from its decoded neighbours.
-fn predict(k: &[i64], i: usize, width: usize) -> i64 {
-    match (i % width, i / width) {
-        (0, 0) => 0,
-        (_, 0) => k[i - 1],
-        (0, _) => k[i - width],
-        _ => k[i - 1]
-            .wrapping_add(k[i - width])
-            .wrapping_sub(k[i - width - 1]),
+/// Integers the planar predictor works on, in wrapping arithmetic.
+trait Wrapping: Copy + Default {
+    fn plus(self, other: Self) -> Self;
+    fn minus(self, other: Self) -> Self;
+}
+
+impl Wrapping for i64 {
+    fn plus(self, other: i64) -> i64 {
+        self.wrapping_add(other)
+    }
+    fn minus(self, other: i64) -> i64 {
+        self.wrapping_sub(other)
     }
 }
 
-fn predict_u32(u: &[u32], i: usize, width: usize) -> u32 {
+impl Wrapping for u32 {
+    fn plus(self, other: u32) -> u32 {
+        self.wrapping_add(other)
+    }
+    fn minus(self, other: u32) -> u32 {
+        self.wrapping_sub(other)
+    }
+}
+
+/// The planar prediction of cell `i` from its decoded neighbours: `left + up - up_left`,
+/// the left one in the first row, the upper one in the first column, zero at the start.
+fn predict<T: Wrapping>(k: &[T], i: usize, width: usize) -> T {
     match (i % width, i / width) {
-        (0, 0) => 0,
-        (_, 0) => u[i - 1],
-        (0, _) => u[i - width],
-        _ => u[i - 1]
-            .wrapping_add(u[i - width])
-            .wrapping_sub(u[i - width - 1]),
+        (0, 0) => T::default(),
+        (_, 0) => k[i - 1],
+        (0, _) => k[i - width],
+        _ => k[i - 1].plus(k[i - width]).minus(k[i - width - 1]),
     }
 }
 
@@ -344,7 +356,7 @@ fn float_predicted(samples: &[f32], width: usize) -> Option<Vec<u8>> {
     let u: Vec<u32> = samples.iter().map(|&v| to_ordered(v)).collect();
     let residuals: Vec<u32> = (0..u.len())
         .map(|i| {
-            let d = u[i].wrapping_sub(predict_u32(&u, i, width)) as i32;
+            let d = u[i].wrapping_sub(predict(&u, i, width)) as i32;
             ((d << 1) ^ (d >> 31)) as u32
         })
         .collect();
