@@ -200,11 +200,18 @@ impl Crs {
     /// at most about 100 m (under 0.002°) in North America. Good enough for bounds; not a
     /// survey conversion.
     pub fn to_lon_lat(&self, x: f64, y: f64) -> Option<[f64; 2]> {
+        self.to_lon_lat_all(&[[x, y]])
+            .and_then(|v| v.first().copied())
+    }
+
+    /// [`Crs::to_lon_lat`] of every point, the projections set up once; `None` if any
+    /// point has no answer.
+    pub fn to_lon_lat_all(&self, points: &[[f64; 2]]) -> Option<Vec<[f64; 2]>> {
         match self.kind {
-            CrsKind::Geographic => Some([x, y]),
+            CrsKind::Geographic => Some(points.to_vec()),
             CrsKind::Projected { .. } => {
                 let proj4 = self.proj4?;
-                inverse(proj4, x, y).or_else(|| inverse(&without_grid_shift(proj4), x, y))
+                inverse(proj4, points).or_else(|| inverse(&without_grid_shift(proj4), points))
             }
             CrsKind::Other => None,
         }
@@ -224,14 +231,19 @@ impl CrsKind {
     }
 }
 
-/// The WGS 84 longitude and latitude of `(x, y)` under the PROJ string `proj4`.
-fn inverse(proj4: &str, x: f64, y: f64) -> Option<[f64; 2]> {
+/// The WGS 84 longitude and latitude of each of `points` under the PROJ string `proj4`.
+fn inverse(proj4: &str, points: &[[f64; 2]]) -> Option<Vec<[f64; 2]>> {
     let from = proj4rs::Proj::from_proj_string(proj4).ok()?;
     let to = proj4rs::Proj::from_proj_string("+proj=longlat +datum=WGS84 +no_defs").ok()?;
-    let mut p = (x, y, 0.0);
-    proj4rs::transform::transform(&from, &to, &mut p).ok()?;
-    let (lon, lat) = (p.0.to_degrees(), p.1.to_degrees());
-    (lon.is_finite() && lat.is_finite() && lat.abs() <= 90.0).then_some([lon, lat])
+    points
+        .iter()
+        .map(|&[x, y]| {
+            let mut p = (x, y, 0.0);
+            proj4rs::transform::transform(&from, &to, &mut p).ok()?;
+            let (lon, lat) = (p.0.to_degrees(), p.1.to_degrees());
+            (lon.is_finite() && lat.is_finite() && lat.abs() <= 90.0).then_some([lon, lat])
+        })
+        .collect()
 }
 
 /// `proj4` with a grid-shift datum replaced by its bare ellipsoid.

@@ -88,25 +88,22 @@ fn lon_lat_bounds(name: &str, b: [f64; 4]) -> Option<[f64; 4]> {
     }
     let crs = Crs::parse(name)?;
     const STEPS: u32 = 16;
-    let mut out = [
-        f64::INFINITY,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        f64::NEG_INFINITY,
-    ];
-    for i in 0..=STEPS {
-        let t = f64::from(i) / f64::from(STEPS);
-        let (x, y) = (b[0] + t * (b[2] - b[0]), b[1] + t * (b[3] - b[1]));
-        for (px, py) in [(x, b[1]), (x, b[3]), (b[0], y), (b[2], y)] {
-            let [lon, lat] = crs.to_lon_lat(px, py)?;
-            out = [
-                out[0].min(lon),
-                out[1].min(lat),
-                out[2].max(lon),
-                out[3].max(lat),
-            ];
-        }
-    }
+    let edges: Vec<[f64; 2]> = (0..=STEPS)
+        .flat_map(|i| {
+            let t = f64::from(i) / f64::from(STEPS);
+            let (x, y) = (b[0] + t * (b[2] - b[0]), b[1] + t * (b[3] - b[1]));
+            [[x, b[1]], [x, b[3]], [b[0], y], [b[2], y]]
+        })
+        .collect();
+    let out = crs.to_lon_lat_all(&edges)?.into_iter().fold(
+        [
+            f64::INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NEG_INFINITY,
+        ],
+        |o, [lon, lat]| [o[0].min(lon), o[1].min(lat), o[2].max(lon), o[3].max(lat)],
+    );
     Some(out)
 }
 
