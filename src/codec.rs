@@ -109,6 +109,15 @@ pub enum DecodeError {
 /// # Panics
 /// If `samples.len()` is not a multiple of a non-zero `width` (a caller's bug).
 pub fn encode(samples: &[f32], width: usize) -> Vec<u8> {
+    encode_on(samples, width, None)
+}
+
+/// As [`encode`], also trying the lattice step `step` (a file's storage precision, which
+/// need not be one of [`LATTICE_STEPS`]). The coarsest step every sample lies on wins.
+///
+/// # Panics
+/// As [`encode`].
+pub fn encode_on(samples: &[f32], width: usize, step: Option<f64>) -> Vec<u8> {
     assert!(
         width > 0 && samples.len().is_multiple_of(width),
         "encode: {} samples in rows of {width}",
@@ -130,7 +139,12 @@ pub fn encode(samples: &[f32], width: usize) -> Vec<u8> {
             }
         }
     };
-    match LATTICE_STEPS.iter().find(|&&q| on_lattice(samples, q)) {
+    let mut steps = LATTICE_STEPS.to_vec();
+    if let Some(q) = step.filter(|q| q.is_finite() && *q > 0.0) {
+        steps.push(q);
+        steps.sort_by(|a, b| b.total_cmp(a));
+    }
+    match steps.iter().find(|&&q| on_lattice(samples, q)) {
         // On a lattice the float encodings cannot win by much; skip their cost.
         Some(&q) => keep(lattice(samples, width, q)),
         None => {
@@ -213,7 +227,7 @@ pub fn decode(bytes: &[u8], width: usize, out: &mut [f32]) -> Result<(), DecodeE
                 out[i] = if void {
                     f32::from_bits(VOID_BITS)
                 } else {
-                    (k[i] as f64 * q) as f32
+                    lattice_value(k[i] as f64, q)
                 };
             }
         }
@@ -233,6 +247,19 @@ pub fn decode(bytes: &[u8], width: usize, out: &mut [f32]) -> Result<(), DecodeE
     Ok(())
 }
 
+/// The height of lattice index `k` (an integer-valued `f64`) on step `q`: `(k · q) as f32`,
+/// the one formula the lattice encoding decodes with, so a height made by it is on the
+/// lattice (for `|k| <= 2^40`). `k = -0` gives `+0.0`.
+pub fn lattice_value(k: f64, q: f64) -> f32 {
+    ((k + 0.0) * q) as f32
+}
+
+/// The lattice index nearest to `v` on step `q`, when it is within the lattice's range.
+pub fn lattice_index(v: f32, q: f64) -> Option<f64> {
+    let k = (f64::from(v) / q).round();
+    (k.abs() <= MAX_LATTICE_INDEX).then_some(k)
+}
+
 /// Whether every real sample of `samples` is exactly `(k · q) as f32` for an integer `k`
 /// within range, and every void the canonical NaN; `-0.0` is not on a lattice (it would
 /// come back as `+0.0`), nor any other NaN or an infinity.
@@ -241,10 +268,7 @@ fn on_lattice(samples: &[f32], q: f64) -> bool {
         if v.is_nan() {
             return v.to_bits() == VOID_BITS;
         }
-        let k = (f64::from(v) / q).round();
-        k.abs() <= MAX_LATTICE_INDEX
-            && (k * q) as f32 == v
-            && !(v == 0.0 && v.is_sign_negative())
+        lattice_index(v, q).is_some_and(|k| lattice_value(k, q).to_bits() == v.to_bits())
             && v.is_finite()
     })
 }

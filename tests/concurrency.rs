@@ -65,6 +65,7 @@ fn readers_running_scenes_see_only_whole_snapshots() {
         &BuildOptions {
             block_size: 65,
             thresholds: Thresholds::Ladder,
+            precision: None,
         },
     )
     .unwrap();

@@ -23,6 +23,7 @@ fn write(field: &Heightfield, block_size: u32, page_size: u32) -> (Model, Vec<u8
         &BuildOptions {
             block_size,
             thresholds: Thresholds::Ladder,
+            precision: None,
         },
     )
     .unwrap();

@@ -20,6 +20,7 @@ fn small_container() -> Vec<u8> {
         &BuildOptions {
             block_size: 9,
             thresholds: Thresholds::Ladder,
+            precision: None,
         },
     )
     .unwrap();

@@ -23,6 +23,8 @@ struct Vector {
     field: Heightfield,
     block_size: u32,
     thresholds: Thresholds,
+    /// The storage precision (format 2.1); the vectors of older versions have none.
+    precision: Option<f64>,
 }
 
 fn vectors() -> Vec<Vector> {
@@ -46,26 +48,49 @@ fn vectors() -> Vec<Vector> {
         source_format: "test".into(),
     };
     let cliff = Heightfield::from_fn(33, 33, |x, _| if x < 11 { 10.0 } else { 500.0 }).unwrap();
+    // Float heights off every lattice, stored to a step of 0.3.
+    let waves = Heightfield::from_fn(17, 17, |x, y| {
+        (x as f32 * 0.41).sin() * 7.3 + (y as f32 * 0.29).cos() * 4.1 + 100.0
+    })
+    .unwrap();
     vec![
         Vector {
             name: "ramp-9x9",
             field: ramp,
             block_size: 9,
             thresholds: Thresholds::Ladder,
+            precision: None,
         },
         Vector {
             name: "hills-20x13-voids",
             field: hills,
             block_size: 9,
             thresholds: Thresholds::Ladder,
+            precision: None,
         },
         Vector {
             name: "cliff-33x33",
             field: cliff,
             block_size: 9,
             thresholds: Thresholds::Explicit(vec![0.0, 1.0, 10.0]),
+            precision: None,
+        },
+        Vector {
+            name: "waves-17x17-precision-0.3",
+            field: waves,
+            block_size: 9,
+            thresholds: Thresholds::Ladder,
+            precision: Some(0.3),
         },
     ]
+}
+
+/// The vectors a format older than 2.1 has: those without a storage precision.
+fn lossless_vectors() -> Vec<Vector> {
+    vectors()
+        .into_iter()
+        .filter(|v| v.precision.is_none())
+        .collect()
 }
 
 fn build(v: &Vector) -> Vec<u8> {
@@ -74,6 +99,7 @@ fn build(v: &Vector) -> Vec<u8> {
         &BuildOptions {
             block_size: v.block_size,
             thresholds: v.thresholds.clone(),
+            precision: v.precision.map(|q| fmrh::model::Precision::new(q).unwrap()),
         },
     )
     .unwrap();
@@ -146,7 +172,7 @@ fn vector_commit_record_fields_sit_where_the_spec_says() {
     let bytes = build(&vectors()[1]);
     assert_eq!(&bytes[0..8], b"FMRH\r\n\x1a\n");
     assert_eq!(u16::from_le_bytes([bytes[8], bytes[9]]), 2); // major
-    assert_eq!(u16::from_le_bytes([bytes[10], bytes[11]]), 0); // minor
+    assert_eq!(u16::from_le_bytes([bytes[10], bytes[11]]), 1); // minor
     assert_eq!(u32::from_le_bytes(bytes[12..16].try_into().unwrap()), 1024); // page size
     assert_eq!(u64::from_le_bytes(bytes[16..24].try_into().unwrap()), 1); // txn id
     assert_eq!(
@@ -184,7 +210,7 @@ fn vector_commit_record_fields_sit_where_the_spec_says() {
 #[test]
 fn format_1_vectors_read_verify_and_refuse_writes() {
     for (minor, folder) in [(1u16, "v1.1"), (2, "v1.2")] {
-        for v in vectors() {
+        for v in lossless_vectors() {
             let old = dir().join(folder).join(format!("{}.fmrh", v.name));
             let store = fmrh::Store::open(&old).unwrap();
             assert_eq!(store.state().format_version, (1, minor), "{}", v.name);
@@ -221,5 +247,78 @@ fn format_1_vectors_read_verify_and_refuse_writes() {
             );
             assert_eq!(std::fs::read(&copy).unwrap(), before, "the refusal wrote");
         }
+    }
+}
+
+/// Format 2.0 files (the vectors as 2.0 wrote them, with the dataset header's precision
+/// field still reserved and zero) read sample for sample as lossless files, pass `verify
+/// --full`, and accept a transaction, whose commit makes them 2.1 (format §8).
+#[test]
+fn format_2_0_vectors_read_verify_and_take_a_transaction() {
+    for v in lossless_vectors() {
+        let old = dir().join("v2.0").join(format!("{}.fmrh", v.name));
+        let store = fmrh::Store::open(&old).unwrap();
+        assert_eq!(store.state().format_version, (2, 0), "{}", v.name);
+        assert_eq!(store.header().precision, None);
+        let samples = store.read_window(store.domain().data_rect()).unwrap();
+        for (a, b) in samples.samples().iter().zip(v.field.samples()) {
+            assert!(a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()));
+        }
+        drop(store);
+        let report = fmrh::verify(
+            fmrh::store::FileSource::open(&old).unwrap(),
+            fmrh::VerifyMode::Full,
+        )
+        .unwrap();
+        assert!(report.valid, "{}: {report:?}", v.name);
+
+        let dir = tempfile::tempdir().unwrap();
+        let copy = dir.path().join("old.fmrh");
+        std::fs::copy(&old, &copy).unwrap();
+        let patch = Heightfield::from_fn(3, 2, |x, y| 1000.0 + (x + y) as f32).unwrap();
+        let c = fmrh::Container::open(&copy).unwrap();
+        let mut txn = c.begin_write().unwrap();
+        txn.replace_region(1, 1, &patch).unwrap();
+        txn.commit().unwrap();
+        drop(c);
+        let store = fmrh::Store::open(&copy).unwrap();
+        assert_eq!(store.state().format_version, (2, 1), "{}", v.name);
+        let got = store
+            .read_window(fmrh::model::SampleRect {
+                col0: 1,
+                row0: 1,
+                col1: 3,
+                row1: 2,
+            })
+            .unwrap();
+        assert_eq!(got.samples(), patch.samples());
+        let report = fmrh::verify(
+            fmrh::store::FileSource::open(&copy).unwrap(),
+            fmrh::VerifyMode::Full,
+        )
+        .unwrap();
+        assert!(report.valid, "{}: {report:?}", v.name);
+    }
+}
+
+/// The storage precision sits at bytes 148..156 of the dataset header (format §5), and the
+/// vector stored with it keeps every height within half a step of its source.
+#[test]
+fn precision_field_sits_where_the_spec_says() {
+    let v = vectors()
+        .into_iter()
+        .find(|v| v.precision.is_some())
+        .unwrap();
+    let bytes = build(&v);
+    let h = 2048 + 24;
+    assert_eq!(
+        f64::from_le_bytes(bytes[h + 148..h + 156].try_into().unwrap()),
+        0.3
+    );
+    assert!(bytes[h + 156..h + 160].iter().all(|&b| b == 0));
+    let store = fmrh::Store::from_bytes(bytes).unwrap();
+    let got = store.read_window(store.domain().data_rect()).unwrap();
+    for (a, b) in got.samples().iter().zip(v.field.samples()) {
+        assert!((f64::from(*a) - f64::from(*b)).abs() <= 0.15, "{a} vs {b}");
     }
 }

@@ -18,6 +18,7 @@ fn build(field: &Heightfield, b: u32, thresholds: Thresholds) -> Model {
         &BuildOptions {
             block_size: b,
             thresholds,
+            precision: None,
         },
     )
     .unwrap();

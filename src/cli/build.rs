@@ -8,7 +8,7 @@ use serde::Serialize;
 
 use fmrh::format::DEFAULT_PAGE_SIZE;
 use fmrh::ingest;
-use fmrh::model::{BuildOptions, Model, Thresholds, DEFAULT_BLOCK_SIZE};
+use fmrh::model::{precision, BuildOptions, Model, Precision, Thresholds, DEFAULT_BLOCK_SIZE};
 use fmrh::store::{write_file, WriteOptions, WriteSummary};
 use fmrh::Error;
 
@@ -39,6 +39,12 @@ pub struct BuildArgs {
     /// ladder from the largest error down, plus 0 (lossless).
     #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
     thresholds: Option<Vec<f64>>,
+    /// Store heights to the step Q (e.g. 0.1): each within Q/2 of the source, a bound every
+    /// node's error includes, so scenes stay true to the source. Much smaller files for
+    /// float DEMs measured to a few centimetres. A step that changes no height (integer
+    /// data and --precision 1) is dropped, and the file is lossless. Default: lossless.
+    #[arg(long, value_name = "Q")]
+    precision: Option<f64>,
     /// Bytes per page of the container: a power of two from 1024 to 65536.
     #[arg(long, default_value_t = DEFAULT_PAGE_SIZE)]
     page_size: u32,
@@ -81,6 +87,10 @@ struct BuildReport {
     nodes: usize,
     nodes_per_level: Vec<u64>,
     max_error: f64,
+    /// The storage step heights were kept to, when they were not kept bit for bit.
+    precision: Option<f64>,
+    /// The largest |stored - source| over real heights, measured (at most precision / 2).
+    storage_error_measured: Option<f64>,
     clusters: Vec<ClusterReport>,
     ingest_time_ms: f64,
     build_time_ms: f64,
@@ -170,10 +180,23 @@ pub fn run(args: &BuildArgs) -> Result<ExitCode, Error> {
             Some(t) => Thresholds::Explicit(t.clone()),
             None => Thresholds::Ladder,
         },
+        precision: match args.precision.map(Precision::new).transpose()? {
+            Some(p) if !precision::changes_any(p, heightfield.samples()) => {
+                eprintln!(
+                    "fmrh: note: every height of {} already lies on the lattice of step {}: \
+                     it is stored bit for bit (lossless), with no storage error",
+                    args.input.display(),
+                    p.step()
+                );
+                None
+            }
+            p => p,
+        },
     };
     let t1 = Instant::now();
     let model = Model::build_with_progress(heightfield, &options, progress)?;
     let build_time = t1.elapsed();
+
     let output = match &args.output {
         Some(path) if !args.dry_run => {
             let t2 = Instant::now();
@@ -214,6 +237,8 @@ pub fn run(args: &BuildArgs) -> Result<ExitCode, Error> {
         nodes: model.tree().nodes().len(),
         nodes_per_level: model.tree().nodes_per_level(),
         max_error: model.max_error(),
+        precision: model.precision().map(Precision::step),
+        storage_error_measured: model.precision().and(model.storage_error_measured()),
         clusters: model
             .clusters()
             .iter()
@@ -251,6 +276,16 @@ fn print_report(r: &BuildReport) {
         r.nodes, r.nodes_per_level
     );
     println!("  max error   {}", r.max_error);
+    match (r.precision, r.storage_error_measured) {
+        (Some(q), Some(e)) => println!(
+            "  precision   {q}: heights stored within {} of the source (measured max {e}); \
+             every node error includes {}",
+            q / 2.0,
+            q / 2.0
+        ),
+        (Some(q), None) => println!("  precision   {q}"),
+        _ => println!("  precision   lossless (every height bit for bit)"),
+    }
     println!("  clusters    {}", r.clusters.len());
     println!("      threshold        nodes    max error");
     for c in &r.clusters {

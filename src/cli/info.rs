@@ -49,6 +49,8 @@ struct Info {
     source_format: String,
     delta_min: f64,
     max_error: f64,
+    /// The storage step heights were kept to (format 2.1), or null when bit for bit.
+    precision: Option<f64>,
     nodes: u64,
     nodes_per_level: Vec<u64>,
     physical_blocks: u64,
@@ -246,6 +248,7 @@ pub fn run(args: &InfoArgs) -> Result<ExitCode, Error> {
         source_format: h.metadata.source_format.clone(),
         delta_min: h.delta_min,
         max_error: h.max_error,
+        precision: h.precision.map(|p| p.step()),
         nodes: h.node_count,
         nodes_per_level: per_level,
         physical_blocks: h.block_count,
@@ -312,6 +315,13 @@ fn print_info(path: &std::path::Path, i: &Info) {
         i.nodes, i.nodes_per_level
     );
     println!("  max error   {} (delta_min {})", i.max_error, i.delta_min);
+    match i.precision {
+        Some(q) => println!(
+            "  precision   {q}: heights within {} of the source, included in every error",
+            q / 2.0
+        ),
+        None => println!("  precision   lossless"),
+    }
     println!("  clusters    {}", i.clusters.len());
     println!("      threshold    max error      nodes  index pages (depth)");
     for c in &i.clusters {

@@ -9,7 +9,7 @@ use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
 
 use super::{Invariant, Violation, MAX_STRING_LEN, VOID_BITS};
 use crate::heightfield::{Georeference, Metadata};
-use crate::model::{Domain, Model};
+use crate::model::{Domain, Model, Precision};
 
 /// Bytes of the fixed part of the dataset header.
 pub const DATASET_FIXED_LEN: usize = 160;
@@ -52,7 +52,8 @@ struct Fixed {
     crs_len: U32,
     units_len: U32,
     source_format_len: U32,
-    reserved: [u8; 12],
+    precision: F64,
+    reserved: [u8; 4],
 }
 
 const _: () = assert!(size_of::<Fixed>() == DATASET_FIXED_LEN);
@@ -76,6 +77,8 @@ pub struct DatasetHeader {
     pub block_count: u64,
     /// Clusters in the cluster directory.
     pub cluster_count: u32,
+    /// The storage precision heights were kept to (format 2.1; `None`: bit for bit).
+    pub precision: Option<Precision>,
     /// Spacing, georeference, units and provenance.
     pub metadata: Metadata,
 }
@@ -95,6 +98,7 @@ impl DatasetHeader {
             block_count: u64::from(cols) * u64::from(rows),
             // A model holds at most MAX_CLUSTERS clusters.
             cluster_count: u32::try_from(model.clusters().len()).unwrap_or(u32::MAX),
+            precision: model.precision(),
             metadata: metadata.clone(),
         }
     }
@@ -150,7 +154,8 @@ impl DatasetHeader {
             crs_len: U32::new(string_len(crs)),
             units_len: U32::new(string_len(units)),
             source_format_len: U32::new(string_len(source_format)),
-            reserved: [0; 12],
+            precision: F64::new(self.precision.map_or(0.0, Precision::step)),
+            reserved: [0; 4],
         };
         let mut out = fixed.as_bytes().to_vec();
         for s in [crs, units, source_format] {
@@ -216,6 +221,10 @@ impl DatasetHeader {
         {
             return Err(bad(format!("delta_min {delta_min}, max error {max_error}")));
         }
+        let precision = match f.precision.get() {
+            0.0 => None,
+            step => Some(Precision::new(step).map_err(|e| bad(e.to_string()))?),
+        };
         let cluster_count = f.cluster_count.get();
         if cluster_count == 0 || cluster_count as usize > crate::model::MAX_CLUSTERS {
             return Err(bad(format!("{cluster_count} clusters")));
@@ -277,6 +286,7 @@ impl DatasetHeader {
             node_count: f.node_count.get(),
             block_count: f.block_count.get(),
             cluster_count,
+            precision,
             metadata,
         })
     }

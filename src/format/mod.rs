@@ -88,8 +88,9 @@ pub const MAGIC: [u8; 8] = *b"FMRH\r\n\x1a\n";
 /// with `fmrh build` to write it.
 pub const FORMAT_MAJOR: u16 = 2;
 
-/// Compatible additions within [`FORMAT_MAJOR`]: none yet in 2.
-pub const FORMAT_MINOR: u16 = 0;
+/// Compatible additions within [`FORMAT_MAJOR`]. 2.1 adds the dataset header's storage
+/// `precision` (formerly reserved, zero in 2.0 files: lossless).
+pub const FORMAT_MINOR: u16 = 1;
 
 /// The last minor version of major 1. 1.1 added the commit record's flags
 /// ([`COMMIT_RECOVERY_NEEDED`]) and files changed by transactions. 1.2 binds every structured

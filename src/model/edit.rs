@@ -25,6 +25,7 @@ use rayon::prelude::*;
 use super::cluster;
 use super::domain::{Domain, SampleRect};
 use super::measure::{measure_band, NodeStats};
+use super::precision::{self, Precision};
 use super::raster::MendedRaster;
 use super::tree::{Fmrh, Measurements};
 use super::Model;
@@ -45,12 +46,24 @@ pub struct ModelEditor {
 type BandId = (u8, u32, u32, u32);
 
 impl ModelEditor {
-    /// Builds the model of `heightfield` with blocks of `block_size` samples and exactly
-    /// `thresholds` (validated as for [`Model::build`]).
-    pub fn new(heightfield: Heightfield, block_size: u32, thresholds: &[f64]) -> Result<Self> {
+    /// Builds the model of `heightfield` with blocks of `block_size` samples, exactly
+    /// `thresholds` and the storage `precision` (validated as for [`Model::build`]). Heights
+    /// are quantised to the precision here and in every patch, as a build would.
+    pub fn new(
+        heightfield: Heightfield,
+        block_size: u32,
+        thresholds: &[f64],
+        precision: Option<Precision>,
+    ) -> Result<Self> {
         let domain = Domain::new(heightfield.width(), heightfield.height(), block_size)?;
-        let thresholds = cluster::validate_thresholds(thresholds)?;
-        let raster = MendedRaster::new(heightfield);
+        let thresholds =
+            precision::check_thresholds(cluster::validate_thresholds(thresholds)?, precision)?;
+        let heightfield = match precision {
+            Some(p) => p.quantise_heightfield(heightfield).0,
+            None => heightfield,
+        };
+        let raster = MendedRaster::new(heightfield)
+            .with_storage_error(precision.map_or(0.0, Precision::bound));
         let per_node = domain.block_size() - 1;
         let bands: Vec<Vec<NodeStats>> = (0..domain.levels())
             .map(|level| {
@@ -86,6 +99,8 @@ impl ModelEditor {
                 raster,
                 tree,
                 clusters,
+                precision,
+                storage_error_measured: None,
             },
             thresholds,
             measured,
@@ -126,6 +141,14 @@ impl ModelEditor {
                 data.row1 + 1
             )));
         }
+        let quantised;
+        let patch = match self.model.precision {
+            Some(p) => {
+                quantised = p.quantise_heightfield(patch.clone()).0;
+                &quantised
+            }
+            None => patch,
+        };
         let dirty = self.model.raster.replace(col0, row0, patch);
         let mut todo: Vec<BandId> = Vec::new();
         for rect in &dirty {
@@ -224,7 +247,7 @@ mod tests {
         let (w, h) = (70u32, 45u32);
         let base = wavy(w, h, 0.0);
         let thresholds = [0.0, 0.5, 2.0, 8.0];
-        let mut ed = ModelEditor::new(base.clone(), 9, &thresholds).unwrap();
+        let mut ed = ModelEditor::new(base.clone(), 9, &thresholds, None).unwrap();
         let mut samples = base.samples().to_vec();
         let patches = [
             (10u64, 7u64, wavy(13, 9, 1.0)),
@@ -250,6 +273,7 @@ mod tests {
                 &BuildOptions {
                     block_size: 9,
                     thresholds: Thresholds::Explicit(thresholds.to_vec()),
+                    precision: None,
                 },
             )
             .unwrap();
@@ -266,7 +290,7 @@ mod tests {
 
     #[test]
     fn patch_outside_is_refused() {
-        let mut ed = ModelEditor::new(wavy(20, 20, 0.0), 9, &[0.0, 1.0]).unwrap();
+        let mut ed = ModelEditor::new(wavy(20, 20, 0.0), 9, &[0.0, 1.0], None).unwrap();
         let before = ed.model().tree().nodes().to_vec();
         let err = ed.replace(15, 0, &wavy(6, 2, 0.0)).unwrap_err();
         assert!(matches!(err, Error::InvalidArgument(_)), "{err}");

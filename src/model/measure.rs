@@ -11,6 +11,11 @@
 //! footprint. Everything the node's grid can draw lies in that range, and so does every real
 //! height under it. The scan also counts the footprint's valid samples.
 //!
+//! **With a storage precision `Q`** (see [`super::precision`]) the raster holds the stored
+//! heights, and every band with a valid sample adds `Q/2` to its error (rounded up by one
+//! ulp), so the error bounds the distance to the source as well: finest nodes get exactly
+//! `Q/2` (model §4).
+//!
 //! One level costs one pass over the data: each node scans its own footprint. The work is
 //! spread over cores by node, or for the few big nodes near the root by band of cell rows. At
 //! the finest level the grid *is* the data, so the error is 0 by definition and only the range
@@ -164,8 +169,17 @@ pub(crate) fn measure_band(
         stats.max_height = hi;
         stats.valid_samples += raster.count_valid(row, col0, col1);
     }
+    // A stored height may be off its source by the storage error (0 when lossless), so
+    // every band with a real height adds it (model §4).
+    let storage = if stats.valid_samples > 0 {
+        raster.storage_error()
+    } else {
+        0.0
+    };
     if s == 1 {
-        return stats; // The finest grid is the data: no sample is off the surface.
+        // The finest grid is the stored data: no sample is off the surface.
+        stats.error = storage;
+        return stats;
     }
 
     // The band's grid rows: north and south edges of its cells, clamped into the data.
@@ -206,6 +220,13 @@ pub(crate) fn measure_band(
             }
         });
     }
-    stats.error = error;
+    stats.error = if storage > 0.0 {
+        // Rounded up by one ulp, so that the recorded error is at least the exact sum of
+        // the measured error and the storage bound, whatever the rounding of each: then
+        // any |surface - source| computed in f64 stays within it.
+        (error + storage).next_up()
+    } else {
+        error
+    };
     stats
 }

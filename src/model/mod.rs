@@ -9,6 +9,7 @@ pub mod cluster;
 pub mod domain;
 pub mod edit;
 pub mod measure;
+pub mod precision;
 pub mod raster;
 pub mod tree;
 
@@ -16,6 +17,7 @@ pub use cluster::{Cluster, MAX_CLUSTERS};
 pub use domain::{Domain, SampleRect, DEFAULT_BLOCK_SIZE, MAX_BLOCK_SIZE, MIN_BLOCK_SIZE};
 pub use edit::ModelEditor;
 pub use measure::NodeStats;
+pub use precision::Precision;
 pub use raster::MendedRaster;
 pub use tree::{Fmrh, Measurements, Node, NO_PARENT};
 
@@ -39,6 +41,9 @@ pub struct BuildOptions {
     pub block_size: u32,
     /// Cluster thresholds.
     pub thresholds: Thresholds,
+    /// Store heights to this step, within half of it (see [`precision`]); `None` keeps them
+    /// bit for bit.
+    pub precision: Option<Precision>,
 }
 
 impl Default for BuildOptions {
@@ -46,6 +51,7 @@ impl Default for BuildOptions {
         BuildOptions {
             block_size: DEFAULT_BLOCK_SIZE,
             thresholds: Thresholds::Ladder,
+            precision: None,
         }
     }
 }
@@ -56,6 +62,8 @@ pub struct Model {
     raster: MendedRaster,
     tree: Fmrh,
     clusters: Vec<Cluster>,
+    precision: Option<Precision>,
+    storage_error_measured: Option<f64>,
 }
 
 /// A node's grid: the `b × b` point-decimation of the mended raster over its footprint, with
@@ -88,13 +96,30 @@ impl Model {
             options.block_size,
         )?;
         let explicit = match &options.thresholds {
-            Thresholds::Explicit(t) => Some(cluster::validate_thresholds(t)?),
+            Thresholds::Explicit(t) => Some(precision::check_thresholds(
+                cluster::validate_thresholds(t)?,
+                options.precision,
+            )?),
             Thresholds::Ladder => None,
         };
-        let raster = MendedRaster::new(heightfield);
+        let precision = options.precision;
+        let (heightfield, storage_error_measured) = match precision {
+            Some(p) => {
+                let (hf, worst) = p.quantise_heightfield(heightfield);
+                (hf, Some(worst.unwrap_or(0.0)))
+            }
+            None => (heightfield, Some(0.0)),
+        };
+        let floor = precision.map_or(0.0, Precision::bound);
+        let raster = MendedRaster::new(heightfield).with_storage_error(floor);
         let measured = Measurements::measure_with_progress(&raster, &domain, progress);
         let thresholds = explicit.clone().unwrap_or_else(|| {
-            cluster::default_ladder(measured.root_error(), measured.min_positive_error())
+            let mut ladder =
+                cluster::default_ladder(measured.root_error(), measured.min_positive_error());
+            // No node beats the storage error: the ladder's lossless rung becomes Q/2.
+            ladder.retain(|&t| t > floor);
+            ladder.insert(0, floor);
+            ladder
         });
         let tree = Fmrh::prune(domain, &measured, thresholds[0]);
         drop(measured);
@@ -106,6 +131,8 @@ impl Model {
             raster,
             tree,
             clusters,
+            precision,
+            storage_error_measured,
         })
     }
 
@@ -127,6 +154,18 @@ impl Model {
     /// The clusters, ascending by threshold.
     pub fn clusters(&self) -> &[Cluster] {
         &self.clusters
+    }
+
+    /// The storage precision its heights were kept to, if any.
+    pub fn precision(&self) -> Option<Precision> {
+        self.precision
+    }
+
+    /// The largest `|stored - source|` over the real heights, measured when the model was
+    /// built from its source (0 without a precision; at most its bound with one). `None`
+    /// for a model edited from stored heights, whose source is gone.
+    pub fn storage_error_measured(&self) -> Option<f64> {
+        self.storage_error_measured
     }
 
     /// The largest static error anywhere: the root's `e*`.

@@ -32,6 +32,9 @@ pub struct MendedRaster {
     values: Vec<f32>,
     valid: Vec<u64>,
     void_count: u64,
+    /// How far a stored height may be from its source (`Q/2` of a storage precision, else
+    /// 0): measuring adds it to every node error (see [`super::precision`]).
+    storage_error: f64,
 }
 
 const NONE: u32 = u32::MAX;
@@ -65,7 +68,19 @@ impl MendedRaster {
             values,
             valid,
             void_count,
+            storage_error: 0.0,
         }
+    }
+
+    /// The raster whose heights are stored within `storage_error` of their source.
+    pub fn with_storage_error(mut self, storage_error: f64) -> MendedRaster {
+        self.storage_error = storage_error;
+        self
+    }
+
+    /// How far a stored height may be from its source.
+    pub fn storage_error(&self) -> f64 {
+        self.storage_error
     }
 
     /// Data samples along a row.
@@ -225,7 +240,8 @@ impl MendedRaster {
             MendedRaster::new(
                 Heightfield::new(self.width, self.height, samples)
                     .expect("same size as a valid heightfield, finite patch"),
-            ),
+            )
+            .with_storage_error(self.storage_error),
         );
         // Stand-ins that changed outside the patch.
         let mut changed: Option<SampleRect> = None;

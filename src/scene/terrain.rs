@@ -29,6 +29,7 @@ pub struct Terrain<'s, S: Source> {
     frame: WorldFrame,
     root: StoredNode,
     thresholds: Vec<f64>,
+    storage_error: f64,
 }
 
 impl<'s, S: Source> Terrain<'s, S> {
@@ -53,7 +54,18 @@ impl<'s, S: Source> Terrain<'s, S> {
             frame: WorldFrame::new(spacing_m.or(store.header().metadata.spacing_m)),
             root,
             thresholds: store.clusters().iter().map(|c| c.threshold).collect(),
+            storage_error: store
+                .header()
+                .precision
+                .map_or(0.0, crate::model::Precision::bound),
         })
+    }
+
+    /// How far a stored height may be from its source: `Q/2` of a storage precision
+    /// (format 2.1), else 0. No block is more exact: a physical block with real heights
+    /// has this error, and a node whose `e*` is this small cannot be refined to better.
+    pub fn storage_error(&self) -> f64 {
+        self.storage_error
     }
 
     /// The store.
@@ -188,7 +200,8 @@ impl<'s, S: Source> Terrain<'s, S> {
         }
     }
 
-    /// Physical block `(x, y)`, exact, its heights bounded by `zmin..=zmax`.
+    /// Physical block `(x, y)`, its heights bounded by `zmin..=zmax`: exact, or within the
+    /// storage error of a file with a precision.
     pub fn physical_block(
         &self,
         view: &View,
@@ -206,6 +219,10 @@ impl<'s, S: Source> Terrain<'s, S> {
             y,
         }
         .samples(&d);
+        let real =
+            u64::from(stored.width) * u64::from(stored.height) > u64::from(stored.void_count);
+        let error = if real { self.storage_error } else { 0.0 };
+        let distance = self.rect_box(&rect, zmin, zmax).distance(view.eye);
         Ok(SceneBlock {
             node: None,
             level: finest,
@@ -216,9 +233,9 @@ impl<'s, S: Source> Terrain<'s, S> {
             row0: rect.row0,
             col1: rect.col1,
             row1: rect.row1,
-            error: 0.0,
-            screen_error: 0.0,
-            distance: self.rect_box(&rect, zmin, zmax).distance(view.eye),
+            error,
+            screen_error: view.screen_error(error, distance),
+            distance,
             min_height: zmin,
             max_height: zmax,
             payload: stored.payload,

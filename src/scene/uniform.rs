@@ -3,7 +3,9 @@
 //! can hold (its box, from the data's lowest to highest height). The answer is the cluster
 //! with the largest threshold `δᵢ <= ε`, never a coarser one, scanned over the region's key
 //! ranges. When even the finest cluster is above `ε` (thresholds given without 0), the
-//! physical blocks of the region are returned: they are exact.
+//! physical blocks of the region are returned: they are exact, or within the storage error
+//! `Q/2` of a file with a precision. When that finest cluster's threshold is already `Q/2`,
+//! it is returned instead: nothing is more exact, and its blocks are fewer.
 
 use super::ranges::{self, KeyRange, Quadrant};
 use super::search::Search;
@@ -18,13 +20,16 @@ impl<S: Source> Search<'_, '_, S> {
         self.stats.p_min = Some(p_min);
         self.stats.allowed_error = Some(allowed);
         // The largest threshold within the bound: the thresholds ascend.
-        let cluster = self
-            .terrain
-            .thresholds()
+        let thresholds = self.terrain.thresholds();
+        let storage = self.terrain.storage_error();
+        let cluster = thresholds
             .partition_point(|&t| t <= allowed)
-            .checked_sub(1);
+            .checked_sub(1)
+            // Below the finest threshold: physical blocks, unless that cluster is already as
+            // exact as storage allows (a precision's Q/2).
+            .or_else(|| (storage > 0.0 && thresholds.first() <= Some(&storage)).then_some(0));
         self.stats.cluster = cluster;
-        self.stats.threshold = Some(cluster.map_or(0.0, |c| self.terrain.thresholds()[c]));
+        self.stats.threshold = Some(cluster.map_or(storage, |c| thresholds[c]));
         let keys: Vec<KeyRange> = quadrants.iter().map(|q| q.keys(&d)).collect();
         let (zmin, zmax) = self.terrain.height_range();
         for run in ranges::merge(&keys, gap) {

@@ -14,7 +14,9 @@
 //! the same cluster, were both measured on Puget Sound 1k and 4k: the extra range scans cost
 //! more than the refinement they save, 10-30 % slower.)
 //! A tree leaf above the finest level that still misses `τ` (possible only when the finest
-//! threshold is above 0) is replaced by its physical blocks.
+//! threshold is above 0) is replaced by its physical blocks, unless its `e*` is already the
+//! file's storage error (a precision `Q` gives every block at least `Q/2`): then it is kept,
+//! since no block is more exact, and its screen error is reported as it is, above `τ`.
 //!
 
 use super::ranges::{self, KeyRange, KeyRun, Quadrant};
@@ -58,7 +60,12 @@ impl<S: Source> Search<'_, '_, S> {
         let mut stack = vec![(index, n)];
         while let Some((i, n)) = stack.pop() {
             let distance = self.terrain.node_box(&n).distance(self.view.eye);
-            if self.view.screen_error(n.monotone_error, distance) <= self.tau || n.level >= finest {
+            // A node as exact as storage allows is kept even when it misses `tau`: nothing
+            // below it is better (a file with a precision, model §4).
+            if self.view.screen_error(n.monotone_error, distance) <= self.tau
+                || n.level >= finest
+                || (n.monotone_error <= self.terrain.storage_error() && n.monotone_error > 0.0)
+            {
                 let block = self.terrain.node_block_at(self.view, i, &n, distance);
                 self.out.push(block);
                 continue;

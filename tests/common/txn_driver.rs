@@ -148,6 +148,7 @@ pub fn build_bytes(hf: &Heightfield, block: u32, thresholds: &Thresholds) -> Vec
         &BuildOptions {
             block_size: block,
             thresholds: thresholds.clone(),
+            precision: None,
         },
     )
     .expect("the model builds");

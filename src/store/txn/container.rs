@@ -340,7 +340,12 @@ impl<I: Io> WriteTxn<'_, I> {
             let base = &self.base;
             let hf = base.read_window(base.domain().data_rect())?;
             let thresholds: Vec<f64> = base.clusters().iter().map(|c| c.threshold).collect();
-            let editor = ModelEditor::new(hf, base.domain().block_size(), &thresholds)?;
+            let editor = ModelEditor::new(
+                hf,
+                base.domain().block_size(),
+                &thresholds,
+                base.header().precision,
+            )?;
             self.cache.editor = Some(editor);
         }
         self.cache

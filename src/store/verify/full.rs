@@ -130,6 +130,7 @@ pub(super) fn check_measured<S: Source>(
     let options = BuildOptions {
         block_size: d.block_size(),
         thresholds: Thresholds::Explicit(store.clusters().iter().map(|c| c.threshold).collect()),
+        precision: store.header().precision,
     };
     let model = match Model::build_with_progress(hf, &options, progress) {
         Ok(m) => m,

@@ -38,6 +38,12 @@ pub(super) fn check_nodes<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut 
     let d = store.domain();
     let finest = d.finest_level();
     let delta_min = store.header().delta_min;
+    // A physical block's grid is the stored data: its error is the storage error, Q/2 of a
+    // precision (format 2.1), where it has real heights, and 0 otherwise.
+    let storage_error = store
+        .header()
+        .precision
+        .map_or(0.0, crate::model::Precision::bound);
     let nodes = &l.nodes;
     let count = nodes.len() as u64;
     let (cols, _) = d.nodes_across(finest);
@@ -168,8 +174,16 @@ pub(super) fn check_nodes<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut 
             );
         }
         if level == finest {
-            if m != 0.0 {
-                checks.fail(id, format!("{at}: a physical block with error {m}"));
+            let want = if n.valid_samples.get() > 0 {
+                storage_error
+            } else {
+                0.0
+            };
+            if m != want || e != want {
+                checks.fail(
+                    id,
+                    format!("{at}: a physical block with error {e}, e* {m}; its storage error is {want}"),
+                );
             }
             if let Some(b) = l.blocks.get((y * cols + x) as usize) {
                 if (n.payload_offset, n.payload_len, n.payload_crc)

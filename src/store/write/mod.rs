@@ -110,6 +110,9 @@ pub struct CreateOptions {
     pub block_size: u32,
     /// Cluster thresholds: the default √2 ladder, or given ones.
     pub thresholds: Thresholds,
+    /// Store heights to this step, within half of it (see [`crate::model::precision`]);
+    /// `None` keeps them bit for bit.
+    pub precision: Option<crate::model::Precision>,
     /// Page size and progress.
     pub write: WriteOptions,
     /// Replace an existing file (atomically) instead of refusing.
@@ -121,6 +124,7 @@ impl Default for CreateOptions {
         CreateOptions {
             block_size: DEFAULT_BLOCK_SIZE,
             thresholds: Thresholds::Ladder,
+            precision: None,
             write: WriteOptions::default(),
             overwrite: false,
         }
@@ -154,6 +158,7 @@ pub fn create(
         &BuildOptions {
             block_size: options.block_size,
             thresholds: options.thresholds.clone(),
+            precision: options.precision,
         },
     )?;
     write_file(&model, &metadata, path, &options.write, options.overwrite)

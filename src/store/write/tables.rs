@@ -16,7 +16,7 @@ use crate::format::{
     tag, AdjacencyEntry, BlobRef, BlockRecord, IndexEntry, NodeRecord, ScanEntry, StoredBlock,
     StoredNode, TreeRef, TreeSpec,
 };
-use crate::model::{cluster, Model, NodeGrid, SampleRect, NO_PARENT};
+use crate::model::{cluster, Model, NodeGrid, Precision, SampleRect, NO_PARENT};
 
 /// Where the pages of a state's tables and blobs go.
 pub(crate) trait PageSink {
@@ -232,6 +232,7 @@ pub(crate) fn encode_grid(model: &Model, node: u32, has_voids: bool) -> Vec<u8> 
         &payload::encode_grid(&g.heights, &g.void, has_voids),
         gw,
         gh,
+        model.precision().map(Precision::step),
     )
 }
 
@@ -264,5 +265,11 @@ pub(crate) fn encode_block(model: &Model, shape: &BlockShape) -> Vec<u8> {
     });
     let raw = payload::encode_block(samples, usize::try_from(r.samples()).unwrap_or(0));
     let (w, h) = shape.size();
-    payload::store_block(&raw, w, h, shape.void_count)
+    payload::store_block(
+        &raw,
+        w,
+        h,
+        shape.void_count,
+        model.precision().map(Precision::step),
+    )
 }

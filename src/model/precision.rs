@@ -1,0 +1,199 @@
+//! Error-bounded storage: heights kept to a step `Q`, and the storage error that adds to
+//! every node's error.
+//!
+//! A DEM measured to a decimetre gains nothing from the other twenty bits of an `f32`, but
+//! a lossless codec must keep them, and they are noise that costs most of the bytes. With a
+//! storage precision `Q` (`fmrh build --precision Q`) every real height `h` is stored as the
+//! lattice height nearest to it, `q(h) = (k · Q) as f32` with `k = round(h / Q)` (the
+//! formula of the lattice codec, [`crate::codec::lattice_value`], so every stored block is
+//! on the lattice and codes as small integers). A height whose lattice value would miss it
+//! by more than `Q/2` (where the `f32` rounding of `k · Q` adds to the half step), or is not
+//! its own lattice value (heights so large that `Q` nears their own `f32` precision), is
+//! stored as it is. So every stored height is within `Q/2` of its source:
+//!
+//! ```text
+//!   |stored(x, y) - source(x, y)| <= Q/2        for every valid sample
+//! ```
+//!
+//! **The storage error enters the node errors.** A node's static error is measured against
+//! the *stored* samples (the only ones a later transaction can see), and `Q/2` is added to
+//! it (model §4: every band with a valid sample). By the triangle inequality the result
+//! bounds the distance from the node's surface to the *source*, which is what a scene's
+//! error bound promises. Finest nodes, whose grid is the stored data, get exactly `Q/2`; so
+//! no cluster threshold below `Q/2` can be met, and the default ladder starts at `Q/2`
+//! instead of 0.
+//!
+//! Bounding rather than measuring the source's error keeps a file editable: a transaction
+//! measures against what is stored, since the source is gone, and a fresh build and an edit
+//! give the same errors. The price is at most `Q/2` of slack on coarse nodes.
+
+use crate::codec;
+use crate::error::{Error, Result};
+use crate::heightfield::Heightfield;
+
+/// A storage precision: the lattice step heights are kept to (see the module docs).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Precision {
+    step: f64,
+}
+
+impl Precision {
+    /// The smallest step accepted: below it an `f32` height near 1 has no more to give.
+    pub const MIN_STEP: f64 = 1e-6;
+    /// The largest step accepted.
+    pub const MAX_STEP: f64 = 1e6;
+
+    /// The precision of lattice step `step`: finite, within
+    /// [`MIN_STEP`](Self::MIN_STEP)`..=`[`MAX_STEP`](Self::MAX_STEP).
+    pub fn new(step: f64) -> Result<Precision> {
+        if !(step.is_finite() && (Self::MIN_STEP..=Self::MAX_STEP).contains(&step)) {
+            return Err(Error::InvalidArgument(format!(
+                "precision {step}: a storage step must be a number from {} to {}",
+                Self::MIN_STEP,
+                Self::MAX_STEP
+            )));
+        }
+        Ok(Precision { step })
+    }
+
+    /// The lattice step `Q`.
+    pub fn step(self) -> f64 {
+        self.step
+    }
+
+    /// The storage error bound, `Q/2`: no stored height is further from its source.
+    pub fn bound(self) -> f64 {
+        self.step / 2.0
+    }
+
+    /// The stored height of source height `v` (see the module docs). NaN (a void) stays
+    /// as it is.
+    pub fn quantise(self, v: f32) -> f32 {
+        if !v.is_finite() {
+            return v;
+        }
+        match codec::lattice_index(v, self.step) {
+            Some(k) => {
+                let q = codec::lattice_value(k, self.step);
+                // Both are f32 values, so their difference is exact in f64. `q` must also
+                // be its own lattice value (it is unless `|k|` nears 2^24, where the f32
+                // rounding can move it to a neighbour), so quantising is idempotent.
+                let on_lattice = codec::lattice_index(q, self.step)
+                    .is_some_and(|k| codec::lattice_value(k, self.step).to_bits() == q.to_bits());
+                if on_lattice && (f64::from(q) - f64::from(v)).abs() <= self.bound() {
+                    q
+                } else {
+                    v
+                }
+            }
+            None => v,
+        }
+    }
+
+    /// Quantises every sample of `heightfield` in place. Returns it with the largest
+    /// `|stored - source|` over its real heights, or `None` when no sample changed a bit
+    /// (integer data and a step of 1, say: the precision changes nothing).
+    pub fn quantise_heightfield(self, heightfield: Heightfield) -> (Heightfield, Option<f64>) {
+        let (w, h) = (heightfield.width(), heightfield.height());
+        let metadata = heightfield.metadata.clone();
+        let mut samples = heightfield.into_samples();
+        let mut worst = 0.0f64;
+        let mut changed = false;
+        for v in &mut samples {
+            let q = self.quantise(*v);
+            if q.to_bits() != v.to_bits() {
+                changed = true;
+                worst = worst.max((f64::from(q) - f64::from(*v)).abs());
+            }
+            *v = q;
+        }
+        let mut out = Heightfield::new(w, h, samples)
+            .unwrap_or_else(|_| unreachable!("quantising keeps the shape and finiteness"));
+        out.metadata = metadata;
+        (out, changed.then_some(worst))
+    }
+}
+
+/// Whether quantising to `precision` would change a bit of `samples`. A caller may then
+/// drop a precision that changes nothing (`fmrh build` does: the file is lossless, and its
+/// errors carry no storage bound).
+pub fn changes_any(precision: Precision, samples: &[f32]) -> bool {
+    samples
+        .iter()
+        .any(|&v| precision.quantise(v).to_bits() != v.to_bits())
+}
+
+/// Checks cluster thresholds (sorted) against `precision`: none may be below its storage
+/// error, which every node with real heights carries.
+pub fn check_thresholds(thresholds: Vec<f64>, precision: Option<Precision>) -> Result<Vec<f64>> {
+    if let (Some(p), Some(&lowest)) = (precision, thresholds.first()) {
+        if lowest < p.bound() {
+            return Err(Error::InvalidArgument(format!(
+                "threshold {lowest} is below the storage error {} of precision {}: no node \
+                 of such a file meets it (use thresholds of at least {})",
+                p.bound(),
+                p.step(),
+                p.bound()
+            )));
+        }
+    }
+    Ok(thresholds)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    #[test]
+    fn steps_outside_the_range_are_refused() {
+        for bad in [0.0, -0.1, f64::NAN, f64::INFINITY, 1e-9, 1e7] {
+            assert!(Precision::new(bad).is_err(), "{bad}");
+        }
+        assert!(Precision::new(0.1).is_ok());
+    }
+
+    #[test]
+    fn negative_zero_and_tiny_values_become_plus_zero() {
+        let p = Precision::new(0.1).unwrap();
+        for v in [-0.0f32, 1e-40, -1e-40, 0.04, -0.04] {
+            let q = p.quantise(v);
+            assert_eq!(q.to_bits(), 0.0f32.to_bits(), "{v}");
+        }
+    }
+
+    #[test]
+    fn huge_values_are_kept() {
+        let p = Precision::new(0.1).unwrap();
+        for v in [f32::MAX, f32::MIN, 3.0e38, -3.0e38] {
+            assert_eq!(p.quantise(v).to_bits(), v.to_bits());
+        }
+        assert!(p.quantise(f32::NAN).is_nan());
+    }
+
+    proptest! {
+        /// The bound holds for every finite f32, and quantising twice changes nothing (a
+        /// transaction reads stored heights back and may quantise them again).
+        #[test]
+        fn within_half_a_step_and_idempotent(
+            bits in any::<u32>(),
+            step in prop::sample::select(vec![1e-6, 0.001, 0.1, 0.25, 0.3, 1.0, 7.0, 1e6]),
+        ) {
+            let v = f32::from_bits(bits);
+            prop_assume!(v.is_finite());
+            let p = Precision::new(step).unwrap();
+            let q = p.quantise(v);
+            prop_assert!((f64::from(q) - f64::from(v)).abs() <= step / 2.0);
+            prop_assert_eq!(p.quantise(q).to_bits(), q.to_bits());
+        }
+
+        /// Ordinary heights land on the lattice, so the lattice codec takes them.
+        #[test]
+        fn ordinary_heights_are_on_the_lattice(v in -12000.0f32..9000.0) {
+            let p = Precision::new(0.1).unwrap();
+            let q = p.quantise(v);
+            let k = codec::lattice_index(q, 0.1).unwrap();
+            prop_assert_eq!(codec::lattice_value(k, 0.1).to_bits(), q.to_bits());
+        }
+    }
+}
