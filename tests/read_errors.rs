@@ -153,13 +153,23 @@ fn every_error_names_its_file() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("damaged.fmrh");
     let mut bytes = container();
-    // Damage a byte of the node table's root page (the last table page before the directory).
-    let flip = bytes.len() - 4096 - 100;
-    bytes[flip] ^= 0xff;
+    // Damage a byte of the node table's root page (commit record bytes 72..80).
+    let root = u64::from_le_bytes(bytes[72..80].try_into().unwrap()) as usize;
+    bytes[root * 4096 + 200] ^= 0xff;
     std::fs::write(&path, &bytes).unwrap();
-    let e = Store::open(&path).unwrap_err();
+    // Opening reads the slots, the header and the directory only; the damaged page is
+    // checked, and refused, when a lookup first reaches it.
+    let store = Store::open(&path).unwrap();
+    let e = store.node(0).unwrap_err();
     assert!(e.to_string().contains(&*path.to_string_lossy()), "{e}");
     assert!(matches!(e, Error::Corrupt { .. }), "{e}");
+    drop(store);
+    let report = fmrh::verify(
+        fmrh::store::FileSource::open(&path).unwrap(),
+        fmrh::VerifyMode::Fast,
+    )
+    .unwrap();
+    assert!(!report.valid);
     let missing = dir.path().join("missing.fmrh");
     let e = Store::open(&missing).unwrap_err();
     assert!(matches!(e, Error::Io { .. }), "{e}");

@@ -39,8 +39,9 @@ pub struct BuildArgs {
     /// ladder from the largest error down, plus 0 (lossless).
     #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
     thresholds: Option<Vec<f64>>,
-    /// Store heights to the step Q (e.g. 0.1): each within Q/2 of the source, a bound every
-    /// node's error includes, so scenes stay true to the source. Much smaller files for
+    /// Store heights to the step Q (e.g. 0.1): each within Q/2 of the source, plus f32
+    /// rounding (bounded by Q/16), a bound every node's error includes, so scenes stay true
+    /// to the source. Much smaller files for
     /// float DEMs measured to a few centimetres. A step that changes no height (integer
     /// data and --precision 1) is dropped, and the file is lossless. Default: lossless.
     #[arg(long, value_name = "Q")]
@@ -279,9 +280,8 @@ fn print_report(r: &BuildReport) {
     match (r.precision, r.storage_error_measured) {
         (Some(q), Some(e)) => println!(
             "  precision   {q}: heights stored within {} of the source (measured max {e}); \
-             every node error includes {}",
-            q / 2.0,
-            q / 2.0
+             every node error includes it",
+            q * 0.5625
         ),
         (Some(q), None) => println!("  precision   {q}"),
         _ => println!("  precision   lossless (every height bit for bit)"),

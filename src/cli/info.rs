@@ -318,7 +318,7 @@ fn print_info(path: &std::path::Path, i: &Info) {
     match i.precision {
         Some(q) => println!(
             "  precision   {q}: heights within {} of the source, included in every error",
-            q / 2.0
+            q * 0.5625
         ),
         None => println!("  precision   lossless"),
     }

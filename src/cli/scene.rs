@@ -7,7 +7,10 @@ use std::process::ExitCode;
 use serde::Serialize;
 
 use fmrh::model::SampleRect;
-use fmrh::scene::{reconstruct, Camera, Mode, Scene, SceneOptions, Terrain, DEFAULT_GAP};
+use fmrh::scene::{
+    load_blocks, reconstruct, Camera, Mode, Scene, SceneOptions, Terrain, DEFAULT_GAP, PAYLOAD_GAP,
+};
+use fmrh::store::ReadStats;
 use fmrh::Error;
 
 /// The camera options `scene` and `fly` share.
@@ -128,9 +131,24 @@ pub struct SceneArgs {
     /// Replace existing --reconstruct files.
     #[arg(long)]
     force: bool,
+    /// Read and decode every block's payload, as a renderer would (adjacent payloads in one
+    /// read), and report what that read.
+    #[arg(long)]
+    load: bool,
     /// Print the scene as JSON.
     #[arg(long)]
     pub json: bool,
+}
+
+/// What the scene read from the file, by phase.
+#[derive(Serialize)]
+struct Reads {
+    /// Opening: the commit slots, the dataset header, the cluster directory.
+    open: ReadStats,
+    /// Scheduling: index and node pages (each read once, then cached).
+    schedule: ReadStats,
+    /// Loading the blocks (--load or --reconstruct): their payloads.
+    load: Option<ReadStats>,
 }
 
 /// The JSON report.
@@ -145,6 +163,8 @@ struct Report<'a> {
     stats: &'a fmrh::scene::SceneStats,
     /// --reconstruct: samples of the window no block owns (written as NaN).
     uncovered_samples: Option<u64>,
+    /// What was read, by phase.
+    reads: Reads,
 }
 
 /// Runs `fmrh scene`.
@@ -184,9 +204,14 @@ fn run_on<S: fmrh::store::Source>(
     options: SceneOptions,
     output: Option<super::sidecar::F32Output>,
 ) -> Result<ExitCode, Error> {
+    let before = store.read_stats();
     let terrain = Terrain::with_spacing(store, args.view.spacing(store, &args.file)?)?;
     let scene = terrain.scene(&camera, &options)?;
+    let scheduled = store.read_stats();
     let mut uncovered = None;
+    if args.load && output.is_none() {
+        load_blocks(store, &scene.blocks, PAYLOAD_GAP)?;
+    }
     if let Some(out) = &output {
         let window = scene.window.ok_or_else(|| {
             Error::InvalidArgument(
@@ -199,6 +224,11 @@ fn run_on<S: fmrh::store::Source>(
         let hf = rec.to_heightfield(&store.header().metadata)?;
         out.write(&hf, window, "fmrh scene --reconstruct", &args.file, store)?;
     }
+    let reads = Reads {
+        open: store.open_reads(),
+        schedule: scheduled.since(&before),
+        load: (args.load || output.is_some()).then(|| store.read_stats().since(&scheduled)),
+    };
     if args.json {
         super::print_json(&Report {
             mode: scene.mode,
@@ -208,14 +238,15 @@ fn run_on<S: fmrh::store::Source>(
             blocks: &scene.blocks,
             stats: &scene.stats,
             uncovered_samples: uncovered,
+            reads,
         })?;
     } else {
-        print_text(&scene, uncovered);
+        print_text(&scene, uncovered, &reads);
     }
     Ok(ExitCode::SUCCESS)
 }
 
-fn print_text(scene: &Scene, uncovered: Option<u64>) {
+fn print_text(scene: &Scene, uncovered: Option<u64>, reads: &Reads) {
     let s = &scene.stats;
     let mode = match scene.mode {
         Mode::Uniform => "uniform",
@@ -249,6 +280,19 @@ fn print_text(scene: &Scene, uncovered: Option<u64>) {
     );
     if let Some(u) = uncovered {
         println!("  reconstruction: {u} samples of the window lie outside every block (NaN)");
+    }
+    let r = |what: &str, s: &ReadStats| {
+        println!(
+            "  read        {what}: {} calls, {} metadata bytes, {} payload bytes",
+            s.reads(),
+            s.metadata_bytes,
+            s.payload_bytes
+        );
+    };
+    r("open", &reads.open);
+    r("schedule", &reads.schedule);
+    if let Some(l) = &reads.load {
+        r("load", l);
     }
     if scene.blocks.is_empty() {
         return;

@@ -12,9 +12,9 @@
 //! height under it. The scan also counts the footprint's valid samples.
 //!
 //! **With a storage precision `Q`** (see [`super::precision`]) the raster holds the stored
-//! heights, and every band with a valid sample adds `Q/2` to its error (rounded up by one
-//! ulp), so the error bounds the distance to the source as well: finest nodes get exactly
-//! `Q/2` (model §4).
+//! heights, and every band with a valid sample adds the storage bound `9Q/16` to its error
+//! (rounded up by one ulp), so the error bounds the distance to the source as well: finest
+//! nodes get exactly the bound (model §4).
 //!
 //! One level costs one pass over the data: each node scans its own footprint. The work is
 //! spread over cores by node, or for the few big nodes near the root by band of cell rows. At

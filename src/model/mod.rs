@@ -116,7 +116,7 @@ impl Model {
         let thresholds = explicit.clone().unwrap_or_else(|| {
             let mut ladder =
                 cluster::default_ladder(measured.root_error(), measured.min_positive_error());
-            // No node beats the storage error: the ladder's lossless rung becomes Q/2.
+            // No node beats the storage error: the ladder's lossless rung becomes its bound.
             ladder.retain(|&t| t > floor);
             ladder.insert(0, floor);
             ladder

@@ -4,7 +4,8 @@
 //! of the terrain as maximal aligned quadrants, then Hilbert key ranges), `result` (what a
 //! scene asks and answers), `terrain` (boxes, regions, and the dispatch to a mode), the modes
 //! `uniform` and `view_dependent` (the cuts, found through the clusters, over the shared
-//! `search` state), `stitch` (neighbour levels across block edges), [`mod@reconstruct`] (the
+//! `search` state), `stitch` (neighbour levels across block edges), [`load`] (a scene's
+//! payloads read in coalesced runs and decoded), [`mod@reconstruct`] (the
 //! surface a scene draws, sampled back at full resolution), [`schedule`] (frames: what to
 //! load, keep and evict as the camera moves, with prefetch), [`path`] (camera paths), and
 //! [`baseline`] (naive answers kept as yardsticks). A new mode is a new file with an `impl`
@@ -17,6 +18,7 @@
 
 pub mod baseline;
 pub mod camera;
+pub mod load;
 pub mod path;
 pub mod ranges;
 pub mod reconstruct;
@@ -30,6 +32,7 @@ mod view_dependent;
 
 pub use crate::format::PayloadRef;
 pub use camera::{Aabb, Camera, Coverage, View, WorldFrame};
+pub use load::{load_blocks, LoadedBlock, PAYLOAD_GAP};
 pub use reconstruct::{reconstruct, Reconstruction};
 pub use result::{Mode, NeighbourLevels, Scene, SceneBlock, SceneOptions, SceneStats, DEFAULT_GAP};
 pub use schedule::{BlockId, Frame, FrameStats, ScheduleOptions, Scheduler};

@@ -15,7 +15,8 @@ use crate::model::measure::surface;
 use crate::model::SampleRect;
 use crate::store::{Source, Store};
 
-use super::Scene;
+use super::load::{load_blocks, PAYLOAD_GAP};
+use super::{Scene, SceneBlock};
 
 /// A window sampled from a scene.
 #[derive(Clone, Debug, PartialEq)]
@@ -74,6 +75,9 @@ pub fn reconstruct<S: Source>(
     let mut bound = vec![f64::NAN; w * h];
     let b = u64::from(d.block_size());
     let finest = d.finest_level();
+    // The blocks that own part of the window, with that part; their payloads are read
+    // together (coalesced) and decoded once.
+    let mut parts = Vec::new();
     for block in &scene.blocks {
         let rect = block.rect();
         // Owned: the half-open footprint, plus the data's last column and row.
@@ -91,32 +95,30 @@ pub fn reconstruct<S: Source>(
                 rect.row1 - 1
             },
         };
-        let Some(part) = owned.intersect(&window) else {
-            continue;
-        };
+        if let Some(part) = owned.intersect(&window) {
+            parts.push((*block, part));
+        }
+    }
+    let blocks: Vec<SceneBlock> = parts.iter().map(|(b, _)| *b).collect();
+    let loaded = load_blocks(store, &blocks, PAYLOAD_GAP)?;
+    for ((block, part), l) in parts.iter().zip(&loaded) {
+        let rect = block.rect();
         let mut put = |col: u64, row: u64, v: f64| {
             let at = (row - window.row0) as usize * w + (col - window.col0) as usize;
             values[at] = v;
             bound[at] = block.error;
         };
+        let g = &l.heights;
         if block.level == finest {
-            let blk = store.block(block.x, block.y)?;
-            let view = blk.view();
-            let mended = view.mended();
-            let bw = u64::from(view.width);
+            // The block's samples within the data start at its footprint's corner.
+            let bw = u64::from(l.width);
             for row in part.row0..=part.row1 {
                 for col in part.col0..=part.col1 {
-                    let at = (row - blk.rect.row0) * bw + (col - blk.rect.col0);
-                    put(col, row, f64::from(mended[at as usize]));
+                    let at = (row - rect.row0) * bw + (col - rect.col0);
+                    put(col, row, f64::from(g[at as usize]));
                 }
             }
         } else {
-            let node = match block.node {
-                Some(i) => store.node(i)?,
-                None => continue, // only physical blocks lack a node, and they are finest
-            };
-            let grid = store.grid(&node)?;
-            let g = grid.view().expanded();
             let s = d.stride(block.level);
             for row in part.row0..=part.row1 {
                 let v = row - rect.row0;

@@ -12,12 +12,17 @@
 //!   least recently visible go first (ties by key, so runs are reproducible);
 //! * **cache area** (within `cache_radius`): the prefetch thread predicts the next camera
 //!   by extrapolating the last two (eye and target move on as they moved), selects that
-//!   scene, and reads the blocks the scheduler lacks into a warm cache (payloads read and
-//!   CRC-checked, what `madvise(WILLNEED)` would only hint). Entries that drift beyond
+//!   scene, and reads the blocks the scheduler lacks into a warm cache (payloads read,
+//!   CRC-checked and decoded, what `madvise(WILLNEED)` would only hint). Entries that drift beyond
 //!   `cache_radius` are dropped. The next frame takes its loads from the cache when it can.
 //!
 //! What a frame loads, keeps and evicts depends only on the cameras, never on the prefetch
 //! thread's timing: prefetch changes where bytes come from, not which.
+//!
+//! **Decoded once.** A loaded block is kept decoded ([`LoadedBlock`]: the heights it draws)
+//! for as long as it is resident, so a fly-through decodes each block once, when it enters
+//! (or when the prefetcher warms it), never per frame. A frame's missing blocks are read
+//! together, with adjacent payloads coalesced into one read ([`super::load`]).
 
 use std::collections::{HashMap, HashSet};
 use std::sync::mpsc::{self, Receiver, Sender};
@@ -31,6 +36,7 @@ use crate::error::Result;
 use crate::store::{Source, Store};
 
 use super::camera::Camera;
+use super::load::{load_blocks, LoadedBlock, PAYLOAD_GAP};
 use super::{Scene, SceneBlock, SceneOptions, Terrain};
 
 /// A block's identity: level and position (a node, or a physical block below a leaf).
@@ -65,8 +71,8 @@ pub struct ScheduleOptions {
     /// Metres: the prefetcher warms predicted blocks this close; farther cache entries are
     /// dropped.
     pub cache_radius: f64,
-    /// Resident payload bytes beyond which out-of-view blocks are evicted (visible blocks
-    /// never are).
+    /// Resident bytes (stored payloads and their decoded heights) beyond which out-of-view
+    /// blocks are evicted (visible blocks never are).
     pub memory_budget: u64,
     /// Run the prefetch thread.
     pub prefetch: bool,
@@ -121,7 +127,7 @@ pub struct FrameStats {
     pub evicted: u64,
     /// Resident blocks after the frame (visible + memory area).
     pub resident: u64,
-    /// Resident payload bytes after the frame.
+    /// Resident bytes after the frame: stored payloads and decoded heights.
     pub resident_bytes: u64,
     /// Time to select the scene and work out the difference, in nanoseconds.
     pub schedule_ns: u64,
@@ -133,14 +139,14 @@ pub struct FrameStats {
 
 struct Resident {
     block: SceneBlock,
-    bytes: Arc<[u8]>,
+    loaded: LoadedBlock,
     last_visible: u64,
 }
 
 /// A prefetch request: its number, the predicted camera, the blocks already resident.
 type Request = (u64, Camera, HashSet<BlockId>);
 
-type WarmCache = Arc<Mutex<HashMap<BlockId, (SceneBlock, Arc<[u8]>)>>>;
+type WarmCache = Arc<Mutex<HashMap<BlockId, (SceneBlock, LoadedBlock)>>>;
 
 /// Keeps the resident set of a moving camera.
 pub struct Scheduler<S: Source + 'static> {
@@ -183,9 +189,15 @@ impl<S: Source + 'static> Scheduler<S> {
         })
     }
 
-    /// The payload of a resident block.
+    /// The stored (coded) payload of a resident block.
     pub fn payload(&self, id: &BlockId) -> Option<&[u8]> {
-        self.resident.get(id).map(|r| &*r.bytes)
+        self.resident.get(id).map(|r| &*r.loaded.stored)
+    }
+
+    /// A resident block, decoded: the heights it draws. Each block is decoded once, when
+    /// it is loaded (or prefetched), and kept while it stays resident.
+    pub fn block(&self, id: &BlockId) -> Option<&LoadedBlock> {
+        self.resident.get(id).map(|r| &r.loaded)
     }
 
     /// The resident blocks, in no order.
@@ -235,36 +247,41 @@ impl<S: Source + 'static> Scheduler<S> {
             ..FrameStats::default()
         };
         let b = u64::from(self.store.domain().block_size());
-        let mut warm = self.prefetcher.as_ref().map(|p| lock(&p.cache));
-        for block in &load {
-            let id = BlockId::of(block);
-            let cached = warm
-                .as_mut()
-                .and_then(|c| c.remove(&id))
-                .filter(|(cb, _)| cb.payload == block.payload);
-            let bytes: Arc<[u8]> = match cached {
-                Some((_, bytes)) => {
-                    stats.prefetch_hits += 1;
-                    bytes
+        // Blocks the prefetcher warmed, then the rest read together (coalesced) and decoded.
+        let mut ready: Vec<(SceneBlock, LoadedBlock)> = Vec::with_capacity(load.len());
+        let mut missing: Vec<SceneBlock> = Vec::new();
+        if let Some(p) = &self.prefetcher {
+            let mut warm = lock(&p.cache);
+            for block in &load {
+                match warm
+                    .remove(&BlockId::of(block))
+                    .filter(|(cb, _)| cb.payload == block.payload)
+                {
+                    Some((_, loaded)) => {
+                        stats.prefetch_hits += 1;
+                        ready.push((*block, loaded));
+                    }
+                    None => missing.push(*block),
                 }
-                None => {
-                    let p = block.payload;
-                    Arc::from(&*self.store.payload(p)?)
-                }
-            };
-            stats.loaded_bytes += bytes.len() as u64;
+            }
+        } else {
+            missing.clone_from(&load);
+        }
+        let read = load_blocks(&self.store, &missing, PAYLOAD_GAP)?;
+        ready.extend(missing.into_iter().zip(read));
+        for (block, loaded) in ready {
+            stats.loaded_bytes += loaded.stored.len() as u64;
             stats.loaded_triangles += 2 * (b - 1) * (b - 1);
-            self.resident_bytes += bytes.len() as u64;
+            self.resident_bytes += loaded.memory();
             self.resident.insert(
-                id,
+                BlockId::of(&block),
                 Resident {
-                    block: *block,
-                    bytes,
+                    block,
+                    loaded,
                     last_visible: index,
                 },
             );
         }
-        drop(warm);
         stats.load_ns = loading.elapsed().as_nanos() as u64;
 
         let evict_started = Instant::now();
@@ -323,7 +340,7 @@ impl<S: Source + 'static> Scheduler<S> {
             .collect();
         for id in &out {
             if let Some(r) = self.resident.remove(id) {
-                self.resident_bytes -= r.bytes.len() as u64;
+                self.resident_bytes -= r.loaded.memory();
             }
         }
         if self.resident_bytes > self.options.memory_budget {
@@ -339,7 +356,7 @@ impl<S: Source + 'static> Scheduler<S> {
                     break;
                 }
                 if let Some(r) = self.resident.remove(&id) {
-                    self.resident_bytes -= r.bytes.len() as u64;
+                    self.resident_bytes -= r.loaded.memory();
                     out.push(id);
                 }
             }
@@ -450,15 +467,26 @@ fn warm<S: Source>(
     };
     lock(cache)
         .retain(|_, (b, _)| terrain.block_box(b).distance(camera.eye) <= options.cache_radius);
-    for b in &scene.blocks {
-        let id = BlockId::of(b);
-        if have.contains(&id) || b.distance > options.cache_radius || lock(cache).contains_key(&id)
-        {
-            continue;
-        }
-        let p = b.payload;
-        if let Ok(bytes) = store.payload(p) {
-            lock(cache).insert(id, (*b, Arc::from(&*bytes)));
+    let wanted: Vec<SceneBlock> = {
+        let cached = lock(cache);
+        scene
+            .blocks
+            .iter()
+            .filter(|b| {
+                let id = BlockId::of(b);
+                !have.contains(&id)
+                    && b.distance <= options.cache_radius
+                    && !cached.contains_key(&id)
+            })
+            .copied()
+            .collect()
+    };
+    // Read together and decoded here, off the frame's path; a failure leaves the frame to
+    // read (and report) it.
+    if let Ok(loaded) = load_blocks(store, &wanted, PAYLOAD_GAP) {
+        let mut cached = lock(cache);
+        for (b, l) in wanted.into_iter().zip(loaded) {
+            cached.insert(BlockId::of(&b), (b, l));
         }
     }
 }

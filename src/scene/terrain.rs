@@ -61,7 +61,7 @@ impl<'s, S: Source> Terrain<'s, S> {
         })
     }
 
-    /// How far a stored height may be from its source: `Q/2` of a storage precision
+    /// How far a stored height may be from its source: `9Q/16` of a storage precision
     /// (format 2.1), else 0. No block is more exact: a physical block with real heights
     /// has this error, and a node whose `e*` is this small cannot be refined to better.
     pub fn storage_error(&self) -> f64 {

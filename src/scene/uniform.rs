@@ -4,7 +4,7 @@
 //! with the largest threshold `δᵢ <= ε`, never a coarser one, scanned over the region's key
 //! ranges. When even the finest cluster is above `ε` (thresholds given without 0), the
 //! physical blocks of the region are returned: they are exact, or within the storage error
-//! `Q/2` of a file with a precision. When that finest cluster's threshold is already `Q/2`,
+//! (`9Q/16`) of a file with a precision. When that finest cluster's threshold is already it,
 //! it is returned instead: nothing is more exact, and its blocks are fewer.
 
 use super::ranges::{self, KeyRange, Quadrant};
@@ -26,7 +26,7 @@ impl<S: Source> Search<'_, '_, S> {
             .partition_point(|&t| t <= allowed)
             .checked_sub(1)
             // Below the finest threshold: physical blocks, unless that cluster is already as
-            // exact as storage allows (a precision's Q/2).
+            // exact as storage allows (a precision's bound).
             .or_else(|| (storage > 0.0 && thresholds.first() <= Some(&storage)).then_some(0));
         self.stats.cluster = cluster;
         self.stats.threshold = Some(cluster.map_or(storage, |c| thresholds[c]));

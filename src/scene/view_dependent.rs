@@ -15,7 +15,7 @@
 //! more than the refinement they save, 10-30 % slower.)
 //! A tree leaf above the finest level that still misses `τ` (possible only when the finest
 //! threshold is above 0) is replaced by its physical blocks, unless its `e*` is already the
-//! file's storage error (a precision `Q` gives every block at least `Q/2`): then it is kept,
+//! file's storage error (a precision `Q` gives every block at least `9Q/16`): then it is kept,
 //! since no block is more exact, and its screen error is reported as it is, above `τ`.
 //!
 

@@ -6,23 +6,21 @@
 //! scan's path on a small stack, since the trees have no sibling pointers.
 
 use std::borrow::Cow;
+use std::sync::Arc;
 
 use zerocopy::FromBytes;
 
+use super::pagecache::PageCache;
 use super::source::{self, Source};
 use crate::error::{Error, Result};
 use crate::format::tree::{read_record, record_key, TreePage};
 use crate::format::{page::check_page, Invariant, TreeRef, TreeSpec, Violation, MAX_TREE_DEPTH};
 
-/// A set of page numbers, one bit each, sized by the real file (never by a stored count),
-/// with the CRC each page had when it was added (what a reader of an unstable source checks
-/// every later read against).
+/// A set of page numbers, one bit each, sized by the real file (never by a stored count).
 #[derive(Clone, Debug)]
 pub struct PageSet {
     bits: Vec<u64>,
     pages: u64,
-    /// `(page, crc)`, sorted by page once [`PageSet::seal`]ed.
-    crcs: Vec<(u64, u32)>,
 }
 
 impl PageSet {
@@ -31,29 +29,7 @@ impl PageSet {
         PageSet {
             bits: vec![0; usize::try_from(pages.div_ceil(64)).unwrap_or(0)],
             pages,
-            crcs: Vec::new(),
         }
-    }
-
-    /// Notes the CRC of a checked structured page (bytes 4..8 of its header).
-    pub fn note_crc(&mut self, page: u64, bytes: &[u8]) {
-        if let Some(crc) = bytes.get(4..8).and_then(|b| b.try_into().ok()) {
-            self.crcs.push((page, u32::from_le_bytes(crc)));
-        }
-    }
-
-    /// Sorts the noted CRCs for lookup.
-    pub fn seal(&mut self) {
-        self.crcs.sort_unstable();
-    }
-
-    /// The CRC page `page` had when noted.
-    #[inline]
-    pub fn crc(&self, page: u64) -> Option<u32> {
-        self.crcs
-            .binary_search_by_key(&page, |&(p, _)| p)
-            .ok()
-            .map(|i| self.crcs[i].1)
     }
 
     fn word(page: u64) -> (usize, u64) {
@@ -84,17 +60,43 @@ impl PageSet {
     }
 }
 
-/// Page access for tree code: bounds-checked, and checked again on every read when `check`.
+/// Page access for tree code: bounds-checked, and checked (tag, number, CRC, txn tag) on the
+/// first read through a cache, or on every read when `check`.
 pub(crate) struct Pages<'a, S: Source + ?Sized> {
     pub src: &'a S,
     pub page_size: u32,
     pub page_count: u64,
-    /// Check tag, number, CRC and txn tag on every read.
+    /// Check every read, whatever the cache says (the walk of a validator or a writer).
     pub check: bool,
     /// The state read: its txn id, and the txn tag each of its pages carries (format §4).
     pub state: Binding,
-    /// The pages as the state was opened: every later read must find the same CRC.
-    pub known: Option<&'a PageSet>,
+    /// The store's cache: pages checked once are served from it (see [`PageCache`]).
+    pub cache: Option<&'a PageCache>,
+    /// For a reader that did not register, on a source whose pages a writer may reuse: the
+    /// state's `pages_txn`. Each page read first is then checked to be within 2^16
+    /// transactions of it, so its 16-bit txn tag cannot have been reused (format §4).
+    pub wrap_guard: Option<u64>,
+}
+
+/// The bytes of a page: lent by the source, or a checked copy the cache shares.
+#[derive(Clone, Debug)]
+pub(crate) enum PageBytes<'a> {
+    /// Borrowed from the source (a mapping, memory) or read into a buffer for this call.
+    Source(Cow<'a, [u8]>),
+    /// A cached copy.
+    Shared(Arc<[u8]>),
+}
+
+impl std::ops::Deref for PageBytes<'_> {
+    type Target = [u8];
+
+    #[inline]
+    fn deref(&self) -> &[u8] {
+        match self {
+            PageBytes::Source(c) => c,
+            PageBytes::Shared(a) => a,
+        }
+    }
 }
 
 /// What binds a page to the state a reader holds.
@@ -114,29 +116,68 @@ impl<'a, S: Source + ?Sized> Pages<'a, S> {
 
     /// Page `page`, which must be a `tag` page past the commit slots.
     #[inline]
-    pub fn get(&self, page: u64, tag: [u8; 4]) -> Result<Cow<'a, [u8]>> {
+    pub fn get(&self, page: u64, tag: [u8; 4]) -> Result<PageBytes<'a>> {
         if page < 2 || page >= self.page_count {
             return Err(self.outside(page));
         }
         let offset = page * u64::from(self.page_size);
+        let cache = self.cache.filter(|_| !self.check);
+        if let Some(c) = cache {
+            if self.src.stable() {
+                if c.is_checked(page) {
+                    return match self.src.read_at(offset, self.page_size as usize) {
+                        Ok(bytes) => Ok(PageBytes::Source(bytes)),
+                        Err(e) => Err(self.read_failed(offset, e)),
+                    };
+                }
+            } else if let Some(bytes) = c.get(page) {
+                return Ok(PageBytes::Shared(bytes));
+            }
+        }
         let bytes = match self.src.read_at(offset, self.page_size as usize) {
             Ok(bytes) => bytes,
             Err(e) => return Err(self.read_failed(offset, e)),
         };
-        if self.check {
-            // A page that fails its own checks may be one a later state reused for something
-            // else (a reader that did not register): the slots tell.
-            let h = check_page(&bytes, page, tag).map_err(|v| self.reused_or_corrupt(v))?;
-            if h.txn_tag.get() != self.state.txn_tag {
-                return Err(self.unbound(page, h.txn_tag.get()));
-            }
-            if let Some(known) = self.known {
-                if known.crc(page) != Some(h.crc.get()) {
-                    return Err(self.changed(page));
-                }
-            }
+        if let Some(c) = self.cache {
+            c.counters.metadata(bytes.len());
         }
-        Ok(bytes)
+        // A page that fails its own checks may be one a later state reused for something
+        // else (a reader that did not register): the slots tell.
+        let h = check_page(&bytes, page, tag).map_err(|v| self.reused_or_corrupt(v))?;
+        if h.txn_tag.get() != self.state.txn_tag {
+            return Err(self.unbound(page, h.txn_tag.get()));
+        }
+        if let Some(pages_txn) = self.wrap_guard {
+            self.check_wrap(pages_txn)?;
+        }
+        match cache {
+            Some(c) if self.src.stable() => {
+                c.mark_checked(page);
+                Ok(PageBytes::Source(bytes))
+            }
+            Some(c) => {
+                let shared: Arc<[u8]> = Arc::from(bytes.into_owned());
+                c.insert(page, Arc::clone(&shared));
+                Ok(PageBytes::Shared(shared))
+            }
+            None => Ok(PageBytes::Source(bytes)),
+        }
+    }
+
+    /// Fails when 2^16 - 1 or more transactions committed since the state's pages were
+    /// written: a page read now could carry a reused tag.
+    #[cold]
+    fn check_wrap(&self, pages_txn: u64) -> Result<()> {
+        let latest = super::open::latest_txn(self.src)?.unwrap_or(0);
+        if latest.saturating_add(1) >= pages_txn.saturating_add(0xffff) {
+            return Err(Error::Superseded {
+                path: self.src.name().to_path_buf(),
+                txn: self.state.txn,
+                latest,
+                detail: "2^16 transactions committed since its pages were written".into(),
+            });
+        }
+        Ok(())
     }
 
     #[cold]
@@ -157,17 +198,6 @@ impl<'a, S: Source + ?Sized> Pages<'a, S> {
                 "carries txn tag {found:#06x}; the state's pages carry {:#06x}",
                 self.state.txn_tag
             ),
-        );
-        super::open::superseded_or_corrupt(self.src, self.state.txn, v)
-    }
-
-    #[cold]
-    #[inline(never)]
-    fn changed(&self, page: u64) -> Error {
-        let v = Violation::new(
-            Invariant::Page,
-            format!("page {page}"),
-            "is not the page this state was opened with",
         );
         super::open::superseded_or_corrupt(self.src, self.state.txn, v)
     }
@@ -260,7 +290,6 @@ fn walk_page<S: Source + ?Sized>(
         )));
     }
     let bytes = pages.get(page_no, spec.tag)?;
-    seen.note_crc(page_no, &bytes);
     let page = TreePage::checked(&bytes, page_no, spec, level).map_err(|v| pages.corrupt(v))?;
     let first_ordinal = state.next_ordinal;
     if level == 0 {
@@ -320,9 +349,35 @@ fn walk_page<S: Source + ?Sized>(
     Ok(())
 }
 
+/// Checks that a page a descent reached is at the level the descent expects and holds at
+/// least one entry. Pages are checked one by one as lookups reach them (not walked when the
+/// store opens), so this is what keeps a damaged but checksummed branch from sending a
+/// lookup sideways; the validator checks the whole shape (I-7).
+#[inline]
+fn check_level<S: Source + ?Sized>(
+    pages: &Pages<'_, S>,
+    spec: TreeSpec,
+    page_no: u64,
+    page: &TreePage<'_>,
+    level: u16,
+) -> Result<()> {
+    if page.level() != level || page.count() == 0 {
+        return Err(pages.corrupt(Violation::new(
+            Invariant::TreeShape,
+            format!("{} page {page_no}", spec.name),
+            format!(
+                "level {} with {} entries where a level-{level} page belongs",
+                page.level(),
+                page.count()
+            ),
+        )));
+    }
+    Ok(())
+}
+
 /// A position in a tree: the path from the root, each level's page and entry.
 pub(crate) struct Cursor<'a> {
-    path: Vec<(Cow<'a, [u8]>, usize)>,
+    path: Vec<(PageBytes<'a>, usize)>,
     spec: TreeSpec,
     remaining: u64,
     /// Pages read so far, the descent included.
@@ -396,10 +451,12 @@ pub(crate) fn seek<'a, S: Source + ?Sized>(
     }
     let mut page_no = tree.root_page.get();
     let mut base_ordinal = 0u64;
-    for _ in 0..tree.depth.get().min(MAX_TREE_DEPTH) {
+    let depth = tree.depth.get().min(MAX_TREE_DEPTH);
+    for step in 0..depth {
         let bytes = pages.get(page_no, spec.tag)?;
         cursor.pages_read += 1;
         let page = TreePage::new(&bytes);
+        check_level(pages, spec, page_no, &page, depth - 1 - step)?;
         if page.level() == 0 {
             let idx = match seek {
                 Seek::Ordinal(o) => o - base_ordinal.min(o),
@@ -443,9 +500,11 @@ pub(crate) fn get_ordinal<S: Source + ?Sized, R: FromBytes>(
     }
     let mut page_no = tree.root_page.get();
     let mut base_ordinal = 0u64;
-    for _ in 0..tree.depth.get().min(MAX_TREE_DEPTH) {
+    let depth = tree.depth.get().min(MAX_TREE_DEPTH);
+    for step in 0..depth {
         let bytes = pages.get(page_no, spec.tag)?;
         let page = TreePage::new(&bytes);
+        check_level(pages, spec, page_no, &page, depth - 1 - step)?;
         if page.level() == 0 {
             let idx = usize::try_from(ordinal - base_ordinal.min(ordinal)).unwrap_or(usize::MAX);
             if idx >= page.records(spec.record_size) {
@@ -519,10 +578,11 @@ impl<'a> Cursor<'a> {
                 self.path.pop();
             };
             let mut child = child;
-            for _ in 0..depth_below {
+            for step in 0..depth_below {
                 let bytes = pages.get(child, self.spec.tag)?;
                 self.pages_read += 1;
                 let page = TreePage::new(&bytes);
+                check_level(pages, self.spec, child, &page, depth_below - 1 - step)?;
                 let leaf = page.level() == 0;
                 if !leaf {
                     child = page.branch(0).child.get();

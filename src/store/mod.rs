@@ -3,14 +3,21 @@
 //!
 //! # Opening, and what it costs
 //!
-//! Opening reads the commit slots, takes the state of the newer valid record, and then checks
-//! *every metadata page* that state reaches: the dataset header, the cluster directory and
-//! every page of every table (tag, page number, CRC, tree shape, key order; no page reached
-//! twice). That work is proportional to the metadata, about 2% of the file. After it, lookups
-//! and scans from a stable source (a mapping, or memory) parse pages without checking them
-//! again. A [`FileSource`] checks each page again on every read, because another process may
-//! have rewritten it. Payloads (blocks and grids) are checked against their CRC on every read,
-//! whatever the source.
+//! Opening reads the commit slots, takes the state of the newer valid record, and reads the
+//! dataset header and the cluster directory: a few pages (9 KiB on a real DEM with 4 KiB
+//! pages, [`Store::open_reads`]). It does not walk the tables. Each index, node, block or
+//! adjacency page is read and checked (tag, page number, CRC, txn tag; the level a descent
+//! expects) the first time a lookup reaches it, and then kept by the store's page cache
+//! ([`pagecache`]): a mapping or memory is lent again unchecked, a file read with `pread`
+//! keeps the checked copy (up to 2,048 pages). So a scene reads each of its pages once, and
+//! a second scene over the same region reads none. Payloads (blocks and grids) are checked
+//! against their CRC on every read, whatever the source; [`Store::payloads`] reads many at
+//! once, coalescing neighbours. [`Store::read_stats`] counts what lookups and payload reads
+//! took from the source.
+//!
+//! A damaged table page is reported by the first lookup that reaches it. The validator
+//! ([`verify()`]) and writers ([`Container`]) walk every table page when they open, since they
+//! must know every page the state owns.
 //!
 //! # The API contract, LMDB style
 //!
@@ -35,7 +42,8 @@
 //!
 //! # Rooms
 //!
-//! `open` (slot choice and the check walk), `read` (records, payloads, scans), `window`
+//! `open` (slot choice, and the walk for writers), `pagecache` (checked pages kept, reads
+//! counted), `read` (records, payloads, scans), `window`
 //! (assembling samples from blocks), `btree` (following tree pages), `verify` (the validator),
 //! `write` (fresh files), `txn` (transactions), `io` and `source` (where bytes come from).
 
@@ -46,6 +54,7 @@ pub(crate) mod btree;
 pub mod io;
 pub mod lock;
 mod open;
+pub mod pagecache;
 mod read;
 pub mod source;
 pub mod txn;
@@ -59,8 +68,9 @@ use std::path::Path;
 use serde::Serialize;
 
 pub use crate::format::{ClusterInfo, FreePage, PayloadRef, ScanEntry, StoredBlock, StoredNode};
+pub use pagecache::ReadStats;
 pub use read::{Block, Children, CodeScan, Grid, HilbertScan, Layout};
-pub use source::{Bytes, FileSource, MmapSource, Source};
+pub use source::{Bytes, Counted, FileSource, MmapSource, Source};
 pub use txn::{CommitSummary, Container, Recovery, Snapshot, WriteTxn};
 pub use verify::{
     verify, verify_with_progress, CheckReport, CheckStatus, VerifyMode, VerifyReport,
@@ -84,8 +94,16 @@ pub struct Store<S: Source = FileSource> {
     commit: CommitRecord,
     header: DatasetHeader,
     clusters: Vec<ClusterInfo>,
-    metadata_pages: btree::PageSet,
+    /// Every metadata page of the state, once walked (at open for writers and the
+    /// validator, on demand otherwise).
+    metadata_pages: std::sync::OnceLock<btree::PageSet>,
     registered: bool,
+    /// Checked pages, and what the store read.
+    cache: pagecache::PageCache,
+    /// See [`btree::Pages::wrap_guard`].
+    wrap_guard: Option<u64>,
+    /// What opening read.
+    open_reads: ReadStats,
 }
 
 /// The state a store reads, as its commit record describes it.
@@ -182,7 +200,26 @@ impl<T: AsRef<[u8]> + Send + Sync> Store<Bytes<T>> {
 impl<S: Source> Store<S> {
     /// Opens a container from any source (see the module docs for what is checked).
     pub fn from_source(src: S) -> Result<Self> {
-        open::open(src)
+        open::open(src, open::Walk::Lean)
+    }
+
+    /// Opens a container from any source, walking every metadata page first (writers and
+    /// the validator).
+    pub(crate) fn from_source_walked(src: S) -> Result<Self> {
+        open::open(src, open::Walk::Full)
+    }
+
+    /// What this store has read from its source since it was opened, opening excluded:
+    /// metadata reads (pages the cache did not hold) and payload reads, calls and bytes.
+    /// Take one before and one after a piece of work and subtract ([`ReadStats::since`]).
+    pub fn read_stats(&self) -> ReadStats {
+        self.cache.counters.snapshot()
+    }
+
+    /// What opening read: the commit slots, the dataset header and the cluster directory
+    /// (and, for a writer or the validator, every table page).
+    pub fn open_reads(&self) -> ReadStats {
+        self.open_reads
     }
 
     /// The dataset header.
@@ -258,8 +295,39 @@ impl<S: Source> Store<S> {
         self.registered
     }
 
-    /// The metadata pages found while opening (blobs and every table page).
-    pub(crate) fn metadata_pages(&self) -> &btree::PageSet {
-        &self.metadata_pages
+    /// Every metadata page of the state (blobs and every table page), walked and checked
+    /// the first time it is asked for: the tree shapes (I-7) and no page reached twice
+    /// (I-8). Writers rely on it to know which pages a state owns.
+    pub(crate) fn metadata_pages(&self) -> Result<&btree::PageSet> {
+        if let Some(set) = self.metadata_pages.get() {
+            return Ok(set);
+        }
+        let pages = btree::Pages {
+            check: true,
+            cache: None,
+            ..self.pages()
+        };
+        let mut seen = btree::PageSet::new(self.page_count);
+        let roots = &self.commit.roots;
+        for blob in [&roots.dataset_header, &roots.cluster_directory] {
+            let count = crate::format::blob::blob_pages(blob.length.get(), self.page_size);
+            for i in 0..count {
+                let page = blob.first_page.get() + i;
+                if !seen.insert(page) {
+                    return Err(self.corrupt(crate::format::Violation::new(
+                        crate::format::Invariant::PageOwnership,
+                        format!("blob page {page}"),
+                        "page reached twice",
+                    )));
+                }
+            }
+        }
+        for (spec, tree) in crate::format::tables::state_trees(roots, &self.clusters) {
+            btree::walk(&pages, &tree, spec, &mut seen, &mut |_, _| Ok(()))?;
+        }
+        let _ = self.metadata_pages.set(seen);
+        self.metadata_pages
+            .get()
+            .ok_or_else(|| crate::Error::Internal("the metadata page set was not kept".into()))
     }
 }

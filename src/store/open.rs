@@ -1,6 +1,8 @@
 //! Opening a container: read the two commit slots, choose the state (format §3), register it
-//! against page reuse by writers in other processes (§11.6), then check every metadata page
-//! that state reaches before anything else is read.
+//! against page reuse by writers in other processes (§11.6), then read and check the dataset
+//! header and the cluster directory. Readers stop there ([`Walk::Lean`]: table pages are
+//! checked as lookups reach them, `btree` and `pagecache`); writers and the validator also
+//! walk every table page ([`Walk::Full`]).
 //!
 //! **Registering.** A reader registers the txn id it chose, then reads the slots again. If the
 //! state is still the latest, no commit that could reuse its pages had started before the
@@ -11,15 +13,17 @@
 //! **Without registering** (memory, or a system without OFD locks), every structured page is
 //! bound to the state by its txn tag (§4), payloads by their CRCs, and a page found unbound
 //! while a later state exists makes the open start again with the latest state. Tags have 16
-//! bits, so after the walk the reader reads the slots once more: if fewer than 2^16 - 1
-//! commits have passed since its pages were written, no page it read can carry a reused tag.
+//! bits, so after opening (and, for a source whose bytes can change, after the first read of
+//! each page) the reader reads the slots once more: if fewer than 2^16 - 1 commits have
+//! passed since its pages were written, no page it read can carry a reused tag.
 //!
 //! The bytes are decoded by [`crate::format`]; this file only decides what to read. The
 //! dataset header and the cluster directory are decoded here, before a [`Store`] exists, so
 //! a store always holds a checked header.
 
 use super::btree::{self, Binding, PageSet, Pages};
-use super::source::Source;
+use super::pagecache::{PageCache, ReadStats, DEFAULT_CACHED_PAGES};
+use super::source::{Counted, Source};
 use super::Store;
 use crate::error::{Error, Result};
 use crate::format::blob::{blob_page_content, check_blob_ref};
@@ -125,7 +129,6 @@ fn read_blob<S: Source + ?Sized>(
             )));
         }
         let page = pages.get(page_no, tag)?;
-        seen.note_crc(page_no, &page);
         let content = blob_page_content(&page, blob, i, tag, pages.page_size, name)
             .map_err(|v| pages.corrupt(v))?;
         out.extend_from_slice(content);
@@ -189,12 +192,23 @@ fn choose_state<S: Source + ?Sized>(src: &S) -> Result<(u8, crate::format::Commi
     }
 }
 
-/// Opens the state `src` holds, checking every metadata page it reaches (see the docs of
-/// [`crate::store`] for what that costs).
-pub(crate) fn open<S: Source>(src: S) -> Result<Store<S>> {
+/// How much opening checks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Walk {
+    /// The commit slots, the dataset header and the cluster directory; every other page is
+    /// checked when a lookup first reaches it (readers).
+    Lean,
+    /// Also every page of every table, with the shape of each tree and no page reached
+    /// twice (writers and the validator, before they trust the page ownership).
+    Full,
+}
+
+/// Opens the state `src` holds, checking what `walk` says (see the docs of [`crate::store`]
+/// for what that costs).
+pub(crate) fn open<S: Source>(src: S, walk: Walk) -> Result<Store<S>> {
     let mut attempts = 0;
     loop {
-        match open_once(&src) {
+        match open_once(&src, walk) {
             Ok(opened) => return Ok(opened.into_store(src)),
             Err(Error::Superseded { .. }) if attempts + 1 < OPEN_ATTEMPTS => attempts += 1,
             Err(e) => return Err(e),
@@ -210,27 +224,38 @@ struct Opened {
     commit: crate::format::CommitRecord,
     header: DatasetHeader,
     clusters: Vec<crate::format::ClusterInfo>,
-    metadata_pages: PageSet,
+    metadata_pages: Option<PageSet>,
     registered: bool,
+    open_reads: ReadStats,
 }
 
 impl Opened {
     fn into_store<S: Source>(self, src: S) -> Store<S> {
         Store {
-            src,
             page_size: self.page_size,
             page_count: self.page_count,
             slot: self.slot,
             commit: self.commit,
             header: self.header,
             clusters: self.clusters,
-            metadata_pages: self.metadata_pages,
+            metadata_pages: self
+                .metadata_pages
+                .map(std::sync::OnceLock::from)
+                .unwrap_or_default(),
+            wrap_guard: (!self.registered && !src.stable() && self.commit.binds_pages())
+                .then(|| self.commit.pages_txn.get()),
+            cache: PageCache::new(self.page_count, src.stable(), DEFAULT_CACHED_PAGES),
             registered: self.registered,
+            open_reads: self.open_reads,
+            src,
         }
     }
 }
 
-fn open_once<S: Source>(src: &S) -> Result<Opened> {
+fn open_once<S: Source>(src: &S, walk: Walk) -> Result<Opened> {
+    // What opening reads, counted by a wrapper around the source.
+    let counted = Counted::new(src);
+    let src = &counted;
     let (slot, commit, registered) = choose_state(src)?;
     // The state may be newer than the length the source saw when it was opened: a writer
     // grows the file before it publishes a record.
@@ -251,7 +276,8 @@ fn open_once<S: Source>(src: &S) -> Result<Opened> {
             txn: commit.txn_id.get(),
             txn_tag: commit.page_txn_tag(),
         },
-        known: None,
+        cache: None,
+        wrap_guard: None,
     };
     let mut seen = PageSet::new(page_count);
     let header_bytes = read_blob(
@@ -286,7 +312,11 @@ fn open_once<S: Source>(src: &S) -> Result<Opened> {
     expect(&commit.roots.node_table, header.node_count, "node table")?;
     expect(&commit.roots.block_table, header.block_count, "block table")?;
     for (spec, tree) in state_trees(&commit.roots, &clusters) {
-        btree::walk(&pages, &tree, spec, &mut seen, &mut |_, _| Ok(()))?;
+        // Cheap and local: the root reference's own fields (depth, record size).
+        crate::format::tree::check_tree_ref(&tree, spec).map_err(|v| pages.corrupt(v))?;
+        if walk == Walk::Full {
+            btree::walk(&pages, &tree, spec, &mut seen, &mut |_, _| Ok(()))?;
+        }
     }
     if !registered && commit.binds_pages() {
         // A tag repeats every 2^16 transactions: if that many could have committed since the
@@ -301,7 +331,6 @@ fn open_once<S: Source>(src: &S) -> Result<Opened> {
             });
         }
     }
-    seen.seal();
     Ok(Opened {
         page_size,
         page_count,
@@ -309,7 +338,8 @@ fn open_once<S: Source>(src: &S) -> Result<Opened> {
         commit,
         header,
         clusters,
-        metadata_pages: seen,
+        metadata_pages: (walk == Walk::Full).then_some(seen),
         registered,
+        open_reads: counted.stats(),
     })
 }

@@ -61,16 +61,16 @@ impl<S: Source> Store<S> {
         v.in_file(self.src.name())
     }
 
-    /// Page access for lookups: checks again only when the source is not stable.
+    /// Page access for lookups: each page checked on its first read, then cached.
     pub(crate) fn pages(&self) -> Pages<'_, S> {
-        let check = !self.src.stable();
         Pages {
             src: &self.src,
             page_size: self.page_size,
             page_count: self.page_count,
-            check,
+            check: false,
             state: self.binding(),
-            known: check.then_some(&self.metadata_pages),
+            cache: Some(&self.cache),
+            wrap_guard: self.wrap_guard,
         }
     }
 
@@ -249,8 +249,9 @@ impl<S: Source> Store<S> {
         Ok(records.iter().map(FreeEntry::decode).collect())
     }
 
-    /// Reads a payload and checks its CRC (I-9).
-    pub fn payload(&self, at: PayloadRef) -> Result<Cow<'_, [u8]>> {
+    /// The length of a payload reference that lies within the file's pages, or the
+    /// corruption error of one that does not.
+    fn payload_len(&self, at: &PayloadRef) -> Result<usize> {
         let start = 2 * u64::from(self.page_size);
         let end = at.offset.checked_add(u64::from(at.len));
         let where_ = || format!("payload at byte {}", at.offset);
@@ -261,18 +262,21 @@ impl<S: Source> Store<S> {
                 format!("{} bytes do not lie within the file's pages", at.len),
             )));
         }
-        let len = usize::try_from(at.len).map_err(|_| Error::TooLarge {
+        usize::try_from(at.len).map_err(|_| Error::TooLarge {
             what: where_(),
             detail: format!("{} bytes do not fit in memory", at.len),
-        })?;
-        let bytes = source::read(&self.src, at.offset, len)?;
-        let actual = crate::format::crc32(&bytes);
+        })
+    }
+
+    /// Checks payload bytes against the CRC their reference records (I-9).
+    fn check_payload(&self, at: &PayloadRef, bytes: &[u8]) -> Result<()> {
+        let actual = crate::format::crc32(bytes);
         if actual != at.crc {
             // The CRC in the record binds the payload to the state (a Merkle reference): a
             // later state that reused the pages is told apart from damage by the slots.
             let v = Violation::new(
                 Invariant::Payload,
-                where_(),
+                format!("payload at byte {}", at.offset),
                 format!("CRC {:#010x} recorded, {actual:#010x} computed", at.crc),
             );
             return Err(super::open::superseded_or_corrupt(
@@ -281,7 +285,66 @@ impl<S: Source> Store<S> {
                 v,
             ));
         }
+        Ok(())
+    }
+
+    /// Reads a payload and checks its CRC (I-9).
+    pub fn payload(&self, at: PayloadRef) -> Result<Cow<'_, [u8]>> {
+        let len = self.payload_len(&at)?;
+        let bytes = source::read(&self.src, at.offset, len)?;
+        self.cache.counters.payload(len);
+        self.check_payload(&at, &bytes)?;
         Ok(bytes)
+    }
+
+    /// Reads many payloads, each checked against its CRC, returned in the order asked. They
+    /// are read in file order, and payloads at most `gap` bytes apart share one read: a
+    /// scene's payloads lie in Hilbert order, so its neighbours are often neighbours in the
+    /// file, and one read instead of dozens matters for `pread` and most for a network.
+    /// The bytes of a gap are read and dropped.
+    pub fn payloads(&self, refs: &[PayloadRef], gap: u64) -> Result<Vec<Cow<'_, [u8]>>> {
+        let mut order: Vec<usize> = (0..refs.len()).collect();
+        order.sort_by_key(|&i| (refs[i].offset, refs[i].len));
+        let mut out: Vec<Option<Cow<'_, [u8]>>> = vec![None; refs.len()];
+        let mut k = 0;
+        while k < order.len() {
+            // One run: payloads whose starts lie within `gap` of the run's end so far.
+            let first = &refs[order[k]];
+            self.payload_len(first)?;
+            let (start, mut end) = (first.offset, first.end());
+            let mut last = k + 1;
+            while last < order.len() {
+                let r = &refs[order[last]];
+                self.payload_len(r)?;
+                if r.offset > end.saturating_add(gap) {
+                    break;
+                }
+                end = end.max(r.end());
+                last += 1;
+            }
+            let span = usize::try_from(end - start).map_err(|_| Error::TooLarge {
+                what: format!("payloads at byte {start}"),
+                detail: format!("{} bytes do not fit in memory", end - start),
+            })?;
+            let run = source::read(&self.src, start, span)?;
+            self.cache.counters.payload(span);
+            for &i in &order[k..last] {
+                let r = &refs[i];
+                let from = usize::try_from(r.offset - start).unwrap_or(usize::MAX);
+                let piece = run
+                    .get(from..from.saturating_add(r.len as usize))
+                    .ok_or_else(|| Error::Internal("a payload outside its run".into()))?;
+                self.check_payload(r, piece)?;
+                out[i] = Some(match &run {
+                    Cow::Borrowed(all) => Cow::Borrowed(&all[from..from + r.len as usize]),
+                    Cow::Owned(_) => Cow::Owned(piece.to_vec()),
+                });
+            }
+            k = last;
+        }
+        out.into_iter()
+            .map(|p| p.ok_or_else(|| Error::Internal("a payload was not read".into())))
+            .collect()
     }
 
     /// Physical block `(x, y)`: its full-resolution samples, checked against their CRC, then
@@ -289,6 +352,18 @@ impl<S: Source> Store<S> {
     pub fn block(&self, x: u32, y: u32) -> Result<Block<'_>> {
         let info = self.stored_block(x, y)?;
         let bytes = self.payload(info.payload)?;
+        self.block_from(x, y, info, bytes)
+    }
+
+    /// Physical block `(x, y)` of block record `info` from its stored payload `bytes`
+    /// (already checked against their CRC, by [`Store::payload`] or [`Store::payloads`]).
+    pub fn block_from<'a>(
+        &self,
+        x: u32,
+        y: u32,
+        info: StoredBlock,
+        bytes: Cow<'a, [u8]>,
+    ) -> Result<Block<'a>> {
         let d = self.domain();
         let at = || format!("block ({x}, {y})");
         let rect = d
@@ -328,13 +403,24 @@ impl<S: Source> Store<S> {
 
     /// The coarse grid of `node` (a node above the finest level), checked against its CRC.
     pub fn grid(&self, node: &StoredNode) -> Result<Grid<'_>> {
+        if node.level >= self.domain().finest_level() {
+            return Err(Error::InvalidArgument(
+                "finest-level nodes have physical blocks, not grids".into(),
+            ));
+        }
+        let bytes = self.payload(node.payload)?;
+        self.grid_from(node, bytes)
+    }
+
+    /// The coarse grid of `node` from its stored payload `bytes` (already checked against
+    /// their CRC, by [`Store::payload`] or [`Store::payloads`]).
+    pub fn grid_from<'a>(&self, node: &StoredNode, bytes: Cow<'a, [u8]>) -> Result<Grid<'a>> {
         let d = self.domain();
         if node.level >= d.finest_level() {
             return Err(Error::InvalidArgument(
                 "finest-level nodes have physical blocks, not grids".into(),
             ));
         }
-        let bytes = self.payload(node.payload)?;
         let size = d.block_size();
         if !d.exists(node.level, node.x, node.y) {
             return Err(self.corrupt(Violation::new(

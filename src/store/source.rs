@@ -281,6 +281,76 @@ impl Source for FileSource {
     }
 }
 
+/// A source that counts the reads that pass through it: calls and bytes. What a store
+/// reads is also in [`super::Store::read_stats`]; this counts what the source itself sees
+/// (tests, benchmarks, and the open path).
+#[derive(Debug)]
+pub struct Counted<S> {
+    inner: S,
+    calls: std::sync::atomic::AtomicU64,
+    bytes: std::sync::atomic::AtomicU64,
+}
+
+impl<S: Source> Counted<S> {
+    /// Counts the reads of `inner`.
+    pub fn new(inner: S) -> Counted<S> {
+        Counted {
+            inner,
+            calls: 0.into(),
+            bytes: 0.into(),
+        }
+    }
+
+    /// The source it counts.
+    pub fn inner(&self) -> &S {
+        &self.inner
+    }
+
+    /// Reads so far (as metadata: this wrapper does not know what it reads).
+    pub fn stats(&self) -> super::ReadStats {
+        use std::sync::atomic::Ordering::Relaxed;
+        super::ReadStats {
+            metadata_reads: self.calls.load(Relaxed),
+            metadata_bytes: self.bytes.load(Relaxed),
+            payload_reads: 0,
+            payload_bytes: 0,
+        }
+    }
+}
+
+impl<S: Source> Source for Counted<S> {
+    fn len(&self) -> u64 {
+        self.inner.len()
+    }
+
+    fn read_at(&self, offset: u64, len: usize) -> io::Result<Cow<'_, [u8]>> {
+        use std::sync::atomic::Ordering::Relaxed;
+        self.calls.fetch_add(1, Relaxed);
+        self.bytes.fetch_add(len as u64, Relaxed);
+        self.inner.read_at(offset, len)
+    }
+
+    fn stable(&self) -> bool {
+        self.inner.stable()
+    }
+
+    fn name(&self) -> &Path {
+        self.inner.name()
+    }
+
+    fn register_reader(&self, txn: u64) -> io::Result<bool> {
+        self.inner.register_reader(txn)
+    }
+
+    fn refresh_len(&self) -> io::Result<u64> {
+        self.inner.refresh_len()
+    }
+
+    fn writer_present(&self) -> io::Result<Option<bool>> {
+        self.inner.writer_present()
+    }
+}
+
 /// The error of a failed read of `len` bytes at `offset` from the file at `path`. A read
 /// past the end means the file is shorter than its commit record says (I-3): corruption. Any
 /// other failure is the operating system's and stays an I/O error.

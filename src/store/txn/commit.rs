@@ -248,8 +248,9 @@ pub(crate) fn write_state<I: Io>(
     // What this commit frees: the old state's metadata pages, and payload pages no kept
     // payload touches.
     let kept_pages: HashSet<u64> = kept.iter().flat_map(|r| r.pages(p)).collect();
+    let metadata = base.metadata_pages()?;
     let mut freed: Vec<u64> = (2..base.page_count())
-        .filter(|&page| base.metadata_pages().contains(page))
+        .filter(|&page| metadata.contains(page))
         .collect();
     let old_payload_pages: HashSet<u64> = old_nodes
         .iter()

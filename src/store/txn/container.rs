@@ -92,7 +92,7 @@ impl Container<FileIo> {
 /// Opens the durable state of `io`, its metadata pages cached.
 fn load<I: Io>(io: &Arc<I>) -> Result<SnapshotStore<I>> {
     let len = io.len().map_err(|e| Error::io(io.name(), e))?;
-    let store = Store::from_source(IoSource::new(Arc::clone(io), len))?;
+    let store = Store::from_source_walked(IoSource::new(Arc::clone(io), len))?;
     store.source().freeze();
     Ok(store)
 }

@@ -249,7 +249,7 @@ pub fn verify_with_progress<S: Source>(
     let opened = if file_length < record.file_length.get() {
         None
     } else {
-        checks.absorb(Store::from_source(&src))?
+        checks.absorb(Store::from_source_walked(&src))?
     };
     // The state the store registered (a writer may have published a newer one meanwhile).
     let (slot, record, slots) = match &opened {

@@ -38,7 +38,7 @@ pub(super) fn check_nodes<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut 
     let d = store.domain();
     let finest = d.finest_level();
     let delta_min = store.header().delta_min;
-    // A physical block's grid is the stored data: its error is the storage error, Q/2 of a
+    // A physical block's grid is the stored data: its error is the storage error, 9Q/16 of a
     // precision (format 2.1), where it has real heights, and 0 otherwise.
     let storage_error = store
         .header()
@@ -257,7 +257,13 @@ pub(super) fn check_ownership<S: Source>(
     checks: &mut Checks,
 ) {
     let id = Invariant::PageOwnership;
-    let meta = store.metadata_pages();
+    let meta = match store.metadata_pages() {
+        Ok(m) => m,
+        Err(e) => {
+            checks.fail(id, format!("walking the tables: {e}"));
+            return;
+        }
+    };
     let mut free = PageSet::new(store.page_count());
     for &FreePage { page, .. } in &l.free {
         if !free.insert(page) {

@@ -1,0 +1,195 @@
+//! Bytes and read calls per scene, and time, cold and warm: what opening a container and
+//! answering a view costs at the source, on Puget Sound 1k (bundled), Puget Sound 4k and
+//! the mostly-sea SRTM1 tile S46W066 (`../shared/data`), three cameras each, tau 0.5 to 4.
+//!
+//! For each row: the blocks of the view-dependent scene and their stored payload bytes (the
+//! least any reader of these blocks reads); what opening read; what scheduling read (index
+//! and node pages, each once through the page cache); what loading read (payloads coalesced
+//! at gaps of 0, 1 KiB and 4 KiB, plus the block-table pages physical blocks need); the read
+//! amplification (all bytes over the payload bytes); and the wall time of open + schedule +
+//! load + decode from a file read with `pread`, cold (the file dropped from the page cache
+//! with `posix_fadvise(DONTNEED)` first) and warm. Every configuration runs in the same
+//! process, so the ratios are side by side. `cargo bench --bench scene_reads`.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use glam::DVec3;
+
+use fmrh::ingest::{load, IngestOptions};
+use fmrh::model::{BuildOptions, Model};
+use fmrh::scene::{load_blocks, Camera, SceneOptions, Terrain};
+use fmrh::store::{write_file, ReadStats, WriteOptions};
+use fmrh::{Heightfield, Store};
+
+fn shared(rel: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data")
+        .join(rel)
+}
+
+/// Drops the file's pages from the page cache (a cold read), as far as the kernel obliges.
+fn evict(path: &Path) {
+    if let Ok(f) = std::fs::File::open(path) {
+        use std::os::fd::AsRawFd;
+        // SAFETY: a plain advisory call on a descriptor we own; it reads no memory of ours.
+        unsafe {
+            libc::posix_fadvise(f.as_raw_fd(), 0, 0, libc::POSIX_FADV_DONTNEED);
+        }
+    }
+}
+
+struct Dataset {
+    name: &'static str,
+    path: PathBuf,
+    /// Metres a side.
+    extent: f64,
+    /// A height above the terrain for the low camera.
+    ground: f64,
+}
+
+fn build(dir: &Path, name: &'static str, mut hf: Heightfield, spacing: f64) -> Dataset {
+    if hf.metadata.spacing_m.is_none() {
+        hf.metadata.spacing_m = Some([spacing, spacing]);
+    }
+    let s = hf.metadata.spacing_m.unwrap_or([spacing, spacing]);
+    let extent = f64::from(hf.width()) * s[0];
+    let ground = hf
+        .samples()
+        .iter()
+        .filter(|v| !v.is_nan())
+        .fold(0.0f32, |a, &b| a.max(b)) as f64;
+    let metadata = hf.metadata.clone();
+    let model = Model::build(hf, &BuildOptions::default()).expect("builds");
+    let path = dir.join(format!("{name}.fmrh"));
+    write_file(&model, &metadata, &path, &WriteOptions::default(), true).expect("writes");
+    Dataset {
+        name,
+        path,
+        extent,
+        ground,
+    }
+}
+
+fn cameras(d: &Dataset) -> Vec<(&'static str, Camera)> {
+    let e = d.extent;
+    vec![
+        (
+            "overview",
+            Camera::looking_at(
+                DVec3::new(0.5 * e, 1.4 * e, 0.5 * e),
+                DVec3::new(0.5 * e, 0.5 * e, 0.0),
+            ),
+        ),
+        (
+            "oblique",
+            Camera::looking_at(
+                DVec3::new(0.1 * e, 0.9 * e, d.ground + 0.04 * e),
+                DVec3::new(0.6 * e, 0.4 * e, 0.0),
+            ),
+        ),
+        (
+            "low",
+            Camera::looking_at(
+                DVec3::new(0.4 * e, 0.6 * e, d.ground + 300.0),
+                DVec3::new(0.7 * e, 0.5 * e, d.ground * 0.5),
+            ),
+        ),
+    ]
+}
+
+/// Open, schedule and load from a fresh `pread` store: (open, schedule, load) reads, blocks,
+/// payload bytes of the blocks, microseconds.
+fn run(
+    path: &Path,
+    cam: &Camera,
+    tau: f64,
+    gap: u64,
+) -> (ReadStats, ReadStats, ReadStats, usize, u64, f64) {
+    let t = Instant::now();
+    let store = Store::open(path).expect("opens");
+    let open = store.open_reads();
+    let terrain = Terrain::new(&store).expect("terrain");
+    let scene = terrain.scene(cam, &SceneOptions::new(tau)).expect("scene");
+    let scheduled = store.read_stats();
+    let loaded = load_blocks(&store, &scene.blocks, gap).expect("loads");
+    let us = t.elapsed().as_secs_f64() * 1e6;
+    let all = store.read_stats();
+    let payload: u64 = scene.blocks.iter().map(|b| u64::from(b.payload.len)).sum();
+    assert_eq!(loaded.len(), scene.blocks.len());
+    (
+        open,
+        scheduled,
+        all.since(&scheduled),
+        scene.blocks.len(),
+        payload,
+        us,
+    )
+}
+
+fn main() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let puget1k = load(
+        &root.join("data/puget-sound-1k/ps_height_1k.png"),
+        &IngestOptions {
+            z_scale: 0.1,
+            ..Default::default()
+        },
+    )
+    .expect("bundled Puget Sound 1k");
+    let mut sets = vec![build(dir.path(), "puget-1k", puget1k, 160.0)];
+    for (name, rel, spacing) in [
+        ("puget-4k", "puget-sound-4k-jpg/ps_height_4k_jpg.f32", 40.0),
+        ("S46W066", "srtm1-asmyasnikov/S46W066.f32", 30.0),
+    ] {
+        match load(&shared(rel), &IngestOptions::default()) {
+            Ok(hf) => sets.push(build(dir.path(), name, hf, spacing)),
+            Err(e) => eprintln!("skipping {name}: {e} (../shared/data)"),
+        }
+    }
+    println!(
+        "| dataset | camera | tau | blocks | payload B | open calls/B | schedule calls/B | \
+         load calls/B gap 0 | gap 1 KiB | gap 4 KiB | total B (1 KiB) | amplification | cold us | warm us |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    for d in &sets {
+        for (cam_name, cam) in cameras(d) {
+            for tau in [0.5, 1.0, 2.0, 4.0] {
+                let mut cells = Vec::new();
+                let mut base = None;
+                for gap in [0u64, 1024, 4096] {
+                    let (open, sched, load, blocks, payload, _) = run(&d.path, &cam, tau, gap);
+                    if base.is_none() {
+                        base = Some((open, sched, blocks, payload));
+                    }
+                    cells.push(load);
+                }
+                let Some((open, sched, blocks, payload)) = base else {
+                    continue;
+                };
+                evict(&d.path);
+                let cold = run(&d.path, &cam, tau, 1024).5;
+                let warm = (0..5)
+                    .map(|_| run(&d.path, &cam, tau, 1024).5)
+                    .fold(f64::INFINITY, f64::min);
+                let total = open.bytes() + sched.bytes() + cells[1].bytes();
+                println!(
+                    "| {} | {cam_name} | {tau} | {blocks} | {payload} | {}/{} | {}/{} | {}/{} | {}/{} | {}/{} | {total} | {:.2} | {cold:.0} | {warm:.0} |",
+                    d.name,
+                    open.reads(),
+                    open.bytes(),
+                    sched.reads(),
+                    sched.bytes(),
+                    cells[0].reads(),
+                    cells[0].bytes(),
+                    cells[1].reads(),
+                    cells[1].bytes(),
+                    cells[2].reads(),
+                    cells[2].bytes(),
+                    total as f64 / payload.max(1) as f64,
+                );
+            }
+        }
+    }
+}

@@ -1,0 +1,197 @@
+//! Lean reads: opening a container reads one small prefix (the commit slots, the dataset
+//! header and the cluster directory: at most 16 KiB on a real DEM), and every deeper page is
+//! read and checked when a lookup first reaches it, then served from the page cache, so a
+//! second scene over the same region reads no metadata at all. Payload batches
+//! (`Store::payloads`) return exactly what single reads return, in the order asked, with
+//! payloads coalesced into fewer reads, on every kind of source; a damaged payload in a batch
+//! is still a corruption error naming the file. The scheduler keeps blocks decoded: heights
+//! it hands out equal the blocks' own, and a frame that sees the same blocks decodes nothing.
+
+mod common;
+
+use std::sync::Arc;
+
+use glam::DVec3;
+use proptest::prelude::*;
+
+use common::views;
+use fmrh::model::BuildOptions;
+use fmrh::scene::{load_blocks, Camera, SceneOptions, ScheduleOptions, Scheduler, Terrain};
+use fmrh::store::{Bytes, FileSource, PayloadRef};
+use fmrh::{Error, Store};
+
+fn puget() -> &'static views::Fixture {
+    static F: std::sync::OnceLock<views::Fixture> = std::sync::OnceLock::new();
+    F.get_or_init(|| views::fixture(views::puget_1k(), &BuildOptions::default()))
+}
+
+fn on_disk() -> (tempfile::TempDir, std::path::PathBuf) {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("p.fmrh");
+    std::fs::write(&path, &puget().store.source().0).unwrap();
+    (dir, path)
+}
+
+fn camera() -> Camera {
+    Camera::looking_at(
+        DVec3::new(20_000.0, 150_000.0, 5_000.0),
+        DVec3::new(90_000.0, 80_000.0, 0.0),
+    )
+}
+
+#[test]
+fn opening_reads_a_small_prefix_and_pages_are_read_once() {
+    let (_dir, path) = on_disk();
+    let store = Store::open(&path).unwrap();
+    let open = store.open_reads();
+    assert!(open.bytes() <= 16 * 1024, "{open:?}");
+    assert_eq!(open.payload_bytes, 0);
+    assert_eq!(
+        store.read_stats(),
+        Default::default(),
+        "opening counted as lookups"
+    );
+
+    let terrain = Terrain::new(&store).unwrap();
+    let before = store.read_stats();
+    let first = terrain.scene(&camera(), &SceneOptions::new(1.0)).unwrap();
+    let after_first = store.read_stats();
+    let scheduled = after_first.since(&before);
+    assert!(scheduled.metadata_reads > 0);
+    assert_eq!(scheduled.payload_reads, 0);
+    // The same scene again: every page it needs is cached.
+    let second = terrain.scene(&camera(), &SceneOptions::new(1.0)).unwrap();
+    assert_eq!(first.blocks, second.blocks);
+    assert_eq!(store.read_stats().since(&after_first), Default::default());
+    // Each page was read once: no more reads than the pages of the file.
+    assert!(scheduled.metadata_reads <= store.page_count());
+    // The lean store answers as the in-memory one does.
+    let mem = Terrain::new(&puget().store).unwrap();
+    assert_eq!(
+        mem.scene(&camera(), &SceneOptions::new(1.0))
+            .unwrap()
+            .blocks,
+        first.blocks
+    );
+}
+
+fn all_refs() -> Vec<PayloadRef> {
+    let s = &puget().store;
+    let mut refs: Vec<PayloadRef> = s.nodes().unwrap().iter().map(|n| n.payload).collect();
+    let (cols, rows) = s.domain().nodes_across(s.domain().finest_level());
+    for y in 0..rows {
+        for x in 0..cols {
+            refs.push(s.stored_block(x, y).unwrap().payload);
+        }
+    }
+    refs
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 32, ..ProptestConfig::default() })]
+
+    /// Any selection of payloads, in any order and with repeats, at any gap: the batch
+    /// returns what single reads return, and never more reads than payloads.
+    #[test]
+    fn batches_equal_single_reads(
+        picks in prop::collection::vec(any::<prop::sample::Index>(), 0..60),
+        gap in prop::sample::select(vec![0u64, 100, 4096, 1 << 20]),
+    ) {
+        let refs = all_refs();
+        let chosen: Vec<PayloadRef> = picks.iter().map(|i| refs[i.index(refs.len())]).collect();
+        let (_dir, path) = on_disk();
+        let file = Store::open(&path).unwrap();
+        let mem = &puget().store;
+        let before = file.read_stats();
+        let batch = file.payloads(&chosen, gap).unwrap();
+        let used = file.read_stats().since(&before);
+        prop_assert!(used.payload_reads <= chosen.len() as u64);
+        prop_assert_eq!(batch.len(), chosen.len());
+        let in_memory = mem.payloads(&chosen, gap).unwrap();
+        for ((r, a), b) in chosen.iter().zip(&batch).zip(&in_memory) {
+            let single = mem.payload(*r).unwrap();
+            prop_assert_eq!(&**a, &*single);
+            prop_assert_eq!(&**b, &*single);
+        }
+    }
+}
+
+#[test]
+fn touching_payloads_share_a_read() {
+    let (_dir, path) = on_disk();
+    let store = Store::open(&path).unwrap();
+    let terrain = Terrain::new(&store).unwrap();
+    let scene = terrain.scene(&camera(), &SceneOptions::new(0.5)).unwrap();
+    let before = store.read_stats();
+    let loaded = load_blocks(&store, &scene.blocks, 0).unwrap();
+    let used = store.read_stats().since(&before);
+    assert_eq!(loaded.len(), scene.blocks.len());
+    assert!(
+        used.payload_reads * 2 < scene.blocks.len() as u64,
+        "{} reads for {} blocks",
+        used.payload_reads,
+        scene.blocks.len()
+    );
+    let stored: u64 = scene.blocks.iter().map(|b| u64::from(b.payload.len)).sum();
+    assert_eq!(
+        used.payload_bytes, stored,
+        "gap 0 reads no byte between payloads"
+    );
+    // Each loaded block draws what the store's own decoding gives.
+    for (b, l) in scene.blocks.iter().zip(&loaded) {
+        let want = match b.node.filter(|_| b.level < store.domain().finest_level()) {
+            Some(i) => store
+                .grid(&store.node(i).unwrap())
+                .unwrap()
+                .view()
+                .expanded(),
+            None => store.block(b.x, b.y).unwrap().view().mended(),
+        };
+        assert_eq!(&*l.heights, &want[..]);
+    }
+}
+
+#[test]
+fn a_damaged_payload_in_a_batch_is_corruption_named() {
+    let mut bytes = puget().store.source().0.clone();
+    let refs = all_refs();
+    let victim = refs[refs.len() / 2];
+    bytes[victim.offset as usize + 1] ^= 0x40;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("damaged.fmrh");
+    std::fs::write(&path, &bytes).unwrap();
+    let store = Store::from_source(FileSource::open(&path).unwrap()).unwrap();
+    let err = store.payloads(&refs, 4096).unwrap_err();
+    assert!(
+        matches!(err, Error::Corrupt { .. }) && err.to_string().contains("damaged.fmrh"),
+        "{err}"
+    );
+    let mem = Store::from_bytes(bytes).unwrap();
+    assert!(matches!(mem.payloads(&refs, 0), Err(Error::Corrupt { .. })));
+}
+
+#[test]
+fn the_scheduler_decodes_each_block_once() {
+    let store = Arc::new(Store::from_source(Bytes(puget().store.source().0.clone())).unwrap());
+    let mut s = Scheduler::new(Arc::clone(&store), ScheduleOptions::new(1.0)).unwrap();
+    let first = s.frame(&camera()).unwrap();
+    assert!(!first.load.is_empty());
+    for id in &first.load {
+        let l = s.block(id).unwrap();
+        let b = s
+            .resident()
+            .find(|b| (b.level, b.x, b.y) == (id.level, id.x, id.y))
+            .unwrap();
+        assert_eq!(l.stored.len() as u32, b.payload.len);
+        assert_eq!(s.payload(id).unwrap(), &*l.stored);
+    }
+    let heights = Arc::clone(&s.block(&first.load[0]).unwrap().heights);
+    let again = s.frame(&camera()).unwrap();
+    assert!(again.load.is_empty());
+    assert_eq!(again.stats.loaded_bytes, 0);
+    // The very same decoded heights, not a second decoding.
+    assert!(Arc::ptr_eq(
+        &heights,
+        &s.block(&first.load[0]).unwrap().heights
+    ));
+}
