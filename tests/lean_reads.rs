@@ -195,3 +195,35 @@ fn the_scheduler_decodes_each_block_once() {
         &s.block(&first.load[0]).unwrap().heights
     ));
 }
+
+/// Regression (fuzzing, open_verify, lean open): a node record whose level lies below the
+/// finest level, in a page whose checksums were made right, reached the scene's geometry
+/// (a shift by a negative amount). Table pages are no longer walked at open, so every node a
+/// lookup returns is checked to be a node of the domain.
+#[test]
+fn a_node_below_the_finest_level_is_corruption_not_a_panic() {
+    let mut bytes = std::fs::read(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("format-spec/vectors/hills-20x13-voids.fmrh"),
+    )
+    .unwrap();
+    let p = 1024usize;
+    let root = u64::from_le_bytes(bytes[72..80].try_into().unwrap()) as usize;
+    let depth = u16::from_le_bytes(bytes[88..90].try_into().unwrap());
+    assert_eq!(depth, 1, "the vector's node table is one leaf");
+    let page = &mut bytes[root * p..(root + 1) * p];
+    assert_eq!(&page[..4], b"FMNT");
+    // Record 1 starts after the 24-byte page header and one 80-byte record; its level at +8.
+    page[24 + 80 + 8] = 200;
+    let crc = crc32fast::hash(&page[8..]);
+    page[4..8].copy_from_slice(&crc.to_le_bytes());
+    let store = Store::from_bytes(&bytes[..]).unwrap();
+    match store.node(1) {
+        Err(Error::Corrupt { invariant, .. }) => assert_eq!(invariant, fmrh::Invariant::NodeTable),
+        other => panic!("{other:?}"),
+    }
+    assert!(store.nodes().is_err());
+    let terrain = Terrain::new(&store).unwrap();
+    let cam = Camera::looking_at(DVec3::new(10.0, 40.0, 30.0), DVec3::new(10.0, 6.0, 0.0));
+    assert!(terrain.scene(&cam, &SceneOptions::new(0.1)).is_err());
+}

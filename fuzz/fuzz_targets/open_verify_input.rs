@@ -2,11 +2,12 @@
 //! which replays the target's corpus (its seeds and every input that once crashed it) on every
 //! test run. See `open_verify.rs` for the modes.
 
-const VECTORS: [&[u8]; 4] = [
+const VECTORS: [&[u8]; 5] = [
     include_bytes!("../../format-spec/vectors/ramp-9x9.fmrh"),
     include_bytes!("../../format-spec/vectors/hills-20x13-voids.fmrh"),
     include_bytes!("../../format-spec/vectors/cliff-33x33.fmrh"),
     include_bytes!("../../format-spec/vectors/v1.1/hills-20x13-voids.fmrh"),
+    include_bytes!("../../format-spec/vectors/waves-17x17-precision-0.3.fmrh"),
 ];
 
 const TAGS: [&[u8; 4]; 7] = [
@@ -75,6 +76,18 @@ fn exercise<S: fmrh::store::Source>(store: &fmrh::Store<S>) {
     if let Ok(nodes) = store.nodes() {
         for n in nodes.iter().take(64) {
             let _ = store.grid(n);
+        }
+    }
+    // A scene over the whole terrain, its blocks read in one coalesced batch and decoded.
+    if let Ok(terrain) = fmrh::scene::Terrain::new(store) {
+        let d = store.domain();
+        let (w, h) = (f64::from(d.width()), f64::from(d.height()));
+        let cam = fmrh::scene::Camera::looking_at(
+            glam::DVec3::new(w / 2.0, h * 2.0, w + h),
+            glam::DVec3::new(w / 2.0, h / 2.0, 0.0),
+        );
+        if let Ok(scene) = terrain.scene(&cam, &fmrh::scene::SceneOptions::new(0.5)) {
+            let _ = fmrh::scene::load_blocks(store, &scene.blocks, 64);
         }
     }
 }

@@ -148,8 +148,12 @@ impl Domain {
 
     /// Whether node `(x, y)` at `level` exists: its footprint holds data.
     pub fn exists(&self, level: u8, x: u32, y: u32) -> bool {
+        // The level first: `nodes_across` has no answer past the finest level.
+        if level > self.finest_level {
+            return false;
+        }
         let (cols, rows) = self.nodes_across(level);
-        level <= self.finest_level && x < cols && y < rows
+        x < cols && y < rows
     }
 
     /// The footprint of node `(x, y)` at `level`, padding included.

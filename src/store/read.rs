@@ -172,10 +172,32 @@ impl<S: Source> Store<S> {
         )
     }
 
-    /// Node `index` of the node table (Hilbert pre-order; 0 is the root).
+    /// Node `index` of the node table (Hilbert pre-order; 0 is the root), checked to be a
+    /// node of the domain (I-10's level and position), so that no caller computes with a
+    /// level or a position the geometry does not have.
     #[inline]
     pub fn node(&self, index: u32) -> Result<StoredNode> {
-        self.node_record(index).map(|r| r.decode())
+        self.node_record(index)
+            .and_then(|r| self.checked_node(index, r.decode()))
+    }
+
+    #[inline]
+    fn checked_node(&self, index: u32, n: StoredNode) -> Result<StoredNode> {
+        let d = self.domain();
+        if n.level > d.finest_level() || !d.exists(n.level, n.x, n.y) {
+            return Err(self.corrupt(Violation::new(
+                Invariant::NodeTable,
+                format!("node {index}"),
+                format!(
+                    "level {} ({}, {}) is not a node of the domain ({} levels)",
+                    n.level,
+                    n.x,
+                    n.y,
+                    d.levels()
+                ),
+            )));
+        }
+        Ok(n)
     }
 
     /// Every node record, in Hilbert pre-order.
@@ -183,13 +205,13 @@ impl<S: Source> Store<S> {
         self.all_records(&self.commit.roots.node_table, tables::NODES)
     }
 
-    /// Every node, in Hilbert pre-order.
+    /// Every node, in Hilbert pre-order, each checked as [`Store::node`] checks it.
     pub fn nodes(&self) -> Result<Vec<StoredNode>> {
-        Ok(self
-            .node_records()?
+        self.node_records()?
             .iter()
-            .map(NodeRecord::decode)
-            .collect())
+            .enumerate()
+            .map(|(i, r)| self.checked_node(u32::try_from(i).unwrap_or(u32::MAX), r.decode()))
+            .collect()
     }
 
     /// The node a scan entry names, checked to be that node (I-13).
