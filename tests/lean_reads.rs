@@ -227,3 +227,109 @@ fn a_node_below_the_finest_level_is_corruption_not_a_panic() {
     let cam = Camera::looking_at(DVec3::new(10.0, 40.0, 30.0), DVec3::new(10.0, 6.0, 0.0));
     assert!(terrain.scene(&cam, &SceneOptions::new(0.1)).is_err());
 }
+
+/// A reader that did not register, on a file read with `pread`, checks on the first read of
+/// each page that fewer than 2^16 - 1 transactions have committed since its state's pages
+/// were written (format §4): past that, a page could carry a reused 16-bit tag, so the read
+/// is refused as superseded instead of trusted.
+#[test]
+fn an_unregistered_reader_refuses_pages_after_a_tag_wrap() {
+    struct Unregistered(FileSource);
+    impl fmrh::store::Source for Unregistered {
+        fn len(&self) -> u64 {
+            self.0.len()
+        }
+        fn read_at(&self, offset: u64, len: usize) -> std::io::Result<std::borrow::Cow<'_, [u8]>> {
+            self.0.read_at(offset, len)
+        }
+        fn stable(&self) -> bool {
+            false
+        }
+        fn name(&self) -> &std::path::Path {
+            self.0.name()
+        }
+    }
+    let (_dir, path) = on_disk();
+    let store = Store::from_source(Unregistered(FileSource::open(&path).unwrap())).unwrap();
+    assert!(!store.is_registered());
+    let first = store.node(0).unwrap();
+    // A newer record in slot 1, 70,000 transactions on (same roots, valid CRC).
+    let mut bytes = std::fs::read(&path).unwrap();
+    let p = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+    let mut record = bytes[..256].to_vec();
+    record[16..24].copy_from_slice(&70_000u64.to_le_bytes());
+    let crc = crc32fast::hash(&record[..252]);
+    record[252..256].copy_from_slice(&crc.to_le_bytes());
+    bytes[p..p + 256].copy_from_slice(&record);
+    std::fs::write(&path, &bytes).unwrap();
+    // A page already read and kept is this state's page: still served.
+    assert_eq!(store.node(0).unwrap(), first);
+    // A page read for the first time is refused.
+    let last = u32::try_from(store.header().node_count - 1).unwrap();
+    match store.node(last) {
+        Err(Error::Superseded { latest, .. }) => assert_eq!(latest, 70_000),
+        other => panic!("{other:?}"),
+    }
+}
+
+/// `fmrh scene --load` and `fmrh fly` report what they read: opening within 16 KiB, a
+/// scene's payload bytes exactly its blocks' (touching payloads are read together, no byte
+/// between them), and a fly-through's metadata read once however many frames reuse it.
+#[test]
+fn the_cli_reports_reads() {
+    let (_dir, path) = on_disk();
+    let p = path.to_str().unwrap();
+    let scene = common::ok_json(&common::fmrh(&[
+        "scene",
+        p,
+        "--eye",
+        "20000,150000,5000",
+        "--target",
+        "90000,80000,0",
+        "--tau",
+        "1",
+        "--load",
+        "--json",
+    ]));
+    let reads = &scene["reads"];
+    assert!(reads["open"]["metadata_bytes"].as_u64().unwrap() <= 16384);
+    assert_eq!(reads["schedule"]["payload_bytes"], 0);
+    let stored: u64 = scene["blocks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|b| b["payload"]["len"].as_u64().unwrap())
+        .sum();
+    assert_eq!(reads["load"]["payload_bytes"].as_u64().unwrap(), stored);
+    let without = common::ok_json(&common::fmrh(&[
+        "scene",
+        p,
+        "--eye",
+        "20000,150000,5000",
+        "--target",
+        "90000,80000,0",
+        "--tau",
+        "1",
+        "--json",
+    ]));
+    assert!(without["reads"]["load"].is_null());
+
+    let route =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/paths/puget-1k-orbit.csv");
+    let fly = common::ok_json(&common::fmrh(&[
+        "fly",
+        p,
+        "--path",
+        route.to_str().unwrap(),
+        "--tau",
+        "1",
+        "--json",
+    ]));
+    let frames = fly["frames"].as_array().unwrap().len() as u64;
+    let metadata = fly["reads"]["path"]["metadata_reads"].as_u64().unwrap();
+    let pages = std::fs::metadata(&path).unwrap().len() / 4096;
+    assert!(
+        frames > 100 && metadata <= pages,
+        "{metadata} page reads over {frames} frames"
+    );
+}

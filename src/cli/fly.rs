@@ -8,6 +8,7 @@ use std::sync::Arc;
 use serde::Serialize;
 
 use fmrh::scene::{path, Camera, FrameStats, ScheduleOptions, Scheduler};
+use fmrh::store::ReadStats;
 use fmrh::{Error, Store};
 
 use super::scene::ViewArgs;
@@ -50,6 +51,15 @@ struct Report {
     frames: Vec<FrameReport>,
     /// Over every frame after the first: mean loaded blocks / the first frame's.
     later_load_fraction: Option<f64>,
+    /// What opening read, and what the whole path read after it (index and node pages once
+    /// each through the page cache, payloads in coalesced runs; prefetch included).
+    reads: Reads,
+}
+
+#[derive(Serialize)]
+struct Reads {
+    open: ReadStats,
+    path: ReadStats,
 }
 
 /// Runs `fmrh fly`.
@@ -84,6 +94,8 @@ fn replay<S: fmrh::store::Source + 'static>(
         prefetch: args.prefetch,
         spacing_m: args.view.spacing(&store, &args.file)?,
     };
+    let open = store.open_reads();
+    let counted = Arc::clone(&store);
     let mut scheduler = Scheduler::new(store, options)?;
     let mut frames = Vec::with_capacity(cameras.len());
     for cam in cameras {
@@ -97,9 +109,14 @@ fn replay<S: fmrh::store::Source + 'static>(
         let later: u64 = frames[1..].iter().map(|f| f.stats.loaded).sum();
         later as f64 / (frames.len() - 1) as f64 / frames[0].stats.loaded as f64
     });
+    scheduler.wait_prefetch();
     let report = Report {
         frames,
         later_load_fraction,
+        reads: Reads {
+            open,
+            path: counted.read_stats(),
+        },
     };
     if args.json {
         super::print_json(&report)?;
@@ -159,4 +176,14 @@ fn print_text(r: &Report) {
             100.0 * x
         );
     }
+    let (o, p) = (&r.reads.open, &r.reads.path);
+    println!(
+        "
+read: open {} calls, {} bytes; the path {} calls, {} metadata bytes, {} payload bytes",
+        o.reads(),
+        o.bytes(),
+        p.reads(),
+        p.metadata_bytes,
+        p.payload_bytes
+    );
 }
