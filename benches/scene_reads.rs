@@ -14,19 +14,12 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use glam::DVec3;
+#[path = "common/dems.rs"]
+mod dems;
 
-use fmrh::ingest::{load, IngestOptions};
-use fmrh::model::{BuildOptions, Model};
 use fmrh::scene::{load_blocks, Camera, SceneOptions, Terrain};
-use fmrh::store::{write_file, ReadStats, WriteOptions};
-use fmrh::{Heightfield, Store};
-
-fn shared(rel: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/data")
-        .join(rel)
-}
+use fmrh::store::ReadStats;
+use fmrh::Store;
 
 /// Drops the file's pages from the page cache (a cold read), as far as the kernel obliges.
 fn evict(path: &Path) {
@@ -37,65 +30,6 @@ fn evict(path: &Path) {
             libc::posix_fadvise(f.as_raw_fd(), 0, 0, libc::POSIX_FADV_DONTNEED);
         }
     }
-}
-
-struct Dataset {
-    name: &'static str,
-    path: PathBuf,
-    /// Metres a side.
-    extent: f64,
-    /// A height above the terrain for the low camera.
-    ground: f64,
-}
-
-fn build(dir: &Path, name: &'static str, mut hf: Heightfield, spacing: f64) -> Dataset {
-    if hf.metadata.spacing_m.is_none() {
-        hf.metadata.spacing_m = Some([spacing, spacing]);
-    }
-    let s = hf.metadata.spacing_m.unwrap_or([spacing, spacing]);
-    let extent = f64::from(hf.width()) * s[0];
-    let ground = hf
-        .samples()
-        .iter()
-        .filter(|v| !v.is_nan())
-        .fold(0.0f32, |a, &b| a.max(b)) as f64;
-    let metadata = hf.metadata.clone();
-    let model = Model::build(hf, &BuildOptions::default()).expect("builds");
-    let path = dir.join(format!("{name}.fmrh"));
-    write_file(&model, &metadata, &path, &WriteOptions::default(), true).expect("writes");
-    Dataset {
-        name,
-        path,
-        extent,
-        ground,
-    }
-}
-
-fn cameras(d: &Dataset) -> Vec<(&'static str, Camera)> {
-    let e = d.extent;
-    vec![
-        (
-            "overview",
-            Camera::looking_at(
-                DVec3::new(0.5 * e, 1.4 * e, 0.5 * e),
-                DVec3::new(0.5 * e, 0.5 * e, 0.0),
-            ),
-        ),
-        (
-            "oblique",
-            Camera::looking_at(
-                DVec3::new(0.1 * e, 0.9 * e, d.ground + 0.04 * e),
-                DVec3::new(0.6 * e, 0.4 * e, 0.0),
-            ),
-        ),
-        (
-            "low",
-            Camera::looking_at(
-                DVec3::new(0.4 * e, 0.6 * e, d.ground + 300.0),
-                DVec3::new(0.7 * e, 0.5 * e, d.ground * 0.5),
-            ),
-        ),
-    ]
 }
 
 /// Open, schedule and load from a fresh `pread` store: (open, schedule, load) reads, blocks,
@@ -129,37 +63,25 @@ fn run(
 
 fn main() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    let puget1k = load(
-        &root.join("data/puget-sound-1k/ps_height_1k.png"),
-        &IngestOptions {
-            z_scale: 0.1,
-            ..Default::default()
-        },
-    )
-    .expect("bundled Puget Sound 1k");
-    let mut sets = vec![build(dir.path(), "puget-1k", puget1k, 160.0)];
-    for (name, rel, spacing) in [
-        ("puget-4k", "puget-sound-4k-jpg/ps_height_4k_jpg.f32", 40.0),
-        ("S46W066", "srtm1-asmyasnikov/S46W066.f32", 30.0),
-    ] {
-        match load(&shared(rel), &IngestOptions::default()) {
-            Ok(hf) => sets.push(build(dir.path(), name, hf, spacing)),
-            Err(e) => eprintln!("skipping {name}: {e} (../shared/data)"),
-        }
-    }
+    let sets: Vec<(dems::Dem, PathBuf)> = dems::dems()
+        .into_iter()
+        .map(|d| {
+            let path = d.build(dir.path());
+            (d, path)
+        })
+        .collect();
     println!(
         "| dataset | camera | tau | blocks | payload B | open calls/B | schedule calls/B | \
          load calls/B gap 0 | gap 1 KiB | gap 4 KiB | total B (1 KiB) | amplification | cold us | warm us |"
     );
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
-    for d in &sets {
-        for (cam_name, cam) in cameras(d) {
+    for (d, path) in &sets {
+        for (cam_name, cam) in d.cameras() {
             for tau in [0.5, 1.0, 2.0, 4.0] {
                 let mut cells = Vec::new();
                 let mut base = None;
                 for gap in [0u64, 1024, 4096] {
-                    let (open, sched, load, blocks, payload, _) = run(&d.path, &cam, tau, gap);
+                    let (open, sched, load, blocks, payload, _) = run(path, &cam, tau, gap);
                     if base.is_none() {
                         base = Some((open, sched, blocks, payload));
                     }
@@ -168,10 +90,10 @@ fn main() {
                 let Some((open, sched, blocks, payload)) = base else {
                     continue;
                 };
-                evict(&d.path);
-                let cold = run(&d.path, &cam, tau, 1024).5;
+                evict(path);
+                let cold = run(path, &cam, tau, 1024).5;
                 let warm = (0..5)
-                    .map(|_| run(&d.path, &cam, tau, 1024).5)
+                    .map(|_| run(path, &cam, tau, 1024).5)
                     .fold(f64::INFINITY, f64::min);
                 let total = open.bytes() + sched.bytes() + cells[1].bytes();
                 println!(

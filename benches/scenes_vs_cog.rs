@@ -27,67 +27,30 @@
 
 #[path = "common/cog.rs"]
 mod cog;
+#[path = "common/dems.rs"]
+mod dems;
 
-use std::path::PathBuf;
 use std::time::Instant;
 
-use cog::{cameras, cog_decode, cog_reads, cog_scene, make_cog};
-use fmrh::ingest::{load, IngestOptions};
-use fmrh::model::{BuildOptions, Model};
+use cog::{cog_decode, cog_reads, cog_scene, make_cog};
 use fmrh::scene::{load_blocks, SceneOptions, Terrain, WorldFrame};
-use fmrh::store::{write_file, WriteOptions};
-use fmrh::{Heightfield, Store};
+use fmrh::Store;
 
 fn main() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    let mut sets: Vec<(&str, Heightfield, f64)> = Vec::new();
-    let puget = load(
-        &root.join("data/puget-sound-1k/ps_height_1k.png"),
-        &IngestOptions {
-            z_scale: 0.1,
-            ..Default::default()
-        },
-    )
-    .expect("bundled Puget Sound 1k");
-    sets.push(("puget-1k", puget, 160.0));
-    for (name, rel, spacing) in [
-        ("puget-4k", "puget-sound-4k-jpg/ps_height_4k_jpg.f32", 40.0),
-        ("S46W066", "srtm1-asmyasnikov/S46W066.f32", 30.0),
-    ] {
-        match load(
-            &root.join("../shared/data").join(rel),
-            &IngestOptions::default(),
-        ) {
-            Ok(hf) => sets.push((name, hf, spacing)),
-            Err(e) => eprintln!("skipping {name}: {e}"),
-        }
-    }
     println!(
         "| dataset | camera | tau | fmrh blocks | fmrh reads | fmrh bytes | fmrh max px | COG tiles | COG reads | COG bytes | COG max px | fmrh/COG bytes | fmrh us | COG us |"
     );
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     let mut ratios = Vec::new();
-    for (name, mut hf, spacing) in sets {
-        if hf.metadata.spacing_m.is_none() {
-            hf.metadata.spacing_m = Some([spacing, spacing]);
-        }
-        let s = hf.metadata.spacing_m.unwrap_or([spacing, spacing]);
-        let Some(cog) = make_cog(dir.path(), name, &hf) else {
+    for dem in dems::dems() {
+        let name = dem.name;
+        let Some(cog) = make_cog(dir.path(), name, &dem.source) else {
             continue;
         };
-        let extent = hf.width() as f64 * s[0];
-        let ground = hf
-            .samples()
-            .iter()
-            .filter(|v| !v.is_nan())
-            .fold(0.0f32, |a, &b| a.max(b)) as f64;
-        let metadata = hf.metadata.clone();
-        let model = Model::build(hf, &BuildOptions::default()).expect("builds");
-        let path = dir.path().join(format!("{name}.fmrh"));
-        write_file(&model, &metadata, &path, &WriteOptions::default(), true).expect("writes");
-        let frame = WorldFrame::new(Some(s));
-        for (cam_name, cam) in cameras(extent, ground) {
+        let path = dem.build(dir.path());
+        let frame = WorldFrame::new(Some(dem.spacing));
+        for (cam_name, cam) in dem.cameras() {
             let view = cam.view().expect("camera");
             for tau in [0.5, 1.0, 2.0, 4.0] {
                 let fmrh_run = || {

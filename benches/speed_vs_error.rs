@@ -18,6 +18,8 @@
 
 #[path = "common/cog.rs"]
 mod cog;
+#[path = "common/dems.rs"]
+mod dems;
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -26,13 +28,11 @@ use std::time::Instant;
 
 use plotters::prelude::*;
 
-use fmrh::ingest::{load, IngestOptions};
-use fmrh::model::{BuildOptions, Model};
 use fmrh::scene::{
     baseline, load_blocks, reconstruct, Camera, Mode, Scene, SceneBlock, SceneOptions, Terrain,
     View, WorldFrame,
 };
-use fmrh::store::{write_file, FileSource, WriteOptions};
+use fmrh::store::FileSource;
 use fmrh::{Heightfield, Store};
 
 const METHODS: [&str; 5] = [
@@ -201,52 +201,18 @@ fn main() {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
     let docs = root.join("docs");
     std::fs::create_dir_all(&docs).expect("docs/");
-    let mut sets: Vec<(&str, Heightfield, f64)> = Vec::new();
-    let puget = load(
-        &root.join("data/puget-sound-1k/ps_height_1k.png"),
-        &IngestOptions {
-            z_scale: 0.1,
-            ..Default::default()
-        },
-    )
-    .expect("bundled Puget Sound 1k");
-    sets.push(("puget-1k", puget, 160.0));
-    for (name, rel, spacing) in [
-        ("puget-4k", "puget-sound-4k-jpg/ps_height_4k_jpg.f32", 40.0),
-        ("S46W066", "srtm1-asmyasnikov/S46W066.f32", 30.0),
-    ] {
-        match load(
-            &root.join("../shared/data").join(rel),
-            &IngestOptions::default(),
-        ) {
-            Ok(hf) => sets.push((name, hf, spacing)),
-            Err(e) => eprintln!("skipping {name}: {e}"),
-        }
-    }
     let mut csv = String::from("dem,camera,method,tau,time_us,bytes,measured_px\n");
-    for (name, mut hf, spacing) in sets {
-        if hf.metadata.spacing_m.is_none() {
-            hf.metadata.spacing_m = Some([spacing, spacing]);
-        }
-        let s = hf.metadata.spacing_m.unwrap_or([spacing, spacing]);
-        let frame = WorldFrame::new(Some(s));
-        let cog = cog::make_cog(dir.path(), name, &hf);
-        let extent = hf.width() as f64 * s[0];
-        let ground = hf
-            .samples()
-            .iter()
-            .filter(|v| !v.is_nan())
-            .fold(0.0f32, |a, &b| a.max(b)) as f64;
-        let source = hf.clone();
-        let metadata = hf.metadata.clone();
-        let model = Model::build(hf, &BuildOptions::default()).expect("builds");
-        let path = dir.path().join(format!("{name}.fmrh"));
-        write_file(&model, &metadata, &path, &WriteOptions::default(), true).expect("writes");
-        drop(model);
+    for dem in dems::dems() {
+        let name = dem.name;
+        let frame = WorldFrame::new(Some(dem.spacing));
+        let cog = cog::make_cog(dir.path(), name, &dem.source);
+        let path = dem.build(dir.path());
+        let source = &dem.source;
         let store = Store::open(&path).expect("opens");
         // Per method and tau: (sum us, sum bytes, max px, cameras).
         let mut acc: BTreeMap<(&str, u64), (f64, f64, f64, f64)> = BTreeMap::new();
-        let cams: Vec<_> = cog::cameras(extent, ground)
+        let cams: Vec<_> = dem
+            .cameras()
             .into_iter()
             .filter(|(c, _)| *c != "overview")
             .collect();
@@ -266,7 +232,7 @@ fn main() {
                                 t.elapsed().as_secs_f64() * 1e6
                             })
                             .fold(f64::INFINITY, f64::min);
-                        let px = cog::measured_px(cog, &source, frame, &view, &tiles, &cog.rasters);
+                        let px = cog::measured_px(cog, source, frame, &view, &tiles);
                         Point {
                             us,
                             bytes: bytes as f64,
@@ -275,7 +241,7 @@ fn main() {
                     } else {
                         let (us, bytes) = timed(&path, method, cam, tau);
                         let (blocks, scene) = select(&store, method, cam, tau);
-                        let px = measured(&store, &source, frame, &view, blocks, &scene);
+                        let px = measured(&store, source, frame, &view, blocks, &scene);
                         Point { us, bytes, px }
                     };
                     let _ = writeln!(

@@ -11,11 +11,10 @@ use std::io::{BufReader, Write};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use glam::DVec3;
 use tiff::decoder::{Decoder, DecodingResult};
 use tiff::tags::Tag;
 
-use fmrh::scene::{Aabb, Camera, View, WorldFrame};
+use fmrh::scene::{Aabb, View, WorldFrame};
 use fmrh::Heightfield;
 
 /// One level of the COG: the full resolution (0) or an overview.
@@ -172,51 +171,67 @@ pub fn footprint(p0: usize, p1: usize, level_len: usize, src_len: usize) -> (usi
     (lo, hi)
 }
 
-fn measure(level: &mut Level, raster: &[f32], src: &[f32], w: usize, h: usize) {
-    let (tx_n, ty_n) = level.tiles_across();
+/// Calls `f(col, row, source, surface)` for every valid source sample of tile `t` of
+/// `level`, with the tile's bilinear surface there: the tile sampled on its own
+/// (pixel-is-area, edges clamped to the tile).
+fn for_each_sample(
+    level: &Level,
+    raster: &[f32],
+    src: &[f32],
+    (w, h): (usize, usize),
+    t: usize,
+    mut f: impl FnMut(usize, usize, f32, f64),
+) {
+    let (tx_n, _) = level.tiles_across();
+    let (tx, ty) = (t % tx_n, t / tx_n);
     let (fx, fy) = (
         w as f64 / level.width as f64,
         h as f64 / level.height as f64,
     );
-    for ty in 0..ty_n {
-        for tx in 0..tx_n {
-            let (px0, px1) = (tx * level.tile, ((tx + 1) * level.tile).min(level.width));
-            let (py0, py1) = (ty * level.tile, ((ty + 1) * level.tile).min(level.height));
-            let (c0, c1) = footprint(px0, px1, level.width, w);
-            let (r0, r1) = footprint(py0, py1, level.height, h);
-            let at = |i: usize, j: usize| raster[j * level.width + i];
-            let mut err = 0.0f64;
-            let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
-            for r in r0..r1 {
-                let v = ((r as f64 + 0.5) / fy - 0.5).clamp(py0 as f64, (py1 - 1) as f64);
-                let (j0, t) = (v.floor() as usize, v - v.floor());
-                let j1 = (j0 + 1).min(py1 - 1);
-                for c in c0..c1 {
-                    let s = src[r * w + c];
-                    if s.is_nan() {
-                        continue;
-                    }
-                    lo = lo.min(s);
-                    hi = hi.max(s);
-                    let u = ((c as f64 + 0.5) / fx - 0.5).clamp(px0 as f64, (px1 - 1) as f64);
-                    let (i0, q) = (u.floor() as usize, u - u.floor());
-                    let i1 = (i0 + 1).min(px1 - 1);
-                    let z = (1.0 - t)
-                        * ((1.0 - q) * f64::from(at(i0, j0)) + q * f64::from(at(i1, j0)))
-                        + t * ((1.0 - q) * f64::from(at(i0, j1)) + q * f64::from(at(i1, j1)));
-                    let e = (f64::from(s) - z).abs();
-                    err = if e.is_nan() {
-                        f64::INFINITY
-                    } else {
-                        err.max(e)
-                    };
-                }
+    let (px0, px1) = (tx * level.tile, ((tx + 1) * level.tile).min(level.width));
+    let (py0, py1) = (ty * level.tile, ((ty + 1) * level.tile).min(level.height));
+    let (c0, c1) = footprint(px0, px1, level.width, w);
+    let (r0, r1) = footprint(py0, py1, level.height, h);
+    let at = |i: usize, j: usize| f64::from(raster[j * level.width + i]);
+    for r in r0..r1 {
+        let v = ((r as f64 + 0.5) / fy - 0.5).clamp(py0 as f64, (py1 - 1) as f64);
+        let (j0, t) = (v.floor() as usize, v - v.floor());
+        let j1 = (j0 + 1).min(py1 - 1);
+        for c in c0..c1 {
+            let s = src[r * w + c];
+            if s.is_nan() {
+                continue;
             }
-            level.error.push(err);
-            level
-                .range
-                .push(if lo <= hi { (lo, hi) } else { (0.0, 0.0) });
+            let u = ((c as f64 + 0.5) / fx - 0.5).clamp(px0 as f64, (px1 - 1) as f64);
+            let (i0, q) = (u.floor() as usize, u - u.floor());
+            let i1 = (i0 + 1).min(px1 - 1);
+            let z = (1.0 - t) * ((1.0 - q) * at(i0, j0) + q * at(i1, j0))
+                + t * ((1.0 - q) * at(i0, j1) + q * at(i1, j1));
+            f(c, r, s, z);
         }
+    }
+}
+
+/// Measures every tile of `level`: its true error and the source's height range.
+fn measure(level: &mut Level, raster: &[f32], src: &[f32], w: usize, h: usize) {
+    let (tx_n, ty_n) = level.tiles_across();
+    for t in 0..tx_n * ty_n {
+        let mut err = 0.0f64;
+        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+        for_each_sample(level, raster, src, (w, h), t, |_, _, s, z| {
+            lo = lo.min(s);
+            hi = hi.max(s);
+            let e = (f64::from(s) - z).abs();
+            err = if e.is_nan() {
+                f64::INFINITY
+            } else {
+                err.max(e)
+            };
+        });
+        level.error.push(err);
+        level
+            .range
+            .push(if lo <= hi { (lo, hi) } else { (0.0, 0.0) });
     }
 }
 
@@ -332,76 +347,29 @@ pub fn cog_decode(cog: &Cog, tiles: &[(usize, usize)]) -> usize {
     n
 }
 
-pub fn cameras(extent: f64, ground: f64) -> Vec<(&'static str, Camera)> {
-    let e = extent;
-    vec![
-        (
-            "overview",
-            Camera::looking_at(
-                DVec3::new(0.5 * e, 1.4 * e, 0.5 * e),
-                DVec3::new(0.5 * e, 0.5 * e, 0.0),
-            ),
-        ),
-        (
-            "oblique",
-            Camera::looking_at(
-                DVec3::new(0.1 * e, 0.9 * e, ground + 0.04 * e),
-                DVec3::new(0.6 * e, 0.4 * e, 0.0),
-            ),
-        ),
-        (
-            "low",
-            Camera::looking_at(
-                DVec3::new(0.4 * e, 0.6 * e, ground + 300.0),
-                DVec3::new(0.7 * e, 0.5 * e, ground * 0.5),
-            ),
-        ),
-    ]
-}
-
 /// The COG answer's largest screen error against the source, measured: each chosen tile
-/// sampled bilinearly (as [`measure`] does) at every valid source sample of its footprint
-/// the frustum may see, `|source - surface|` in pixels at that sample's distance.
+/// sampled as [`measure`] samples it, at every valid source sample of its footprint the
+/// frustum may see, `|source - surface|` in pixels at that sample's distance.
 pub fn measured_px(
     cog: &Cog,
     source: &Heightfield,
     frame: WorldFrame,
     view: &View,
     tiles: &[(usize, usize)],
-    rasters: &[Vec<f32>],
 ) -> f64 {
-    let (w, h) = (cog.src_w, cog.src_h);
-    let src = source.samples();
     let mut worst = 0.0f64;
     for &(l, t) in tiles {
-        let lv = &cog.levels[l];
-        let raster = &rasters[l];
-        let (tx_n, _) = lv.tiles_across();
-        let (tx, ty) = (t % tx_n, t / tx_n);
-        let (fx, fy) = (w as f64 / lv.width as f64, h as f64 / lv.height as f64);
-        let (px0, px1) = (tx * lv.tile, ((tx + 1) * lv.tile).min(lv.width));
-        let (py0, py1) = (ty * lv.tile, ((ty + 1) * lv.tile).min(lv.height));
-        let (c0, c1) = footprint(px0, px1, lv.width, w);
-        let (r0, r1) = footprint(py0, py1, lv.height, h);
-        let at = |i: usize, j: usize| raster[j * lv.width + i];
-        for r in r0..r1 {
-            let v = ((r as f64 + 0.5) / fy - 0.5).clamp(py0 as f64, (py1 - 1) as f64);
-            let (j0, tt) = (v.floor() as usize, v - v.floor());
-            let j1 = (j0 + 1).min(py1 - 1);
-            for c in c0..c1 {
-                let s = src[r * w + c];
-                if s.is_nan() {
-                    continue;
-                }
-                let u = ((c as f64 + 0.5) / fx - 0.5).clamp(px0 as f64, (px1 - 1) as f64);
-                let (i0, q) = (u.floor() as usize, u - u.floor());
-                let i1 = (i0 + 1).min(px1 - 1);
-                let z = (1.0 - tt)
-                    * ((1.0 - q) * f64::from(at(i0, j0)) + q * f64::from(at(i1, j0)))
-                    + tt * ((1.0 - q) * f64::from(at(i0, j1)) + q * f64::from(at(i1, j1)));
+        let dims = (cog.src_w, cog.src_h);
+        for_each_sample(
+            &cog.levels[l],
+            &cog.rasters[l],
+            source.samples(),
+            dims,
+            t,
+            |c, r, s, z| {
                 worst = worst.max(sample_px(view, frame, c as u64, r as u64, s, z));
-            }
-        }
+            },
+        );
     }
     worst
 }
