@@ -196,4 +196,35 @@ mod tests {
         assert!(kept.len() <= 4 && kept.contains(&9), "{kept:?}");
         assert_eq!(c.get(9).unwrap()[0], 9);
     }
+
+    proptest::proptest! {
+        /// Under any sequence of inserts and lookups, a lookup returns nothing or exactly the
+        /// bytes last inserted for that page (never another page's), the most recent insert
+        /// is always kept, and no more than two generations of copies are held.
+        #[test]
+        fn copies_are_never_mixed_up(
+            ops in proptest::collection::vec((0u64..40, proptest::bool::ANY), 1..400),
+            capacity in 1usize..16,
+        ) {
+            let c = PageCache::new(40, false, capacity);
+            let mut model = std::collections::HashMap::new();
+            let mut version = 0u8;
+            for (page, insert) in ops {
+                let p8 = u8::try_from(page).unwrap();
+                if insert {
+                    version = version.wrapping_add(1);
+                    c.insert(page, Arc::from(vec![p8, version]));
+                    model.insert(page, version);
+                    proptest::prop_assert_eq!(&*c.get(page).unwrap(), &[p8, version][..]);
+                } else if let Some(bytes) = c.get(page) {
+                    proptest::prop_assert_eq!(&*bytes, &[p8, model[&page]][..]);
+                }
+                let held = {
+                    let g = c.copies.as_ref().unwrap().lock().unwrap();
+                    g.young.len() + g.old.len()
+                };
+                proptest::prop_assert!(held <= 2 * (capacity / 2).max(1) + 1);
+            }
+        }
+    }
 }
