@@ -45,6 +45,10 @@ struct Source {
     container: String,
     txn_id: u64,
     original_format: String,
+    /// The container's storage precision (format 2.1): the samples are the stored ones,
+    /// each within 9/16 of it of the original source; absent when stored bit for bit.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    storage_precision: Option<f64>,
 }
 
 /// Where a `.f32` and its sidecar go, checked before any work is done.
@@ -135,6 +139,7 @@ impl F32Output {
                 container: container.display().to_string(),
                 txn_id: store.txn_id(),
                 original_format: store.header().metadata.source_format.clone(),
+                storage_precision: store.header().precision.map(|p| p.step()),
             },
         };
         let json = serde_json::to_vec_pretty(&sidecar)
