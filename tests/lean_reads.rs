@@ -333,3 +333,43 @@ fn the_cli_reports_reads() {
         "{metadata} page reads over {frames} frames"
     );
 }
+
+/// A page is checked once, but every reference still gets the kind of page it expects: a
+/// damaged (and resealed) commit record whose node table root names the block table's root
+/// page is refused when a node lookup reaches that page, even after a block lookup checked
+/// and cached it, on a mapping-like source and on a `pread` file alike.
+#[test]
+fn a_cached_page_of_another_table_is_refused() {
+    let mut bytes = std::fs::read(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("format-spec/vectors/hills-20x13-voids.fmrh"),
+    )
+    .unwrap();
+    let block_root = bytes[96..104].to_vec();
+    assert_eq!(
+        bytes[88..90],
+        bytes[112..114],
+        "both trees have the same depth"
+    );
+    bytes[72..80].copy_from_slice(&block_root);
+    let crc = crc32fast::hash(&bytes[..252]);
+    bytes[252..256].copy_from_slice(&crc.to_le_bytes());
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("crossed.fmrh");
+    std::fs::write(&path, &bytes).unwrap();
+    let check = |store_node: Result<fmrh::store::StoredNode, Error>| match store_node {
+        Err(Error::Corrupt {
+            invariant, detail, ..
+        }) => {
+            assert_eq!(invariant, fmrh::Invariant::Page);
+            assert!(detail.contains("FMBT"), "{detail}");
+        }
+        other => panic!("{other:?}"),
+    };
+    let mem = Store::from_bytes(&bytes[..]).unwrap();
+    mem.stored_block(0, 0).unwrap();
+    check(mem.node(0));
+    let file = Store::open(&path).unwrap();
+    file.stored_block(0, 0).unwrap();
+    check(file.node(0));
+}

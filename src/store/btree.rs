@@ -123,15 +123,17 @@ impl<'a, S: Source + ?Sized> Pages<'a, S> {
         let offset = page * u64::from(self.page_size);
         let cache = self.cache.filter(|_| !self.check);
         if let Some(c) = cache {
+            // A page checked once is not checked again, but the kind a reference expects
+            // is: a damaged reference to a page of another table must not read as this one.
             if self.src.stable() {
                 if c.is_checked(page) {
                     return match self.src.read_at(offset, self.page_size as usize) {
-                        Ok(bytes) => Ok(PageBytes::Source(bytes)),
+                        Ok(bytes) => self.tagged(page, tag, PageBytes::Source(bytes)),
                         Err(e) => Err(self.read_failed(offset, e)),
                     };
                 }
             } else if let Some(bytes) = c.get(page) {
-                return Ok(PageBytes::Shared(bytes));
+                return self.tagged(page, tag, PageBytes::Shared(bytes));
             }
         }
         let bytes = match self.src.read_at(offset, self.page_size as usize) {
@@ -162,6 +164,30 @@ impl<'a, S: Source + ?Sized> Pages<'a, S> {
             }
             None => Ok(PageBytes::Source(bytes)),
         }
+    }
+
+    /// `bytes` (page `page`, checked when first read) if it is a `tag` page.
+    #[inline]
+    fn tagged(&self, page: u64, tag: [u8; 4], bytes: PageBytes<'a>) -> Result<PageBytes<'a>> {
+        if bytes.get(..4) == Some(&tag[..]) {
+            return Ok(bytes);
+        }
+        Err(self.wrong_kind(page, tag, &bytes))
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn wrong_kind(&self, page: u64, tag: [u8; 4], bytes: &[u8]) -> Error {
+        let found = bytes.get(..4).unwrap_or(&[]);
+        self.corrupt(Violation::new(
+            Invariant::Page,
+            format!("page {page}"),
+            format!(
+                "tag {:?} where a reference expects {:?}",
+                String::from_utf8_lossy(found),
+                String::from_utf8_lossy(&tag)
+            ),
+        ))
     }
 
     /// Fails when 2^16 - 1 or more transactions committed since the state's pages were
