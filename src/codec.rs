@@ -268,9 +268,14 @@ fn on_lattice(samples: &[f32], q: f64) -> bool {
         if v.is_nan() {
             return v.to_bits() == VOID_BITS;
         }
-        lattice_index(v, q).is_some_and(|k| lattice_value(k, q).to_bits() == v.to_bits())
-            && v.is_finite()
+        is_lattice_value(v, q) && v.is_finite()
     })
+}
+
+/// Whether `v` is exactly the lattice value of its own nearest index on step `q` (so the
+/// lattice encoding gives back its bits): false for `-0.0` and beyond the index range.
+pub fn is_lattice_value(v: f32, q: f64) -> bool {
+    lattice_index(v, q).is_some_and(|k| lattice_value(k, q).to_bits() == v.to_bits())
 }
 
 fn raw(samples: &[f32]) -> Vec<u8> {

@@ -279,18 +279,22 @@ fn an_unregistered_reader_refuses_pages_after_a_tag_wrap() {
 fn the_cli_reports_reads() {
     let (_dir, path) = on_disk();
     let p = path.to_str().unwrap();
-    let scene = common::ok_json(&common::fmrh(&[
-        "scene",
-        p,
-        "--eye",
-        "20000,150000,5000",
-        "--target",
-        "90000,80000,0",
-        "--tau",
-        "1",
-        "--load",
-        "--json",
-    ]));
+    let scene_json = |extra: &[&str]| {
+        let mut args = vec![
+            "scene",
+            p,
+            "--eye",
+            "20000,150000,5000",
+            "--target",
+            "90000,80000,0",
+            "--tau",
+            "1",
+            "--json",
+        ];
+        args.extend_from_slice(extra);
+        common::ok_json(&common::fmrh(&args))
+    };
+    let scene = scene_json(&["--load"]);
     let reads = &scene["reads"];
     assert!(reads["open"]["metadata_bytes"].as_u64().unwrap() <= 16384);
     assert_eq!(reads["schedule"]["payload_bytes"], 0);
@@ -301,17 +305,7 @@ fn the_cli_reports_reads() {
         .map(|b| b["payload"]["len"].as_u64().unwrap())
         .sum();
     assert_eq!(reads["load"]["payload_bytes"].as_u64().unwrap(), stored);
-    let without = common::ok_json(&common::fmrh(&[
-        "scene",
-        p,
-        "--eye",
-        "20000,150000,5000",
-        "--target",
-        "90000,80000,0",
-        "--tau",
-        "1",
-        "--json",
-    ]));
+    let without = scene_json(&[]);
     assert!(without["reads"]["load"].is_null());
 
     let route =

@@ -90,6 +90,8 @@ struct BuildReport {
     max_error: f64,
     /// The storage step heights were kept to, when they were not kept bit for bit.
     precision: Option<f64>,
+    /// How far a stored height may be from its source (9/16 of the step; 0 when bit for bit).
+    storage_error: f64,
     /// The largest |stored - source| over real heights, measured (at most precision / 2).
     storage_error_measured: Option<f64>,
     clusters: Vec<ClusterReport>,
@@ -239,6 +241,7 @@ pub fn run(args: &BuildArgs) -> Result<ExitCode, Error> {
         nodes_per_level: model.tree().nodes_per_level(),
         max_error: model.max_error(),
         precision: model.precision().map(Precision::step),
+        storage_error: model.precision().map_or(0.0, Precision::bound),
         storage_error_measured: model.precision().and(model.storage_error_measured()),
         clusters: model
             .clusters()
@@ -281,7 +284,7 @@ fn print_report(r: &BuildReport) {
         (Some(q), Some(e)) => println!(
             "  precision   {q}: heights stored within {} of the source (measured max {e}); \
              every node error includes it",
-            q * 0.5625
+            r.storage_error
         ),
         (Some(q), None) => println!("  precision   {q}"),
         _ => println!("  precision   lossless (every height bit for bit)"),

@@ -51,6 +51,8 @@ struct Info {
     max_error: f64,
     /// The storage step heights were kept to (format 2.1), or null when bit for bit.
     precision: Option<f64>,
+    /// How far a stored height may be from its source (0 when bit for bit).
+    storage_error: f64,
     nodes: u64,
     nodes_per_level: Vec<u64>,
     physical_blocks: u64,
@@ -249,6 +251,7 @@ pub fn run(args: &InfoArgs) -> Result<ExitCode, Error> {
         delta_min: h.delta_min,
         max_error: h.max_error,
         precision: h.precision.map(|p| p.step()),
+        storage_error: h.storage_error(),
         nodes: h.node_count,
         nodes_per_level: per_level,
         physical_blocks: h.block_count,
@@ -318,7 +321,7 @@ fn print_info(path: &std::path::Path, i: &Info) {
     match i.precision {
         Some(q) => println!(
             "  precision   {q}: heights within {} of the source, included in every error",
-            q * 0.5625
+            i.storage_error
         ),
         None => println!("  precision   lossless"),
     }

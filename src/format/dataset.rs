@@ -84,6 +84,12 @@ pub struct DatasetHeader {
 }
 
 impl DatasetHeader {
+    /// How far a stored height may be from its source: the precision's bound (2.1), or 0
+    /// when heights are stored bit for bit.
+    pub fn storage_error(&self) -> f64 {
+        self.precision.map_or(0.0, Precision::bound)
+    }
+
     /// The header describing `model`, built from a heightfield with `metadata`.
     pub fn of_model(model: &Model, metadata: &Metadata) -> DatasetHeader {
         let d = *model.domain();

@@ -94,9 +94,9 @@ impl Precision {
                 // both checks hold (|k| <= 2^20, so `q` is its own lattice value); they
                 // stay as a guard, so that quantising is idempotent and bounded whatever
                 // the arithmetic.
-                let on_lattice = codec::lattice_index(q, self.step)
-                    .is_some_and(|k| codec::lattice_value(k, self.step).to_bits() == q.to_bits());
-                if on_lattice && (f64::from(q) - f64::from(v)).abs() <= self.bound() {
+                if codec::is_lattice_value(q, self.step)
+                    && (f64::from(q) - f64::from(v)).abs() <= self.bound()
+                {
                     q
                 } else {
                     v

@@ -54,10 +54,7 @@ impl<'s, S: Source> Terrain<'s, S> {
             frame: WorldFrame::new(spacing_m.or(store.header().metadata.spacing_m)),
             root,
             thresholds: store.clusters().iter().map(|c| c.threshold).collect(),
-            storage_error: store
-                .header()
-                .precision
-                .map_or(0.0, crate::model::Precision::bound),
+            storage_error: store.header().storage_error(),
         })
     }
 

@@ -325,6 +325,9 @@ impl<S: Source> Store<S> {
     /// file, and one read instead of dozens matters for `pread` and most for a network.
     /// The bytes of a gap are read and dropped.
     pub fn payloads(&self, refs: &[PayloadRef], gap: u64) -> Result<Vec<Cow<'_, [u8]>>> {
+        for r in refs {
+            self.payload_len(r)?;
+        }
         let mut order: Vec<usize> = (0..refs.len()).collect();
         order.sort_by_key(|&i| (refs[i].offset, refs[i].len));
         let mut out: Vec<Option<Cow<'_, [u8]>>> = vec![None; refs.len()];
@@ -332,12 +335,10 @@ impl<S: Source> Store<S> {
         while k < order.len() {
             // One run: payloads whose starts lie within `gap` of the run's end so far.
             let first = &refs[order[k]];
-            self.payload_len(first)?;
             let (start, mut end) = (first.offset, first.end());
             let mut last = k + 1;
             while last < order.len() {
                 let r = &refs[order[last]];
-                self.payload_len(r)?;
                 if r.offset > end.saturating_add(gap) {
                     break;
                 }

@@ -40,10 +40,7 @@ pub(super) fn check_nodes<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut 
     let delta_min = store.header().delta_min;
     // A physical block's grid is the stored data: its error is the storage error, 9Q/16 of a
     // precision (format 2.1), where it has real heights, and 0 otherwise.
-    let storage_error = store
-        .header()
-        .precision
-        .map_or(0.0, crate::model::Precision::bound);
+    let storage_error = store.header().storage_error();
     let nodes = &l.nodes;
     let count = nodes.len() as u64;
     let (cols, _) = d.nodes_across(finest);
