@@ -11,12 +11,16 @@
 //! once against a fresh build of its samples, so "the same model" means "the model a fresh
 //! build of that content gives". Recovery itself is crashed too, after each of its
 //! operations, and the next open must still recover. A recovered file must accept a further
-//! commit.
+//! commit. Both runs happen twice: with the metadata in a bundle (format 3.0, what a file of
+//! this size gets) and with every table in pages of its own (what a larger file gets), since
+//! the two commit different pages.
 
 mod common;
 
 use common::data;
-use common::txn::{build_bytes, described, digest_samples, paste, samples_digest, Described};
+use common::txn::{
+    build_bytes, build_bytes_paged, described, digest_samples, paste, samples_digest, Described,
+};
 use fmrh::ingest::{self, IngestOptions};
 use fmrh::model::Thresholds;
 use fmrh::store::io::{Damage, SimDisk};
@@ -110,18 +114,33 @@ struct Workload {
     total: u64,
 }
 
-fn prepare() -> Workload {
+/// Opens `disk` for transactions; with `paged`, its commits keep every table in pages of
+/// their own.
+fn open(disk: &SimDisk, paged: bool) -> fmrh::Result<Container<SimDisk>> {
+    let (c, _) = Container::open_io(disk.clone())?;
+    if paged {
+        c.set_bundle_limit(0);
+    }
+    Ok(c)
+}
+
+fn prepare(paged: bool) -> Workload {
     let src = ingest::load(
         &data("puget-sound-east-512/ps-e_lg.f32"),
         &IngestOptions::default(),
     )
     .unwrap();
-    let bytes = build_bytes(&src, 65, &Thresholds::Ladder);
+    let bytes = if paged {
+        build_bytes_paged(&src, 65, &Thresholds::Ladder)
+    } else {
+        build_bytes(&src, 65, &Thresholds::Ladder)
+    };
     let stored = Store::from_bytes(bytes.clone()).unwrap();
+    assert_eq!(stored.layout().unwrap().bundle_bytes == 0, paged);
     let thresholds = common::txn::thresholds(&stored);
     let txns = workload();
     let probe = SimDisk::new(bytes.clone());
-    let (c, _) = Container::open_io(probe.clone()).unwrap();
+    let c = open(&probe, paged).unwrap();
     let mut states = vec![State {
         digest: samples_digest(&stored),
         model: described(&stored),
@@ -165,13 +184,22 @@ fn prepare() -> Workload {
 
 #[test]
 fn crash_anywhere_in_a_real_workload_recovers_old_or_new() {
+    crash_anywhere(false);
+}
+
+#[test]
+fn crash_anywhere_with_paged_tables_recovers_old_or_new() {
+    crash_anywhere(true);
+}
+
+fn crash_anywhere(paged: bool) {
     let Workload {
         bytes,
         txns,
         states,
         ends,
         total,
-    } = prepare();
+    } = prepare(paged);
     let last = txns.len();
 
     let damages = |at: u64| {
@@ -186,7 +214,7 @@ fn crash_anywhere_in_a_real_workload_recovers_old_or_new() {
             let committed = ends.iter().filter(|&&e| e <= at).count();
             let allowed: Vec<usize> = (committed..=(committed + 1).min(last)).collect();
             let disk = SimDisk::new(bytes.clone());
-            let (c, _) = Container::open_io(disk.clone()).unwrap();
+            let c = open(&disk, paged).unwrap();
             disk.power_off_after(at);
             let done = match run(&c, &txns) {
                 Ok(n) => c.close().map(|_| n),
@@ -234,7 +262,7 @@ fn crash_anywhere_in_a_real_workload_recovers_old_or_new() {
                 // The recovered file takes a further commit.
                 if matches!(damage, Damage::Random(s) if s % 16 == 0) {
                     let disk = SimDisk::new(image);
-                    let (c, _) = Container::open_io(disk.clone()).unwrap();
+                    let c = open(&disk, paged).unwrap();
                     let mut w = c.begin_write().unwrap();
                     let p = Heightfield::from_fn(9, 9, |x, _| x as f32).unwrap();
                     w.replace_region(7, 7, &p).unwrap();
@@ -251,8 +279,9 @@ fn crash_anywhere_in_a_real_workload_recovers_old_or_new() {
     let sum = |f: fn(&(u64, u64, u64, u64)) -> u64| results.iter().map(f).sum::<u64>();
     let (cases, old, new, rec) = (sum(|r| r.0), sum(|r| r.1), sum(|r| r.2), sum(|r| r.3));
     eprintln!(
-        "crash matrix: {} crash points x 6 damages = {cases} crashes: recovered old {old}, \
-         recovered new {new}, failures 0; {rec} crashes during recovery, all recovered",
+        "crash matrix (paged tables: {paged}): {} crash points x 6 damages = {cases} \
+         crashes: recovered old {old}, recovered new {new}, failures 0; {rec} crashes during \
+         recovery, all recovered",
         total + 1
     );
     assert_eq!(old + new, cases);
@@ -266,6 +295,15 @@ fn crash_anywhere_in_a_real_workload_recovers_old_or_new() {
 /// the operations not yet synced, holds the last committed state or the one in flight.
 #[test]
 fn io_error_at_every_operation_poisons_and_keeps_old_or_new() {
+    io_errors(false);
+}
+
+#[test]
+fn io_error_with_paged_tables_poisons_and_keeps_old_or_new() {
+    io_errors(true);
+}
+
+fn io_errors(paged: bool) {
     use fmrh::store::io::{Fault, OpKind};
     use fmrh::Error;
     let Workload {
@@ -273,7 +311,7 @@ fn io_error_at_every_operation_poisons_and_keeps_old_or_new() {
         txns,
         states,
         ..
-    } = prepare();
+    } = prepare(paged);
 
     let cases: Vec<(OpKind, bool)> = [OpKind::Write, OpKind::Sync, OpKind::SetLen]
         .into_iter()
@@ -286,7 +324,7 @@ fn io_error_at_every_operation_poisons_and_keeps_old_or_new() {
             loop {
                 let what = format!("{kind:?} #{n} failing (sticky: {sticky})");
                 let disk = SimDisk::new(bytes.clone());
-                let (c, _) = Container::open_io(disk.clone()).unwrap();
+                let c = open(&disk, paged).unwrap();
                 disk.inject(Fault {
                     kind,
                     nth: n,
@@ -344,8 +382,8 @@ fn io_error_at_every_operation_poisons_and_keeps_old_or_new() {
         .collect();
     for ((kind, sticky), (n, failed)) in cases.iter().zip(&counts) {
         eprintln!(
-            "io error loop: {kind:?} (sticky: {sticky}): N = 1..={}: {failed} errors surfaced, \
-             each poisoned, file old or new; N = {n} completes",
+            "io error loop (paged tables: {paged}): {kind:?} (sticky: {sticky}): N = 1..={}: \
+             {failed} errors surfaced, each poisoned, file old or new; N = {n} completes",
             n - 1
         );
         assert!(*failed > 0);

@@ -5,9 +5,10 @@
 //! format change: bump the version per the policy in `format-spec/container.md`, then
 //! regenerate with `FMRH_BLESS=1 cargo test --release --test golden_vectors`.
 //!
-//! Files of older minor versions stay readable: `format-spec/vectors/v1.1/` keeps the same
-//! vectors as format 1.1 wrote them (no txn tags), and they must read, verify and accept a
-//! transaction exactly as the current ones do.
+//! Files of older versions stay readable: `format-spec/vectors/v1.1/`, `v1.2/`, `v2.0/` and
+//! `v2.1/` keep the same vectors as those versions wrote them. They must read and verify
+//! exactly as the current ones do; 2.x files accept a transaction (which makes them 3.0),
+//! 1.x files refuse one.
 
 use std::io::Cursor;
 use std::path::PathBuf;
@@ -25,6 +26,10 @@ struct Vector {
     thresholds: Thresholds,
     /// The storage precision (format 2.1); the vectors of older versions have none.
     precision: Option<f64>,
+    /// Written with every table in pages of its own (no metadata bundle, format 3.0): the
+    /// layout of a state whose metadata is too large to bundle. Older versions have no
+    /// such vector.
+    paged: bool,
 }
 
 fn vectors() -> Vec<Vector> {
@@ -47,6 +52,7 @@ fn vectors() -> Vec<Vector> {
         units: Some("metres".into()),
         source_format: "test".into(),
     };
+    let hills_paged = hills.clone();
     let cliff = Heightfield::from_fn(33, 33, |x, _| if x < 11 { 10.0 } else { 500.0 }).unwrap();
     // Float heights off every lattice, stored to a step of 0.3.
     let waves = Heightfield::from_fn(17, 17, |x, y| {
@@ -60,6 +66,7 @@ fn vectors() -> Vec<Vector> {
             block_size: 9,
             thresholds: Thresholds::Ladder,
             precision: None,
+            paged: false,
         },
         Vector {
             name: "hills-20x13-voids",
@@ -67,6 +74,7 @@ fn vectors() -> Vec<Vector> {
             block_size: 9,
             thresholds: Thresholds::Ladder,
             precision: None,
+            paged: false,
         },
         Vector {
             name: "cliff-33x33",
@@ -74,6 +82,7 @@ fn vectors() -> Vec<Vector> {
             block_size: 9,
             thresholds: Thresholds::Explicit(vec![0.0, 1.0, 10.0]),
             precision: None,
+            paged: false,
         },
         Vector {
             name: "waves-17x17-precision-0.3",
@@ -81,6 +90,15 @@ fn vectors() -> Vec<Vector> {
             block_size: 9,
             thresholds: Thresholds::Ladder,
             precision: Some(0.3),
+            paged: false,
+        },
+        Vector {
+            name: "hills-20x13-voids-paged",
+            field: hills_paged,
+            block_size: 9,
+            thresholds: Thresholds::Ladder,
+            precision: None,
+            paged: true,
         },
     ]
 }
@@ -89,7 +107,7 @@ fn vectors() -> Vec<Vector> {
 fn lossless_vectors() -> Vec<Vector> {
     vectors()
         .into_iter()
-        .filter(|v| v.precision.is_none())
+        .filter(|v| v.precision.is_none() && !v.paged)
         .collect()
 }
 
@@ -109,6 +127,11 @@ fn build(v: &Vector) -> Vec<u8> {
         &v.field.metadata,
         &WriteOptions {
             page_size: 1024,
+            bundle_limit: if v.paged {
+                0
+            } else {
+                WriteOptions::default().bundle_limit
+            },
             ..WriteOptions::default()
         },
         &mut out,
@@ -166,41 +189,71 @@ fn vectors_are_byte_exact_and_read_as_recorded() {
     }
 }
 
+/// The metadata bundle of a vector (format §6.7), decompressed by zstd itself (not by
+/// fmrh): offset, stored length, CRC and pages from commit record bytes 176..196.
+fn bundle_of(bytes: &[u8]) -> Vec<u8> {
+    let offset = u64::from_le_bytes(bytes[176..184].try_into().unwrap()) as usize;
+    let len = u32::from_le_bytes(bytes[184..188].try_into().unwrap()) as usize;
+    let crc = u32::from_le_bytes(bytes[188..192].try_into().unwrap());
+    let pages = u32::from_le_bytes(bytes[192..196].try_into().unwrap()) as usize;
+    let stored = &bytes[offset..offset + len];
+    assert_eq!(crc32fast::hash(stored), crc, "the bundle's CRC");
+    let raw = zstd::stream::decode_all(stored).unwrap();
+    assert_eq!(raw.len(), pages * 1024, "the bundle holds its pages");
+    raw
+}
+
 #[test]
 fn vector_commit_record_fields_sit_where_the_spec_says() {
-    // Spot checks against the byte table of format-spec/container.md §2.
+    // Spot checks against the byte table of format-spec/container.md §3.
     let bytes = build(&vectors()[1]);
     assert_eq!(&bytes[0..8], b"FMRH\r\n\x1a\n");
-    assert_eq!(u16::from_le_bytes([bytes[8], bytes[9]]), 2); // major
-    assert_eq!(u16::from_le_bytes([bytes[10], bytes[11]]), 1); // minor
+    assert_eq!(u16::from_le_bytes([bytes[8], bytes[9]]), 3); // major
+    assert_eq!(u16::from_le_bytes([bytes[10], bytes[11]]), 0); // minor
     assert_eq!(u32::from_le_bytes(bytes[12..16].try_into().unwrap()), 1024); // page size
     assert_eq!(u64::from_le_bytes(bytes[16..24].try_into().unwrap()), 1); // txn id
     assert_eq!(
         u64::from_le_bytes(bytes[24..32].try_into().unwrap()),
         bytes.len() as u64
     );
-    // pages_txn (1.2 and 2.x): the fresh file's one transaction wrote every structured page.
+    // pages_txn (1.2 and later): the fresh file's one transaction wrote every structured page.
     assert_eq!(u64::from_le_bytes(bytes[168..176].try_into().unwrap()), 1);
-    assert!(bytes[176..252].iter().all(|&b| b == 0));
+    // The bundle's reserved field and the record's reserved tail are zero.
+    assert!(bytes[196..252].iter().all(|&b| b == 0));
     let crc = crc32fast::hash(&bytes[..252]);
     assert_eq!(u32::from_le_bytes(bytes[252..256].try_into().unwrap()), crc);
     assert!(
         bytes[1024..2048].iter().all(|&b| b == 0),
         "slot 1 of a fresh file is zero"
     );
-    // The dataset header blob starts at page 2: tag, then width and height. Its header
-    // carries the txn tag of transaction 1 at bytes 18..20.
-    assert_eq!(&bytes[2048..2052], b"FMHD");
-    assert_eq!(u16::from_le_bytes([bytes[2048 + 18], bytes[2048 + 19]]), 1);
-    let h = 2048 + 24;
-    assert_eq!(u32::from_le_bytes(bytes[h..h + 4].try_into().unwrap()), 20);
+    // Payloads start at page 2, and the bundle follows the last of them (§2).
+    let offset = u64::from_le_bytes(bytes[176..184].try_into().unwrap());
+    let len = u32::from_le_bytes(bytes[184..188].try_into().unwrap()) as u64;
+    assert!(offset > 2048 && offset + len <= bytes.len() as u64);
+    assert!(
+        bytes.len() as u64 - (offset + len) < 1024,
+        "only the page tail follows"
+    );
+    // The bundle's first page is the dataset header blob, page 2^40: tag, txn tag of
+    // transaction 1 at bytes 18..20, then width, height and block size.
+    let raw = bundle_of(&bytes);
+    assert_eq!(&raw[0..4], b"FMHD");
+    assert_eq!(u64::from_le_bytes(raw[8..16].try_into().unwrap()), 1 << 40);
+    assert_eq!(u16::from_le_bytes([raw[18], raw[19]]), 1);
+    let h = 24;
+    assert_eq!(u32::from_le_bytes(raw[h..h + 4].try_into().unwrap()), 20);
     assert_eq!(
-        u32::from_le_bytes(bytes[h + 4..h + 8].try_into().unwrap()),
+        u32::from_le_bytes(raw[h + 4..h + 8].try_into().unwrap()),
         13
     );
     assert_eq!(
-        u32::from_le_bytes(bytes[h + 8..h + 12].try_into().unwrap()),
+        u32::from_le_bytes(raw[h + 8..h + 12].try_into().unwrap()),
         9
+    );
+    // The root references point into the bundle: the dataset header's BlobRef at 40.
+    assert_eq!(
+        u64::from_le_bytes(bytes[40..48].try_into().unwrap()),
+        1 << 40
     );
 }
 
@@ -250,19 +303,36 @@ fn format_1_vectors_read_verify_and_refuse_writes() {
     }
 }
 
-/// Format 2.0 files (the vectors as 2.0 wrote them, with the dataset header's precision
-/// field still reserved and zero) read sample for sample as lossless files, pass `verify
-/// --full`, and accept a transaction, whose commit makes them 2.1 (format §8).
+/// Format 2.x files (the vectors as 2.0 and 2.1 wrote them, every table in pages of its
+/// own; in 2.0 the dataset header's precision field still reserved and zero) read sample
+/// for sample, pass `verify --full`, and accept a transaction, whose commit makes them 3.0
+/// (format §8) with their metadata in a bundle.
 #[test]
-fn format_2_0_vectors_read_verify_and_take_a_transaction() {
-    for v in lossless_vectors() {
-        let old = dir().join("v2.0").join(format!("{}.fmrh", v.name));
+fn format_2_vectors_read_verify_and_take_a_transaction() {
+    let old_vectors = lossless_vectors().into_iter().map(|v| (0u16, v)).chain(
+        vectors()
+            .into_iter()
+            .filter(|v| !v.paged)
+            .map(|v| (1u16, v)),
+    );
+    for (minor, v) in old_vectors {
+        let old = dir()
+            .join(format!("v2.{minor}"))
+            .join(format!("{}.fmrh", v.name));
         let store = fmrh::Store::open(&old).unwrap();
-        assert_eq!(store.state().format_version, (2, 0), "{}", v.name);
-        assert_eq!(store.header().precision, None);
+        assert_eq!(store.state().format_version, (2, minor), "{}", v.name);
+        assert_eq!(
+            store.header().precision.map(|p| p.step()),
+            v.precision.filter(|_| minor > 0)
+        );
         let samples = store.read_window(store.domain().data_rect()).unwrap();
+        let bound = v.precision.map_or(0.0, |q| q * 0.5625);
         for (a, b) in samples.samples().iter().zip(v.field.samples()) {
-            assert!(a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()));
+            assert!(
+                a.to_bits() == b.to_bits()
+                    || (a.is_nan() && b.is_nan())
+                    || (f64::from(*a) - f64::from(*b)).abs() <= bound
+            );
         }
         drop(store);
         let report = fmrh::verify(
@@ -282,7 +352,8 @@ fn format_2_0_vectors_read_verify_and_take_a_transaction() {
         txn.commit().unwrap();
         drop(c);
         let store = fmrh::Store::open(&copy).unwrap();
-        assert_eq!(store.state().format_version, (2, 1), "{}", v.name);
+        assert_eq!(store.state().format_version, (3, 0), "{}", v.name);
+        assert!(store.layout().unwrap().bundle_bytes > 0, "{}", v.name);
         let got = store
             .read_window(fmrh::model::SampleRect {
                 col0: 1,
@@ -291,7 +362,9 @@ fn format_2_0_vectors_read_verify_and_take_a_transaction() {
                 row1: 2,
             })
             .unwrap();
-        assert_eq!(got.samples(), patch.samples());
+        for (a, b) in got.samples().iter().zip(patch.samples()) {
+            assert!((f64::from(*a) - f64::from(*b)).abs() <= bound, "{a} vs {b}");
+        }
         let report = fmrh::verify(
             fmrh::store::FileSource::open(&copy).unwrap(),
             fmrh::VerifyMode::Full,
@@ -310,12 +383,13 @@ fn precision_field_sits_where_the_spec_says() {
         .find(|v| v.precision.is_some())
         .unwrap();
     let bytes = build(&v);
-    let h = 2048 + 24;
+    let raw = bundle_of(&bytes);
+    let h = 24;
     assert_eq!(
-        f64::from_le_bytes(bytes[h + 148..h + 156].try_into().unwrap()),
+        f64::from_le_bytes(raw[h + 148..h + 156].try_into().unwrap()),
         0.3
     );
-    assert!(bytes[h + 156..h + 160].iter().all(|&b| b == 0));
+    assert!(raw[h + 156..h + 160].iter().all(|&b| b == 0));
     let store = fmrh::Store::from_bytes(bytes).unwrap();
     let got = store.read_window(store.domain().data_rect()).unwrap();
     for (a, b) in got.samples().iter().zip(v.field.samples()) {

@@ -1,7 +1,8 @@
-//! Lean reads: opening a container reads one small prefix (the commit slots, the dataset
-//! header and the cluster directory: at most 16 KiB on a real DEM), and every deeper page is
-//! read and checked when a lookup first reaches it, then served from the page cache, so a
-//! second scene over the same region reads no metadata at all. Payload batches
+//! Lean reads: opening a container reads one small prefix (the commit slots and the
+//! metadata bundle, or without a bundle the dataset header and the cluster directory: at
+//! most 16 KiB on a real DEM). Without a bundle every deeper page is read and checked when a
+//! lookup first reaches it, then served from the page cache, so a second scene over the same
+//! region reads no metadata at all; with one, no scene reads metadata. Payload batches
 //! (`Store::payloads`) return exactly what single reads return, in the order asked, with
 //! payloads coalesced into fewer reads, on every kind of source; a damaged payload in a batch
 //! is still a corruption error naming the file. The scheduler keeps blocks decoded: heights
@@ -20,15 +21,36 @@ use fmrh::scene::{load_blocks, Camera, SceneOptions, ScheduleOptions, Scheduler,
 use fmrh::store::{Bytes, FileSource, PayloadRef};
 use fmrh::{Error, Store};
 
+/// Puget Sound 1k with every table in pages of its own (no metadata bundle): the layout of
+/// a file whose metadata is too large to bundle, whose pages are read as lookups reach them.
 fn puget() -> &'static views::Fixture {
+    static F: std::sync::OnceLock<views::Fixture> = std::sync::OnceLock::new();
+    F.get_or_init(|| {
+        views::fixture_written(
+            views::puget_1k(),
+            &BuildOptions::default(),
+            &fmrh::store::WriteOptions {
+                bundle_limit: 0,
+                ..Default::default()
+            },
+        )
+    })
+}
+
+/// Puget Sound 1k as `fmrh build` writes it: its metadata in one bundle.
+fn puget_bundled() -> &'static views::Fixture {
     static F: std::sync::OnceLock<views::Fixture> = std::sync::OnceLock::new();
     F.get_or_init(|| views::fixture(views::puget_1k(), &BuildOptions::default()))
 }
 
 fn on_disk() -> (tempfile::TempDir, std::path::PathBuf) {
+    write_out(puget())
+}
+
+fn write_out(f: &views::Fixture) -> (tempfile::TempDir, std::path::PathBuf) {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("p.fmrh");
-    std::fs::write(&path, &puget().store.source().0).unwrap();
+    std::fs::write(&path, &f.store.source().0).unwrap();
     (dir, path)
 }
 
@@ -73,6 +95,36 @@ fn opening_reads_a_small_prefix_and_pages_are_read_once() {
             .blocks,
         first.blocks
     );
+}
+
+/// With the metadata in a bundle, opening is the slots and one read of the bundle, and no
+/// scene reads a metadata page: the same scenes as the paged file, from fewer reads.
+#[test]
+fn a_bundled_file_opens_in_three_reads_and_schedules_from_memory() {
+    let (_dir, path) = write_out(puget_bundled());
+    let store = Store::open(&path).unwrap();
+    let layout = store.layout().unwrap();
+    assert!(layout.bundle_bytes > 0 && layout.node_table_pages == 0);
+    let open = store.open_reads();
+    assert!(open.bytes() <= 16 * 1024, "{open:?}");
+    assert!(
+        open.bytes() < layout.bundle_bytes + 4096,
+        "slots and bundle only: {open:?}"
+    );
+    let terrain = Terrain::new(&store).unwrap();
+    let before = store.read_stats();
+    let scene = terrain.scene(&camera(), &SceneOptions::new(1.0)).unwrap();
+    assert_eq!(store.read_stats().since(&before), Default::default());
+    let paged = Terrain::new(&puget().store).unwrap();
+    assert_eq!(
+        paged
+            .scene(&camera(), &SceneOptions::new(1.0))
+            .unwrap()
+            .blocks,
+        scene.blocks
+    );
+    // The paged file reads pages for the same scene; the bundled file is the smaller.
+    assert!(layout.file_length < puget().store.layout().unwrap().file_length);
 }
 
 fn all_refs() -> Vec<PayloadRef> {
@@ -204,7 +256,7 @@ fn the_scheduler_decodes_each_block_once() {
 fn a_node_below_the_finest_level_is_corruption_not_a_panic() {
     let mut bytes = std::fs::read(
         std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("format-spec/vectors/hills-20x13-voids.fmrh"),
+            .join("format-spec/vectors/hills-20x13-voids-paged.fmrh"),
     )
     .unwrap();
     let p = 1024usize;

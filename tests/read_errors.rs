@@ -1,5 +1,6 @@
 //! Errors say what happened. A read the operating system fails is an I/O error wherever it
-//! happens (the commit slots, a table page, a payload, the validator), never corruption and
+//! happens (the commit slots, the metadata bundle, a table page, a payload, the validator),
+//! never corruption and
 //! never "not a container"; a read past the end of a file shorter than it claims is
 //! corruption (I-3); and every error names its file. A source that fails a chosen read with
 //! `EIO` stands in for a failing disk.
@@ -12,7 +13,7 @@ use std::path::Path;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Mutex;
 
-use common::txn::build_bytes;
+use common::txn::{build_bytes, build_bytes_paged};
 use fmrh::model::Thresholds;
 use fmrh::store::{verify, Source};
 use fmrh::{Error, Heightfield, Invariant, Store, VerifyMode};
@@ -57,9 +58,26 @@ impl Source for FailingSource {
     }
 }
 
+fn terrain() -> Heightfield {
+    Heightfield::from_fn(150, 120, |x, y| ((x * 7 + y * 3) % 41) as f32).unwrap()
+}
+
+/// A container whose tables lie in pages of their own, read as lookups reach them.
 fn container() -> Vec<u8> {
-    let hf = Heightfield::from_fn(150, 120, |x, y| ((x * 7 + y * 3) % 41) as f32).unwrap();
-    build_bytes(&hf, 17, &Thresholds::Ladder)
+    build_bytes_paged(&terrain(), 17, &Thresholds::Ladder)
+}
+
+/// The same container with its metadata in a bundle (format §6.7), read whole at open.
+fn bundled() -> Vec<u8> {
+    build_bytes(&terrain(), 17, &Thresholds::Ladder)
+}
+
+/// Where the bundle's stored bytes lie (commit record bytes 176..188).
+fn bundle_range(bytes: &[u8]) -> std::ops::Range<u64> {
+    let offset = u64::from_le_bytes(bytes[176..184].try_into().unwrap());
+    let len = u32::from_le_bytes(bytes[184..188].try_into().unwrap());
+    assert!(len > 0, "the container has a bundle");
+    offset..offset + u64::from(len)
 }
 
 fn failing(bytes: Vec<u8>, bad: std::ops::Range<u64>, armed_after: u64) -> FailingSource {
@@ -123,6 +141,54 @@ fn a_failed_read_of_a_table_page_or_payload_is_an_io_error() {
     // The validator stops with the I/O error rather than calling the file invalid.
     let e = verify(failing(bytes, 2 * p..len, 2), VerifyMode::Full).unwrap_err();
     assert_io(e, "verify");
+}
+
+/// With the metadata in a bundle, a failed read of it fails opening with the I/O error (not
+/// a corruption report), and once open, lookups and scans read nothing that could fail.
+#[test]
+fn a_failed_read_of_the_bundle_is_an_io_error_and_lookups_read_nothing() {
+    let bytes = bundled();
+    let range = bundle_range(&bytes);
+    let e =
+        Store::from_source(failing(bytes.clone(), range.start..range.start + 1, 0)).unwrap_err();
+    assert_io(e, "open, bundle read");
+    let e = verify(failing(bytes.clone(), range.clone(), 0), VerifyMode::Fast).unwrap_err();
+    assert_io(e, "verify, bundle read");
+    let opened = {
+        let st = Store::from_source(failing(bytes.clone(), 0..0, u64::MAX)).unwrap();
+        st.source().reads.load(Ordering::Relaxed)
+    };
+    // Everything but payloads fails after opening: tables come from memory.
+    let store = Store::from_source(failing(bytes.clone(), 0..range.end, opened)).unwrap();
+    store.node(0).unwrap();
+    store
+        .scan_hilbert(0, 0..=u64::MAX)
+        .unwrap()
+        .collect::<Result<Vec<_>, _>>()
+        .unwrap();
+    let (cols, rows) = store.domain().nodes_across(store.domain().finest_level());
+    store.stored_block(cols - 1, rows - 1).unwrap();
+}
+
+/// A damaged byte in the bundle's stored bytes fails its CRC at open: corruption (I-9),
+/// naming the file, and the validator reports it rather than failing.
+#[test]
+fn a_damaged_bundle_is_corrupt_at_open() {
+    let mut bytes = bundled();
+    let range = bundle_range(&bytes);
+    bytes[(range.start + range.end) as usize / 2] ^= 0x10;
+    let e = Store::from_source(failing(bytes.clone(), 0..0, u64::MAX)).unwrap_err();
+    match e {
+        Error::Corrupt {
+            path, invariant, ..
+        } => {
+            assert_eq!(invariant, Invariant::Payload);
+            assert_eq!(path, Path::new("/disk/failing.fmrh"));
+        }
+        other => panic!("{other}"),
+    }
+    let report = verify(failing(bytes, 0..0, u64::MAX), VerifyMode::Fast).unwrap();
+    assert!(!report.valid);
 }
 
 #[test]

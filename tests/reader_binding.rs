@@ -2,7 +2,11 @@
 //! §11.6): a reader of an old state that follows a reference into a page a later commit reused
 //! gets `Error::Superseded`, never that page's bytes as its own; the same mismatch in the
 //! latest state is corruption (I-5), reported as such; and a registered reader never meets
-//! reuse at all, because the writer keeps its pages.
+//! reuse at all, because the writer keeps its pages. A state with a metadata bundle (format
+//! 3.0) holds its tables in memory from its opening, so an old reader keeps reading its own
+//! tables, and its payloads are still bound by their CRCs.
+
+mod common;
 
 use std::borrow::Cow;
 use std::io;
@@ -38,9 +42,21 @@ fn field() -> Heightfield {
     Heightfield::from_fn(300, 260, |x, y| ((x * 13 + y * 7) % 101) as f32 * 0.5).unwrap()
 }
 
+/// Creates the test file, its metadata bundled or in pages of its own.
+fn create(path: &Path, paged: bool) {
+    let mut options = CreateOptions::default();
+    if paged {
+        options.write.bundle_limit = 0;
+    }
+    fmrh::create(path, field(), &options).unwrap();
+}
+
 /// Commits four replacements and returns each commit's (reuse limit, pages reused).
-fn commit_four(path: &Path) -> Vec<(u64, u64)> {
+fn commit_four(path: &Path, paged: bool) -> Vec<(u64, u64)> {
     let container = Container::open(path).unwrap();
+    if paged {
+        container.set_bundle_limit(0);
+    }
     let out = (0..4)
         .map(|i| {
             let mut txn = container.begin_write().unwrap();
@@ -56,15 +72,27 @@ fn commit_four(path: &Path) -> Vec<(u64, u64)> {
 
 #[test]
 fn an_old_state_reading_a_reused_page_gets_superseded_never_data() {
+    old_state_reads(true);
+}
+
+#[test]
+fn an_old_bundled_state_reads_its_own_tables_and_never_reused_payloads() {
+    old_state_reads(false);
+}
+
+fn old_state_reads(paged: bool) {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("t.fmrh");
-    fmrh::create(&path, field(), &CreateOptions::default()).unwrap();
+    create(&path, paged);
     let old = Store::from_source(Unregistered(FileSource::open(&path).unwrap())).unwrap();
     assert!(!old.is_registered());
     let txn = old.txn_id();
     let before = old.read_window(old.domain().data_rect()).unwrap();
+    // The bundled store holds its tables from the start; the paged one reads its node pages
+    // only below, after the commits reused them.
+    let nodes_before = (!paged).then(|| old.nodes().unwrap());
 
-    let commits = commit_four(&path);
+    let commits = commit_four(&path, paged);
     assert!(
         commits.iter().any(|&(_, reused)| reused > 0),
         "no commit reused a page: {commits:?}"
@@ -72,11 +100,15 @@ fn an_old_state_reading_a_reused_page_gets_superseded_never_data() {
     // Nobody registered state 1, so the writer was free to reuse its pages.
     assert!(commits.iter().skip(1).all(|&(limit, _)| limit > txn));
 
-    match old.nodes() {
-        Err(Error::Superseded {
-            txn: held, latest, ..
-        }) => assert!(held == txn && latest > txn, "{held} {latest}"),
-        other => panic!("the old node table read as {:?}", other.map(|n| n.len())),
+    match nodes_before {
+        None => match old.nodes() {
+            Err(Error::Superseded {
+                txn: held, latest, ..
+            }) => assert!(held == txn && latest > txn, "{held} {latest}"),
+            other => panic!("the old node table read as {:?}", other.map(|n| n.len())),
+        },
+        // The bundle was read whole at opening: the old tables, exactly.
+        Some(before) => assert_eq!(old.nodes().unwrap(), before),
     }
     // Whatever else the old store reads is its own state's, or the same error.
     match old.read_window(old.domain().data_rect()) {
@@ -100,9 +132,15 @@ fn an_old_state_reading_a_reused_page_gets_superseded_never_data() {
 
 #[test]
 fn a_registered_reader_keeps_its_state_while_commits_go_on() {
+    for paged in [true, false] {
+        registered_reader(paged);
+    }
+}
+
+fn registered_reader(paged: bool) {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("t.fmrh");
-    fmrh::create(&path, field(), &CreateOptions::default()).unwrap();
+    create(&path, paged);
     let reader = Store::open(&path).unwrap();
     if !fmrh::store::lock::SUPPORTED {
         assert!(!reader.is_registered());
@@ -110,7 +148,7 @@ fn a_registered_reader_keeps_its_state_while_commits_go_on() {
     }
     assert!(reader.is_registered());
     let before = reader.read_window(reader.domain().data_rect()).unwrap();
-    for (limit, _) in commit_four(&path) {
+    for (limit, _) in commit_four(&path, paged) {
         assert_eq!(
             limit,
             reader.txn_id(),
@@ -129,7 +167,7 @@ fn a_registered_reader_keeps_its_state_while_commits_go_on() {
 fn a_wrong_txn_tag_in_the_latest_state_is_corruption() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("t.fmrh");
-    fmrh::create(&path, field(), &CreateOptions::default()).unwrap();
+    create(&path, true);
     let mut bytes = std::fs::read(&path).unwrap();
     let p = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
     // The node table's root (commit record bytes 72..80): give it another transaction's tag
@@ -151,6 +189,36 @@ fn a_wrong_txn_tag_in_the_latest_state_is_corruption() {
         }
         Err(e) => panic!("expected I-5, got {e}"),
         Ok(_) => panic!("a page of another transaction was accepted"),
+    }
+    let report = fmrh::verify(fmrh::store::Bytes(&bytes[..]), fmrh::VerifyMode::Fast).unwrap();
+    assert!(!report.valid && !report.busy);
+}
+
+/// In a bundle, a page with another transaction's tag (CRC made right, bundle recompressed
+/// and its CRC in the record made right) is refused when the state is opened: I-5, never a
+/// table read as this state's.
+#[test]
+fn a_wrong_txn_tag_in_a_bundle_is_corruption_at_open() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("t.fmrh");
+    create(&path, false);
+    let mut bytes = std::fs::read(&path).unwrap();
+    let p = common::bundle::page_size(&bytes);
+    common::bundle::rewrite(&mut bytes, |raw| {
+        let last = raw.len() / p - 1;
+        let page = &mut raw[last * p..(last + 1) * p];
+        page[18..20].copy_from_slice(&7u16.to_le_bytes());
+        common::bundle::reseal_page(page);
+    });
+    match Store::from_bytes(&bytes[..]) {
+        Err(Error::Corrupt {
+            invariant, detail, ..
+        }) => {
+            assert_eq!(invariant, fmrh::Invariant::Page);
+            assert!(detail.contains("txn tag"), "{detail}");
+        }
+        Err(e) => panic!("expected I-5, got {e}"),
+        Ok(_) => panic!("a bundle page of another transaction was accepted"),
     }
     let report = fmrh::verify(fmrh::store::Bytes(&bytes[..]), fmrh::VerifyMode::Fast).unwrap();
     assert!(!report.valid && !report.busy);

@@ -188,9 +188,13 @@ fn adjacency_runs_count_records_and_tile_the_table() {
     let p = u32_at(&file, 12) as usize;
     let adjacency_records = u64_at(&file, 144 + 8);
     // The cluster directory blob: its first page, from byte 24 of that page.
-    let (dir_page, dir_len) = (u64_at(&file, 56) as usize, u64_at(&file, 64) as usize);
+    // The file keeps its metadata in a bundle (format 3.0, §6.7), whose pages are numbered
+    // from 2^40.
+    let (dir_page, dir_len) = (u64_at(&file, 56), u64_at(&file, 64) as usize);
     assert!(dir_len <= p - 24, "a one-page directory");
-    let dir = &file[dir_page * p + 24..dir_page * p + 24 + dir_len];
+    let bundle = common::bundle::pages(&file);
+    let at = (dir_page - (1 << 40)) as usize * p;
+    let dir = &bundle[at + 24..at + 24 + dir_len];
     let count = u32_at(dir, 0) as usize;
     assert!(count >= 3, "{count} clusters");
     let mut next = 0u64;

@@ -157,6 +157,11 @@ struct Sections {
     block_payloads: u64,
     grid_payloads: u64,
     payload_padding: u64,
+    /// Stored bytes of the metadata bundle (format 3, §6.7): tables and blobs in it are
+    /// counted here, not above.
+    metadata_bundle: u64,
+    /// Pages the bundle decompresses to.
+    metadata_bundle_pages: u64,
 }
 
 impl Sections {
@@ -187,7 +192,9 @@ impl Sections {
             grid_payloads: l.grid_bytes,
             payload_padding: l
                 .file_length
-                .saturating_sub(metadata_pages * p + l.block_bytes + l.grid_bytes),
+                .saturating_sub(metadata_pages * p + l.block_bytes + l.grid_bytes + l.bundle_bytes),
+            metadata_bundle: l.bundle_bytes,
+            metadata_bundle_pages: l.bundle_pages,
         }
     }
 }
@@ -349,10 +356,18 @@ fn print_info(path: &std::path::Path, i: &Info) {
         ("commit slots", s.commit_slots),
         ("free list", s.free_list),
         ("free pages", s.free_pages),
+        ("metadata bundle", s.metadata_bundle),
     ] {
         println!(
             "    {name:<18} {bytes:>12}  {:>6.2}%",
             100.0 * bytes as f64 / total
+        );
+    }
+    if s.metadata_bundle > 0 {
+        println!(
+            "  the dataset header, directory and tables are in the bundle: {} pages, \
+             compressed, read whole on open",
+            s.metadata_bundle_pages
         );
     }
 }

@@ -71,18 +71,25 @@ pub fn encode_blob(
 }
 
 /// Checks a blob reference against the file before any page is read: not empty, at most
-/// `max_len` bytes, every page past the commit slots and inside `page_count` pages. Returns
-/// the pages it occupies.
+/// `max_len` bytes, every page past the commit slots and inside `page_count` pages, or every
+/// page inside the state's `bundle_pages` bundle pages (§6.7). Returns the pages it occupies.
 pub fn check_blob_ref(
     blob: &BlobRef,
     max_len: u64,
     page_size: u32,
     page_count: u64,
+    bundle_pages: u64,
     name: &str,
 ) -> Result<u64, Violation> {
     let (len, first) = (blob.length.get(), blob.first_page.get());
     let pages = blob_pages(len, page_size);
-    if len == 0 || len > max_len || first < 2 || first.saturating_add(pages) > page_count {
+    let (lo, hi) = if super::bundle::is_bundle_page(first) {
+        let b = super::bundle::BUNDLE_FIRST_PAGE;
+        (b, b + bundle_pages)
+    } else {
+        (2, page_count)
+    };
+    if len == 0 || len > max_len || first < lo || first.saturating_add(pages) > hi {
         return Err(Violation::new(
             Invariant::DatasetHeader,
             name,
@@ -134,8 +141,13 @@ mod tests {
         let content: Vec<u8> = (0..2500u32).map(|i| i.to_le_bytes()[0]).collect();
         let (blob, pages) = encode_blob(&content, tag::DATASET_HEADER, 5, 1, 1024);
         assert_eq!(pages.len() as u64, blob_pages(2500, 1024));
-        assert_eq!(check_blob_ref(&blob, 4096, 1024, 8, "b").unwrap(), 3);
-        assert!(check_blob_ref(&blob, 4096, 1024, 7, "b").is_err());
+        assert_eq!(check_blob_ref(&blob, 4096, 1024, 8, 0, "b").unwrap(), 3);
+        assert!(check_blob_ref(&blob, 4096, 1024, 7, 9, "b").is_err());
+        // In a bundle: inside its pages, never straddling its end.
+        let b = crate::format::bundle::BUNDLE_FIRST_PAGE;
+        let (bundled, _) = encode_blob(&content, tag::DATASET_HEADER, b + 1, 1, 1024);
+        assert_eq!(check_blob_ref(&bundled, 4096, 1024, 8, 4, "b").unwrap(), 3);
+        assert!(check_blob_ref(&bundled, 4096, 1024, 1 << 41, 3, "b").is_err());
         let mut back = Vec::new();
         for (i, page) in pages.iter().enumerate() {
             let part =

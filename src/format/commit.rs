@@ -6,13 +6,15 @@
 //! of the two valid records.
 //!
 //! ```text
-//!  0        8     10    12     16       24           32     36     40 ...  168       176 ... 252  256
-//!  | magic  | maj | min | page | txn_id | file_length| flags| rsvd | roots | pages_txn| rsvd | crc |
-//!  └──────── the envelope: the same in every major version ───────┘                 └─ CRC of 0..252
+//!  0        8     10    12     16       24           32     36     40 ...  168       176     200 ... 252  256
+//!  | magic  | maj | min | page | txn_id | file_length| flags| rsvd | roots | pages_txn| bundle | rsvd | crc |
+//!  └──────── the envelope: the same in every major version ───────┘                         └─ CRC of 0..252
 //! ```
 //!
 //! `pages_txn` (1.2; zero before) is the transaction that wrote every structured page the
-//! state reaches: each of those pages carries its low 16 bits (`page::txn_tag`).
+//! state reaches: each of those pages carries its low 16 bits (`page::txn_tag`). `bundle`
+//! (3.0; zero before) names the compressed metadata bundle, if the state has one
+//! ([`super::bundle`]).
 //!
 //! **The envelope.** Magic, major, minor, page size, txn id and the CRC at 252 keep their
 //! places in every major version, so a reader can tell that a newer writer has superseded the
@@ -23,10 +25,11 @@ use zerocopy::byteorder::little_endian::{U16, U32, U64};
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
 
 use super::blob::BlobRef;
+use super::bundle::BundleRef;
 use super::tree::TreeRef;
 use super::{
     crc32, is_zero, page_size_is_valid, Invariant, Violation, FORMAT_MAJOR, FORMAT_MINOR,
-    LAST_MINOR_OF_1, MAGIC, MAX_PAGE_SIZE, MIN_PAGE_SIZE,
+    LAST_MINOR_OF_1, LAST_MINOR_OF_2, MAGIC, MAX_PAGE_SIZE, MIN_PAGE_SIZE,
 };
 
 /// Bytes of a commit record at the start of its slot page; the rest of the page is zero.
@@ -77,8 +80,10 @@ pub struct CommitRecord {
     /// The transaction that wrote every structured page this state reaches (1.2). Zero in
     /// older files, whose pages carry no txn tag.
     pub pages_txn: U64,
+    /// The metadata bundle (3.0; zero before, and when the state has none).
+    pub bundle: BundleRef,
     /// Zero.
-    pub reserved: [u8; 76],
+    pub reserved: [u8; 52],
     /// CRC-32 of bytes `0..COMMIT_CRC_SPAN` of the record.
     pub crc: U32,
 }
@@ -139,11 +144,19 @@ impl CommitRecord {
             reserved0: U32::new(0),
             roots,
             pages_txn: U64::new(txn_id),
-            reserved: [0; 76],
+            bundle: BundleRef::default(),
+            reserved: [0; 52],
             crc: U32::new(0),
         };
         r.seal();
         r
+    }
+
+    /// The same record with `bundle` as its metadata bundle, sealed.
+    pub fn with_bundle(mut self, bundle: BundleRef) -> CommitRecord {
+        self.bundle = bundle;
+        self.seal();
+        self
     }
 
     /// The same state under another txn id and flags, sealed: what a writer publishes to mark
@@ -305,15 +318,24 @@ pub fn classify(bytes: &[u8], slot: u8, offset: u64) -> Slot {
     }
     let newer_minor = match r.major.get() {
         FORMAT_MAJOR => r.minor.get() > FORMAT_MINOR,
+        2 => r.minor.get() > LAST_MINOR_OF_2,
         _ => r.minor.get() > LAST_MINOR_OF_1,
     };
+    let has_bundle = r.major.get() >= 3;
     if !newer_minor
         && (r.flags.get() & !COMMIT_FLAGS_KNOWN != 0
             || r.reserved0.get() != 0
             || (!r.binds_pages() && r.pages_txn.get() != 0)
+            || (!has_bundle && !is_zero(r.bundle.as_bytes()))
+            || r.bundle.reserved.get() != 0
             || !is_zero(&r.reserved))
     {
         return invalid("reserved fields are not zero".into());
+    }
+    if has_bundle {
+        if let Err(why) = r.bundle.check(p, len) {
+            return invalid(why);
+        }
     }
     Slot::Valid(Box::new(r))
 }

@@ -12,6 +12,7 @@
 //! | [`commit`] | commit records, the slot choice | §3 |
 //! | [`page`] | the page header, tags, page checks | §4 |
 //! | [`blob`] | blobs of consecutive pages | §4 |
+//! | [`bundle`] | the compressed metadata bundle of a small state | §6.7 |
 //! | [`tree`] | B+-tree pages | §4 |
 //! | [`dataset`] | the dataset header | §5 |
 //! | [`records`] | node, block, index, adjacency and free-list records | §6 |
@@ -50,6 +51,7 @@
 #![warn(clippy::cast_possible_truncation)]
 
 pub mod blob;
+pub mod bundle;
 pub mod commit;
 pub mod dataset;
 pub mod directory;
@@ -80,17 +82,22 @@ pub use tree::{TreeRef, TreeSpec, MAX_TREE_DEPTH};
 /// transfers, as PNG's signature does.
 pub const MAGIC: [u8; 8] = *b"FMRH\r\n\x1a\n";
 
-/// Incompatible revisions of the format. Writers write 2; readers read 1 and 2.
+/// Incompatible revisions of the format. Writers write 3; readers read 1, 2 and 3.
 ///
-/// 2.0 stores payloads coded ([`payload::store_block`], [`crate::codec`]) where 1.x stored
-/// raw `f32`: a 1.x reader would misread them. Everything else is as in 1.2. A 1.x file is
-/// read as it is, and refused for writing (it would mix raw and coded payloads): rebuild it
-/// with `fmrh build` to write it.
-pub const FORMAT_MAJOR: u16 = 2;
+/// 3.0 may keep a small state's structured pages in a compressed *metadata bundle*
+/// ([`bundle`]) that the commit record names: a 2.x reader would find the tables missing.
+/// Everything else is as in 2.1, so a 2.x file is read as it is and a transaction on it
+/// writes a 3.0 state. 2.0 stored payloads coded ([`payload::store_block`],
+/// [`crate::codec`]) where 1.x stored raw `f32`: a 1.x file is read as it is, and refused
+/// for writing (it would mix raw and coded payloads): rebuild it with `fmrh build`.
+pub const FORMAT_MAJOR: u16 = 3;
 
-/// Compatible additions within [`FORMAT_MAJOR`]. 2.1 adds the dataset header's storage
-/// `precision` (formerly reserved, zero in 2.0 files: lossless).
-pub const FORMAT_MINOR: u16 = 1;
+/// Compatible additions within [`FORMAT_MAJOR`]: none yet.
+pub const FORMAT_MINOR: u16 = 0;
+
+/// The last minor version of major 2. 2.1 added the dataset header's storage `precision`
+/// (formerly reserved, zero in 2.0 files: lossless).
+pub const LAST_MINOR_OF_2: u16 = 1;
 
 /// The last minor version of major 1. 1.1 added the commit record's flags
 /// ([`COMMIT_RECOVERY_NEEDED`]) and files changed by transactions. 1.2 binds every structured

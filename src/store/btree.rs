@@ -13,36 +13,56 @@ use zerocopy::FromBytes;
 use super::pagecache::PageCache;
 use super::source::{self, Source};
 use crate::error::{Error, Result};
+use crate::format::bundle::{self, BUNDLE_FIRST_PAGE};
 use crate::format::tree::{read_record, record_key, TreePage};
 use crate::format::{page::check_page, Invariant, TreeRef, TreeSpec, Violation, MAX_TREE_DEPTH};
 
-/// A set of page numbers, one bit each, sized by the real file (never by a stored count).
+/// A set of page numbers, one bit each, sized by the real file (never by a stored count)
+/// and, past it, by the state's metadata bundle (format §6.7): file pages `0..pages` and
+/// bundle pages `BUNDLE_FIRST_PAGE..BUNDLE_FIRST_PAGE + bundle_pages`.
 #[derive(Clone, Debug)]
 pub struct PageSet {
     bits: Vec<u64>,
     pages: u64,
+    bundle_pages: u64,
 }
 
 impl PageSet {
-    /// An empty set over pages `0..pages`.
+    /// An empty set over file pages `0..pages` (no bundle pages).
     pub fn new(pages: u64) -> PageSet {
+        PageSet::with_bundle(pages, 0)
+    }
+
+    /// An empty set over file pages `0..pages` and `bundle_pages` bundle pages.
+    pub fn with_bundle(pages: u64, bundle_pages: u64) -> PageSet {
+        let total = pages.saturating_add(bundle_pages);
         PageSet {
-            bits: vec![0; usize::try_from(pages.div_ceil(64)).unwrap_or(0)],
+            bits: vec![0; usize::try_from(total.div_ceil(64)).unwrap_or(0)],
             pages,
+            bundle_pages,
         }
     }
 
-    fn word(page: u64) -> (usize, u64) {
-        // `page < pages`, whose word count fit a usize when the set was made.
-        (usize::try_from(page / 64).unwrap_or(usize::MAX), page % 64)
+    /// The bit of `page`, if the set covers it.
+    fn bit(&self, page: u64) -> Option<(usize, u64)> {
+        let i = if page < self.pages {
+            page
+        } else {
+            let b = page.checked_sub(BUNDLE_FIRST_PAGE)?;
+            if b >= self.bundle_pages {
+                return None;
+            }
+            self.pages + b
+        };
+        // `i` is below the bit count, whose word count fit a usize when the set was made.
+        Some((usize::try_from(i / 64).ok()?, i % 64))
     }
 
-    /// Adds `page`; false if it was already in (or lies outside the file).
+    /// Adds `page`; false if it was already in (or lies outside the file and the bundle).
     pub fn insert(&mut self, page: u64) -> bool {
-        if page >= self.pages {
+        let Some((w, b)) = self.bit(page) else {
             return false;
-        }
-        let (w, b) = Self::word(page);
+        };
         let had = self.bits[w] >> b & 1 == 1;
         self.bits[w] |= 1 << b;
         !had
@@ -50,13 +70,13 @@ impl PageSet {
 
     /// Whether `page` is in.
     pub fn contains(&self, page: u64) -> bool {
-        let (w, b) = Self::word(page);
-        page < self.pages && self.bits[w] >> b & 1 == 1
+        self.bit(page)
+            .is_some_and(|(w, b)| self.bits[w] >> b & 1 == 1)
     }
 
-    /// Pages in the set.
-    pub fn len(&self) -> u64 {
-        self.bits.iter().map(|w| u64::from(w.count_ones())).sum()
+    /// File pages in the set (bundle pages left out).
+    pub fn file_pages(&self) -> u64 {
+        (0..self.pages).filter(|&p| self.contains(p)).count() as u64
     }
 }
 
@@ -76,6 +96,9 @@ pub(crate) struct Pages<'a, S: Source + ?Sized> {
     /// state's `pages_txn`. Each page read first is then checked to be within 2^16
     /// transactions of it, so its 16-bit txn tag cannot have been reused (format §4).
     pub wrap_guard: Option<u64>,
+    /// The state's metadata bundle, decompressed, every page checked when it was opened
+    /// (format §6.7): pages from `BUNDLE_FIRST_PAGE` on are served from it.
+    pub bundle: Option<&'a [u8]>,
 }
 
 /// The bytes of a page: lent by the source, or a checked copy the cache shares.
@@ -117,6 +140,17 @@ impl<'a, S: Source + ?Sized> Pages<'a, S> {
     /// Page `page`, which must be a `tag` page past the commit slots.
     #[inline]
     pub fn get(&self, page: u64, tag: [u8; 4]) -> Result<PageBytes<'a>> {
+        if bundle::is_bundle_page(page) {
+            // Checked (number, CRC, txn tag) when the bundle was opened; the kind a
+            // reference expects is checked on every read.
+            return match self
+                .bundle
+                .and_then(|b| bundle::page_of(b, page, self.page_size))
+            {
+                Some(bytes) => self.tagged(page, tag, PageBytes::Source(Cow::Borrowed(bytes))),
+                None => Err(self.outside(page)),
+            };
+        }
         if page < 2 || page >= self.page_count {
             return Err(self.outside(page));
         }
@@ -235,7 +269,10 @@ impl<'a, S: Source + ?Sized> Pages<'a, S> {
         self.corrupt(Violation::new(
             Invariant::TreeShape,
             format!("page {page}"),
-            format!("a reference to page {page}, outside 2..{}", self.page_count),
+            format!(
+                "a reference to page {page}, outside 2..{} and the metadata bundle",
+                self.page_count
+            ),
         ))
     }
 

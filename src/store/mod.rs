@@ -88,6 +88,8 @@ use crate::model::Domain;
 #[derive(Debug)]
 pub struct Store<S: Source = FileSource> {
     src: S,
+    /// The state's metadata bundle, decompressed and checked at open (format §6.7).
+    bundle: Option<std::sync::Arc<[u8]>>,
     page_size: u32,
     page_count: u64,
     slot: u8,
@@ -289,6 +291,13 @@ impl<S: Source> Store<S> {
         }
     }
 
+    /// Pages of the state's metadata bundle (0 when it has none).
+    pub(crate) fn bundle_pages(&self) -> u64 {
+        self.bundle
+            .as_ref()
+            .map_or(0, |b| (b.len() / self.page_size as usize) as u64)
+    }
+
     /// Whether this store registered its state against page reuse by writers in other
     /// processes (format §11.6): then no commit reuses a page it reaches while it lives.
     pub fn is_registered(&self) -> bool {
@@ -307,7 +316,7 @@ impl<S: Source> Store<S> {
             cache: None,
             ..self.pages()
         };
-        let mut seen = btree::PageSet::new(self.page_count);
+        let mut seen = btree::PageSet::with_bundle(self.page_count, self.bundle_pages());
         let roots = &self.commit.roots;
         for blob in [&roots.dataset_header, &roots.cluster_directory] {
             let count = crate::format::blob::blob_pages(blob.length.get(), self.page_size);

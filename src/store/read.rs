@@ -53,6 +53,11 @@ pub struct Layout {
     pub block_bytes: u64,
     /// Payload bytes of the coarse grids.
     pub grid_bytes: u64,
+    /// Stored bytes of the metadata bundle (format §6.7), 0 when the state has none. The
+    /// page counts above are of file pages: tables in the bundle count here.
+    pub bundle_bytes: u64,
+    /// Pages the bundle decompresses to.
+    pub bundle_pages: u64,
 }
 
 impl<S: Source> Store<S> {
@@ -71,6 +76,7 @@ impl<S: Source> Store<S> {
             state: self.binding(),
             cache: Some(&self.cache),
             wrap_guard: self.wrap_guard,
+            bundle: self.bundle.as_deref(),
         }
     }
 
@@ -79,9 +85,10 @@ impl<S: Source> Store<S> {
         let pages = self.pages();
         let mut table_pages = Vec::new();
         for (spec, tree) in state_trees(&self.commit.roots, &self.clusters) {
-            let mut seen = PageSet::new(self.page_count);
+            let mut seen = PageSet::with_bundle(self.page_count, self.bundle_pages());
             btree::walk(&pages, &tree, spec, &mut seen, &mut |_, _| Ok(()))?;
-            table_pages.push((spec, seen.len()));
+            // File pages only: a bundle's pages are counted by its stored bytes.
+            table_pages.push((spec, seen.file_pages()));
         }
         let sum = |want: TreeSpec| -> u64 {
             table_pages
@@ -107,7 +114,13 @@ impl<S: Source> Store<S> {
             .iter()
             .map(|b| u64::from(b.payload_len.get()))
             .sum();
-        let blob = |b: &blob::BlobRef| blob::blob_pages(b.length.get(), self.page_size);
+        let blob = |b: &blob::BlobRef| {
+            if crate::format::bundle::is_bundle_page(b.first_page.get()) {
+                0
+            } else {
+                blob::blob_pages(b.length.get(), self.page_size)
+            }
+        };
         Ok(Layout {
             page_size: self.page_size,
             file_length: self.commit.file_length.get(),
@@ -122,6 +135,8 @@ impl<S: Source> Store<S> {
             cluster_index_pages,
             block_bytes,
             grid_bytes,
+            bundle_bytes: u64::from(self.commit.bundle.stored_len.get()),
+            bundle_pages: self.bundle_pages(),
         })
     }
 

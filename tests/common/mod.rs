@@ -61,6 +61,7 @@ pub fn ok_json(out: &std::process::Output) -> serde_json::Value {
     serde_json::from_slice(&out.stdout).expect("stdout is JSON")
 }
 
+pub mod bundle;
 pub mod fields;
 pub mod oracle;
 pub mod txn;

@@ -7,7 +7,7 @@
 use fmrh::store::Source;
 use fmrh::{Heightfield, Store};
 
-pub use super::txn_driver::{build_bytes, described, Described};
+pub use super::txn_driver::{build_bytes, build_bytes_paged, described, Described};
 
 /// The stored cluster thresholds.
 pub fn thresholds<S: Source>(s: &Store<S>) -> Vec<f64> {

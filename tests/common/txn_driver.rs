@@ -143,6 +143,26 @@ pub struct Driver {
 
 /// The bytes of a fresh container of `hf`.
 pub fn build_bytes(hf: &Heightfield, block: u32, thresholds: &Thresholds) -> Vec<u8> {
+    build_bytes_with(hf, block, thresholds, &WriteOptions::default())
+}
+
+/// [`build_bytes`] with every table in pages of its own (no metadata bundle): the layout
+/// of a file whose metadata is too large to bundle.
+#[allow(dead_code)]
+pub fn build_bytes_paged(hf: &Heightfield, block: u32, thresholds: &Thresholds) -> Vec<u8> {
+    let paged = WriteOptions {
+        bundle_limit: 0,
+        ..WriteOptions::default()
+    };
+    build_bytes_with(hf, block, thresholds, &paged)
+}
+
+fn build_bytes_with(
+    hf: &Heightfield,
+    block: u32,
+    thresholds: &Thresholds,
+    write: &WriteOptions,
+) -> Vec<u8> {
     let model = Model::build(
         hf.clone(),
         &BuildOptions {
@@ -153,7 +173,7 @@ pub fn build_bytes(hf: &Heightfield, block: u32, thresholds: &Thresholds) -> Vec
     )
     .expect("the model builds");
     let mut out = Cursor::new(Vec::new());
-    write_to(&model, &hf.metadata, &WriteOptions::default(), &mut out).expect("it writes");
+    write_to(&model, &hf.metadata, write, &mut out).expect("it writes");
     out.into_inner()
 }
 

@@ -24,15 +24,19 @@ pub struct Fixture {
 
 /// Builds `source` with `options` into an in-memory container.
 pub fn fixture(source: Heightfield, options: &BuildOptions) -> Fixture {
+    fixture_written(source, options, &WriteOptions::default())
+}
+
+/// [`fixture`], written with `write` (for example with every table in pages of its own).
+#[allow(dead_code)]
+pub fn fixture_written(
+    source: Heightfield,
+    options: &BuildOptions,
+    write: &WriteOptions,
+) -> Fixture {
     let model = Model::build(source.clone(), options).expect("model builds");
     let mut bytes = Cursor::new(Vec::new());
-    write_to(
-        &model,
-        &source.metadata,
-        &WriteOptions::default(),
-        &mut bytes,
-    )
-    .expect("writes");
+    write_to(&model, &source.metadata, write, &mut bytes).expect("writes");
     let store = Store::from_bytes(bytes.into_inner()).expect("opens");
     Fixture {
         source,

@@ -12,6 +12,7 @@ use super::alloc::Alloc;
 use super::SnapshotStore;
 use crate::error::{Error, Result};
 use crate::format::blob::encode_blob;
+use crate::format::bundle::BundleRef;
 use crate::format::payload::PayloadRef;
 use crate::format::tables::FREE;
 use crate::format::tree::{self, TreeSpec};
@@ -127,7 +128,12 @@ impl<I: Io> PageSink for CommitSink<'_, I> {
     }
 }
 
-/// Writes every page of the state `editor` holds, on top of `base`; returns its commit
+/// The zstd level of a commit's metadata bundle: a commit pays for its compression in
+/// latency, so it takes a faster level than a build (a few per cent larger).
+const COMMIT_ZSTD_LEVEL: i32 = 9;
+
+/// Writes every page of the state `editor` holds, on top of `base`, with its metadata in a
+/// bundle of at most `bundle_limit` stored bytes when it fits; returns its commit
 /// record (txn id + 1, sealed, flags `RECOVERY_NEEDED | PAYLOAD_SLACK`) and what changed.
 /// Nothing it writes is reachable from `base` or from a snapshot older than `reuse_limit`.
 pub(crate) fn write_state<I: Io>(
@@ -136,6 +142,7 @@ pub(crate) fn write_state<I: Io>(
     editor: &ModelEditor,
     dirty: &[SampleRect],
     reuse_limit: u64,
+    bundle_limit: u64,
 ) -> Result<(CommitRecord, CommitSummary)> {
     let p = base.page_size();
     let txn = base.txn_id() + 1;
@@ -233,16 +240,36 @@ pub(crate) fn write_state<I: Io>(
         .count() as u64;
     summary.clusters_changed = changed_clusters(base, editor)?;
 
-    // Tables and blobs.
+    // The header and tables: one compressed bundle when small (format §6.7), in pages of
+    // their own otherwise.
     let header = DatasetHeader::of_model(model, &base.header().metadata).encode();
-    let dataset_header = sink.blob(&header, tag::DATASET_HEADER)?;
     let refs = PayloadRefs {
         grid: grid_ref,
         block: block_ref,
         grid_voids,
         shapes,
     };
-    let roots = tables::write_tables(model, &refs, &mut sink)?;
+    let bundled = tables::bundle_metadata(
+        model,
+        &refs,
+        &header,
+        p,
+        txn,
+        bundle_limit,
+        COMMIT_ZSTD_LEVEL,
+    )?;
+    let (dataset_header, roots, bundle) = match bundled {
+        Some(b) => {
+            let at = sink.payload(b.stored.clone())?;
+            let bundle = b.at(at.offset);
+            (b.dataset_header, b.roots, bundle)
+        }
+        None => {
+            let dataset_header = sink.blob(&header, tag::DATASET_HEADER)?;
+            let roots = tables::write_tables(model, &refs, &mut sink)?;
+            (dataset_header, roots, BundleRef::default())
+        }
+    };
     let written = sink.written;
 
     // What this commit frees: the old state's metadata pages, and payload pages no kept
@@ -252,10 +279,13 @@ pub(crate) fn write_state<I: Io>(
     let mut freed: Vec<u64> = (2..base.page_count())
         .filter(|&page| metadata.contains(page))
         .collect();
+    // The old bundle (if any) is a payload no new record keeps.
+    let old_bundle = base.commit_record().bundle;
     let old_payload_pages: HashSet<u64> = old_nodes
         .iter()
         .map(|n| n.payload())
         .chain(old_blocks.iter().map(|b| b.payload()))
+        .chain(old_bundle.is_present().then(|| old_bundle.payload()))
         .flat_map(|r| r.pages(p))
         .collect();
     freed.extend(
@@ -284,7 +314,7 @@ pub(crate) fn write_state<I: Io>(
         adjacency: roots.adjacency,
     };
     let flags = COMMIT_RECOVERY_NEEDED | COMMIT_PAYLOAD_SLACK;
-    let record = CommitRecord::new(p, txn, length, flags, state);
+    let record = CommitRecord::new(p, txn, length, flags, state).with_bundle(bundle);
     // Step 3: a grown file gets its length before anything refers to it; then sync.
     let e = |err| Error::io(io.name(), err);
     if length > io.len().map_err(e)? {

@@ -30,6 +30,8 @@ struct Shared<I: Io> {
     readers: Mutex<BTreeMap<u64, usize>>,
     writer: Mutex<WriterCache>,
     poisoned: AtomicBool,
+    /// The most stored bytes a commit gives its metadata bundle (format §6.7).
+    bundle_limit: std::sync::atomic::AtomicU64,
 }
 
 #[derive(Default)]
@@ -156,6 +158,9 @@ impl<I: Io> Container<I> {
                     readers: Mutex::new(BTreeMap::new()),
                     writer: Mutex::new(WriterCache::default()),
                     poisoned: AtomicBool::new(false),
+                    bundle_limit: std::sync::atomic::AtomicU64::new(
+                        crate::format::bundle::DEFAULT_BUNDLE_LIMIT,
+                    ),
                 }),
             },
             recovery,
@@ -169,6 +174,14 @@ impl<I: Io> Container<I> {
             });
         }
         Ok(())
+    }
+
+    /// Sets the most stored bytes later commits give the metadata bundle (format §6.7;
+    /// [`crate::format::bundle::DEFAULT_BUNDLE_LIMIT`] unless set). Larger metadata, or any
+    /// with 0, is written in pages of its own. Either way the commit is the same
+    /// copy-on-write protocol: this changes bytes, not atomicity or durability.
+    pub fn set_bundle_limit(&self, bytes: u64) {
+        self.shared.bundle_limit.store(bytes, Ordering::Relaxed);
     }
 
     /// Whether an I/O error has poisoned the container.
@@ -408,8 +421,14 @@ impl<I: Io> WriteTxn<'_, I> {
                 .editor
                 .as_ref()
                 .ok_or_else(|| Error::Internal("a commit without its model".into()))?;
-            let (record, mut summary) =
-                write_state(&container.shared.io, &base, editor, &self.dirty, limit)?;
+            let (record, mut summary) = write_state(
+                &container.shared.io,
+                &base,
+                editor,
+                &self.dirty,
+                limit,
+                container.shared.bundle_limit.load(Ordering::Relaxed),
+            )?;
             let store = container.publish(&base, &record)?;
             *lock(&container.shared.current) = Arc::new(store);
             summary.replacements = self.replacements;

@@ -34,6 +34,12 @@ pub(super) fn check_payloads<S: Source>(
             runs.push((n.payload(), Payload::Grid(i)));
         }
     }
+    // The metadata bundle's stored bytes are placed like a payload (format §6.7); opening
+    // checked their CRC and content.
+    let bundle = store.commit_record().bundle;
+    if bundle.is_present() {
+        runs.push((bundle.payload(), Payload::Bundle));
+    }
     runs.sort_unstable_by_key(|r| r.0.offset);
     let start = 2 * p;
     let end_of_file = store.page_count() * p;
@@ -48,7 +54,7 @@ pub(super) fn check_payloads<S: Source>(
         let at = format!("{what} payload at byte {offset}");
         // Records with identical payloads may share one (format §7): its place is checked
         // once, its content against every record's own shape.
-        let shared = coded && prev == Some(r);
+        let shared = coded && prev == Some(r) && !matches!(what, Payload::Bundle);
         prev = Some(r);
         phase.advance(u64::from(len));
         if !shared {
@@ -69,6 +75,9 @@ pub(super) fn check_payloads<S: Source>(
             for page in offset / p..end.div_ceil(p) {
                 pages.insert(page);
             }
+        }
+        if matches!(what, Payload::Bundle) {
+            continue;
         }
         let Some(bytes) = checks.absorb(store.payload(r))? else {
             continue;
@@ -141,6 +150,7 @@ pub(super) fn check_payloads<S: Source>(
 enum Payload {
     Block(usize),
     Grid(usize),
+    Bundle,
 }
 
 impl std::fmt::Display for Payload {
@@ -148,6 +158,7 @@ impl std::fmt::Display for Payload {
         match self {
             Payload::Block(i) => write!(f, "block {i}"),
             Payload::Grid(i) => write!(f, "node {i} grid"),
+            Payload::Bundle => write!(f, "metadata bundle"),
         }
     }
 }

@@ -1,10 +1,11 @@
 //! Writing a model to a new container, all at once.
 //!
 //! The file is laid out front to back (`format-spec/container.md` §2): the two commit slots,
-//! the dataset header, every payload in the tree's Hilbert pre-order, then the tables (nodes,
-//! blocks, each cluster's index, the adjacency table) and the cluster directory. The commit
-//! record goes into slot 0 last, once every page it points to is written. The second slot is
-//! left zero.
+//! every payload in the tree's Hilbert pre-order, then the metadata: the dataset header and
+//! the tables (nodes, blocks, each cluster's index, the adjacency table) and the cluster
+//! directory. Small metadata is one compressed bundle straight after the last payload
+//! (§6.7); larger metadata is pages of its own. The commit record goes into slot 0 last,
+//! once every page it points to is written. The second slot is left zero.
 
 use std::collections::HashMap;
 use std::io::{Seek, SeekFrom, Write};
@@ -18,6 +19,7 @@ use super::{SectionBytes, WriteOptions, WriteSummary};
 use crate::curve::HilbertKey;
 use crate::error::{Error, Result};
 use crate::format::blob::encode_blob;
+use crate::format::bundle::BundleRef;
 use crate::format::payload::{self, PayloadRef};
 use crate::format::tables::FREE;
 use crate::format::tree::{self, TreeSpec};
@@ -85,24 +87,52 @@ pub(crate) fn write_named<W: Write + Seek>(
         page_size: p,
         bytes: HashMap::new(),
     };
-    let header = DatasetHeader::of_model(model, metadata).encode();
-    let dataset_header = sink.blob(&header, tag::DATASET_HEADER)?;
-    sections.dataset_header = sink.bytes.remove(&tag::DATASET_HEADER).unwrap_or(0);
-
     let refs = write_payloads(model, options, sink.out, &mut sections)?;
-    sink.next_page = sink.out.written / u64::from(p);
-    let TableRoots {
-        node_table,
-        block_table,
-        adjacency,
-        cluster_directory,
-    } = tables::write_tables(model, &refs, &mut sink)?;
+    let header = DatasetHeader::of_model(model, metadata).encode();
+    // Small metadata goes into one compressed bundle right after the payloads (format
+    // §6.7); larger metadata into pages of its own after them.
+    let bundled = tables::bundle_metadata(
+        model,
+        &refs,
+        &header,
+        p,
+        FIRST_TXN,
+        options.bundle_limit,
+        crate::format::bundle::BUNDLE_ZSTD_LEVEL,
+    )?;
+    let (dataset_header, roots, bundle) = match bundled {
+        Some(b) => {
+            let at = b.at(sink.out.written);
+            sink.out.write(&b.stored)?;
+            sections.bundle = b.stored.len() as u64;
+            let before = sink.out.written;
+            sink.out.pad_to_page()?;
+            sections.payload_padding += sink.out.written - before;
+            (b.dataset_header, b.roots, at)
+        }
+        None => {
+            let before = sink.out.written;
+            sink.out.pad_to_page()?;
+            sections.payload_padding += sink.out.written - before;
+            sink.next_page = sink.out.written / u64::from(p);
+            let dataset_header = sink.blob(&header, tag::DATASET_HEADER)?;
+            let roots = tables::write_tables(model, &refs, &mut sink)?;
+            (dataset_header, roots, BundleRef::default())
+        }
+    };
     let of = |t: [u8; 4]| sink.bytes.get(&t).copied().unwrap_or(0);
+    sections.dataset_header = of(tag::DATASET_HEADER);
     sections.node_table = of(tag::NODE_TABLE);
     sections.block_table = of(tag::BLOCK_TABLE);
     sections.cluster_index = of(tag::CLUSTER_INDEX);
     sections.adjacency = of(tag::ADJACENCY);
     sections.cluster_directory = of(tag::CLUSTER_DIRECTORY);
+    let TableRoots {
+        node_table,
+        block_table,
+        adjacency,
+        cluster_directory,
+    } = roots;
 
     // The commit record, last.
     let file_length = out.written;
@@ -114,7 +144,7 @@ pub(crate) fn write_named<W: Write + Seek>(
         free_list: tree::empty(FREE.record_size),
         adjacency,
     };
-    let record = CommitRecord::new(p, FIRST_TXN, file_length, 0, roots);
+    let record = CommitRecord::new(p, FIRST_TXN, file_length, 0, roots).with_bundle(bundle);
     out.w.seek(SeekFrom::Start(0)).map_err(io_err)?;
     out.w.write_all(record.as_bytes()).map_err(io_err)?;
     out.w.seek(SeekFrom::Start(file_length)).map_err(io_err)?;
@@ -125,8 +155,8 @@ pub(crate) fn write_named<W: Write + Seek>(
     })
 }
 
-/// Writes every payload in file order from the current position (page-aligned), then pads
-/// to a whole page; returns where each lies.
+/// Writes every payload in file order from the current position (page-aligned), back to
+/// back; returns where each lies.
 fn write_payloads<W: Write>(
     model: &Model,
     options: &WriteOptions,
@@ -206,9 +236,6 @@ fn write_payloads<W: Write>(
         }
     }
     drop(phase);
-    let before = out.written;
-    out.pad_to_page()?;
-    sections.payload_padding += out.written - before;
     Ok(PayloadRefs {
         grid,
         block,

@@ -34,6 +34,9 @@ pub struct WriteOptions {
     pub page_size: u32,
     /// Told of the progress of long phases.
     pub progress: Arc<dyn Progress>,
+    /// The most stored bytes the metadata may take as one compressed bundle (format §6.7);
+    /// larger metadata stays in file pages. 0 never bundles.
+    pub bundle_limit: u64,
 }
 
 impl Default for WriteOptions {
@@ -41,6 +44,7 @@ impl Default for WriteOptions {
         WriteOptions {
             page_size: DEFAULT_PAGE_SIZE,
             progress: Arc::new(Silent),
+            bundle_limit: crate::format::bundle::DEFAULT_BUNDLE_LIMIT,
         }
     }
 }
@@ -49,6 +53,7 @@ impl fmt::Debug for WriteOptions {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.debug_struct("WriteOptions")
             .field("page_size", &self.page_size)
+            .field("bundle_limit", &self.bundle_limit)
             .finish_non_exhaustive()
     }
 }
@@ -76,6 +81,9 @@ pub struct SectionBytes {
     pub adjacency: u64,
     /// Cluster directory pages.
     pub cluster_directory: u64,
+    /// Stored bytes of the metadata bundle (format §6.7): the header, tables and directory,
+    /// compressed, when they are small; the page counts above are then 0.
+    pub bundle: u64,
 }
 
 /// What a write produced.

@@ -8,7 +8,8 @@
 use rayon::prelude::*;
 use zerocopy::IntoBytes;
 
-use crate::error::Result;
+use crate::error::{Error, Result};
+use crate::format::bundle;
 use crate::format::directory::{self, ClusterInfo, EdgeRange};
 use crate::format::payload::{self, PayloadRef};
 use crate::format::tables;
@@ -24,6 +25,113 @@ pub(crate) trait PageSink {
     fn tree(&mut self, records: &[u8], spec: TreeSpec) -> Result<TreeRef>;
     /// Writes `content` as a blob of consecutive `tag` pages.
     fn blob(&mut self, content: &[u8], tag: [u8; 4]) -> Result<BlobRef>;
+}
+
+/// A [`PageSink`] that builds pages in memory at bundle page numbers, for a metadata
+/// bundle (format §6.7).
+pub(crate) struct BundleSink {
+    page_size: u32,
+    txn: u64,
+    pages: Vec<Vec<u8>>,
+}
+
+impl BundleSink {
+    fn next_page(&self) -> u64 {
+        bundle::BUNDLE_FIRST_PAGE + self.pages.len() as u64
+    }
+}
+
+impl PageSink for BundleSink {
+    fn tree(&mut self, records: &[u8], spec: TreeSpec) -> Result<TreeRef> {
+        let (first, txn, p) = (self.next_page(), self.txn, self.page_size);
+        let pages = &mut self.pages;
+        crate::format::tree::build::<Error>(records, spec, p, first, txn, &mut |page| {
+            pages.push(page);
+            Ok(())
+        })
+    }
+
+    fn blob(&mut self, content: &[u8], tag: [u8; 4]) -> Result<BlobRef> {
+        let (blob, pages) = crate::format::blob::encode_blob(
+            content,
+            tag,
+            self.next_page(),
+            self.txn,
+            self.page_size,
+        );
+        self.pages.extend(pages);
+        Ok(blob)
+    }
+}
+
+/// A state's dataset header and tables built as a metadata bundle.
+pub(crate) struct Bundled {
+    /// The stored (compressed) bytes, to be written anywhere past the slots.
+    pub stored: Vec<u8>,
+    /// Pages they decompress to.
+    pub pages: u32,
+    pub dataset_header: BlobRef,
+    pub roots: TableRoots,
+}
+
+impl Bundled {
+    /// The record's reference to the bundle once its stored bytes lie at `offset`.
+    pub fn at(&self, offset: u64) -> bundle::BundleRef {
+        use zerocopy::byteorder::little_endian::{U32, U64};
+        bundle::BundleRef {
+            offset: U64::new(offset),
+            // `stored` is at most the limit, far below 4 GiB.
+            stored_len: U32::new(u32::try_from(self.stored.len()).unwrap_or(u32::MAX)),
+            crc: U32::new(bundle::stored_crc(&self.stored)),
+            pages: U32::new(self.pages),
+            reserved: U32::new(0),
+        }
+    }
+}
+
+/// Builds the dataset header `header` and the tables of `model` as a metadata bundle written
+/// by transaction `txn`, compressed at zstd `level`, if its stored form is at most `limit` bytes (and it decompresses
+/// to at most [`bundle::MAX_BUNDLE_BYTES`]); `None` when the state should keep its pages in
+/// the file. A fast first compression rules out metadata far over the limit without paying
+/// for the strong one.
+pub(crate) fn bundle_metadata(
+    model: &Model,
+    refs: &PayloadRefs,
+    header: &[u8],
+    page_size: u32,
+    txn: u64,
+    limit: u64,
+    level: i32,
+) -> Result<Option<Bundled>> {
+    if limit == 0 {
+        return Ok(None);
+    }
+    let mut sink = BundleSink {
+        page_size,
+        txn,
+        pages: Vec::new(),
+    };
+    let dataset_header = sink.blob(header, tag::DATASET_HEADER)?;
+    let roots = write_tables(model, refs, &mut sink)?;
+    let raw = sink.pages.len() as u64 * u64::from(page_size);
+    if raw > bundle::MAX_BUNDLE_BYTES {
+        return Ok(None);
+    }
+    let io = |e: std::io::Error| Error::Internal(format!("compressing the metadata bundle: {e}"));
+    // zstd's strongest levels keep 10-25 % less than level 1 on metadata pages.
+    if bundle::compress(&sink.pages, 1).map_err(io)?.len() as u64 > limit.saturating_mul(2) {
+        return Ok(None);
+    }
+    let stored = bundle::compress(&sink.pages, level).map_err(io)?;
+    if stored.len() as u64 > limit {
+        return Ok(None);
+    }
+    Ok(Some(Bundled {
+        stored,
+        pages: u32::try_from(sink.pages.len()).unwrap_or(u32::MAX),
+        dataset_header,
+        roots,
+    }))
 }
 
 /// A physical block's shape: the samples it holds and how many are void.

@@ -1,0 +1,279 @@
+//! The metadata bundle (format 3.0, `format-spec/container.md` §6.7): a small state's
+//! structured pages, compressed together into one byte run that the commit record names.
+//!
+//! A small file's metadata is mostly empty page: a cluster index of 25 entries fills 400
+//! bytes of a 4 KiB page, and a file of 1,201² samples had 19 such pages (76 KiB) beside 45
+//! KiB of payloads. Smaller pages would risk the crash-safety argument (a page must be at
+//! least a physical sector, §11), so instead the pages stay as they are and are *stored*
+//! compressed:
+//!
+//! ```text
+//!  commit record (bytes 176..200)          the file
+//!  ┌──────────┬──────┬──────┬───────┐       ┌────────────────────────────────────┐
+//!  │ offset   │ len  │ crc  │ pages │ ────▶ │ … payloads … │ zstd frame (len B)  │
+//!  └──────────┴──────┴──────┴───────┘       └────────────────────────────────────┘
+//!                                                 │ decompresses to exactly pages·P bytes
+//!                                                 ▼
+//!                 bundle page i = page number BUNDLE_FIRST_PAGE + i, a structured page
+//!                 exactly as §4 (tag, CRC, own number, txn tag), reached by the same
+//!                 BlobRefs, TreeRefs and branch entries as any page
+//! ```
+//!
+//! The run is bound like a payload: by the CRC in the (sealed) commit record. A reader reads
+//! it whole when it opens the state (one read), checks every page once, and from then on
+//! serves lookups from memory. Page numbers at and above [`BUNDLE_FIRST_PAGE`] name bundle
+//! pages and never a file page, so every tree, blob and check works unchanged on both.
+
+use zerocopy::byteorder::little_endian::{U32, U64};
+use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
+
+use super::page::PageHeader;
+use super::{crc32, tag, Invariant, Violation};
+
+/// The page number of a bundle's first page: 2^40. A file has fewer pages than this (§10),
+/// so a page number tells by itself whether it names a file page or a bundle page.
+pub const BUNDLE_FIRST_PAGE: u64 = 1 << 40;
+
+/// The most bytes a bundle decompresses to: a reader allocates no more, whatever the record
+/// says.
+pub const MAX_BUNDLE_BYTES: u64 = 16 << 20;
+
+/// The default most stored bytes a writer gives a bundle: a state whose compressed
+/// metadata is larger keeps it in file pages, read page by page as lookups reach them,
+/// so that opening never reads more than about 16 KiB (issue 15's open target).
+pub const DEFAULT_BUNDLE_LIMIT: u64 = 16 << 10;
+
+/// The zstd level a writer compresses a bundle with.
+pub const BUNDLE_ZSTD_LEVEL: i32 = 19;
+
+/// Where a state's bundle lies (commit record bytes 176..200; all zero for no bundle).
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    FromBytes,
+    IntoBytes,
+    KnownLayout,
+    Immutable,
+    Unaligned,
+)]
+#[repr(C)]
+pub struct BundleRef {
+    /// Absolute byte offset of the stored (compressed) bytes.
+    pub offset: U64,
+    /// Stored bytes; 0 for no bundle.
+    pub stored_len: U32,
+    /// CRC of the stored bytes.
+    pub crc: U32,
+    /// Pages the bundle decompresses to.
+    pub pages: U32,
+    /// Zero.
+    pub reserved: U32,
+}
+
+const _: () = assert!(size_of::<BundleRef>() == 24);
+
+impl BundleRef {
+    /// Whether the state has a bundle.
+    pub fn is_present(&self) -> bool {
+        self.stored_len.get() != 0
+    }
+
+    /// The stored bytes as a payload reference (their place and CRC).
+    pub fn payload(&self) -> super::PayloadRef {
+        super::PayloadRef {
+            offset: self.offset.get(),
+            len: self.stored_len.get(),
+            crc: self.crc.get(),
+        }
+    }
+
+    /// Checks the reference against the record it sits in: absent means all zero; present
+    /// means past the commit slots, inside `file_length`, at least one page and at most
+    /// [`MAX_BUNDLE_BYTES`] decompressed. (The reserved field is the record's to check.)
+    pub fn check(&self, page_size: u32, file_length: u64) -> Result<(), String> {
+        if !self.is_present() {
+            if self.as_bytes().iter().any(|&b| b != 0) {
+                return Err("a bundle of 0 bytes with other fields set".into());
+            }
+            return Ok(());
+        }
+        let (offset, len) = (self.offset.get(), u64::from(self.stored_len.get()));
+        let pages = u64::from(self.pages.get());
+        if offset < 2 * u64::from(page_size) || offset.saturating_add(len) > file_length {
+            return Err(format!(
+                "bundle of {len} bytes at byte {offset} lies outside {}..{file_length}",
+                2 * page_size
+            ));
+        }
+        if pages == 0 || pages * u64::from(page_size) > MAX_BUNDLE_BYTES {
+            return Err(format!(
+                "bundle of {pages} pages: 1 to {} allowed at this page size",
+                MAX_BUNDLE_BYTES / u64::from(page_size)
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Whether `page` names a bundle page rather than a file page.
+#[inline]
+pub fn is_bundle_page(page: u64) -> bool {
+    page >= BUNDLE_FIRST_PAGE
+}
+
+/// The tags a bundle page may carry: every structured page but the free list's, which
+/// names file pages and stays in the file (§6.7).
+const BUNDLE_TAGS: [[u8; 4]; 6] = [
+    tag::DATASET_HEADER,
+    tag::CLUSTER_DIRECTORY,
+    tag::NODE_TABLE,
+    tag::BLOCK_TABLE,
+    tag::CLUSTER_INDEX,
+    tag::ADJACENCY,
+];
+
+/// Compresses `pages` (each `page_size` bytes, numbered from [`BUNDLE_FIRST_PAGE`]) into
+/// the stored form: one zstd frame.
+pub fn compress(pages: &[Vec<u8>], level: i32) -> std::io::Result<Vec<u8>> {
+    let raw: Vec<u8> = pages.concat();
+    zstd::bulk::compress(&raw, level)
+}
+
+/// Decompresses and checks a bundle's stored bytes (whose CRC the caller has checked): it
+/// must be one zstd frame of exactly `pages · page_size` bytes, and every page must be a
+/// sealed structured page carrying its own bundle page number, a bundle tag and
+/// `txn_tag`. Never allocates more than `pages · page_size` bytes.
+pub fn decompress(
+    stored: &[u8],
+    pages: u32,
+    page_size: u32,
+    txn_tag: u16,
+) -> Result<Vec<u8>, Violation> {
+    let want = u64::from(pages) * u64::from(page_size);
+    let bad = |detail: String| Violation::new(Invariant::Page, "metadata bundle", detail);
+    if want > MAX_BUNDLE_BYTES || want == 0 {
+        return Err(bad(format!("{pages} pages")));
+    }
+    let cap = usize::try_from(want).map_err(|_| bad(format!("{pages} pages")))?;
+    // The frame's declared size is checked against the capacity before any output.
+    let raw = zstd::bulk::decompress(stored, cap)
+        .map_err(|e| bad(format!("does not decompress within {want} bytes: {e}")))?;
+    if raw.len() != cap {
+        return Err(bad(format!(
+            "decompresses to {} bytes; the record says {pages} pages of {page_size}",
+            raw.len()
+        )));
+    }
+    for (i, page) in raw.chunks_exact(page_size as usize).enumerate() {
+        let page_no = BUNDLE_FIRST_PAGE + i as u64;
+        let Some(h) = PageHeader::read(page) else {
+            return Err(bad(format!("page {page_no} is short")));
+        };
+        if !BUNDLE_TAGS.contains(&h.tag) {
+            return Err(Violation::new(
+                Invariant::Page,
+                format!("page {page_no}"),
+                format!(
+                    "tag {:?} in the metadata bundle",
+                    String::from_utf8_lossy(&h.tag)
+                ),
+            ));
+        }
+        let h = super::page::check_page(page, page_no, h.tag)?;
+        if h.txn_tag.get() != txn_tag {
+            return Err(Violation::new(
+                Invariant::Page,
+                format!("page {page_no}"),
+                format!(
+                    "carries txn tag {:#06x}; the state's pages carry {txn_tag:#06x}",
+                    h.txn_tag.get()
+                ),
+            ));
+        }
+    }
+    Ok(raw)
+}
+
+/// The CRC a [`BundleRef`] holds for `stored`.
+pub fn stored_crc(stored: &[u8]) -> u32 {
+    crc32(stored)
+}
+
+/// Page `page` (a bundle page number) of a decompressed bundle, if it has it.
+#[inline]
+pub fn page_of(raw: &[u8], page: u64, page_size: u32) -> Option<&[u8]> {
+    let i = usize::try_from(page.checked_sub(BUNDLE_FIRST_PAGE)?).ok()?;
+    let p = page_size as usize;
+    raw.get(i.checked_mul(p)?..i.checked_mul(p)?.checked_add(p)?)
+}
+
+#[cfg(test)]
+#[allow(clippy::cast_possible_truncation)] // small test sizes
+mod tests {
+    use super::*;
+    use crate::format::blob::encode_blob;
+
+    fn pages(n: usize) -> Vec<Vec<u8>> {
+        let content: Vec<u8> = (0..n * 4000).map(|i| (i % 7) as u8).collect();
+        encode_blob(&content, tag::DATASET_HEADER, BUNDLE_FIRST_PAGE, 3, 4096).1
+    }
+
+    #[test]
+    fn a_bundle_round_trips_and_checks_its_pages() {
+        let p = pages(3);
+        let stored = compress(&p, 3).unwrap();
+        assert!(stored.len() < 1000, "{}", stored.len());
+        let raw = decompress(&stored, p.len() as u32, 4096, 3).unwrap();
+        assert_eq!(raw, p.concat());
+        assert_eq!(page_of(&raw, BUNDLE_FIRST_PAGE + 1, 4096), Some(&p[1][..]));
+        assert_eq!(page_of(&raw, BUNDLE_FIRST_PAGE + 3, 4096), None);
+        assert_eq!(page_of(&raw, 5, 4096), None);
+        // Wrong txn tag, wrong page count (either way), garbage.
+        assert!(decompress(&stored, p.len() as u32, 4096, 4).is_err());
+        assert!(decompress(&stored, p.len() as u32 + 1, 4096, 3).is_err());
+        assert!(decompress(&stored, p.len() as u32 - 1, 4096, 3).is_err());
+        assert!(decompress(b"not zstd at all", 1, 4096, 3).is_err());
+    }
+
+    #[test]
+    fn a_frame_larger_than_its_pages_is_refused_without_allocating_it() {
+        // 64 MiB of zeros compresses to a few KiB: a bomb a reader must not inflate.
+        let bomb = zstd::bulk::compress(&vec![0u8; 64 << 20], 1).unwrap();
+        let e = decompress(&bomb, 1, 4096, 1).unwrap_err();
+        assert_eq!(e.invariant, Invariant::Page);
+        assert!(decompress(&bomb, u32::MAX, 65536, 1).is_err());
+    }
+
+    #[test]
+    fn references_are_checked_against_the_record() {
+        let r = BundleRef {
+            offset: U64::new(8192),
+            stored_len: U32::new(100),
+            crc: U32::new(1),
+            pages: U32::new(2),
+            reserved: U32::new(0),
+        };
+        assert!(r.check(4096, 12288).is_ok());
+        assert!(r.check(4096, 8200).is_err());
+        let early = BundleRef {
+            offset: U64::new(4096),
+            ..r
+        };
+        assert!(early.check(4096, 12288).is_err());
+        let huge = BundleRef {
+            pages: U32::new(u32::MAX),
+            ..r
+        };
+        assert!(huge.check(4096, 12288).is_err());
+        let stray = BundleRef {
+            stored_len: U32::new(0),
+            ..r
+        };
+        assert!(stray.check(4096, 12288).is_err());
+        assert!(BundleRef::default().check(4096, 8192).is_ok());
+    }
+}
