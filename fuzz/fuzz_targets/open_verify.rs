@@ -12,7 +12,9 @@
 //!   made right again, the commit records' and every structured page's (a page is structured
 //!   when it starts with a known tag). Random bytes rarely pass a CRC, so without this mode the
 //!   fuzzer stops at the checksums; with it, damage reaches the tables, the trees, the
-//!   directory and the records behind them.
+//!   directory and the records behind them. In a file whose metadata is a compressed bundle
+//!   (format 3.0), an edit whose offset has its top bit set lands in the decompressed bundle
+//!   pages, which are then resealed, compressed again and named by the record.
 //!
 //! cargo fuzz run --sanitizer none open_verify fuzz/corpus/open_verify -- -dict=fuzz/container.dict
 

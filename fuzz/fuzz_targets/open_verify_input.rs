@@ -2,29 +2,64 @@
 //! which replays the target's corpus (its seeds and every input that once crashed it) on every
 //! test run. See `open_verify.rs` for the modes.
 
-const VECTORS: [&[u8]; 5] = [
+const VECTORS: [&[u8]; 7] = [
     include_bytes!("../../format-spec/vectors/ramp-9x9.fmrh"),
     include_bytes!("../../format-spec/vectors/hills-20x13-voids.fmrh"),
     include_bytes!("../../format-spec/vectors/cliff-33x33.fmrh"),
     include_bytes!("../../format-spec/vectors/v1.1/hills-20x13-voids.fmrh"),
     include_bytes!("../../format-spec/vectors/waves-17x17-precision-0.3.fmrh"),
+    include_bytes!("../../format-spec/vectors/hills-20x13-voids-paged.fmrh"),
+    include_bytes!("../../format-spec/vectors/v2.1/cliff-33x33.fmrh"),
 ];
 
 const TAGS: [&[u8; 4]; 7] = [
     b"FMHD", b"FMCD", b"FMNT", b"FMBT", b"FMCI", b"FMAJ", b"FMFL",
 ];
 
-/// `original` with `edits` applied and every checksum recomputed.
+/// `original` with `edits` applied and every checksum recomputed. An edit whose offset has
+/// its top bit set lands in the decompressed metadata bundle (format 3.0) when the file has
+/// one; the bundle is then compressed again and stored at the end of the file, and the
+/// record names it (offset, length, CRC, file length).
 pub fn resealed(original: &[u8], edits: &[u8]) -> Vec<u8> {
     let mut bytes = original.to_vec();
+    let mut bundle = bundle_pages(&bytes);
+    let mut bundle_edited = false;
     for e in edits.chunks_exact(4) {
-        let at = usize::from(e[0]) | usize::from(e[1]) << 8 | usize::from(e[2]) << 16;
-        let i = at % bytes.len();
-        bytes[i] = e[3];
+        let at = usize::from(e[0]) | usize::from(e[1]) << 8 | usize::from(e[2] & 0x7f) << 16;
+        match bundle.as_mut() {
+            Some(b) if e[2] & 0x80 != 0 => {
+                let i = at % b.len();
+                b[i] = e[3];
+                bundle_edited = true;
+            }
+            _ => {
+                let i = at % bytes.len();
+                bytes[i] = e[3];
+            }
+        }
     }
     // The vectors use 1 KiB pages; a page size edited away leaves the other checksums wrong,
     // which is fine: that path is the raw mode's.
     let p = 1024;
+    for page in bytes.chunks_exact_mut(p).skip(2) {
+        reseal_page(page);
+    }
+    if let (Some(mut b), true) = (bundle, bundle_edited) {
+        for page in b.chunks_exact_mut(p) {
+            reseal_page(page);
+        }
+        let stored = fmrh::format::bundle::compress(&[b.clone()], 1).unwrap_or_default();
+        let offset = bytes.len();
+        bytes.extend_from_slice(&stored);
+        bytes.resize(bytes.len().next_multiple_of(p), 0);
+        let len = bytes.len() as u64;
+        let r = &mut bytes[..256];
+        r[176..184].copy_from_slice(&(offset as u64).to_le_bytes());
+        r[184..188].copy_from_slice(&(stored.len() as u32).to_le_bytes());
+        r[188..192].copy_from_slice(&crc32fast::hash(&stored).to_le_bytes());
+        r[192..196].copy_from_slice(&((b.len() / p) as u32).to_le_bytes());
+        r[24..32].copy_from_slice(&len.to_le_bytes());
+    }
     for slot in 0..2 {
         let r = &mut bytes[slot * p..slot * p + 256];
         if r[..4] == *b"FMRH" {
@@ -32,13 +67,29 @@ pub fn resealed(original: &[u8], edits: &[u8]) -> Vec<u8> {
             r[252..].copy_from_slice(&crc.to_le_bytes());
         }
     }
-    for page in bytes.chunks_exact_mut(p).skip(2) {
-        if TAGS.iter().any(|t| page[..4] == t[..]) {
-            let crc = crc32fast::hash(&page[8..]);
-            page[4..8].copy_from_slice(&crc.to_le_bytes());
-        }
-    }
     bytes
+}
+
+/// Makes a structured page's CRC right again (a page is structured when it starts with a
+/// known tag).
+fn reseal_page(page: &mut [u8]) {
+    if TAGS.iter().any(|t| page[..4] == t[..]) {
+        let crc = crc32fast::hash(&page[8..]);
+        page[4..8].copy_from_slice(&crc.to_le_bytes());
+    }
+}
+
+/// Slot 0's metadata bundle, decompressed, if the file has one (commit record bytes
+/// 176..196: offset, stored length, CRC, pages).
+fn bundle_pages(bytes: &[u8]) -> Option<Vec<u8>> {
+    let r = bytes.get(..256)?;
+    let offset = usize::try_from(u64::from_le_bytes(r[176..184].try_into().ok()?)).ok()?;
+    let len = u32::from_le_bytes(r[184..188].try_into().ok()?) as usize;
+    if len == 0 {
+        return None;
+    }
+    let stored = bytes.get(offset..offset.checked_add(len)?)?;
+    zstd::bulk::decompress(stored, 1 << 20).ok()
 }
 
 pub fn check(bytes: &[u8]) {

@@ -34,7 +34,9 @@
 //! B+-trees of fixed-size records). The directory holds, per cluster, the roots of its *index*
 //! (the cut sorted by Hilbert key) and of its four *adjacency lists*. Node grids and physical
 //! blocks are *payloads*: byte runs anywhere in the file, found through their records and
-//! checked by the CRC stored beside the offset.
+//! checked by the CRC stored beside the offset. Since 3.0 a small state keeps its structured
+//! pages (all but the free list's) in a *metadata bundle*: one zstd frame, named and checked
+//! by the record like a payload, that decompresses to pages numbered from 2^40 ([`bundle`]).
 //!
 //! ## Versioning policy
 //!

@@ -1,0 +1,293 @@
+//! The metadata bundle (format 3.0, container.md §6.7) changes where a state's tables are
+//! stored, never what they say: a file written with its metadata bundled and the same model
+//! written with every table in pages of its own read the same nodes, blocks, cuts,
+//! adjacency lists and samples, and both pass `verify --full`. The writer bundles exactly
+//! when the stored form fits its limit, and commits move a file between the two layouts
+//! as the limit says, each state valid. A hostile bundle (a frame that inflates past its
+//! pages, a page count that lies, bytes that are not zstd, a page of a foreign tag, a
+//! reference past the bundle's end) is corruption reported by opening, never a panic or an
+//! allocation the record did not bound.
+
+mod common;
+
+use std::io::Cursor;
+
+use proptest::prelude::*;
+
+use fmrh::model::{BuildOptions, Model, SampleRect, Thresholds};
+use fmrh::store::io::SimDisk;
+use fmrh::store::{verify, write_to, Bytes, Container, WriteOptions};
+use fmrh::{Error, Heightfield, Invariant, Store, VerifyMode};
+
+fn write(hf: &Heightfield, block: u32, bundle_limit: u64) -> Vec<u8> {
+    let model = Model::build(
+        hf.clone(),
+        &BuildOptions {
+            block_size: block,
+            thresholds: Thresholds::Ladder,
+            precision: None,
+        },
+    )
+    .unwrap();
+    let mut out = Cursor::new(Vec::new());
+    let options = WriteOptions {
+        bundle_limit,
+        ..WriteOptions::default()
+    };
+    write_to(&model, &hf.metadata, &options, &mut out).unwrap();
+    out.into_inner()
+}
+
+fn terrain(w: u32, h: u32, seed: u32) -> Heightfield {
+    Heightfield::from_fn(w, h, |x, y| {
+        let v = ((x * 31 + y * 17 + seed) % 23) as f32 + (x as f32 * 0.1).sin() * 30.0;
+        if (x * 7 + y * 3 + seed).is_multiple_of(97) {
+            f32::NAN
+        } else {
+            v.round()
+        }
+    })
+    .unwrap()
+}
+
+/// Everything a reader can ask of a store's metadata, in one comparable value.
+fn everything(s: &Store<Bytes<Vec<u8>>>) -> String {
+    // Where each index lies differs by layout; what it holds may not.
+    let clusters: Vec<_> = s
+        .clusters()
+        .iter()
+        .map(|c| (c.threshold, c.max_error, c.nodes()))
+        .collect();
+    let mut out = format!("{:?}\n{clusters:?}\n", s.header());
+    out += &format!("{:?}\n", s.nodes().unwrap());
+    let (cols, rows) = s.domain().nodes_across(s.domain().finest_level());
+    for y in 0..rows {
+        for x in 0..cols {
+            out += &format!("{:?}\n", s.stored_block(x, y).unwrap());
+        }
+    }
+    for c in 0..s.clusters().len() {
+        let scan: Vec<_> = s
+            .scan_hilbert(c, 0..=u64::MAX)
+            .unwrap()
+            .collect::<Result<_, _>>()
+            .unwrap();
+        out += &format!("{scan:?}\n");
+        for e in 0..4 {
+            out += &format!("{:?}\n", s.adjacency(c, e).unwrap());
+        }
+    }
+    out
+}
+
+fn assert_valid(bytes: &[u8], what: &str) {
+    let report = verify(Bytes(bytes), VerifyMode::Full).unwrap();
+    assert!(report.valid, "{what}: {report:#?}");
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 24, ..ProptestConfig::default() })]
+
+    /// Bundled and paged files of one model read the same, both valid, and the bundled one
+    /// is never the larger.
+    #[test]
+    fn bundled_and_paged_files_read_the_same(
+        w in 9u32..120, h in 9u32..120, seed in 0u32..1000,
+        block in prop::sample::select(vec![9u32, 17, 33]),
+    ) {
+        let hf = terrain(w, h, seed);
+        let bundled = write(&hf, block, 1 << 20);
+        let paged = write(&hf, block, 0);
+        let b = Store::from_bytes(bundled.clone()).unwrap();
+        let p = Store::from_bytes(paged.clone()).unwrap();
+        prop_assert!(b.layout().unwrap().bundle_bytes > 0);
+        prop_assert_eq!(p.layout().unwrap().bundle_bytes, 0);
+        prop_assert_eq!(everything(&b), everything(&p));
+        let all = b.domain().data_rect();
+        let (wb, wp) = (b.read_window(all).unwrap(), p.read_window(all).unwrap());
+        prop_assert!(wb.samples().iter().zip(wp.samples()).all(|(x, y)| x.to_bits() == y.to_bits()));
+        prop_assert!(bundled.len() <= paged.len());
+        assert_valid(&bundled, "bundled");
+        assert_valid(&paged, "paged");
+        // Opening the bundled file reads the slots and the bundle, nothing more.
+        let open = b.open_reads();
+        prop_assert!(open.bytes() <= b.layout().unwrap().bundle_bytes + 4 * 256);
+    }
+}
+
+/// The writer keeps the bundle exactly when its stored form fits the limit.
+#[test]
+fn the_writer_bundles_exactly_within_its_limit() {
+    let hf = terrain(200, 150, 7);
+    let big = write(&hf, 9, 1 << 20);
+    let stored = Store::from_bytes(big)
+        .unwrap()
+        .layout()
+        .unwrap()
+        .bundle_bytes;
+    assert!(stored > 1000, "{stored}");
+    let at = Store::from_bytes(write(&hf, 9, stored)).unwrap();
+    assert_eq!(at.layout().unwrap().bundle_bytes, stored);
+    let under = Store::from_bytes(write(&hf, 9, stored - 1)).unwrap();
+    assert_eq!(under.layout().unwrap().bundle_bytes, 0);
+    assert!(under.layout().unwrap().node_table_pages > 0);
+}
+
+/// Commits follow the container's limit: a bundled file goes to pages and back, every state
+/// valid (page ownership included: the pages a layout leaves behind are free, I-8) and
+/// holding the samples committed.
+#[test]
+fn commits_move_a_file_between_bundle_and_pages() {
+    let hf = terrain(150, 130, 3);
+    let disk = SimDisk::new(write(&hf, 17, 1 << 20));
+    let (c, _) = Container::open_io(disk.clone()).unwrap();
+    let mut freed_tables = false;
+    for round in 0..12u32 {
+        let limit = if round % 3 == 1 { 0 } else { 1 << 20 };
+        c.set_bundle_limit(limit);
+        let patch = Heightfield::from_fn(20, 15, |x, y| (round * 100 + x + y) as f32).unwrap();
+        let mut txn = c.begin_write().unwrap();
+        let at = u64::from(round) * 9;
+        txn.replace_region(at, 40, &patch).unwrap();
+        txn.commit().unwrap();
+        let snap = c.read().unwrap();
+        assert_eq!(
+            snap.layout().unwrap().bundle_bytes == 0,
+            limit == 0,
+            "round {round}"
+        );
+        let got = snap
+            .read_window(SampleRect {
+                col0: at,
+                row0: 40,
+                col1: at + 19,
+                row1: 54,
+            })
+            .unwrap();
+        assert_eq!(got.samples(), patch.samples(), "round {round}");
+        if round % 3 == 2 {
+            // The paged state before this one had table pages; they are free now.
+            freed_tables |= snap.free_pages().unwrap().len() > 4;
+        }
+        drop(snap);
+        assert_valid(&disk.current(), &format!("round {round}"));
+    }
+    assert!(
+        freed_tables,
+        "leaving the paged layout freed no table pages"
+    );
+    c.close().unwrap();
+    assert_valid(&disk.current(), "closed");
+}
+
+fn bundled_vector() -> Vec<u8> {
+    std::fs::read(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("format-spec/vectors/hills-20x13-voids.fmrh"),
+    )
+    .unwrap()
+}
+
+fn corrupt(bytes: &[u8]) -> (Invariant, String) {
+    match Store::from_bytes(bytes) {
+        Err(Error::Corrupt {
+            invariant, detail, ..
+        }) => {
+            let report = verify(Bytes(bytes), VerifyMode::Fast).unwrap();
+            assert!(!report.valid, "verify called it valid: {detail}");
+            (invariant, detail)
+        }
+        Err(e) => panic!("expected corruption, got {e}"),
+        Ok(_) => panic!("a hostile bundle opened"),
+    }
+}
+
+#[test]
+fn a_frame_that_inflates_past_its_pages_is_refused() {
+    let mut bytes = bundled_vector();
+    let pages = common::bundle::pages(&bytes);
+    let count = (pages.len() / 1024) as u32;
+    // 64 MiB of zeros in a few KiB: the record says `count` pages.
+    let bomb = zstd::bulk::compress(&vec![0u8; 64 << 20], 19).unwrap();
+    common::bundle::store_raw(&mut bytes, &bomb, count);
+    let (inv, detail) = corrupt(&bytes);
+    assert_eq!(inv, Invariant::Page, "{detail}");
+}
+
+#[test]
+fn a_page_count_that_lies_is_refused() {
+    for delta in [-1i64, 1] {
+        let mut bytes = bundled_vector();
+        let pages = common::bundle::pages(&bytes);
+        let count = (pages.len() / 1024) as i64 + delta;
+        let stored = zstd::bulk::compress(&pages, 3).unwrap();
+        common::bundle::store_raw(&mut bytes, &stored, count as u32);
+        let (inv, detail) = corrupt(&bytes);
+        assert_eq!(inv, Invariant::Page, "{delta}: {detail}");
+    }
+}
+
+#[test]
+fn bytes_that_are_not_zstd_are_refused() {
+    let mut bytes = bundled_vector();
+    common::bundle::store_raw(&mut bytes, b"certainly not a zstd frame", 3);
+    let (inv, detail) = corrupt(&bytes);
+    assert_eq!(inv, Invariant::Page, "{detail}");
+}
+
+#[test]
+fn a_free_list_page_in_a_bundle_is_refused() {
+    let mut bytes = bundled_vector();
+    common::bundle::rewrite(&mut bytes, |raw| {
+        let last = raw.len() / 1024 - 1;
+        let page = &mut raw[last * 1024..(last + 1) * 1024];
+        page[..4].copy_from_slice(b"FMFL");
+        common::bundle::reseal_page(page);
+    });
+    let (inv, detail) = corrupt(&bytes);
+    assert_eq!(inv, Invariant::Page, "{detail}");
+    assert!(detail.contains("FMFL"), "{detail}");
+}
+
+/// A root reference past the bundle's last page: refused by the first lookup that follows
+/// it, as a reference outside the file is.
+#[test]
+fn a_reference_past_the_bundle_is_refused() {
+    let mut bytes = bundled_vector();
+    let pages = (common::bundle::pages(&bytes).len() / 1024) as u64;
+    // The node table's root (bytes 72..80) one page past the bundle's end.
+    bytes[72..80].copy_from_slice(&((1u64 << 40) + pages).to_le_bytes());
+    let crc = crc32fast::hash(&bytes[..252]);
+    bytes[252..256].copy_from_slice(&crc.to_le_bytes());
+    let store = Store::from_bytes(&bytes[..]).unwrap();
+    match store.node(0) {
+        Err(Error::Corrupt { detail, .. }) => assert!(detail.contains("bundle"), "{detail}"),
+        other => panic!("{other:?}"),
+    }
+    let report = verify(Bytes(&bytes[..]), VerifyMode::Fast).unwrap();
+    assert!(!report.valid);
+}
+
+/// The bundle's reference lives in bytes a 2.x record reserves: a 2.x record that sets
+/// them is invalid, and a 3.0 record whose bundle lies outside the file is too (I-1).
+#[test]
+fn bundle_references_are_checked_in_the_record() {
+    let mut outside = bundled_vector();
+    let len = outside.len() as u64;
+    outside[176..184].copy_from_slice(&(len - 10).to_le_bytes());
+    let crc = crc32fast::hash(&outside[..252]);
+    outside[252..256].copy_from_slice(&crc.to_le_bytes());
+    let (inv, _) = corrupt(&outside);
+    assert_eq!(inv, Invariant::CommitRecord);
+
+    let mut old = std::fs::read(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("format-spec/vectors/v2.1/hills-20x13-voids.fmrh"),
+    )
+    .unwrap();
+    old[184] = 1;
+    let crc = crc32fast::hash(&old[..252]);
+    old[252..256].copy_from_slice(&crc.to_le_bytes());
+    let (inv, detail) = corrupt(&old);
+    assert_eq!(inv, Invariant::CommitRecord, "{detail}");
+}
