@@ -8,8 +8,11 @@
 //! at gaps of 0, 1 KiB and 4 KiB, plus the block-table pages physical blocks need); the read
 //! amplification (all bytes over the payload bytes); and the wall time of open + schedule +
 //! load + decode from a file read with `pread`, cold (the file dropped from the page cache
-//! with `posix_fadvise(DONTNEED)` first) and warm. Every configuration runs in the same
-//! process, so the ratios are side by side. `cargo bench --bench scene_reads`.
+//! with `posix_fadvise(DONTNEED)` first) and warm. The last columns are the price of the
+//! codec: the warm time of the same scene from a copy of the file whose payloads are stored
+//! raw (`WriteOptions::raw_payloads`: nothing to decode, as format 1 stored them), and the
+//! ratio. Every configuration runs in the same process, so the ratios are side by side.
+//! `cargo bench --bench scene_reads`.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -63,19 +66,24 @@ fn run(
 
 fn main() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let sets: Vec<(dems::Dem, PathBuf)> = dems::dems()
+    let raw = fmrh::store::WriteOptions {
+        raw_payloads: true,
+        ..Default::default()
+    };
+    let sets: Vec<(dems::Dem, PathBuf, PathBuf)> = dems::dems()
         .into_iter()
         .map(|d| {
             let path = d.build(dir.path());
-            (d, path)
+            let raw_path = d.build_with(dir.path(), "-raw", &raw);
+            (d, path, raw_path)
         })
         .collect();
     println!(
         "| dataset | camera | tau | blocks | payload B | open calls/B | schedule calls/B | \
-         load calls/B gap 0 | gap 1 KiB | gap 4 KiB | total B (gap 0) | amplification | cold us | warm us |"
+         load calls/B gap 0 | gap 1 KiB | gap 4 KiB | total B (gap 0) | amplification | cold us | warm us | warm us, raw payloads | codec cost |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
-    for (d, path) in &sets {
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    for (d, path, raw_path) in &sets {
         for (cam_name, cam) in d.cameras() {
             for tau in [0.5, 1.0, 2.0, 4.0] {
                 let mut cells = Vec::new();
@@ -92,12 +100,17 @@ fn main() {
                 };
                 evict(path);
                 let cold = run(path, &cam, tau, 0).5;
-                let warm = (0..5)
-                    .map(|_| run(path, &cam, tau, 0).5)
-                    .fold(f64::INFINITY, f64::min);
+                // Coded and raw, interleaved, so both see the same machine.
+                let (mut warm, mut warm_raw) = (f64::INFINITY, f64::INFINITY);
+                for _ in 0..5 {
+                    warm = warm.min(run(path, &cam, tau, 0).5);
+                    let (.., raw_blocks, _, us) = run(raw_path, &cam, tau, 0);
+                    assert_eq!(raw_blocks, blocks, "the raw copy schedules the same scene");
+                    warm_raw = warm_raw.min(us);
+                }
                 let total = open.bytes() + sched.bytes() + cells[0].bytes();
                 println!(
-                    "| {} | {cam_name} | {tau} | {blocks} | {payload} | {}/{} | {}/{} | {}/{} | {}/{} | {}/{} | {total} | {:.2} | {cold:.0} | {warm:.0} |",
+                    "| {} | {cam_name} | {tau} | {blocks} | {payload} | {}/{} | {}/{} | {}/{} | {}/{} | {}/{} | {total} | {:.2} | {cold:.0} | {warm:.0} | {warm_raw:.0} | {:.2} |",
                     d.name,
                     open.reads(),
                     open.bytes(),
@@ -110,17 +123,37 @@ fn main() {
                     cells[2].reads(),
                     cells[2].bytes(),
                     total as f64 / payload.max(1) as f64,
+                    warm / warm_raw,
                 );
             }
         }
     }
-    fly_through(&sets[0].1);
+    fly_through(&sets[0].1, &sets[0].2);
 }
 
 /// The decoded-block cache: the Puget Sound 1k orbit (720 frames) through the `Scheduler`,
 /// which decodes a block once when it becomes resident, beside a renderer that reads and
-/// decodes every visible block each frame.
-fn fly_through(path: &Path) {
+/// decodes every visible block each frame, and beside the scheduler on the copy whose
+/// payloads are raw (format 1's cost: nothing to decode).
+fn fly_through(path: &Path, raw_path: &Path) {
+    let (cameras, decoded, cached) = scheduled_frames(path);
+    let (_, decoded_raw, cached_raw) = scheduled_frames(raw_path);
+    assert_eq!(decoded, decoded_raw, "the raw copy loads the same blocks");
+    let (every, uncached) = every_frame(path, &cameras);
+    println!(
+        "\nfly-through, Puget Sound 1k orbit, {} frames, tau 1: the scheduler decodes {decoded} \
+         blocks in all, {cached:.0} us a frame; reading and decoding every visible block each \
+         frame decodes {every}, {uncached:.0} us a frame ({:.1}x); the scheduler on raw \
+         payloads (nothing to decode), {cached_raw:.0} us a frame ({:.2}x of it)",
+        cameras.len(),
+        uncached / cached,
+        cached / cached_raw
+    );
+}
+
+/// The orbit through the `Scheduler` on `path`: the cameras, blocks decoded in all, and
+/// microseconds a frame.
+fn scheduled_frames(path: &Path) -> (Vec<Camera>, u64, f64) {
     let text = std::fs::read_to_string(
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/paths/puget-1k-orbit.csv"),
     )
@@ -139,20 +172,20 @@ fn fly_through(path: &Path) {
         decoded += scheduler.frame(cam).expect("frame").stats.loaded;
     }
     let cached = t.elapsed().as_secs_f64() * 1e6 / cameras.len() as f64;
+    (cameras, decoded, cached)
+}
+
+/// Every frame's visible blocks read and decoded, no cache: blocks decoded in all and
+/// microseconds a frame.
+fn every_frame(path: &Path, cameras: &[Camera]) -> (u64, f64) {
     let store = Store::open(path).expect("opens");
     let terrain = Terrain::new(&store).expect("terrain");
     let t = Instant::now();
     let mut every = 0u64;
-    for cam in &cameras {
+    for cam in cameras {
         let scene = terrain.scene(cam, &SceneOptions::new(1.0)).expect("scene");
         every += load_blocks(&store, &scene.blocks, 0).expect("loads").len() as u64;
     }
     let uncached = t.elapsed().as_secs_f64() * 1e6 / cameras.len() as f64;
-    println!(
-        "\nfly-through, Puget Sound 1k orbit, {} frames, tau 1: the scheduler decodes {decoded} \
-         blocks in all, {cached:.0} us a frame; reading and decoding every visible block each \
-         frame decodes {every}, {uncached:.0} us a frame ({:.1}x)",
-        cameras.len(),
-        uncached / cached
-    );
+    (every, uncached)
 }

@@ -155,6 +155,12 @@ pub fn encode_on(samples: &[f32], width: usize, step: Option<f64>) -> Vec<u8> {
     best
 }
 
+/// The raw encoding of `samples` (encoding 0): what a writer stores when told not to
+/// compress (see [`crate::format::payload::Coding`]).
+pub fn encode_raw(samples: &[f32]) -> Vec<u8> {
+    raw(samples)
+}
+
 /// Decodes `bytes` into `out`, a `width`-wide block of `out.len()` samples.
 pub fn decode(bytes: &[u8], width: usize, out: &mut [f32]) -> Result<(), DecodeError> {
     let encoding =
@@ -207,40 +213,49 @@ pub fn decode(bytes: &[u8], width: usize, out: &mut [f32]) -> Result<(), DecodeE
                 }
                 flag => return Err(length(format!("void flag {flag}, or a short bitmap"))),
             };
-            let mut residuals = vec![0i64; n];
-            pco_decode(rest, &mut residuals)?;
             let mut k = vec![0i64; n];
-            for i in 0..n {
-                let p = predict(&k, i, width);
-                let void = voids.is_some_and(|m| m[i / 8] >> (i % 8) & 1 == 1);
-                k[i] = if void {
-                    p
-                } else {
-                    p.wrapping_add(residuals[i])
-                };
-                if k[i].unsigned_abs() > MAX_LATTICE_INDEX as u64 {
-                    return Err(DecodeError::Pco(format!(
-                        "lattice index {} at sample {i} is out of range",
-                        k[i]
-                    )));
+            pco_decode(rest, &mut k)?;
+            // In place: each residual becomes its index once the cells it is predicted
+            // from (left, up, up-left: all earlier) are indexes. A void's residual is
+            // ignored (written 0).
+            if let Some(m) = voids {
+                for (i, r) in k.iter_mut().enumerate() {
+                    if m[i / 8] >> (i % 8) & 1 == 1 {
+                        *r = 0;
+                    }
                 }
-                out[i] = if void {
-                    f32::from_bits(VOID_BITS)
-                } else {
-                    lattice_value(k[i] as f64, q)
-                };
+            }
+            unpredict(&mut k, width);
+            let mut bad = None;
+            for (i, (o, &ki)) in out.iter_mut().zip(&k).enumerate() {
+                if ki.unsigned_abs() > MAX_LATTICE_INDEX as u64 {
+                    bad.get_or_insert((i, ki));
+                }
+                *o = lattice_value(ki as f64, q);
+            }
+            if let Some((i, ki)) = bad {
+                return Err(DecodeError::Pco(format!(
+                    "lattice index {ki} at sample {i} is out of range"
+                )));
+            }
+            if let Some(m) = voids {
+                for (i, o) in out.iter_mut().enumerate() {
+                    if m[i / 8] >> (i % 8) & 1 == 1 {
+                        *o = f32::from_bits(VOID_BITS);
+                    }
+                }
             }
         }
         Encoding::FloatPco => pco_decode(body, out)?,
         Encoding::FloatPredicted => {
-            let mut residuals = vec![0u32; out.len()];
-            pco_decode(body, &mut residuals)?;
             let mut u = vec![0u32; out.len()];
-            for i in 0..out.len() {
-                let r = residuals[i];
-                let d = ((r >> 1) as i32 ^ -((r & 1) as i32)) as u32;
-                u[i] = predict(&u, i, width).wrapping_add(d);
-                out[i] = from_ordered(u[i]);
+            pco_decode(body, &mut u)?;
+            for r in &mut u {
+                *r = ((*r >> 1) as i32 ^ -((*r & 1) as i32)) as u32;
+            }
+            unpredict(&mut u, width);
+            for (o, &ui) in out.iter_mut().zip(&u) {
+                *o = from_ordered(ui);
             }
         }
     }
@@ -319,6 +334,25 @@ fn predict<T: Wrapping>(k: &[T], i: usize, width: usize) -> T {
         (_, 0) => k[i - 1],
         (0, _) => k[i - width],
         _ => k[i - 1].plus(k[i - width]).minus(k[i - width - 1]),
+    }
+}
+
+/// Turns residuals into values in place, row by row: cell `i` gets [`predict`]'s value from
+/// the cells before it plus its residual. The same arithmetic as `predict`, without a
+/// division per cell (decoding spends its time here and in pco).
+fn unpredict<T: Wrapping>(k: &mut [T], width: usize) {
+    for i in 1..width.min(k.len()) {
+        k[i] = k[i - 1].plus(k[i]);
+    }
+    for row in (width..k.len()).step_by(width.max(1)) {
+        let end = (row + width).min(k.len());
+        k[row] = k[row - width].plus(k[row]);
+        for i in row + 1..end {
+            k[i] = k[i - 1]
+                .plus(k[i - width])
+                .minus(k[i - width - 1])
+                .plus(k[i]);
+        }
     }
 }
 
@@ -568,6 +602,25 @@ mod tests {
             bytes.truncate(cut.max(1));
             let mut out = vec![0.0f32; w * w];
             let _ = decode(&bytes, w, &mut out);
+        }
+
+        /// The decoder's row-wise reconstruction inverts the encoder's per-cell residuals,
+        /// in wrapping arithmetic, for any values and shape (overflowing ones included).
+        #[test]
+        fn unpredict_inverts_predict(
+            values in proptest::collection::vec(proptest::prelude::any::<i64>(), 1..300),
+            width in 1usize..25,
+        ) {
+            let n = values.len() / width * width;
+            proptest::prop_assume!(n > 0);
+            let k = &values[..n];
+            let mut r: Vec<i64> = (0..n).map(|i| k[i].wrapping_sub(predict(k, i, width))).collect();
+            unpredict(&mut r, width);
+            proptest::prop_assert_eq!(&r[..], k);
+            let u: Vec<u32> = k.iter().map(|&v| v as u32).collect();
+            let mut ru: Vec<u32> = (0..n).map(|i| u[i].wrapping_sub(predict(&u, i, width))).collect();
+            unpredict(&mut ru, width);
+            proptest::prop_assert_eq!(ru, u);
         }
 
         /// Any bytes decode or fail; nothing panics.

@@ -1,6 +1,8 @@
 //! Property tests of the container: a model written to a `.fmrh` and read back is the same
 //! model. The tests run on random fields of every character, with voids, block sizes and page
-//! sizes (small pages give deep trees). They check that the full validator passes, that
+//! sizes (small pages give deep trees), and every layout a writer chooses: the metadata in a
+//! bundle or in pages of its own (format §6.7), payloads coded or stored raw
+//! (`WriteOptions::raw_payloads`). They check that the full validator passes, that
 //! extraction returns every sample bit for bit (voids as NaN), that the node table and every
 //! cluster equal the model's, that grids and blocks read back as the model's, and that both
 //! range scans equal a brute-force filter of the cluster. The three sources (memory, a
@@ -18,6 +20,26 @@ use fmrh::{Heightfield, Store};
 use proptest::prelude::*;
 
 fn write(field: &Heightfield, block_size: u32, page_size: u32) -> (Model, Vec<u8>) {
+    write_as(field, block_size, page_size, Layout::Default)
+}
+
+/// How a test writes a container.
+#[derive(Clone, Copy, Debug)]
+enum Layout {
+    /// What `fmrh build` writes.
+    Default,
+    /// Every table in pages of its own (no metadata bundle).
+    Paged,
+    /// Every payload's codes raw.
+    RawPayloads,
+}
+
+fn write_as(
+    field: &Heightfield,
+    block_size: u32,
+    page_size: u32,
+    layout: Layout,
+) -> (Model, Vec<u8>) {
     let model = Model::build(
         field.clone(),
         &BuildOptions {
@@ -30,6 +52,11 @@ fn write(field: &Heightfield, block_size: u32, page_size: u32) -> (Model, Vec<u8
     let mut out = Cursor::new(Vec::new());
     let options = WriteOptions {
         page_size,
+        bundle_limit: match layout {
+            Layout::Paged => 0,
+            _ => WriteOptions::default().bundle_limit,
+        },
+        raw_payloads: matches!(layout, Layout::RawPayloads),
         ..WriteOptions::default()
     };
     write_to(&model, &field.metadata, &options, &mut out).unwrap();
@@ -152,13 +179,23 @@ proptest! {
         field in any_field(90),
         b in prop_oneof![Just(9u32), Just(17), Just(33)],
         p in page_size(),
+        layout in prop_oneof![Just(Layout::Default), Just(Layout::Paged), Just(Layout::RawPayloads)],
         ranges in prop::collection::vec((any::<u64>(), any::<u64>()), 6),
     ) {
-        let (model, bytes) = write(&field, b, p);
+        let (model, bytes) = write_as(&field, b, p, layout);
         let report = verify(Bytes(&bytes), fmrh::VerifyMode::Full).unwrap();
         prop_assert!(report.valid, "{:#?}", report.checks);
         let store = Store::from_bytes(&bytes).unwrap();
         check_store(&store, &model, &field, &ranges);
+        prop_assert_eq!(
+            store.layout().unwrap().bundle_bytes == 0,
+            matches!(layout, Layout::Paged)
+        );
+        if matches!(layout, Layout::RawPayloads) {
+            // After the code's u32 length, its encoding byte: 0, raw.
+            let root = store.node(0).unwrap();
+            prop_assert_eq!(store.payload(root.payload).unwrap()[4], 0);
+        }
     }
 }
 

@@ -49,16 +49,14 @@ impl Dem {
 
     /// Builds its container (lossless, defaults) in `dir`.
     pub fn build(&self, dir: &Path) -> PathBuf {
+        self.build_with(dir, "", &WriteOptions::default())
+    }
+
+    /// Builds its container in `dir` with `options`, named with `suffix`.
+    pub fn build_with(&self, dir: &Path, suffix: &str, options: &WriteOptions) -> PathBuf {
         let model = Model::build(self.source.clone(), &BuildOptions::default()).expect("builds");
-        let path = dir.join(format!("{}.fmrh", self.name));
-        write_file(
-            &model,
-            &self.source.metadata,
-            &path,
-            &WriteOptions::default(),
-            true,
-        )
-        .expect("writes");
+        let path = dir.join(format!("{}{suffix}.fmrh", self.name));
+        write_file(&model, &self.source.metadata, &path, options, true).expect("writes");
         path
     }
 

@@ -114,14 +114,34 @@ pub fn encode_grid(heights: &[f32], void: &[bool], has_voids: bool) -> Vec<u8> {
     bytes
 }
 
-/// Format 2: the stored (coded) form of a block's layout `raw` (see the module docs).
-/// `step`, a file's storage precision, is one more lattice step the codec tries.
+/// How a writer codes a payload's values (§7).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Coding {
+    /// One more lattice step the codec tries: the file's storage precision.
+    pub step: Option<f64>,
+    /// Store every code raw (encoding 0): larger payloads with nothing to decode. What
+    /// measuring the codec's cost compares with; `fmrh build` never writes it.
+    pub raw: bool,
+}
+
+impl Coding {
+    fn code(&self, samples: &[f32], width: usize) -> Vec<u8> {
+        if self.raw {
+            codec::encode_raw(samples)
+        } else {
+            codec::encode_on(samples, width, self.step)
+        }
+    }
+}
+
+/// Format 2: the stored (coded) form of a block's layout `raw` (see the module docs), coded
+/// as `coding` says.
 pub fn store_block(
     raw: &[u8],
     width: u32,
     height: u32,
     void_count: u32,
-    step: Option<f64>,
+    coding: Coding,
 ) -> Vec<u8> {
     let n = width as usize * height as usize;
     let floats: Vec<f32> = raw
@@ -129,12 +149,12 @@ pub fn store_block(
         .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
         .collect();
     let (samples, stand_ins) = floats.split_at(n.min(floats.len()));
-    let a = codec::encode_on(samples, width.max(1) as usize, step);
+    let a = coding.code(samples, width.max(1) as usize);
     let mut out = Vec::with_capacity(4 + a.len() + 8);
     out.extend_from_slice(&u32::try_from(a.len()).unwrap_or(u32::MAX).to_le_bytes());
     out.extend_from_slice(&a);
     if void_count > 0 && !stand_ins.is_empty() {
-        out.extend_from_slice(&codec::encode_on(stand_ins, stand_ins.len(), step));
+        out.extend_from_slice(&coding.code(stand_ins, stand_ins.len()));
     }
     out
 }
@@ -168,13 +188,13 @@ pub fn load_block(
 
 /// Format 2: the stored form of a grid's layout `raw` of `gw × gh` heights (see the module
 /// docs), trying the lattice `step` as [`store_block`] does.
-pub fn store_grid(raw: &[u8], gw: u32, gh: u32, step: Option<f64>) -> Vec<u8> {
+pub fn store_grid(raw: &[u8], gw: u32, gh: u32, coding: Coding) -> Vec<u8> {
     let n = gw as usize * gh as usize;
     let heights: Vec<f32> = raw[..(4 * n).min(raw.len())]
         .chunks_exact(4)
         .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
         .collect();
-    let a = codec::encode_on(&heights, gw.max(1) as usize, step);
+    let a = coding.code(&heights, gw.max(1) as usize);
     let mut out = Vec::with_capacity(4 + a.len() + raw.len().saturating_sub(4 * n));
     out.extend_from_slice(&u32::try_from(a.len()).unwrap_or(u32::MAX).to_le_bytes());
     out.extend_from_slice(&a);
@@ -406,7 +426,7 @@ mod stored_tests {
     #[test]
     fn shapes_from_records_are_checked_before_allocating() {
         let raw = encode_block((0..81).map(|i| (i as f32, true)), 81);
-        let stored = store_block(&raw, 9, 9, 0, None);
+        let stored = store_block(&raw, 9, 9, 0, Coding::default());
         assert_eq!(load_block(&stored, 9, 9, 0).expect("decodes"), raw);
         // Refused by the shape check itself, not later by a decoder that had allocated.
         let refused = |r: Result<Vec<u8>, String>, why: &str| {
@@ -426,13 +446,13 @@ mod stored_tests {
             .collect();
         let voids = u32::try_from(samples.iter().filter(|s| !s.1).count()).expect("63 at most");
         let raw = encode_block(samples.into_iter(), 63);
-        let stored = store_block(&raw, 9, 7, voids, None);
+        let stored = store_block(&raw, 9, 7, voids, Coding::default());
         assert!(stored.len() < raw.len());
         assert_eq!(load_block(&stored, 9, 7, voids).expect("decodes"), raw);
         let heights: Vec<f32> = (0..25).map(|i| i as f32).collect();
         let void: Vec<bool> = (0..25).map(|i| i % 7 == 0).collect();
         let raw = encode_grid(&heights, &void, true);
-        let stored = store_grid(&raw, 5, 5, None);
+        let stored = store_grid(&raw, 5, 5, Coding::default());
         assert_eq!(load_grid(&stored, 5, 5, true).expect("decodes"), raw);
         assert!(
             load_grid(&stored, 5, 5, false).is_err(),

@@ -190,7 +190,7 @@ pub(crate) fn write_state<I: Io>(
             ))
         })?;
         if meets(&shape.rect) {
-            block_ref.push(sink.payload(tables::encode_block(model, shape))?);
+            block_ref.push(sink.payload(tables::encode_block(model, shape, false))?);
             summary.blocks += 1;
         } else {
             kept.push(old.payload());
@@ -230,7 +230,7 @@ pub(crate) fn write_state<I: Io>(
                 grid_ref[i] = o.payload();
             }
             _ => {
-                let bytes = tables::encode_grid(model, id, grid_voids[i]);
+                let bytes = tables::encode_grid(model, id, grid_voids[i], false);
                 grid_ref[i] = sink.payload(bytes)?;
                 summary.grids += 1;
             }

@@ -196,10 +196,17 @@ fn write_payloads<W: Write>(
         let encoded: Vec<Vec<u8>> = w_items
             .par_iter()
             .map(|item| match *item {
-                Item::Grid { node } => tables::encode_grid(model, node, grid_voids[node as usize]),
-                Item::Block { x, y } => {
-                    tables::encode_block(model, &shapes[block_index(x, y, cols)])
-                }
+                Item::Grid { node } => tables::encode_grid(
+                    model,
+                    node,
+                    grid_voids[node as usize],
+                    options.raw_payloads,
+                ),
+                Item::Block { x, y } => tables::encode_block(
+                    model,
+                    &shapes[block_index(x, y, cols)],
+                    options.raw_payloads,
+                ),
             })
             .collect();
         for (item, bytes) in w_items.iter().zip(encoded) {

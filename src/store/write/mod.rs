@@ -37,6 +37,10 @@ pub struct WriteOptions {
     /// The most stored bytes the metadata may take as one compressed bundle (format §6.7);
     /// larger metadata stays in file pages. 0 never bundles.
     pub bundle_limit: u64,
+    /// Store every payload's codes raw (format §7, encoding 0): a larger file whose reads
+    /// decode nothing, what a benchmark compares the codec's cost with (format 1 stored raw
+    /// `f32`). Commits code their payloads as usual. `fmrh build` never sets it.
+    pub raw_payloads: bool,
 }
 
 impl Default for WriteOptions {
@@ -45,6 +49,7 @@ impl Default for WriteOptions {
             page_size: DEFAULT_PAGE_SIZE,
             progress: Arc::new(Silent),
             bundle_limit: crate::format::bundle::DEFAULT_BUNDLE_LIMIT,
+            raw_payloads: false,
         }
     }
 }
@@ -54,6 +59,7 @@ impl fmt::Debug for WriteOptions {
         f.debug_struct("WriteOptions")
             .field("page_size", &self.page_size)
             .field("bundle_limit", &self.bundle_limit)
+            .field("raw_payloads", &self.raw_payloads)
             .finish_non_exhaustive()
     }
 }

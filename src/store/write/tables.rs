@@ -339,15 +339,24 @@ pub(crate) fn node_id(i: usize) -> u32 {
     u32::try_from(i).unwrap_or(u32::MAX)
 }
 
-/// The stored payload of `node`'s coarse grid (format 2: coded).
-pub(crate) fn encode_grid(model: &Model, node: u32, has_voids: bool) -> Vec<u8> {
+/// The stored payload of `node`'s coarse grid (format 2: coded; every code raw when `raw`).
+pub(crate) fn encode_grid(model: &Model, node: u32, has_voids: bool, raw: bool) -> Vec<u8> {
     let (g, gw, gh) = clipped_grid(model, node);
     payload::store_grid(
         &payload::encode_grid(&g.heights, &g.void, has_voids),
         gw,
         gh,
-        model.precision().map(Precision::step),
+        coding(model, raw),
     )
+}
+
+/// How `model`'s payloads are coded: every code raw when `raw`, else the smallest, with the
+/// model's storage precision as one more lattice step.
+fn coding(model: &Model, raw: bool) -> payload::Coding {
+    payload::Coding {
+        step: model.precision().map(Precision::step),
+        raw,
+    }
 }
 
 /// The grid of `node` clipped to its stored `gw × gh` (see [`payload::grid_dims`]).
@@ -370,8 +379,9 @@ pub(crate) fn clipped_grid(model: &Model, node: u32) -> (NodeGrid, u32, u32) {
     (g, gw, gh)
 }
 
-/// The stored payload of the physical block of `shape` (format 2: coded).
-pub(crate) fn encode_block(model: &Model, shape: &BlockShape) -> Vec<u8> {
+/// The stored payload of the physical block of `shape` (format 2: coded; every code raw
+/// when `raw`).
+pub(crate) fn encode_block(model: &Model, shape: &BlockShape, raw_codes: bool) -> Vec<u8> {
     let raster = model.raster();
     let r = shape.rect;
     let samples = (r.row0..=r.row1).flat_map(|row| {
@@ -379,11 +389,5 @@ pub(crate) fn encode_block(model: &Model, shape: &BlockShape) -> Vec<u8> {
     });
     let raw = payload::encode_block(samples, usize::try_from(r.samples()).unwrap_or(0));
     let (w, h) = shape.size();
-    payload::store_block(
-        &raw,
-        w,
-        h,
-        shape.void_count,
-        model.precision().map(Precision::step),
-    )
+    payload::store_block(&raw, w, h, shape.void_count, coding(model, raw_codes))
 }
