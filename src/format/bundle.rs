@@ -203,6 +203,12 @@ pub fn stored_crc(stored: &[u8]) -> u32 {
     crc32(stored)
 }
 
+/// Pages in a decompressed bundle of `raw` bytes.
+#[inline]
+pub fn page_count(raw: &[u8], page_size: u32) -> u64 {
+    (raw.len() / page_size as usize) as u64
+}
+
 /// Page `page` (a bundle page number) of a decompressed bundle, if it has it.
 #[inline]
 pub fn page_of(raw: &[u8], page: u64, page_size: u32) -> Option<&[u8]> {

@@ -298,7 +298,7 @@ impl<S: Source> Store<S> {
     pub(crate) fn bundle_pages(&self) -> u64 {
         self.bundle
             .as_ref()
-            .map_or(0, |b| (b.len() / self.page_size as usize) as u64)
+            .map_or(0, |b| crate::format::bundle::page_count(b, self.page_size))
     }
 
     /// Whether this store registered its state against page reuse by writers in other

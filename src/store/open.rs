@@ -121,7 +121,7 @@ fn read_blob<S: Source + ?Sized>(
 ) -> Result<Vec<u8>> {
     let bundle_pages = pages
         .bundle
-        .map_or(0, |b| (b.len() / pages.page_size as usize) as u64);
+        .map_or(0, |b| bundle::page_count(b, pages.page_size));
     let count = check_blob_ref(
         blob,
         max_len,
@@ -333,7 +333,7 @@ fn open_once<S: Source>(src: &S, walk: Walk) -> Result<Opened> {
     };
     let bundle_pages = bundle
         .as_ref()
-        .map_or(0, |b| (b.len() / page_size as usize) as u64);
+        .map_or(0, |b| bundle::page_count(b, page_size));
     let mut seen = PageSet::with_bundle(page_count, bundle_pages);
     let header_bytes = read_blob(
         &pages,

@@ -262,9 +262,12 @@ pub(crate) fn write_state<I: Io>(
     )?;
     let (dataset_header, roots, bundle) = match bundled {
         Some(b) => {
-            let at = sink.payload(b.stored.clone())?;
-            let bundle = b.at(at.offset);
-            (b.dataset_header, b.roots, bundle)
+            let at = sink.payload(b.stored)?;
+            (
+                b.dataset_header,
+                b.roots,
+                tables::bundle_at(b.reference, at.offset),
+            )
         }
         None => {
             let dataset_header = sink.blob(&header, tag::DATASET_HEADER)?;

@@ -100,24 +100,29 @@ pub(crate) fn write_named<W: Write + Seek>(
         options.bundle_limit,
         crate::format::bundle::BUNDLE_ZSTD_LEVEL,
     )?;
-    let (dataset_header, roots, bundle) = match bundled {
+    // The bundle's stored bytes follow the last payload on any byte; the page's tail is
+    // zero. Without a bundle, the tables take pages of their own after it.
+    let bundle = match &bundled {
         Some(b) => {
-            let at = b.at(sink.out.written);
+            let at = tables::bundle_at(b.reference, sink.out.written);
             sink.out.write(&b.stored)?;
             sections.bundle = b.stored.len() as u64;
-            let before = sink.out.written;
-            sink.out.pad_to_page()?;
-            sections.payload_padding += sink.out.written - before;
-            (b.dataset_header, b.roots, at)
+            at
         }
+        None => BundleRef::default(),
+    };
+    let before = sink.out.written;
+    sink.out.pad_to_page()?;
+    sections.payload_padding += sink.out.written - before;
+    let (dataset_header, roots) = match bundled {
+        Some(b) => (b.dataset_header, b.roots),
         None => {
-            let before = sink.out.written;
-            sink.out.pad_to_page()?;
-            sections.payload_padding += sink.out.written - before;
             sink.next_page = sink.out.written / u64::from(p);
             let dataset_header = sink.blob(&header, tag::DATASET_HEADER)?;
-            let roots = tables::write_tables(model, &refs, &mut sink)?;
-            (dataset_header, roots, BundleRef::default())
+            (
+                dataset_header,
+                tables::write_tables(model, &refs, &mut sink)?,
+            )
         }
     };
     let of = |t: [u8; 4]| sink.bytes.get(&t).copied().unwrap_or(0);

@@ -68,24 +68,37 @@ impl PageSink for BundleSink {
 pub(crate) struct Bundled {
     /// The stored (compressed) bytes, to be written anywhere past the slots.
     pub stored: Vec<u8>,
-    /// Pages they decompress to.
-    pub pages: u32,
+    /// The record's reference to them, at offset 0 until they are placed ([`Bundled::at`]).
+    pub reference: bundle::BundleRef,
     pub dataset_header: BlobRef,
     pub roots: TableRoots,
 }
 
 impl Bundled {
-    /// The record's reference to the bundle once its stored bytes lie at `offset`.
-    pub fn at(&self, offset: u64) -> bundle::BundleRef {
+    fn new(stored: Vec<u8>, pages: usize, dataset_header: BlobRef, roots: TableRoots) -> Self {
         use zerocopy::byteorder::little_endian::{U32, U64};
-        bundle::BundleRef {
-            offset: U64::new(offset),
-            // `stored` is at most the limit, far below 4 GiB.
-            stored_len: U32::new(u32::try_from(self.stored.len()).unwrap_or(u32::MAX)),
-            crc: U32::new(bundle::stored_crc(&self.stored)),
-            pages: U32::new(self.pages),
+        let reference = bundle::BundleRef {
+            offset: U64::new(0),
+            // `stored` is at most the limit, and `pages` at most 16 MiB of pages.
+            stored_len: U32::new(u32::try_from(stored.len()).unwrap_or(u32::MAX)),
+            crc: U32::new(bundle::stored_crc(&stored)),
+            pages: U32::new(u32::try_from(pages).unwrap_or(u32::MAX)),
             reserved: U32::new(0),
+        };
+        Bundled {
+            stored,
+            reference,
+            dataset_header,
+            roots,
         }
+    }
+}
+
+/// `reference` with its stored bytes placed at `offset`.
+pub(crate) fn bundle_at(reference: bundle::BundleRef, offset: u64) -> bundle::BundleRef {
+    bundle::BundleRef {
+        offset: zerocopy::byteorder::little_endian::U64::new(offset),
+        ..reference
     }
 }
 
@@ -132,12 +145,12 @@ pub(crate) fn bundle_metadata(
     if stored.len() as u64 > limit {
         return Ok(None);
     }
-    Ok(Some(Bundled {
+    Ok(Some(Bundled::new(
         stored,
-        pages: u32::try_from(sink.pages.len()).unwrap_or(u32::MAX),
+        sink.pages.len(),
         dataset_header,
         roots,
-    }))
+    )))
 }
 
 /// A physical block's shape: the samples it holds and how many are void.
