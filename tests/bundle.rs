@@ -291,3 +291,35 @@ fn bundle_references_are_checked_in_the_record() {
     let (inv, detail) = corrupt(&old);
     assert_eq!(inv, Invariant::CommitRecord, "{detail}");
 }
+
+/// Regression (the container property test, a constant 49 x 81 field, blocks of 9, 1 KiB
+/// pages): its 77 blocks share one constant payload and their records compress into a few
+/// hundred bytes of bundle, so the file (3 KiB) is smaller than 41 bytes a block, which the
+/// reader's guard against oversized windows demanded. The guard now counts the 32-byte
+/// records against the file and the bundle's decompressed pages together.
+#[test]
+fn a_constant_field_smaller_than_its_block_records_reads_whole() {
+    let hf = Heightfield::from_fn(49, 81, |_, _| 42.0).unwrap();
+    let model = Model::build(
+        hf.clone(),
+        &BuildOptions {
+            block_size: 9,
+            thresholds: Thresholds::Ladder,
+            precision: None,
+        },
+    )
+    .unwrap();
+    let mut out = Cursor::new(Vec::new());
+    let options = WriteOptions {
+        page_size: 1024,
+        ..WriteOptions::default()
+    };
+    write_to(&model, &hf.metadata, &options, &mut out).unwrap();
+    let bytes = out.into_inner();
+    let store = Store::from_bytes(bytes.clone()).unwrap();
+    // The guard counts the blocks a window's corners span, the last sample included: 7 x 11.
+    assert!(7 * 11 * 41 > bytes.len(), "the case the guard refused");
+    let whole = store.read_window(store.domain().data_rect()).unwrap();
+    assert!(whole.samples().iter().all(|&v| v == 42.0));
+    assert_valid(&bytes, "constant");
+}

@@ -66,18 +66,27 @@ impl<S: Source> Store<S> {
             )));
         }
         // Refuse to allocate more than the file could back. A 1.x file holds four bytes per
-        // data sample. A 2.x file codes its payloads (a constant block takes a few bytes), so
-        // the bound is per block instead: each block of the window has its record and a
-        // stored payload of at least the length field and an encoding.
+        // data sample. A 2.x or 3.x file codes its payloads and shares identical ones (a
+        // thousand sea blocks may name one constant payload of nine bytes), so the bound is
+        // per block instead: each block of the window has its 32-byte record, in a table
+        // page of the file or in a page of the metadata bundle (whose decompressed bytes
+        // this store already holds).
         let cells = u64::from(d.block_size() - 1);
         let blocks = (window.col1 / cells - window.col0 / cells + 1)
             * (window.row1 / cells - window.row0 / cells + 1);
-        let needed = if self.commit.payloads_coded() {
-            blocks.saturating_mul(MIN_CODED_BLOCK_BYTES)
+        let (needed, capacity) = if self.commit.payloads_coded() {
+            let bundle = self.bundle_pages() * u64::from(self.page_size);
+            (
+                blocks.saturating_mul(BLOCK_RECORD_BYTES),
+                self.commit.file_length.get().saturating_add(bundle),
+            )
         } else {
-            window.samples().saturating_mul(4)
+            (
+                window.samples().saturating_mul(4),
+                self.commit.file_length.get(),
+            )
         };
-        if needed > self.commit.file_length.get() {
+        if needed > capacity {
             return Err(self.corrupt(Violation::new(
                 Invariant::DatasetHeader,
                 "dataset header",
@@ -128,9 +137,9 @@ impl<S: Source> Store<S> {
     }
 }
 
-/// The fewest bytes a block of a 2.x file takes: its 32-byte record, and a stored payload of
-/// a 4-byte length and a 5-byte constant encoding.
-const MIN_CODED_BLOCK_BYTES: u64 = 32 + 4 + 5;
+/// The bytes of a block record (format §6.2): the least a block of a coded file takes, since
+/// its payload may be shared with any number of others.
+const BLOCK_RECORD_BYTES: u64 = 32;
 
 /// The columns and rows of a window inside the data (each at most 2^20).
 fn window_size(window: &SampleRect) -> (u32, u32) {
