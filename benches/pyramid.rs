@@ -28,6 +28,9 @@
 
 use std::path::PathBuf;
 
+#[path = "common/dems.rs"]
+mod dems;
+
 use fmrh::codec;
 use fmrh::ingest::{load, IngestOptions};
 use fmrh::model::{BuildOptions, Model, NO_PARENT};
@@ -283,6 +286,132 @@ fn values(model: &Model, s: &Samples, mended: bool) -> Vec<f32> {
     v
 }
 
+/// Bytes of one model's payloads, today and as a pyramid, in total and per tree node (a
+/// node at the finest level counts its physical block).
+struct Measured {
+    today_grids: usize,
+    today_blocks: usize,
+    bilinear: usize,
+    cubic: usize,
+    within: usize,
+    today_of: Vec<usize>,
+    cubic_of: Vec<usize>,
+}
+
+impl Measured {
+    /// Whether a tree node's payload would be coded against its parent: only where that is
+    /// smaller than coding it alone.
+    fn against_parent(&self, i: usize) -> bool {
+        self.cubic_of[i] < self.today_of[i]
+    }
+
+    /// File bytes when each payload takes the smaller of the two codings (physical blocks
+    /// outside the tree stay as today).
+    fn hybrid(&self) -> usize {
+        let in_tree_today: usize = self.today_of.iter().sum();
+        let chosen: usize = (0..self.today_of.len())
+            .map(|i| self.today_of[i].min(self.cubic_of[i]))
+            .sum();
+        self.today_grids + self.today_blocks - in_tree_today + chosen
+    }
+}
+
+fn measure(model: &Model, space: Space) -> Measured {
+    let d = *model.domain();
+    let finest = d.finest_level();
+    let nodes = model.tree().nodes();
+    let mut m = Measured {
+        today_grids: 0,
+        today_blocks: 0,
+        bilinear: 0,
+        cubic: 0,
+        within: 0,
+        today_of: vec![0; nodes.len()],
+        cubic_of: vec![0; nodes.len()],
+    };
+    let hier = |v: &[f32], w: usize| {
+        let (r, voids) = hierarchical(v, w, v.len() / w, space, true);
+        coded_len(&r, v.len(), voids) + 4
+    };
+    // Grids above the finest level: each against its parent's grid.
+    let mut grid_of: Vec<Option<(Samples, Vec<f32>)>> = (0..nodes.len()).map(|_| None).collect();
+    for (i, n) in nodes.iter().enumerate() {
+        if n.level == finest {
+            continue;
+        }
+        let s = grid_samples(model, n.level, n.x, n.y);
+        let v = values(model, &s, true);
+        let today = codec::encode(&v, s.cols.len()).len() + 4;
+        m.today_grids += today;
+        m.today_of[i] = today;
+        m.within += hier(&v, s.cols.len());
+        if n.parent == NO_PARENT {
+            m.bilinear += today;
+            m.cubic += today;
+            m.cubic_of[i] = today;
+        } else {
+            let (ps, pv) = grid_of[n.parent as usize]
+                .as_ref()
+                .expect("parents come first");
+            let (r, voids) = residuals(&s, &v, ps, pv, space, false);
+            m.bilinear += coded_len(&r, v.len(), voids);
+            let (r, voids) = residuals(&s, &v, ps, pv, space, true);
+            let c = coded_len(&r, v.len(), voids);
+            m.cubic += c;
+            m.cubic_of[i] = c;
+        }
+        grid_of[i] = Some((s, v));
+    }
+    // Physical blocks: each against its nearest ancestor in the tree.
+    let (cols, rows) = d.nodes_across(finest);
+    let node_at: std::collections::HashMap<(u8, u32, u32), usize> = nodes
+        .iter()
+        .enumerate()
+        .map(|(i, n)| ((n.level, n.x, n.y), i))
+        .collect();
+    for y in 0..rows {
+        for x in 0..cols {
+            let s = block_samples(model, x, y);
+            let v = values(model, &s, false);
+            let today = codec::encode(&v, s.cols.len()).len() + 4;
+            m.today_blocks += today;
+            m.within += hier(&v, s.cols.len());
+            let mut up = (finest - 1, x / 2, y / 2);
+            let parent = loop {
+                if let Some(&i) = node_at.get(&up) {
+                    break i;
+                }
+                up = (up.0 - 1, up.1 / 2, up.2 / 2);
+            };
+            let (ps, pv) = grid_of[parent].as_ref().expect("an ancestor grid");
+            let (r, voids) = residuals(&s, &v, ps, pv, space, false);
+            m.bilinear += coded_len(&r, v.len(), voids);
+            let (r, voids) = residuals(&s, &v, ps, pv, space, true);
+            let c = coded_len(&r, v.len(), voids);
+            m.cubic += c;
+            if let Some(&i) = node_at.get(&(finest, x, y)) {
+                m.today_of[i] = today;
+                m.cubic_of[i] = c;
+            }
+        }
+    }
+    m
+}
+
+/// The space a DEM's heights are coded in: the coarsest lattice every height lies on, else
+/// the float bits.
+fn space_of(hf: &fmrh::Heightfield) -> (Space, String) {
+    let step = codec::LATTICE_STEPS.iter().copied().find(|&q| {
+        hf.samples()
+            .iter()
+            .all(|&v| v.is_nan() || codec::is_lattice_value(v, q))
+    });
+    (
+        step.map_or(Space::Float, Space::Lattice),
+        step.map_or("float".to_string(), |q| format!("lattice {q}")),
+    )
+}
+
 fn main() {
     let files = [
         ("dem-hills (float)", "gdal-rs-dem-hills/dem_hills.json"),
@@ -290,94 +419,121 @@ fn main() {
         ("pysheds", "pysheds-dem/pysheds_dem.json"),
         ("Puget east 512", "puget-sound-east-512/ps-e_lg.json"),
         ("Puget 1k", "puget-sound-1k/ps_height_1k.json"),
+        ("Puget 4k", "puget-sound-4k-jpg/ps_height_4k_jpg.json"),
         ("SRTM3 N22W160", "srtm3-srtmpy/N22W160.json"),
         ("Fuji", "fuji-terrain-rgb/fuji.json"),
     ];
     println!(
-        "| DEM | space | today grids | today blocks | today total | bilinear total | cubic total | cubic / today | within payloads | / today |"
+        "| DEM | space | today grids | today blocks | today total | bilinear total | cubic total | cubic / today | within payloads | / today | hybrid | / today |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
     for (name, rel) in files {
         let hf = load(&data(rel), &IngestOptions::default())
             .unwrap_or_else(|e| panic!("{rel}: {e} (this benchmark needs ../shared/data)"));
-        let step = codec::LATTICE_STEPS.iter().copied().find(|&q| {
-            hf.samples()
-                .iter()
-                .all(|&v| v.is_nan() || codec::is_lattice_value(v, q))
-        });
-        let space = step.map_or(Space::Float, Space::Lattice);
+        let (space, label) = space_of(&hf);
         let model = Model::build(hf, &BuildOptions::default()).expect("builds");
-        let d = *model.domain();
-        let finest = d.finest_level();
-        let tree = model.tree();
-        let nodes = tree.nodes();
-        let (mut today_grids, mut today_blocks) = (0usize, 0usize);
-        let (mut bilinear, mut cubic) = (0usize, 0usize);
-        let mut within = 0usize;
-        let mut hier = |v: &[f32], w: usize| {
-            let (r, voids) = hierarchical(v, w, v.len() / w, space, true);
-            within += coded_len(&r, v.len(), voids) + 4;
-        };
-        // Grids above the finest level: each against its parent's grid.
-        let mut grid_of: Vec<Option<(Samples, Vec<f32>)>> =
-            (0..nodes.len()).map(|_| None).collect();
-        for (i, n) in nodes.iter().enumerate() {
-            if n.level == finest {
-                continue;
-            }
-            let s = grid_samples(&model, n.level, n.x, n.y);
-            let v = values(&model, &s, true);
-            today_grids += codec::encode(&v, s.cols.len()).len() + 4;
-            hier(&v, s.cols.len());
-            if n.parent == NO_PARENT {
-                let today = codec::encode(&v, s.cols.len()).len() + 4;
-                bilinear += today;
-                cubic += today;
-            } else {
-                let (ps, pv) = grid_of[n.parent as usize]
-                    .as_ref()
-                    .expect("parents come first");
-                let n_samples = v.len();
-                let (r, voids) = residuals(&s, &v, ps, pv, space, false);
-                bilinear += coded_len(&r, n_samples, voids);
-                let (r, voids) = residuals(&s, &v, ps, pv, space, true);
-                cubic += coded_len(&r, n_samples, voids);
-            }
-            grid_of[i] = Some((s, v));
-        }
-        // Physical blocks: each against its nearest ancestor in the tree.
-        let (cols, rows) = d.nodes_across(finest);
-        let node_at: std::collections::HashMap<(u8, u32, u32), usize> = nodes
-            .iter()
-            .enumerate()
-            .map(|(i, n)| ((n.level, n.x, n.y), i))
-            .collect();
-        for y in 0..rows {
-            for x in 0..cols {
-                let s = block_samples(&model, x, y);
-                let v = values(&model, &s, false);
-                today_blocks += codec::encode(&v, s.cols.len()).len() + 4;
-                hier(&v, s.cols.len());
-                let mut up = (finest - 1, x / 2, y / 2);
-                let parent = loop {
-                    if let Some(&i) = node_at.get(&up) {
-                        break i;
-                    }
-                    up = (up.0 - 1, up.1 / 2, up.2 / 2);
-                };
-                let (ps, pv) = grid_of[parent].as_ref().expect("an ancestor grid");
-                let (r, voids) = residuals(&s, &v, ps, pv, space, false);
-                bilinear += coded_len(&r, v.len(), voids);
-                let (r, voids) = residuals(&s, &v, ps, pv, space, true);
-                cubic += coded_len(&r, v.len(), voids);
-            }
-        }
-        let today = today_grids + today_blocks;
+        let m = measure(&model, space);
+        let today = m.today_grids + m.today_blocks;
+        let hybrid = m.hybrid();
         println!(
-            "| {name} | {} | {today_grids} | {today_blocks} | {today} | {bilinear} | {cubic} | {:.2} | {within} | {:.2} |",
-            step.map_or("float".to_string(), |q| format!("lattice {q}")),
-            cubic as f64 / today as f64,
-            within as f64 / today as f64
+            "| {name} | {label} | {} | {} | {today} | {} | {} | {:.2} | {} | {:.2} | {hybrid} | {:.2} |",
+            m.today_grids,
+            m.today_blocks,
+            m.bilinear,
+            m.cubic,
+            m.cubic as f64 / today as f64,
+            m.within,
+            m.within as f64 / today as f64,
+            hybrid as f64 / today as f64
         );
+    }
+    scenes();
+}
+
+/// What a scene would read: its blocks' payloads today, against the cubic pyramid's
+/// payloads of its blocks *and every ancestor of them* (drawing a node needs its
+/// ancestors' grids), on the scene benchmarks' DEMs and cameras.
+fn scenes() {
+    println!(
+        "\n| dataset | camera | tau | blocks | today B | ancestors added | pyramid B | pyramid / today | hybrid B | hybrid / today |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|");
+    for dem in dems::dems() {
+        let (space, _) = space_of(&dem.source);
+        let model = Model::build(dem.source.clone(), &BuildOptions::default()).expect("builds");
+        let m = measure(&model, space);
+        let mut bytes = std::io::Cursor::new(Vec::new());
+        fmrh::store::write_to(
+            &model,
+            &dem.source.metadata,
+            &fmrh::store::WriteOptions::default(),
+            &mut bytes,
+        )
+        .expect("writes");
+        let store = fmrh::Store::from_bytes(bytes.into_inner()).expect("opens");
+        let terrain = fmrh::scene::Terrain::new(&store).expect("terrain");
+        let nodes = model.tree().nodes();
+        for (cam_name, cam) in dem.cameras() {
+            for tau in [0.5, 1.0, 2.0, 4.0] {
+                let scene = terrain
+                    .scene(&cam, &fmrh::scene::SceneOptions::new(tau))
+                    .expect("scene");
+                let mut today = 0usize;
+                let mut needed = std::collections::BTreeSet::new();
+                for b in &scene.blocks {
+                    match b.node {
+                        Some(i) => {
+                            today += m.today_of[i as usize];
+                            let mut at = i;
+                            while needed.insert(at) && nodes[at as usize].parent != NO_PARENT {
+                                at = nodes[at as usize].parent;
+                            }
+                        }
+                        // A physical block below a pruned leaf stays self-contained.
+                        None => today += b.payload.len as usize,
+                    }
+                }
+                let pyramid: usize = needed
+                    .iter()
+                    .map(|&i| m.cubic_of[i as usize])
+                    .sum::<usize>()
+                    + scene
+                        .blocks
+                        .iter()
+                        .filter(|b| b.node.is_none())
+                        .map(|b| b.payload.len as usize)
+                        .sum::<usize>();
+                let ancestors =
+                    needed.len() - scene.blocks.iter().filter(|b| b.node.is_some()).count();
+                // Hybrid: a node needs its parent only when coded against it.
+                let mut hybrid_needed = std::collections::BTreeSet::new();
+                for i in scene.blocks.iter().filter_map(|b| b.node) {
+                    let mut at = i as usize;
+                    while hybrid_needed.insert(at)
+                        && m.against_parent(at)
+                        && nodes[at].parent != NO_PARENT
+                    {
+                        at = nodes[at].parent as usize;
+                    }
+                }
+                let hybrid: usize = hybrid_needed
+                    .iter()
+                    .map(|&i| m.today_of[i].min(m.cubic_of[i]))
+                    .sum::<usize>()
+                    + scene
+                        .blocks
+                        .iter()
+                        .filter(|b| b.node.is_none())
+                        .map(|b| b.payload.len as usize)
+                        .sum::<usize>();
+                println!(
+                    "| {} | {cam_name} | {tau} | {} | {today} | {ancestors} | {pyramid} | {:.2} | {hybrid} | {:.2} |",
+                    dem.name,
+                    scene.blocks.len(),
+                    pyramid as f64 / today.max(1) as f64,
+                    hybrid as f64 / today.max(1) as f64
+                );
+            }
+        }
     }
 }
