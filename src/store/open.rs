@@ -1,9 +1,9 @@
 //! Opening a container: read the two commit slots, choose the state (format §3), register it
 //! against page reuse by writers in other processes (§11.6), read and check its metadata
 //! bundle if it has one (§6.7: one read, every page checked once, then kept in memory), then
-//! read and check the dataset header and the cluster directory. Readers stop there ([`Walk::Lean`]: table pages are
-//! checked as lookups reach them, `btree` and `pagecache`); writers and the validator also
-//! walk every table page ([`Walk::Full`]).
+//! read and check the dataset header and the cluster directory. Readers stop there
+//! ([`Walk::Lean`]: table pages are checked as lookups reach them, `btree` and `pagecache`);
+//! writers and the validator also walk every table page ([`Walk::Full`]).
 //!
 //! **Registering.** A reader registers the txn id it chose, then reads the slots again. If the
 //! state is still the latest, no commit that could reuse its pages had started before the
