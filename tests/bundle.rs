@@ -20,6 +20,14 @@ use fmrh::store::{verify, write_to, Bytes, Container, WriteOptions};
 use fmrh::{Error, Heightfield, Invariant, Store, VerifyMode};
 
 fn write(hf: &Heightfield, block: u32, bundle_limit: u64) -> Vec<u8> {
+    let options = WriteOptions {
+        bundle_limit,
+        ..WriteOptions::default()
+    };
+    write_with(hf, block, &options)
+}
+
+fn write_with(hf: &Heightfield, block: u32, options: &WriteOptions) -> Vec<u8> {
     let model = Model::build(
         hf.clone(),
         &BuildOptions {
@@ -30,11 +38,7 @@ fn write(hf: &Heightfield, block: u32, bundle_limit: u64) -> Vec<u8> {
     )
     .unwrap();
     let mut out = Cursor::new(Vec::new());
-    let options = WriteOptions {
-        bundle_limit,
-        ..WriteOptions::default()
-    };
-    write_to(&model, &hf.metadata, &options, &mut out).unwrap();
+    write_to(&model, &hf.metadata, options, &mut out).unwrap();
     out.into_inner()
 }
 
@@ -300,22 +304,11 @@ fn bundle_references_are_checked_in_the_record() {
 #[test]
 fn a_constant_field_smaller_than_its_block_records_reads_whole() {
     let hf = Heightfield::from_fn(49, 81, |_, _| 42.0).unwrap();
-    let model = Model::build(
-        hf.clone(),
-        &BuildOptions {
-            block_size: 9,
-            thresholds: Thresholds::Ladder,
-            precision: None,
-        },
-    )
-    .unwrap();
-    let mut out = Cursor::new(Vec::new());
     let options = WriteOptions {
         page_size: 1024,
         ..WriteOptions::default()
     };
-    write_to(&model, &hf.metadata, &options, &mut out).unwrap();
-    let bytes = out.into_inner();
+    let bytes = write_with(&hf, 9, &options);
     let store = Store::from_bytes(bytes.clone()).unwrap();
     // The guard counts the blocks a window's corners span, the last sample included: 7 x 11.
     assert!(7 * 11 * 41 > bytes.len(), "the case the guard refused");
