@@ -185,11 +185,7 @@ fn commits_move_a_file_between_bundle_and_pages() {
 }
 
 fn bundled_vector() -> Vec<u8> {
-    std::fs::read(
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("format-spec/vectors/hills-20x13-voids.fmrh"),
-    )
-    .unwrap()
+    common::vector("hills-20x13-voids.fmrh")
 }
 
 fn corrupt(bytes: &[u8]) -> (Invariant, String) {
@@ -284,11 +280,7 @@ fn bundle_references_are_checked_in_the_record() {
     let (inv, _) = corrupt(&outside);
     assert_eq!(inv, Invariant::CommitRecord);
 
-    let mut old = std::fs::read(
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("format-spec/vectors/v2.1/hills-20x13-voids.fmrh"),
-    )
-    .unwrap();
+    let mut old = common::vector("v2.1/hills-20x13-voids.fmrh");
     old[184] = 1;
     let crc = crc32fast::hash(&old[..252]);
     old[252..256].copy_from_slice(&crc.to_le_bytes());

@@ -254,11 +254,7 @@ fn the_scheduler_decodes_each_block_once() {
 /// lookup returns is checked to be a node of the domain.
 #[test]
 fn a_node_below_the_finest_level_is_corruption_not_a_panic() {
-    let mut bytes = std::fs::read(
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("format-spec/vectors/hills-20x13-voids-paged.fmrh"),
-    )
-    .unwrap();
+    let mut bytes = common::vector("hills-20x13-voids-paged.fmrh");
     let p = 1024usize;
     let root = u64::from_le_bytes(bytes[72..80].try_into().unwrap()) as usize;
     let depth = u16::from_le_bytes(bytes[88..90].try_into().unwrap());
@@ -386,11 +382,7 @@ fn the_cli_reports_reads() {
 /// and cached it, on a mapping-like source and on a `pread` file alike.
 #[test]
 fn a_cached_page_of_another_table_is_refused() {
-    let mut bytes = std::fs::read(
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("format-spec/vectors/hills-20x13-voids.fmrh"),
-    )
-    .unwrap();
+    let mut bytes = common::vector("hills-20x13-voids.fmrh");
     let block_root = bytes[96..104].to_vec();
     assert_eq!(
         bytes[88..90],

@@ -14,6 +14,14 @@ pub fn bundled_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data")
 }
 
+/// The bytes of a golden vector, by its path inside `format-spec/vectors/`.
+pub fn vector(rel: &str) -> Vec<u8> {
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("format-spec/vectors")
+        .join(rel);
+    std::fs::read(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+}
+
 /// A real DEM by its path inside the data set (`folder/file`): the bundled copy in `data/`
 /// when there is one, else the one in `../shared/data`. Panics with a clear message when
 /// neither has it: the large-data suite must not pass vacuously on a clone without
