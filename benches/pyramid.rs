@@ -289,6 +289,8 @@ fn values(model: &Model, s: &Samples, mended: bool) -> Vec<f32> {
 /// Bytes of one model's payloads, today and as a pyramid, in total and per tree node (a
 /// node at the finest level counts its physical block).
 struct Measured {
+    /// The same cubic coding through `codec::parent` (the format's encoder to be).
+    codec: usize,
     today_grids: usize,
     today_blocks: usize,
     bilinear: usize,
@@ -316,11 +318,37 @@ impl Measured {
     }
 }
 
+/// Bytes of `v` (at `s`) coded by `codec::parent` against the parent `pv` (at `ps`), with a
+/// payload's 4-byte length, decoded back and checked.
+fn against(s: &Samples, v: &[f32], ps: &Samples, pv: &[f32]) -> usize {
+    use fmrh::codec::parent::{decode_against, encode_against, Axes, Parent};
+    let at = Axes {
+        cols: &s.cols,
+        rows: &s.rows,
+    };
+    let parent = Parent {
+        at: Axes {
+            cols: &ps.cols,
+            rows: &ps.rows,
+        },
+        heights: pv,
+    };
+    let bytes = encode_against(v, at, parent, None).expect("a child of its parent encodes");
+    let mut out = vec![0.0f32; v.len()];
+    decode_against(&bytes, at, parent, &mut out).expect("decodes");
+    assert!(
+        v.iter().zip(&out).all(|(a, b)| a.to_bits() == b.to_bits()),
+        "codec::parent did not round-trip"
+    );
+    bytes.len() + 4
+}
+
 fn measure(model: &Model, space: Space) -> Measured {
     let d = *model.domain();
     let finest = d.finest_level();
     let nodes = model.tree().nodes();
     let mut m = Measured {
+        codec: 0,
         today_grids: 0,
         today_blocks: 0,
         bilinear: 0,
@@ -348,6 +376,7 @@ fn measure(model: &Model, space: Space) -> Measured {
         if n.parent == NO_PARENT {
             m.bilinear += today;
             m.cubic += today;
+            m.codec += today;
             m.cubic_of[i] = today;
         } else {
             let (ps, pv) = grid_of[n.parent as usize]
@@ -359,6 +388,7 @@ fn measure(model: &Model, space: Space) -> Measured {
             let c = coded_len(&r, v.len(), voids);
             m.cubic += c;
             m.cubic_of[i] = c;
+            m.codec += against(&s, &v, ps, pv);
         }
         grid_of[i] = Some((s, v));
     }
@@ -389,6 +419,7 @@ fn measure(model: &Model, space: Space) -> Measured {
             let (r, voids) = residuals(&s, &v, ps, pv, space, true);
             let c = coded_len(&r, v.len(), voids);
             m.cubic += c;
+            m.codec += against(&s, &v, ps, pv);
             if let Some(&i) = node_at.get(&(finest, x, y)) {
                 m.today_of[i] = today;
                 m.cubic_of[i] = c;
@@ -424,9 +455,9 @@ fn main() {
         ("Fuji", "fuji-terrain-rgb/fuji.json"),
     ];
     println!(
-        "| DEM | space | today grids | today blocks | today total | bilinear total | cubic total | cubic / today | within payloads | / today | hybrid | / today |"
+        "| DEM | space | today grids | today blocks | today total | bilinear total | cubic total | cubic / today | within payloads | / today | hybrid | / today | codec::parent total |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for (name, rel) in files {
         let hf = load(&data(rel), &IngestOptions::default())
             .unwrap_or_else(|e| panic!("{rel}: {e} (this benchmark needs ../shared/data)"));
@@ -436,7 +467,7 @@ fn main() {
         let today = m.today_grids + m.today_blocks;
         let hybrid = m.hybrid();
         println!(
-            "| {name} | {label} | {} | {} | {today} | {} | {} | {:.2} | {} | {:.2} | {hybrid} | {:.2} |",
+            "| {name} | {label} | {} | {} | {today} | {} | {} | {:.2} | {} | {:.2} | {hybrid} | {:.2} | {} |",
             m.today_grids,
             m.today_blocks,
             m.bilinear,
@@ -444,7 +475,8 @@ fn main() {
             m.cubic as f64 / today as f64,
             m.within,
             m.within as f64 / today as f64,
-            hybrid as f64 / today as f64
+            hybrid as f64 / today as f64,
+            m.codec
         );
     }
     scenes();

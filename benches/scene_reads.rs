@@ -11,7 +11,10 @@
 //! with `posix_fadvise(DONTNEED)` first) and warm. The last columns are the price of the
 //! codec: the warm time of the same scene from a copy of the file whose payloads are stored
 //! raw (`WriteOptions::raw_payloads`: nothing to decode, as format 1 stored them), and the
-//! ratio. Every configuration runs in the same process, so the ratios are side by side.
+//! ratio; and the same scene from a copy whose blocks are all coded alone
+//! (`WriteOptions::blocks_against_parents` off, as format 3 coded them): its bytes read and
+//! warm time, the price of format 4's blocks coded against their parent's grid. Every
+//! configuration runs in the same process, so the ratios are side by side.
 //! `cargo bench --bench scene_reads`.
 
 use std::path::{Path, PathBuf};
@@ -70,20 +73,25 @@ fn main() {
         raw_payloads: true,
         ..Default::default()
     };
-    let sets: Vec<(dems::Dem, PathBuf, PathBuf)> = dems::dems()
+    let alone = fmrh::store::WriteOptions {
+        blocks_against_parents: false,
+        ..Default::default()
+    };
+    let sets: Vec<(dems::Dem, PathBuf, PathBuf, PathBuf)> = dems::dems()
         .into_iter()
         .map(|d| {
             let path = d.build(dir.path());
             let raw_path = d.build_with(dir.path(), "-raw", &raw);
-            (d, path, raw_path)
+            let alone_path = d.build_with(dir.path(), "-alone", &alone);
+            (d, path, raw_path, alone_path)
         })
         .collect();
     println!(
         "| dataset | camera | tau | blocks | payload B | open calls/B | schedule calls/B | \
-         load calls/B gap 0 | gap 1 KiB | gap 4 KiB | total B (gap 0) | amplification | cold us | warm us | warm us, raw payloads | codec cost |"
+         load calls/B gap 0 | gap 1 KiB | gap 4 KiB | total B (gap 0) | amplification | cold us | warm us | warm us, raw payloads | codec cost | blocks alone: total B | warm us |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
-    for (d, path, raw_path) in &sets {
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    for (d, path, raw_path, alone_path) in &sets {
         for (cam_name, cam) in d.cameras() {
             for tau in [0.5, 1.0, 2.0, 4.0] {
                 let mut cells = Vec::new();
@@ -101,16 +109,22 @@ fn main() {
                 evict(path);
                 let cold = run(path, &cam, tau, 0).5;
                 // Coded and raw, interleaved, so both see the same machine.
-                let (mut warm, mut warm_raw) = (f64::INFINITY, f64::INFINITY);
+                let (mut warm, mut warm_raw, mut warm_alone) =
+                    (f64::INFINITY, f64::INFINITY, f64::INFINITY);
+                let mut alone_total = 0;
                 for _ in 0..5 {
                     warm = warm.min(run(path, &cam, tau, 0).5);
                     let (.., raw_blocks, _, us) = run(raw_path, &cam, tau, 0);
                     assert_eq!(raw_blocks, blocks, "the raw copy schedules the same scene");
                     warm_raw = warm_raw.min(us);
+                    let (o, s, l, alone_blocks, _, us) = run(alone_path, &cam, tau, 0);
+                    assert_eq!(alone_blocks, blocks, "the copy schedules the same scene");
+                    warm_alone = warm_alone.min(us);
+                    alone_total = o.bytes() + s.bytes() + l.bytes();
                 }
                 let total = open.bytes() + sched.bytes() + cells[0].bytes();
                 println!(
-                    "| {} | {cam_name} | {tau} | {blocks} | {payload} | {}/{} | {}/{} | {}/{} | {}/{} | {}/{} | {total} | {:.2} | {cold:.0} | {warm:.0} | {warm_raw:.0} | {:.2} |",
+                    "| {} | {cam_name} | {tau} | {blocks} | {payload} | {}/{} | {}/{} | {}/{} | {}/{} | {}/{} | {total} | {:.2} | {cold:.0} | {warm:.0} | {warm_raw:.0} | {:.2} | {alone_total} | {warm_alone:.0} |",
                     d.name,
                     open.reads(),
                     open.bytes(),
@@ -128,23 +142,27 @@ fn main() {
             }
         }
     }
-    fly_through(&sets[0].1, &sets[0].2);
+    fly_through(&sets[0].1, &sets[0].2, &sets[0].3);
 }
 
 /// The decoded-block cache: the Puget Sound 1k orbit (720 frames) through the `Scheduler`,
 /// which decodes a block once when it becomes resident, beside a renderer that reads and
 /// decodes every visible block each frame, and beside the scheduler on the copy whose
-/// payloads are raw (format 1's cost: nothing to decode).
-fn fly_through(path: &Path, raw_path: &Path) {
+/// payloads are raw (format 1's cost: nothing to decode) and the copy whose blocks are
+/// coded alone (format 3's coding).
+fn fly_through(path: &Path, raw_path: &Path, alone_path: &Path) {
     let (cameras, decoded, cached) = scheduled_frames(path);
     let (_, decoded_raw, cached_raw) = scheduled_frames(raw_path);
+    let (_, decoded_alone, cached_alone) = scheduled_frames(alone_path);
     assert_eq!(decoded, decoded_raw, "the raw copy loads the same blocks");
+    assert_eq!(decoded, decoded_alone, "the copy loads the same blocks");
     let (every, uncached) = every_frame(path, &cameras);
     println!(
         "\nfly-through, Puget Sound 1k orbit, {} frames, tau 1: the scheduler decodes {decoded} \
          blocks in all, {cached:.0} us a frame; reading and decoding every visible block each \
          frame decodes {every}, {uncached:.0} us a frame ({:.1}x); the scheduler on raw \
-         payloads (nothing to decode), {cached_raw:.0} us a frame ({:.2}x of it)",
+         payloads (nothing to decode), {cached_raw:.0} us a frame ({:.2}x of it); with \
+         every block coded alone, {cached_alone:.0} us a frame",
         cameras.len(),
         uncached / cached,
         cached / cached_raw

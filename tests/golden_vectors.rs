@@ -5,10 +5,10 @@
 //! format change: bump the version per the policy in `format-spec/container.md`, then
 //! regenerate with `FMRH_BLESS=1 cargo test --release --test golden_vectors`.
 //!
-//! Files of older versions stay readable: `format-spec/vectors/v1.1/`, `v1.2/`, `v2.0/` and
-//! `v2.1/` keep the same vectors as those versions wrote them. They must read and verify
-//! exactly as the current ones do; 2.x files accept a transaction (which makes them 3.0),
-//! 1.x files refuse one.
+//! Files of older versions stay readable: `format-spec/vectors/v1.1/`, `v1.2/`, `v2.0/`,
+//! `v2.1/` and `v3.0/` keep the same vectors as those versions wrote them. They must read and
+//! verify exactly as the current ones do; 2.x and 3.x files accept a transaction (which makes
+//! them 4.0), 1.x files refuse one.
 
 use std::io::Cursor;
 use std::path::PathBuf;
@@ -189,6 +189,40 @@ fn vectors_are_byte_exact_and_read_as_recorded() {
     }
 }
 
+/// The vectors pin format 4's blocks coded against their parent's grid: the voids vectors
+/// have such blocks (encodings 5 and 6, the block record naming the parent), and a block
+/// whose record names no parent is coded alone.
+#[test]
+fn vectors_pin_blocks_coded_against_their_parents() {
+    for v in vectors() {
+        let store = fmrh::Store::open(&dir().join(format!("{}.fmrh", v.name))).unwrap();
+        let d = *store.domain();
+        let (cols, rows) = d.nodes_across(d.finest_level());
+        let mut against = 0;
+        for y in 0..rows {
+            for x in 0..cols {
+                let b = store.stored_block(x, y).unwrap();
+                let bytes = store.payload(b.payload).unwrap();
+                let encoding = bytes[4];
+                if let Some(n) = b.against {
+                    against += 1;
+                    assert!(matches!(encoding, 5 | 6), "{} ({x}, {y})", v.name);
+                    let parent = store.node(n).unwrap();
+                    assert_eq!(
+                        (parent.level, parent.x, parent.y),
+                        (d.finest_level() - 1, x / 2, y / 2)
+                    );
+                } else {
+                    assert!(encoding < 5, "{} ({x}, {y})", v.name);
+                }
+            }
+        }
+        if v.name.starts_with("hills") {
+            assert!(against > 0, "{}: no block coded against its parent", v.name);
+        }
+    }
+}
+
 /// The metadata bundle of a vector (format §6.7), decompressed by zstd itself (not by
 /// fmrh): offset, stored length, CRC and pages from commit record bytes 176..196.
 fn bundle_of(bytes: &[u8]) -> Vec<u8> {
@@ -208,7 +242,7 @@ fn vector_commit_record_fields_sit_where_the_spec_says() {
     // Spot checks against the byte table of format-spec/container.md §3.
     let bytes = build(&vectors()[1]);
     assert_eq!(&bytes[0..8], b"FMRH\r\n\x1a\n");
-    assert_eq!(u16::from_le_bytes([bytes[8], bytes[9]]), 3); // major
+    assert_eq!(u16::from_le_bytes([bytes[8], bytes[9]]), 4); // major
     assert_eq!(u16::from_le_bytes([bytes[10], bytes[11]]), 0); // minor
     assert_eq!(u32::from_le_bytes(bytes[12..16].try_into().unwrap()), 1024); // page size
     assert_eq!(u64::from_le_bytes(bytes[16..24].try_into().unwrap()), 1); // txn id
@@ -303,27 +337,31 @@ fn format_1_vectors_read_verify_and_refuse_writes() {
     }
 }
 
-/// Format 2.x files (the vectors as 2.0 and 2.1 wrote them, every table in pages of its
-/// own; in 2.0 the dataset header's precision field still reserved and zero) read sample
-/// for sample, pass `verify --full`, and accept a transaction, whose commit makes them 3.0
-/// (format §8) with their metadata in a bundle.
+/// Format 2.x and 3.x files (the vectors as 2.0 and 2.1 wrote them, every table in pages of
+/// its own, in 2.0 the dataset header's precision field still reserved and zero; as 3.0 wrote
+/// them, every block coded alone) read sample for sample, pass `verify --full`, and accept a
+/// transaction, whose commit makes them 4.0 (format §8) with their metadata in a bundle.
 #[test]
-fn format_2_vectors_read_verify_and_take_a_transaction() {
-    let old_vectors = lossless_vectors().into_iter().map(|v| (0u16, v)).chain(
-        vectors()
-            .into_iter()
-            .filter(|v| !v.paged)
-            .map(|v| (1u16, v)),
-    );
-    for (minor, v) in old_vectors {
+fn format_2_and_3_vectors_read_verify_and_take_a_transaction() {
+    let old_vectors = lossless_vectors()
+        .into_iter()
+        .map(|v| ((2u16, 0u16), v))
+        .chain(
+            vectors()
+                .into_iter()
+                .filter(|v| !v.paged)
+                .map(|v| ((2, 1), v)),
+        )
+        .chain(vectors().into_iter().map(|v| ((3, 0), v)));
+    for ((major, minor), v) in old_vectors {
         let old = dir()
-            .join(format!("v2.{minor}"))
+            .join(format!("v{major}.{minor}"))
             .join(format!("{}.fmrh", v.name));
         let store = fmrh::Store::open(&old).unwrap();
-        assert_eq!(store.state().format_version, (2, minor), "{}", v.name);
+        assert_eq!(store.state().format_version, (major, minor), "{}", v.name);
         assert_eq!(
             store.header().precision.map(|p| p.step()),
-            v.precision.filter(|_| minor > 0)
+            v.precision.filter(|_| (major, minor) > (2, 0))
         );
         let samples = store.read_window(store.domain().data_rect()).unwrap();
         let bound = v.precision.map_or(0.0, |q| q * 0.5625);
@@ -352,7 +390,7 @@ fn format_2_vectors_read_verify_and_take_a_transaction() {
         txn.commit().unwrap();
         drop(c);
         let store = fmrh::Store::open(&copy).unwrap();
-        assert_eq!(store.state().format_version, (3, 0), "{}", v.name);
+        assert_eq!(store.state().format_version, (4, 0), "{}", v.name);
         assert!(store.layout().unwrap().bundle_bytes > 0, "{}", v.name);
         let got = store
             .read_window(fmrh::model::SampleRect {

@@ -127,6 +127,44 @@ fn a_bundled_file_opens_in_three_reads_and_schedules_from_memory() {
     assert!(layout.file_length < puget().store.layout().unwrap().file_length);
 }
 
+fn n_len(b: &serde_json::Value) -> u64 {
+    b["payload"]["len"].as_u64().unwrap()
+}
+
+/// The payload bytes loading `blocks` (each `(level, x, y, payload bytes)`) must read: their
+/// own, and once each the grid of every parent a physical block is coded against (format 4).
+fn payload_bytes_with_parents<S: fmrh::store::Source>(
+    store: &Store<S>,
+    blocks: impl IntoIterator<Item = (u8, u32, u32, u64)>,
+) -> u64 {
+    let finest = store.domain().finest_level();
+    let mut parents = std::collections::BTreeSet::new();
+    let mut total = 0;
+    for (level, x, y, len) in blocks {
+        total += len;
+        if level == finest {
+            parents.extend(store.stored_block(x, y).unwrap().against);
+        }
+    }
+    total
+        + parents
+            .into_iter()
+            .map(|n| u64::from(store.node(n).unwrap().payload.len))
+            .sum::<u64>()
+}
+
+fn scene_payload_bytes<S: fmrh::store::Source>(
+    store: &Store<S>,
+    blocks: &[fmrh::scene::SceneBlock],
+) -> u64 {
+    payload_bytes_with_parents(
+        store,
+        blocks
+            .iter()
+            .map(|b| (b.level, b.x, b.y, u64::from(b.payload.len))),
+    )
+}
+
 fn all_refs() -> Vec<PayloadRef> {
     let s = &puget().store;
     let mut refs: Vec<PayloadRef> = s.nodes().unwrap().iter().map(|n| n.payload).collect();
@@ -184,10 +222,10 @@ fn touching_payloads_share_a_read() {
         used.payload_reads,
         scene.blocks.len()
     );
-    let stored: u64 = scene.blocks.iter().map(|b| u64::from(b.payload.len)).sum();
+    let stored = scene_payload_bytes(&store, &scene.blocks);
     assert_eq!(
         used.payload_bytes, stored,
-        "gap 0 reads no byte between payloads"
+        "gap 0 reads no byte between payloads, and every grid a block is coded against"
     );
     // Each loaded block draws what the store's own decoding gives.
     for (b, l) in scene.blocks.iter().zip(&loaded) {
@@ -321,8 +359,8 @@ fn an_unregistered_reader_refuses_pages_after_a_tag_wrap() {
 }
 
 /// `fmrh scene --load` and `fmrh fly` report what they read: opening within 16 KiB, a
-/// scene's payload bytes exactly its blocks' (touching payloads are read together, no byte
-/// between them), and a fly-through's metadata read once however many frames reuse it.
+/// scene's payload bytes exactly its blocks' and their parents' grids they are coded against
+/// (touching payloads are read together, no byte between them), and a fly-through's metadata read once however many frames reuse it.
 #[test]
 fn the_cli_reports_reads() {
     let (_dir, path) = on_disk();
@@ -346,12 +384,23 @@ fn the_cli_reports_reads() {
     let reads = &scene["reads"];
     assert!(reads["open"]["metadata_bytes"].as_u64().unwrap() <= 16384);
     assert_eq!(reads["schedule"]["payload_bytes"], 0);
-    let stored: u64 = scene["blocks"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|b| b["payload"]["len"].as_u64().unwrap())
-        .sum();
+    let stored = payload_bytes_with_parents(
+        &Store::open(&path).unwrap(),
+        scene["blocks"].as_array().unwrap().iter().map(|b| {
+            let n = |k: &str| b[k].as_u64().unwrap();
+            (n("level") as u8, n("x") as u32, n("y") as u32, n_len(b))
+        }),
+    );
+    assert!(
+        stored
+            > scene["blocks"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(n_len)
+                .sum::<u64>(),
+        "this scene has blocks coded against their parents' grids"
+    );
     assert_eq!(reads["load"]["payload_bytes"].as_u64().unwrap(), stored);
     let without = scene_json(&[]);
     assert!(without["reads"]["load"].is_null());

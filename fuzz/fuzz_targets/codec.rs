@@ -1,14 +1,41 @@
 //! Fuzz target: block codecs. The first two bytes give a block's width and rows (1..=64).
 //! Then, by the third byte's low bit, either the rest is an encoded block (and a stored block
-//! and grid payload), which must decode or fail with an error (never panic, never write past
-//! the block), or the rest is samples
-//! (`f32` bits, or lattice values), which must encode and decode back bit for bit.
+//! and grid payload, and a block coded against a parent grid), which must decode or fail with
+//! an error (never panic, never write past the block), or the rest is samples
+//! (`f32` bits, or lattice values), which must encode and decode back bit for bit, alone and
+//! against a parent grid holding every other sample (format 4).
 //!
 //! cargo fuzz run --sanitizer none codec
 
 #![no_main]
 
+use fmrh::codec::parent::{decode_against, encode_against, Axes, Parent};
 use libfuzzer_sys::fuzz_target;
+
+/// Every other coordinate of `0..n`, and the last (a parent's axis, clamped at the edge).
+fn parent_axis(n: usize) -> Vec<u64> {
+    let mut a: Vec<u64> = (0..n as u64).step_by(2).collect();
+    if (n - 1) % 2 == 1 {
+        a.push(n as u64 - 1);
+    }
+    a
+}
+
+/// The parent's heights: the child's samples it holds, voids mended to 0.
+fn parent_heights(samples: &[f32], width: usize, pc: &[u64], pr: &[u64]) -> Vec<f32> {
+    pr.iter()
+        .flat_map(|&r| {
+            pc.iter().map(move |&c| {
+                let v = samples[r as usize * width + c as usize];
+                if v.is_nan() {
+                    0.0
+                } else {
+                    v
+                }
+            })
+        })
+        .collect()
+}
 
 fuzz_target!(|data: &[u8]| {
     let [w, r, mode, rest @ ..] = data else {
@@ -23,6 +50,16 @@ fuzz_target!(|data: &[u8]| {
         let voids = u32::from(mode >> 2) % (w * h + 1);
         let _ = fmrh::format::payload::load_block(rest, w, h, voids);
         let _ = fmrh::format::payload::load_grid(rest, w, h, mode & 2 != 0);
+        let (cols, rows_at): (Vec<u64>, Vec<u64>) =
+            ((0..width as u64).collect(), (0..rows as u64).collect());
+        let (pc, pr) = (parent_axis(width), parent_axis(rows));
+        let heights: Vec<f32> = (0..pc.len() * pr.len())
+            .map(|i| f32::from(rest.get(i).copied().unwrap_or(0)))
+            .collect();
+        let at = Axes { cols: &cols, rows: &rows_at };
+        let parent = Parent { at: Axes { cols: &pc, rows: &pr }, heights: &heights };
+        let _ = decode_against(rest, at, parent, &mut out);
+        let _ = fmrh::format::payload::load_block_against(rest, (w, h, voids), at, parent);
         return;
     }
     let n = width * rows;
@@ -48,5 +85,25 @@ fuzz_target!(|data: &[u8]| {
     fmrh::codec::decode(&bytes, width, &mut out).expect("an encoding decodes");
     for (a, b) in samples.iter().zip(&out) {
         assert_eq!(a.to_bits(), b.to_bits());
+    }
+    let (cols, rows_at): (Vec<u64>, Vec<u64>) =
+        ((0..width as u64).collect(), (0..rows as u64).collect());
+    let (pc, pr) = (parent_axis(width), parent_axis(rows));
+    let heights = parent_heights(&samples, width, &pc, &pr);
+    let at = Axes { cols: &cols, rows: &rows_at };
+    let parent = Parent { at: Axes { cols: &pc, rows: &pr }, heights: &heights };
+    // Refused only for a NaN that is not the canonical void.
+    let odd_nan = samples
+        .iter()
+        .any(|v| v.is_nan() && v.to_bits() != fmrh::codec::VOID_BITS);
+    match encode_against(&samples, at, parent, None) {
+        Some(bytes) => {
+            let mut back = vec![0.0f32; n];
+            decode_against(&bytes, at, parent, &mut back).expect("an encoding decodes");
+            for (a, b) in samples.iter().zip(&back) {
+                assert_eq!(a.to_bits(), b.to_bits());
+            }
+        }
+        None => assert!(odd_nan, "a child of its parent was refused"),
     }
 });

@@ -29,7 +29,7 @@ use super::bundle::BundleRef;
 use super::tree::TreeRef;
 use super::{
     crc32, is_zero, page_size_is_valid, Invariant, Violation, FORMAT_MAJOR, FORMAT_MINOR,
-    LAST_MINOR_OF_1, LAST_MINOR_OF_2, MAGIC, MAX_PAGE_SIZE, MIN_PAGE_SIZE,
+    LAST_MINOR_OF_1, LAST_MINOR_OF_2, LAST_MINOR_OF_3, MAGIC, MAX_PAGE_SIZE, MIN_PAGE_SIZE,
 };
 
 /// Bytes of a commit record at the start of its slot page; the rest of the page is zero.
@@ -184,6 +184,12 @@ impl CommitRecord {
         self.major.get() >= 2
     }
 
+    /// Whether its blocks may be coded against their parent's grid (format 4.x): before,
+    /// a block record's `against` field was reserved, zero.
+    pub fn blocks_against_parents(&self) -> bool {
+        self.major.get() >= 4
+    }
+
     /// Whether `flag` is set.
     pub fn has_flag(&self, flag: u32) -> bool {
         self.flags.get() & flag != 0
@@ -318,6 +324,7 @@ pub fn classify(bytes: &[u8], slot: u8, offset: u64) -> Slot {
     }
     let newer_minor = match r.major.get() {
         FORMAT_MAJOR => r.minor.get() > FORMAT_MINOR,
+        3 => r.minor.get() > LAST_MINOR_OF_3,
         2 => r.minor.get() > LAST_MINOR_OF_2,
         _ => r.minor.get() > LAST_MINOR_OF_1,
     };

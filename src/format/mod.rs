@@ -84,7 +84,12 @@ pub use tree::{TreeRef, TreeSpec, MAX_TREE_DEPTH};
 /// transfers, as PNG's signature does.
 pub const MAGIC: [u8; 8] = *b"FMRH\r\n\x1a\n";
 
-/// Incompatible revisions of the format. Writers write 3; readers read 1, 2 and 3.
+/// Incompatible revisions of the format. Writers write 4; readers read 1 to 4.
+///
+/// 4.0 may code a physical block *against its parent's grid* (payload encodings 5 and 6,
+/// the block record's `against` field, formerly reserved): a 3.x reader would take such a
+/// block for a corrupt one. Everything else is as in 3.0, so a 3.x file is read as it is
+/// and a transaction on it writes a 4.0 state.
 ///
 /// 3.0 may keep a small state's structured pages in a compressed *metadata bundle*
 /// ([`bundle`]) that the commit record names: a 2.x reader would find the tables missing.
@@ -92,10 +97,13 @@ pub const MAGIC: [u8; 8] = *b"FMRH\r\n\x1a\n";
 /// writes a 3.0 state. 2.0 stored payloads coded ([`payload::store_block`],
 /// [`crate::codec`]) where 1.x stored raw `f32`: a 1.x file is read as it is, and refused
 /// for writing (it would mix raw and coded payloads): rebuild it with `fmrh build`.
-pub const FORMAT_MAJOR: u16 = 3;
+pub const FORMAT_MAJOR: u16 = 4;
 
 /// Compatible additions within [`FORMAT_MAJOR`]: none yet.
 pub const FORMAT_MINOR: u16 = 0;
+
+/// The last minor version of major 3.
+pub const LAST_MINOR_OF_3: u16 = 0;
 
 /// The last minor version of major 2. 2.1 added the dataset header's storage `precision`
 /// (formerly reserved, zero in 2.0 files: lossless).
@@ -109,6 +117,23 @@ pub const LAST_MINOR_OF_1: u16 = 2;
 
 /// The page size a writer uses unless told otherwise.
 pub const DEFAULT_PAGE_SIZE: u32 = 4096;
+
+/// The page size `fmrh build` picks when not told: [`MIN_PAGE_SIZE`] for data of at most
+/// [`SMALL_DATA_SAMPLES`] samples, else [`DEFAULT_PAGE_SIZE`]. A file's fixed cost is its two
+/// commit slots (two pages) and the tail of its last page: 10 KiB on average at 4 KiB
+/// pages, a tenth of a 100 KB file, and a COG of the same small DEM has no such cost.
+/// Larger files keep 4 KiB pages, the operating system's, for their tables and commits.
+pub fn page_size_for(samples: u64) -> u32 {
+    if samples <= SMALL_DATA_SAMPLES {
+        MIN_PAGE_SIZE
+    } else {
+        DEFAULT_PAGE_SIZE
+    }
+}
+
+/// Data of at most this many samples (1024², 4 MiB of raw `f32`) gets 1 KiB pages from
+/// [`page_size_for`].
+pub const SMALL_DATA_SAMPLES: u64 = 1 << 20;
 /// The smallest page size: a node record and a branch of two entries must fit in one page.
 pub const MIN_PAGE_SIZE: u32 = 1024;
 /// The largest page size.

@@ -27,6 +27,12 @@
 //! the void bitmap as it is. [`store_block`] and [`store_grid`] code; [`load_block`] and
 //! [`load_grid`] give back the layout above, which the views read. The CRC covers the stored
 //! bytes, so damage is caught before any decoding.
+//!
+//! **Against the parent (format 4).** A block may instead code its samples against its
+//! parent node's decoded grid ([`store_block_against`], [`load_block_against`],
+//! [`crate::codec::parent`]): the quarter of its samples the grid holds are stored once, in
+//! the grid. The block record names that node; [`grid_axes`] and [`block_axes`] say where
+//! each one's samples lie, which is all the prediction needs.
 
 use std::ops::Range;
 
@@ -36,8 +42,9 @@ use zerocopy::FromBytes;
 
 use super::VOID_BITS;
 use crate::codec;
+use crate::codec::parent::{Axes, Parent};
 use crate::model::domain::MAX_BLOCK_SIZE;
-use crate::model::Domain;
+use crate::model::{Domain, SampleRect};
 
 /// Where a payload is: its byte offset in the container, its length, and the CRC-32 of its
 /// bytes.
@@ -166,6 +173,62 @@ pub fn load_block(
     height: u32,
     void_count: u32,
 ) -> Result<Vec<u8>, String> {
+    load_block_with(stored, width, height, void_count, |a, samples| {
+        codec::decode(a, width.max(1) as usize, samples).map_err(|e| e.to_string())
+    })
+}
+
+/// Format 4: the stored form of a block's layout `raw` whose samples lie at `at`, with its
+/// samples coded against `parent`'s grid ([`codec::parent`]) and its stand-ins as
+/// [`store_block`] codes them. `None` when the block does not lie inside the parent, a
+/// sample the parent holds differs from the parent's height, or `coding` is raw.
+pub fn store_block_against(
+    raw: &[u8],
+    (width, height, void_count): (u32, u32, u32),
+    coding: Coding,
+    at: Axes<'_>,
+    parent: Parent<'_>,
+) -> Option<Vec<u8>> {
+    if coding.raw {
+        return None;
+    }
+    let n = width as usize * height as usize;
+    let floats: Vec<f32> = raw
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect();
+    let (samples, stand_ins) = floats.split_at(n.min(floats.len()));
+    let a = codec::parent::encode_against(samples, at, parent, coding.step)?;
+    let mut out = Vec::with_capacity(4 + a.len() + 8);
+    out.extend_from_slice(&u32::try_from(a.len()).ok()?.to_le_bytes());
+    out.extend_from_slice(&a);
+    if void_count > 0 && !stand_ins.is_empty() {
+        out.extend_from_slice(&coding.code(stand_ins, stand_ins.len()));
+    }
+    Some(out)
+}
+
+/// Format 4: a block's layout from its stored form when its samples (at `at`) are coded
+/// against `parent`'s grid, or why it does not decode.
+pub fn load_block_against(
+    stored: &[u8],
+    (width, height, void_count): (u32, u32, u32),
+    at: Axes<'_>,
+    parent: Parent<'_>,
+) -> Result<Vec<u8>, String> {
+    load_block_with(stored, width, height, void_count, |a, samples| {
+        codec::parent::decode_against(a, at, parent, samples).map_err(|e| e.to_string())
+    })
+}
+
+/// A block's layout from its stored form, its samples decoded by `samples_from`.
+fn load_block_with(
+    stored: &[u8],
+    width: u32,
+    height: u32,
+    void_count: u32,
+    samples_from: impl FnOnce(&[u8], &mut [f32]) -> Result<(), String>,
+) -> Result<Vec<u8>, String> {
     check_shape(width, height)?;
     let n = width as usize * height as usize;
     if void_count as usize > n {
@@ -174,7 +237,7 @@ pub fn load_block(
     let (a, b) = split_stored(stored)?;
     let mut floats = vec![0f32; n + void_count as usize];
     let (samples, stand_ins) = floats.split_at_mut(n);
-    codec::decode(a, width.max(1) as usize, samples).map_err(|e| format!("samples: {e}"))?;
+    samples_from(a, samples).map_err(|e| format!("samples: {e}"))?;
     if void_count > 0 {
         codec::decode(b, void_count as usize, stand_ins).map_err(|e| format!("stand-ins: {e}"))?;
     } else if !b.is_empty() {
@@ -184,6 +247,33 @@ pub fn load_block(
         ));
     }
     Ok(floats.iter().flat_map(|v| v.to_le_bytes()).collect())
+}
+
+/// Where the samples of a physical block lie: its columns and rows (its footprint clipped
+/// to the data, `rect`).
+pub fn block_axes(rect: &SampleRect) -> (Vec<u64>, Vec<u64>) {
+    (
+        (rect.col0..=rect.col1).collect(),
+        (rect.row0..=rect.row1).collect(),
+    )
+}
+
+/// Where the stored samples of the grid of node `(x, y)` at `level` lie: the sample column
+/// of each of its `gw` stored columns and the row of each of its `gh` rows, a sample past the
+/// data's edge clamped to it (see [`grid_dims`]).
+pub fn grid_axes(domain: &Domain, level: u8, x: u32, y: u32) -> (Vec<u64>, Vec<u64>) {
+    let fp = domain.footprint(level, x, y);
+    let s = domain.stride(level);
+    let (gw, gh) = grid_dims(domain, level, x, y);
+    let data = domain.data_rect();
+    (
+        (0..u64::from(gw))
+            .map(|i| (fp.col0 + i * s).min(data.col1))
+            .collect(),
+        (0..u64::from(gh))
+            .map(|j| (fp.row0 + j * s).min(data.row1))
+            .collect(),
+    )
 }
 
 /// Format 2: the stored form of a grid's layout `raw` of `gw × gh` heights (see the module

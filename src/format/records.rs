@@ -176,8 +176,9 @@ pub struct BlockRecord {
     pub height: U32,
     /// Void samples; their mended stand-ins follow the samples.
     pub void_count: U32,
-    /// Zero.
-    pub reserved: U32,
+    /// Format 4: the node whose coarse grid the samples are coded against, as its index in
+    /// the node table plus one; 0 when the block is coded alone. Zero (reserved) before 4.0.
+    pub against: U32,
 }
 
 /// A physical block as the block table describes it.
@@ -191,6 +192,9 @@ pub struct StoredBlock {
     pub height: u32,
     /// Void samples.
     pub void_count: u32,
+    /// The node (its index in the node table) whose coarse grid the samples are coded
+    /// against; `None` when the block is coded alone.
+    pub against: Option<u32>,
 }
 
 impl BlockRecord {
@@ -202,6 +206,7 @@ impl BlockRecord {
             width: self.width.get(),
             height: self.height.get(),
             void_count: self.void_count.get(),
+            against: self.against.get().checked_sub(1),
         }
     }
 
@@ -214,7 +219,8 @@ impl BlockRecord {
             width: U32::new(block.width),
             height: U32::new(block.height),
             void_count: U32::new(block.void_count),
-            reserved: U32::new(0),
+            // A node table holds fewer than 2^32 - 1 nodes (checked where it is written).
+            against: U32::new(block.against.map_or(0, |n| n.saturating_add(1))),
         }
     }
 

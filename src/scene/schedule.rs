@@ -33,10 +33,11 @@ use std::time::Instant;
 use serde::Serialize;
 
 use crate::error::Result;
+use crate::format::StoredNode;
 use crate::store::{Source, Store};
 
 use super::camera::Camera;
-use super::load::{load_blocks, LoadedBlock, PAYLOAD_GAP};
+use super::load::{load_blocks, load_blocks_reusing, LoadedBlock, PAYLOAD_GAP};
 use super::{Scene, SceneBlock, SceneOptions, Terrain};
 
 /// A block's identity: level and position (a node, or a physical block below a leaf).
@@ -119,7 +120,8 @@ pub struct FrameStats {
     pub loaded: u64,
     /// Triangles of the loaded blocks.
     pub loaded_triangles: u64,
-    /// Payload bytes loaded.
+    /// Payload bytes loaded: the blocks', and the grids the blocks are coded against
+    /// (format 4).
     pub loaded_bytes: u64,
     /// Loaded blocks the prefetcher had already read.
     pub prefetch_hits: u64,
@@ -267,10 +269,23 @@ impl<S: Source + 'static> Scheduler<S> {
         } else {
             missing.clone_from(&load);
         }
-        let read = load_blocks(&self.store, &missing, PAYLOAD_GAP)?;
+        // A block coded against its parent's grid takes the grid from the parent block when
+        // that is still resident (it was drawn in an earlier frame), instead of reading it.
+        let resident = &self.resident;
+        let held = |index: u32, node: &StoredNode| {
+            resident
+                .get(&BlockId {
+                    level: node.level,
+                    x: node.x,
+                    y: node.y,
+                })
+                .filter(|r| r.block.node == Some(index) && r.block.payload == node.payload)
+                .map(|r| Arc::clone(&r.loaded.heights))
+        };
+        let read = load_blocks_reusing(&self.store, &missing, PAYLOAD_GAP, &held)?;
         ready.extend(missing.into_iter().zip(read));
         for (block, loaded) in ready {
-            stats.loaded_bytes += loaded.stored.len() as u64;
+            stats.loaded_bytes += loaded.stored.len() as u64 + loaded.parent_bytes;
             stats.loaded_triangles += 2 * (b - 1) * (b - 1);
             self.resident_bytes += loaded.memory();
             self.resident.insert(

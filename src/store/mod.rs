@@ -72,7 +72,7 @@ use serde::Serialize;
 
 pub use crate::format::{ClusterInfo, FreePage, PayloadRef, ScanEntry, StoredBlock, StoredNode};
 pub use pagecache::ReadStats;
-pub use read::{Block, Children, CodeScan, Grid, HilbertScan, Layout};
+pub use read::{Block, Children, CodeScan, Grid, HilbertScan, Layout, ParentGrid};
 pub use source::{Bytes, Counted, FileSource, MmapSource, Source};
 pub use txn::{CommitSummary, Container, Recovery, Snapshot, WriteTxn};
 pub use verify::{

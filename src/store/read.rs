@@ -386,7 +386,8 @@ impl<S: Source> Store<S> {
     }
 
     /// Physical block `(x, y)`: its full-resolution samples, checked against their CRC, then
-    /// decoded (format 2; a 1.x file's are read zero-copy from a mapping).
+    /// decoded (format 2; a 1.x file's are read zero-copy from a mapping). A block coded
+    /// against its parent's grid (format 4) reads and decodes that grid too.
     pub fn block(&self, x: u32, y: u32) -> Result<Block<'_>> {
         let info = self.stored_block(x, y)?;
         let bytes = self.payload(info.payload)?;
@@ -395,12 +396,88 @@ impl<S: Source> Store<S> {
 
     /// Physical block `(x, y)` of block record `info` from its stored payload `bytes`
     /// (already checked against their CRC, by [`Store::payload`] or [`Store::payloads`]).
+    /// A block coded against its parent's grid reads that grid ([`Store::block_with`] takes
+    /// one already read).
     pub fn block_from<'a>(
         &self,
         x: u32,
         y: u32,
         info: StoredBlock,
         bytes: Cow<'a, [u8]>,
+    ) -> Result<Block<'a>> {
+        let parent = match self.against_node(x, y, &info)? {
+            Some((index, node)) => Some(ParentGrid::of(self, index, &node, &self.grid(&node)?)),
+            None => None,
+        };
+        self.block_with(x, y, info, bytes, parent.as_ref())
+    }
+
+    /// [`Store::block`] for callers that read many blocks in turn: the grid a block is coded
+    /// against is kept in `parent` and reused by the next block coded against the same one
+    /// (siblings), instead of being read again.
+    pub fn block_reusing(
+        &self,
+        x: u32,
+        y: u32,
+        parent: &mut Option<ParentGrid>,
+    ) -> Result<Block<'_>> {
+        let info = self.stored_block(x, y)?;
+        if let Some((index, node)) = self.against_node(x, y, &info)? {
+            if parent.as_ref().is_none_or(|p| p.node != index) {
+                *parent = Some(ParentGrid::of(self, index, &node, &self.grid(&node)?));
+            }
+        }
+        let bytes = self.payload(info.payload)?;
+        self.block_with(x, y, info, bytes, parent.as_ref())
+    }
+
+    /// The node whose grid block `(x, y)` of record `info` is coded against, if any: checked
+    /// to be the block's parent, the node at the level above covering it (format 4, I-11).
+    pub fn against_node(
+        &self,
+        x: u32,
+        y: u32,
+        info: &StoredBlock,
+    ) -> Result<Option<(u32, StoredNode)>> {
+        let Some(index) = info.against else {
+            return Ok(None);
+        };
+        let at = || format!("block ({x}, {y})");
+        let finest = self.domain().finest_level();
+        if !self.commit.blocks_against_parents() || finest == 0 {
+            return Err(self.corrupt(Violation::new(
+                Invariant::BlockTable,
+                at(),
+                format!(
+                    "coded against node {index}, which format {}.{} has no field for",
+                    self.commit.major.get(),
+                    self.commit.minor.get()
+                ),
+            )));
+        }
+        let node = self.node(index)?;
+        if (node.level, node.x, node.y) != (finest - 1, x / 2, y / 2) {
+            return Err(self.corrupt(Violation::new(
+                Invariant::BlockTable,
+                at(),
+                format!(
+                    "coded against node {index} at level {} ({}, {}), not its parent",
+                    node.level, node.x, node.y
+                ),
+            )));
+        }
+        Ok(Some((index, node)))
+    }
+
+    /// [`Store::block_from`] with the grid the block is coded against, if it is, already
+    /// read (`parent`, made by [`ParentGrid::of`] for the node [`Store::against_node`] names).
+    pub fn block_with<'a>(
+        &self,
+        x: u32,
+        y: u32,
+        info: StoredBlock,
+        bytes: Cow<'a, [u8]>,
+        parent: Option<&ParentGrid>,
     ) -> Result<Block<'a>> {
         let d = self.domain();
         let at = || format!("block ({x}, {y})");
@@ -423,8 +500,27 @@ impl<S: Source> Store<S> {
             )));
         }
         let bytes = if self.commit.payloads_coded() {
-            let decoded = payload::load_block(&bytes, w, h, info.void_count)
-                .map_err(|e| self.corrupt(Violation::new(Invariant::Payload, at(), e)))?;
+            let decoded = match (info.against, parent) {
+                (None, _) => payload::load_block(&bytes, w, h, info.void_count),
+                (Some(n), Some(p)) if p.node == n => {
+                    let (cols, rows) = payload::block_axes(&rect);
+                    payload::load_block_against(
+                        &bytes,
+                        (w, h, info.void_count),
+                        crate::codec::parent::Axes {
+                            cols: &cols,
+                            rows: &rows,
+                        },
+                        p.parent(),
+                    )
+                }
+                (Some(n), _) => {
+                    return Err(Error::Internal(format!(
+                        "block ({x}, {y}) is coded against node {n}, whose grid was not given"
+                    )))
+                }
+            }
+            .map_err(|e| self.corrupt(Violation::new(Invariant::Payload, at(), e)))?;
             Cow::Owned(decoded)
         } else {
             bytes
@@ -616,6 +712,74 @@ impl Block<'_> {
     /// little-endian `f32`, decoded from the stored payload.
     pub fn bytes(&self) -> &[u8] {
         &self.bytes
+    }
+}
+
+/// The decoded grid a block coded against its parent (format 4) is predicted from: the
+/// node's stored heights and where they lie.
+#[derive(Clone, Debug)]
+pub struct ParentGrid {
+    /// The node's index in the node table.
+    pub node: u32,
+    cols: Vec<u64>,
+    rows: Vec<u64>,
+    heights: Vec<f32>,
+}
+
+impl ParentGrid {
+    /// The grid `grid` of node `index` (`node`) of `store`, for decoding its children.
+    pub fn of<S: Source>(store: &Store<S>, index: u32, node: &StoredNode, grid: &Grid<'_>) -> Self {
+        let (cols, rows) = payload::grid_axes(store.domain(), node.level, node.x, node.y);
+        ParentGrid {
+            node: index,
+            cols,
+            rows,
+            heights: grid.view().stored().iter().map(|h| h.get()).collect(),
+        }
+    }
+
+    /// The grid of node `index` (`node`) from its full `b × b` heights as a renderer holds
+    /// them (a [`crate::scene::LoadedBlock`] of a node above the finest level): the stored
+    /// heights are their top-left `gw × gh` (format §7). Lets a cache of decoded grids stand
+    /// in for reading one again. `None` when `heights` is not `b × b`.
+    pub fn from_expanded<S: Source>(
+        store: &Store<S>,
+        index: u32,
+        node: &StoredNode,
+        heights: &[f32],
+    ) -> Option<Self> {
+        let d = store.domain();
+        let b = d.block_size() as usize;
+        if heights.len() != b * b || node.level >= d.finest_level() {
+            return None;
+        }
+        let (cols, rows) = payload::grid_axes(d, node.level, node.x, node.y);
+        let stored = heights
+            .chunks_exact(b)
+            .take(rows.len())
+            .flat_map(|row| row[..cols.len()].iter().copied())
+            .collect();
+        Some(ParentGrid {
+            node: index,
+            cols,
+            rows,
+            heights: stored,
+        })
+    }
+
+    fn parent(&self) -> crate::codec::parent::Parent<'_> {
+        crate::codec::parent::Parent {
+            at: crate::codec::parent::Axes {
+                cols: &self.cols,
+                rows: &self.rows,
+            },
+            heights: &self.heights,
+        }
+    }
+
+    /// Bytes of memory it holds.
+    pub fn memory(&self) -> u64 {
+        8 * (self.cols.len() + self.rows.len()) as u64 + 4 * self.heights.len() as u64
     }
 }
 

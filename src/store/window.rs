@@ -107,9 +107,10 @@ impl<S: Source> Store<S> {
         let (x0, y0) = (bx(window.col0), by(window.row0));
         let blocks = u64::from(bx(window.col1) - x0 + 1) * u64::from(by(window.row1) - y0 + 1);
         let phase = Phase::start(progress, "assembling blocks", blocks, Unit::Steps);
+        let mut parent = None;
         for y in y0..=by(window.row1) {
             for x in x0..=bx(window.col1) {
-                let block = self.block(x, y)?;
+                let block = self.block_reusing(x, y, &mut parent)?;
                 let view = block.view();
                 let r = block.rect;
                 let width = u64::from(view.width);

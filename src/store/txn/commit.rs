@@ -176,36 +176,25 @@ pub(crate) fn write_state<I: Io>(
         ..CommitSummary::default()
     };
 
-    // Payloads: changed ones are written, the others kept where they are.
+    // Payloads: changed ones are written, the others kept where they are. Grids first: a
+    // kept block coded against its parent's grid (format 4) stays only if that grid does.
     let shapes = tables::block_shapes(model);
     let grid_voids = tables::grid_void_flags(model);
     let mut kept: Vec<PayloadRef> = Vec::new();
-    let mut block_ref = Vec::with_capacity(shapes.len());
-    for (i, shape) in shapes.iter().enumerate() {
-        let old = old_blocks.get(i).ok_or_else(|| {
-            base.corrupt(Violation::new(
-                Invariant::BlockTable,
-                "block table",
-                "fewer records than blocks",
-            ))
-        })?;
-        if meets(&shape.rect) {
-            block_ref.push(sink.payload(tables::encode_block(model, shape, false))?);
-            summary.blocks += 1;
-        } else {
-            kept.push(old.payload());
-            block_ref.push(old.payload());
-        }
-    }
     let old_at: HashMap<(u8, u32, u32), _> = old_nodes
         .iter()
         .map(|n| ((n.level, n.x.get(), n.y.get()), n))
         .collect();
+    let mut new_at: HashMap<(u8, u32, u32), u32> = HashMap::new();
     let mut grid_ref = vec![PayloadRef::default(); tree.nodes().len()];
     let mut seen = HashSet::with_capacity(tree.nodes().len());
     for (i, n) in tree.nodes().iter().enumerate() {
         let at = (n.level, n.x, n.y);
         seen.insert(at);
+        let id = tables::node_id(i);
+        if n.level + 1 >= finest {
+            new_at.insert(at, id);
+        }
         let old = old_at.get(&at);
         match old {
             None => summary.nodes_added += 1,
@@ -223,7 +212,6 @@ pub(crate) fn write_state<I: Io>(
         if n.level == finest {
             continue;
         }
-        let id = tables::node_id(i);
         match old {
             Some(o) if o.level < finest && !meets(&tree.footprint(id)) => {
                 kept.push(o.payload());
@@ -233,6 +221,51 @@ pub(crate) fn write_state<I: Io>(
                 let bytes = tables::encode_grid(model, id, grid_voids[i], false);
                 grid_ref[i] = sink.payload(bytes)?;
                 summary.grids += 1;
+            }
+        }
+    }
+    let (cols, _) = d.nodes_across(finest);
+    let mut block_ref = Vec::with_capacity(shapes.len());
+    let mut against = Vec::with_capacity(shapes.len());
+    for (i, shape) in shapes.iter().enumerate() {
+        let old = old_blocks.get(i).ok_or_else(|| {
+            base.corrupt(Violation::new(
+                Invariant::BlockTable,
+                "block table",
+                "fewer records than blocks",
+            ))
+        })?;
+        let (x, y) = (
+            tables::node_id(i % cols as usize),
+            tables::node_id(i / cols as usize),
+        );
+        let parent_now = (finest > 0)
+            .then(|| new_at.get(&(finest - 1, x / 2, y / 2)).copied())
+            .flatten();
+        // A kept block coded against a grid still decodes if that grid is kept as it was.
+        let keep = match old.decode().against {
+            _ if meets(&shape.rect) => None,
+            None => Some(None),
+            Some(o) => {
+                let old_grid = old_nodes.get(o as usize).map(|n| n.payload());
+                parent_now
+                    .filter(|&p| Some(grid_ref[p as usize]) == old_grid)
+                    .map(Some)
+            }
+        };
+        match keep {
+            Some(a) => {
+                kept.push(old.payload());
+                block_ref.push(old.payload());
+                against.push(a);
+            }
+            None => {
+                let node = new_at.get(&(finest, x, y)).copied();
+                let (bytes, a) =
+                    tables::encode_block(model, shape, tables::block_parent(model, node), false);
+                block_ref.push(sink.payload(bytes)?);
+                against.push(a);
+                summary.blocks += 1;
             }
         }
     }
@@ -248,6 +281,7 @@ pub(crate) fn write_state<I: Io>(
     let refs = PayloadRefs {
         grid: grid_ref,
         block: block_ref,
+        against,
         grid_voids,
         shapes,
     };

@@ -211,12 +211,13 @@ pub(super) fn check_measured<S: Source>(
     }
     // Stand-ins: each void's mended height.
     let raster = model.raster();
+    let mut parent = None;
     for (i, b) in l.blocks.iter().enumerate() {
         if b.void_count.get() == 0 {
             continue;
         }
         let (x, y) = super::block_xy(i, cols);
-        let Some(block) = checks.absorb(store.block(x, y))? else {
+        let Some(block) = checks.absorb(store.block_reusing(x, y, &mut parent))? else {
             continue;
         };
         let view = block.view();

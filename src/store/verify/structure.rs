@@ -233,13 +233,31 @@ pub(super) fn check_blocks<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut
             );
         } else if u64::from(v) > rect.samples()
             || !payload_len_fits(store, b.payload_len.get(), payload::block_len(w, h, v))
-            || b.reserved.get() != 0
         {
             checks.fail(
                 id,
                 format!(
                     "block ({x}, {y}): {v} voids, {} payload bytes",
                     b.payload_len.get()
+                ),
+            );
+        }
+        // Format 4: a block coded against a grid names its parent, the node at the level
+        // above that covers it; before, the field was reserved.
+        let against = b.against.get();
+        let finest = d.finest_level();
+        let parent_ok = against == 0
+            || (store.commit_record().blocks_against_parents()
+                && finest > 0
+                && l.nodes.get((against - 1) as usize).is_some_and(|n| {
+                    (n.level, n.x.get(), n.y.get()) == (finest - 1, x / 2, y / 2)
+                }));
+        if !parent_ok {
+            checks.fail(
+                id,
+                format!(
+                    "block ({x}, {y}): coded against node {}, which is not its parent",
+                    against - 1
                 ),
             );
         }

@@ -38,8 +38,15 @@ const FIRST_TXN: u64 = 1;
 /// One payload, in file order.
 #[derive(Clone, Copy, Debug)]
 enum Item {
-    Grid { node: u32 },
-    Block { x: u32, y: u32 },
+    Grid {
+        node: u32,
+    },
+    /// A physical block, and its node when it is one of the tree's.
+    Block {
+        x: u32,
+        y: u32,
+        node: Option<u32>,
+    },
 }
 
 /// Writes the whole container to `w`, which must start empty (positioned at 0). A failed
@@ -182,7 +189,7 @@ fn write_payloads<W: Write>(
             let (gw, gh) = payload::grid_dims(&domain, n.level, n.x, n.y);
             payload::grid_len(gw, gh, grid_voids[node as usize])
         }
-        Item::Block { x, y } => shapes[block_index(x, y, cols)].raw_len(),
+        Item::Block { x, y, .. } => shapes[block_index(x, y, cols)].raw_len(),
     };
     let phase = crate::progress::Phase::start(
         &*options.progress,
@@ -192,29 +199,34 @@ fn write_payloads<W: Write>(
     );
     let mut grid = vec![PayloadRef::default(); tree.nodes().len()];
     let mut block = vec![PayloadRef::default(); shapes.len()];
+    let mut against = vec![None; shapes.len()];
     // Small payloads that repeat (sea, void and flat blocks code to a few bytes, the same
     // ones by the thousand) are stored once and shared by every record that has them.
     let mut small: HashMap<Vec<u8>, PayloadRef> = HashMap::new();
     // Coded in parallel a window at a time, written in order, each on the next aligned byte.
     const WINDOW: usize = 256;
     for w_items in items.chunks(WINDOW) {
-        let encoded: Vec<Vec<u8>> = w_items
+        let encoded: Vec<(Vec<u8>, Option<u32>)> = w_items
             .par_iter()
             .map(|item| match *item {
-                Item::Grid { node } => tables::encode_grid(
-                    model,
-                    node,
-                    grid_voids[node as usize],
-                    options.raw_payloads,
+                Item::Grid { node } => (
+                    tables::encode_grid(
+                        model,
+                        node,
+                        grid_voids[node as usize],
+                        options.raw_payloads,
+                    ),
+                    None,
                 ),
-                Item::Block { x, y } => tables::encode_block(
+                Item::Block { x, y, node } => tables::encode_block(
                     model,
                     &shapes[block_index(x, y, cols)],
+                    tables::block_parent(model, node).filter(|_| options.blocks_against_parents),
                     options.raw_payloads,
                 ),
             })
             .collect();
-        for (item, bytes) in w_items.iter().zip(encoded) {
+        for (item, (bytes, parent)) in w_items.iter().zip(encoded) {
             phase.advance(raw_len(item));
             let shared = (bytes.len() <= MAX_SHARED_PAYLOAD)
                 .then(|| small.get(&bytes).copied())
@@ -243,7 +255,10 @@ fn write_payloads<W: Write>(
             };
             match *item {
                 Item::Grid { node } => grid[node as usize] = r,
-                Item::Block { x, y } => block[block_index(x, y, cols)] = r,
+                Item::Block { x, y, .. } => {
+                    block[block_index(x, y, cols)] = r;
+                    against[block_index(x, y, cols)] = parent;
+                }
             }
         }
     }
@@ -251,6 +266,7 @@ fn write_payloads<W: Write>(
     Ok(PayloadRefs {
         grid,
         block,
+        against,
         grid_voids,
         shapes,
     })
@@ -330,7 +346,11 @@ fn payload_order(model: &Model) -> Vec<Item> {
     let mut items = Vec::new();
     for (i, n) in model.tree().nodes().iter().enumerate() {
         if n.level == finest {
-            items.push(Item::Block { x: n.x, y: n.y });
+            items.push(Item::Block {
+                x: n.x,
+                y: n.y,
+                node: Some(tables::node_id(i)),
+            });
             continue;
         }
         items.push(Item::Grid {
@@ -348,7 +368,7 @@ fn blocks_under(d: &Domain, level: u8, x: u32, y: u32, items: &mut Vec<Item>) {
         return;
     }
     if level == d.finest_level() {
-        items.push(Item::Block { x, y });
+        items.push(Item::Block { x, y, node: None });
         return;
     }
     let mut children: Vec<(HilbertKey, u32, u32)> = (0..4u32)

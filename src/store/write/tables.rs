@@ -6,6 +6,8 @@
 //! and hands them to the sink.
 
 use rayon::prelude::*;
+
+use crate::codec::parent::{Axes, Parent};
 use zerocopy::IntoBytes;
 
 use crate::error::{Error, Result};
@@ -181,6 +183,8 @@ impl BlockShape {
 pub(crate) struct PayloadRefs {
     pub grid: Vec<PayloadRef>,
     pub block: Vec<PayloadRef>,
+    /// Per block: the node whose grid it is coded against (format 4), if any.
+    pub against: Vec<Option<u32>>,
     pub grid_voids: Vec<bool>,
     pub shapes: Vec<BlockShape>,
 }
@@ -233,13 +237,14 @@ pub(crate) fn write_tables(
     let node_table = sink.tree(&node_records, tables::NODES)?;
 
     let mut block_records = Vec::with_capacity(refs.shapes.len() * tables::BLOCKS.record_size);
-    for (s, &payload) in refs.shapes.iter().zip(&refs.block) {
+    for ((s, &payload), &against) in refs.shapes.iter().zip(&refs.block).zip(&refs.against) {
         let (width, height) = s.size();
         let block = StoredBlock {
             payload,
             width,
             height,
             void_count: s.void_count,
+            against,
         };
         block_records.extend_from_slice(BlockRecord::encode(&block).as_bytes());
     }
@@ -393,8 +398,15 @@ pub(crate) fn clipped_grid(model: &Model, node: u32) -> (NodeGrid, u32, u32) {
 }
 
 /// The stored payload of the physical block of `shape` (format 2: coded; every code raw
-/// when `raw`).
-pub(crate) fn encode_block(model: &Model, shape: &BlockShape, raw_codes: bool) -> Vec<u8> {
+/// when `raw`), and the node whose grid it is coded against: `parent` (the block's parent
+/// node, when the block is a node of the tree) when that codes it smaller (format 4), else
+/// none. A tie goes to coding alone: then a reader needs nothing else to draw the block.
+pub(crate) fn encode_block(
+    model: &Model,
+    shape: &BlockShape,
+    parent: Option<u32>,
+    raw_codes: bool,
+) -> (Vec<u8>, Option<u32>) {
     let raster = model.raster();
     let r = shape.rect;
     let samples = (r.row0..=r.row1).flat_map(|row| {
@@ -402,5 +414,41 @@ pub(crate) fn encode_block(model: &Model, shape: &BlockShape, raw_codes: bool) -
     });
     let raw = payload::encode_block(samples, usize::try_from(r.samples()).unwrap_or(0));
     let (w, h) = shape.size();
-    payload::store_block(&raw, w, h, shape.void_count, coding(model, raw_codes))
+    let coding = coding(model, raw_codes);
+    let alone = payload::store_block(&raw, w, h, shape.void_count, coding);
+    let against = parent.filter(|_| !raw_codes).and_then(|p| {
+        let (g, _, _) = clipped_grid(model, p);
+        let n = model.tree().node(p);
+        let (pc, pr) = payload::grid_axes(model.domain(), n.level, n.x, n.y);
+        let (cols, rows) = payload::block_axes(&r);
+        let bytes = payload::store_block_against(
+            &raw,
+            (w, h, shape.void_count),
+            coding,
+            Axes {
+                cols: &cols,
+                rows: &rows,
+            },
+            Parent {
+                at: Axes {
+                    cols: &pc,
+                    rows: &pr,
+                },
+                heights: &g.heights,
+            },
+        )?;
+        Some((bytes, p))
+    });
+    match against {
+        Some((bytes, p)) if bytes.len() < alone.len() => (bytes, Some(p)),
+        _ => (alone, None),
+    }
+}
+
+/// The node whose grid block `(x, y)` may be coded against: its parent, when the block is a
+/// node of `model`'s tree (a block under a pruned leaf is coded alone: its leaf's grid
+/// already draws it, and it is often one shared constant).
+pub(crate) fn block_parent(model: &Model, node_at_finest: Option<u32>) -> Option<u32> {
+    let n = model.tree().node(node_at_finest?);
+    (n.parent != NO_PARENT).then_some(n.parent)
 }

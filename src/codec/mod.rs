@@ -12,6 +12,11 @@
 //! | 2 | lattice: integers `k` with `h = (k · q) as f32` exactly, predicted in 2D | every real sample lies on a lattice step `q` of [`LATTICE_STEPS`] |
 //! | 3 | pco on the `f32` values | floats off any lattice |
 //! | 4 | pco on 2D-predicted residuals of the `f32` bits | floats off any lattice |
+//! | 5, 6 | lattice or float, against a parent grid ([`parent`]) | a block whose parent's grid holds a quarter of its samples |
+//!
+//! Encodings 5 and 6 code a block *against its parent's grid*: the samples the parent holds
+//! cost nothing, the others are residuals against an interpolation of the parent. [`decode`]
+//! refuses them (it has no parent); [`parent::decode_against`] takes one.
 //!
 //! **The 2D predictor** is the planar (Lorenzo) predictor `left + up - up_left`, which is
 //! exact on any plane: residuals on terrain are small and centred on zero. **pco**
@@ -31,6 +36,8 @@
 //! line.)
 //!
 //! The module knows nothing of files: the format stores its output as payload bytes.
+
+pub mod parent;
 
 use pco::standalone::{simple_compress, DecompressorItem, FileDecompressor};
 use pco::{ChunkConfig, DeltaSpec};
@@ -59,6 +66,11 @@ pub enum Encoding {
     FloatPco = 3,
     /// pco on 2D-predicted residuals of the `f32` bits.
     FloatPredicted = 4,
+    /// Lattice integers of the samples the parent's grid does not hold, predicted from it
+    /// ([`parent`]; decoding needs the parent's heights).
+    LatticeFromParent = 5,
+    /// The `f32` bits of the samples the parent's grid does not hold, predicted from it.
+    FloatFromParent = 6,
 }
 
 impl Encoding {
@@ -70,6 +82,8 @@ impl Encoding {
             2 => Encoding::Lattice,
             3 => Encoding::FloatPco,
             4 => Encoding::FloatPredicted,
+            5 => Encoding::LatticeFromParent,
+            6 => Encoding::FloatFromParent,
             _ => return None,
         })
     }
@@ -247,6 +261,11 @@ pub fn decode(bytes: &[u8], width: usize, out: &mut [f32]) -> Result<(), DecodeE
             }
         }
         Encoding::FloatPco => pco_decode(body, out)?,
+        Encoding::LatticeFromParent | Encoding::FloatFromParent => {
+            return Err(length(
+                "coded against a parent grid: decode with codec::parent".into(),
+            ));
+        }
         Encoding::FloatPredicted => {
             let mut u = vec![0u32; out.len()];
             pco_decode(body, &mut u)?;

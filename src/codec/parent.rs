@@ -1,0 +1,615 @@
+//! Coding a payload against its parent's grid (format 4: a physical block against the grid
+//! of its parent node; `docs/next-pyramid.md` says why and what was measured).
+//!
+//! A node's samples lie on a grid of sample coordinates (columns and rows, clamped to the
+//! data edge as format §7's coarse grids are); its parent's grid lies on a coarser one that
+//! covers the same footprint. A child sample whose column and row are both among the
+//! parent's is *held* by the parent: its height is the parent's, and costs nothing. Every
+//! other sample is predicted from the parent's heights around it, separably, along rows then
+//! columns: a 4-point (−1, 9, 9, −1)/16 interpolation halfway between evenly spaced parent
+//! samples, linear interpolation elsewhere. Only the residuals of those samples are coded,
+//! in row-major order, with the codec's pco back end:
+//!
+//! | id | body |
+//! |---|---|
+//! | 5 lattice from parent | `q: f64`, a void flag (and bitmap over all samples, as encoding 2), a pco stream of `i64` residuals `k − round(p · (1/q))` |
+//! | 6 float from parent | a void flag (and bitmap), a pco stream of `u32` zigzag residuals of the order-preserving bits against those of `p as f32` |
+//!
+//! `p` is the prediction, computed in `f64` in a fixed order, so encoder and decoder agree
+//! bit for bit. A void sample is coded by its bitmap bit alone. An encoding applies only
+//! when every held sample that is not a void equals the parent's height bit for bit (a
+//! coarse grid is a decimation of the same mended heights, so it does in a valid tree).
+
+use pco::standalone::simple_compress;
+use pco::{ChunkConfig, DeltaSpec};
+
+use super::{
+    from_ordered, is_lattice_value, lattice_value, pco_decode, to_ordered, DecodeError, Encoding,
+    LATTICE_STEPS, MAX_LATTICE_INDEX, VOID_BITS,
+};
+
+/// Where a grid's samples lie: sample columns and rows, each non-decreasing.
+#[derive(Clone, Copy, Debug)]
+pub struct Axes<'a> {
+    /// Column of each sample column.
+    pub cols: &'a [u64],
+    /// Row of each sample row.
+    pub rows: &'a [u64],
+}
+
+impl Axes<'_> {
+    fn len(&self) -> usize {
+        self.cols.len() * self.rows.len()
+    }
+}
+
+/// The grid a payload is coded against: where its samples lie and their decoded heights
+/// (row-major, voids mended).
+#[derive(Clone, Copy, Debug)]
+pub struct Parent<'a> {
+    /// Where its samples lie.
+    pub at: Axes<'a>,
+    /// Its heights.
+    pub heights: &'a [f32],
+}
+
+/// How one child coordinate is predicted along one axis: held (the parent's index), or
+/// interpolated from parent indexes with weights.
+#[derive(Clone, Debug, PartialEq)]
+enum Along {
+    Held(usize),
+    /// Up to four `(parent index, weight)` terms; the count used.
+    Mixed([(usize, f64); 4], usize),
+}
+
+impl Along {
+    /// Its terms, without allocating (the decoder evaluates one per sample).
+    fn terms<'a>(&'a self, one: &'a mut [(usize, f64); 1]) -> &'a [(usize, f64)] {
+        match self {
+            Along::Held(i) => {
+                one[0] = (*i, 1.0);
+                &one[..]
+            }
+            Along::Mixed(v, n) => &v[..*n],
+        }
+    }
+}
+
+/// The interpolation at `x` from `xs` (the parent's coordinates, non-decreasing).
+fn along(xs: &[u64], x: u64) -> Option<Along> {
+    let hi = xs.partition_point(|&p| p < x);
+    if hi < xs.len() && xs[hi] == x {
+        return Some(Along::Held(hi));
+    }
+    if hi == 0 || hi >= xs.len() {
+        return None; // outside the parent: not a child of it
+    }
+    let lo = hi - 1;
+    let (a, b) = (xs[lo], xs[hi]);
+    let step = b - a;
+    let t = (x - a) as f64 / step as f64;
+    let even = |i: usize, j: usize| xs[j] - xs[i] == step;
+    if 2 * (x - a) == step && lo >= 1 && hi + 1 < xs.len() && even(lo - 1, lo) && even(hi, hi + 1) {
+        return Some(Along::Mixed(
+            [
+                (lo - 1, -1.0 / 16.0),
+                (lo, 9.0 / 16.0),
+                (hi, 9.0 / 16.0),
+                (hi + 1, -1.0 / 16.0),
+            ],
+            4,
+        ));
+    }
+    Some(Along::Mixed(
+        [(lo, 1.0 - t), (hi, t), (0, 0.0), (0, 0.0)],
+        2,
+    ))
+}
+
+/// Per child column and row, how it is predicted; `None` when the child does not lie inside
+/// the parent.
+fn plan(at: Axes<'_>, parent: Axes<'_>) -> Option<(Vec<Along>, Vec<Along>)> {
+    let cols = at
+        .cols
+        .iter()
+        .map(|&c| along(parent.cols, c))
+        .collect::<Option<Vec<_>>>()?;
+    let rows = at
+        .rows
+        .iter()
+        .map(|&r| along(parent.rows, r))
+        .collect::<Option<Vec<_>>>()?;
+    Some((cols, rows))
+}
+
+/// The predictions of a child from its parent's heights, evaluated separably: for every
+/// parent row a child row needs, the interpolation along it at every child column
+/// (`Σ_i wx_i · G(i, j)`, the inner sum of container.md §7), once; then a child sample's
+/// prediction is `Σ_j wy_j · inner(j, c)`, in the order of `j`. Encoder and decoder share it,
+/// so their predictions agree bit for bit, and a sample costs at most four multiply-adds.
+struct Predictor<'a> {
+    rows: &'a [Along],
+    /// `inner[(j - first) * w + c]` for parent rows `first..first + n`.
+    inner: Vec<f64>,
+    first: usize,
+    w: usize,
+}
+
+impl<'a> Predictor<'a> {
+    fn new(cols: &[Along], rows: &'a [Along], parent: &Parent<'_>) -> Self {
+        let pw = parent.at.cols.len();
+        let mut one = [(0, 0.0)];
+        let (mut first, mut last) = (usize::MAX, 0);
+        for r in rows {
+            for &(j, _) in r.terms(&mut one) {
+                first = first.min(j);
+                last = last.max(j);
+            }
+        }
+        let w = cols.len();
+        let n = if first <= last { last - first + 1 } else { 0 };
+        let mut inner = vec![0.0f64; n * w];
+        for (k, chunk) in inner.chunks_exact_mut(w.max(1)).enumerate().take(n) {
+            let j = first + k;
+            for (c, slot) in cols.iter().zip(chunk.iter_mut()) {
+                let mut one = [(0, 0.0)];
+                let mut row = 0.0f64;
+                for &(i, a) in c.terms(&mut one) {
+                    row += a * f64::from(parent.heights[j * pw + i]);
+                }
+                *slot = row;
+            }
+        }
+        Predictor {
+            rows,
+            inner,
+            first,
+            w,
+        }
+    }
+
+    /// The prediction at child column `c`, row `r`.
+    #[inline]
+    fn at(&self, c: usize, r: usize) -> f64 {
+        self.row(r).at(c)
+    }
+
+    /// Child row `r`'s terms, resolved to rows of `inner`: the decoder's inner loop.
+    #[inline]
+    fn row(&self, r: usize) -> RowPredictor<'_> {
+        let mut one = [(0, 0.0)];
+        let mut terms = [(0usize, 0.0f64); 4];
+        let mut n = 0;
+        for (slot, &(j, b)) in terms.iter_mut().zip(self.rows[r].terms(&mut one)) {
+            *slot = ((j - self.first) * self.w, b);
+            n += 1;
+        }
+        RowPredictor {
+            inner: &self.inner,
+            terms,
+            n,
+        }
+    }
+}
+
+/// [`Predictor`] along one child row.
+struct RowPredictor<'a> {
+    inner: &'a [f64],
+    /// `(start of the parent row in inner, weight)`.
+    terms: [(usize, f64); 4],
+    n: usize,
+}
+
+impl RowPredictor<'_> {
+    /// The prediction at child column `c`: `Σ_j wy_j · inner(j, c)`, in the order of `j`.
+    #[inline]
+    fn at(&self, c: usize) -> f64 {
+        let mut p = 0.0f64;
+        for &(start, b) in &self.terms[..self.n] {
+            p += b * self.inner[start + c];
+        }
+        p
+    }
+}
+
+/// `x.round() as i64` (half away from zero, saturating, NaN to 0), without a call to libm's
+/// `round` (the decoder does this once a sample). `x - trunc(x)` is exact for any `f64`
+/// below 2^63 in magnitude; past it the cast saturates and so does the correction.
+/// Branch-free: which way a prediction rounds is as good as random, and a mispredicted
+/// branch per sample was a fifth of decoding.
+#[inline]
+fn round_to_i64(x: f64) -> i64 {
+    let t = x as i64;
+    let frac = x - t as f64;
+    t.saturating_add(i64::from(frac >= 0.5))
+        .saturating_sub(i64::from(frac <= -0.5))
+}
+
+fn void_bitmap(samples: &[f32]) -> Option<Vec<u8>> {
+    let mut bitmap = vec![0u8; samples.len().div_ceil(8)];
+    let mut any = false;
+    for (i, v) in samples.iter().enumerate() {
+        if v.is_nan() {
+            bitmap[i / 8] |= 1 << (i % 8);
+            any = true;
+        }
+    }
+    any.then_some(bitmap)
+}
+
+/// Encodes `samples` (row-major, at `at`, voids the canonical NaN) against `parent`: the
+/// lattice encoding when every real sample lies on a lattice step (one of
+/// [`LATTICE_STEPS`] or `step`), else the float one. `None` when the child does not lie
+/// inside the parent, a held sample differs from the parent's height, or a sample is a NaN
+/// that is not the canonical void.
+pub fn encode_against(
+    samples: &[f32],
+    at: Axes<'_>,
+    parent: Parent<'_>,
+    step: Option<f64>,
+) -> Option<Vec<u8>> {
+    if samples.len() != at.len() || parent.heights.len() != parent.at.len() {
+        return None;
+    }
+    if samples
+        .iter()
+        .any(|v| v.is_nan() && v.to_bits() != VOID_BITS)
+    {
+        return None;
+    }
+    let (cols, rows) = plan(at, parent.at)?;
+    let mut steps = LATTICE_STEPS.to_vec();
+    if let Some(q) = step.filter(|q| q.is_finite() && *q > 0.0) {
+        steps.push(q);
+        steps.sort_by(|a, b| b.total_cmp(a));
+    }
+    let lattice = steps.into_iter().find(|&q| {
+        samples
+            .iter()
+            .all(|&v| v.is_nan() || (is_lattice_value(v, q) && v.is_finite()))
+    });
+    let w = at.cols.len();
+    let pw = parent.at.cols.len();
+    let predictor = Predictor::new(&cols, &rows, &parent);
+    let mut ints: Vec<i64> = Vec::new();
+    let mut bits: Vec<u32> = Vec::new();
+    for (j, ry) in rows.iter().enumerate() {
+        for (i, cx) in cols.iter().enumerate() {
+            let v = samples[j * w + i];
+            if v.is_nan() {
+                continue;
+            }
+            if let (Along::Held(pi), Along::Held(pj)) = (cx, ry) {
+                if parent.heights[pj * pw + pi].to_bits() != v.to_bits() {
+                    return None;
+                }
+                continue;
+            }
+            let p = predictor.at(i, j);
+            match lattice {
+                Some(q) => {
+                    let k = (f64::from(v) / q).round() as i64;
+                    ints.push(k.wrapping_sub(round_to_i64(p * (1.0 / q))));
+                }
+                None => {
+                    let d = to_ordered(v).wrapping_sub(to_ordered(p as f32)) as i32;
+                    bits.push(((d << 1) ^ (d >> 31)) as u32);
+                }
+            }
+        }
+    }
+    let config = ChunkConfig::default().with_delta_spec(DeltaSpec::NoOp);
+    let mut out = Vec::new();
+    match lattice {
+        Some(q) => {
+            out.push(Encoding::LatticeFromParent as u8);
+            out.extend_from_slice(&q.to_le_bytes());
+        }
+        None => out.push(Encoding::FloatFromParent as u8),
+    }
+    match void_bitmap(samples) {
+        Some(bitmap) => {
+            out.push(1);
+            out.extend_from_slice(&bitmap);
+        }
+        None => out.push(0),
+    }
+    let coded = match lattice {
+        Some(_) => simple_compress(&ints, &config).ok()?,
+        None => simple_compress(&bits, &config).ok()?,
+    };
+    out.extend_from_slice(&coded);
+    Some(out)
+}
+
+/// Decodes `bytes` (encoding 5 or 6) at `at` against `parent` into `out` (`at`'s samples,
+/// row-major). Hostile bytes, a parent that does not fit, or a count that does not match
+/// are errors; nothing panics, and nothing is allocated past `out`'s size.
+pub fn decode_against(
+    bytes: &[u8],
+    at: Axes<'_>,
+    parent: Parent<'_>,
+    out: &mut [f32],
+) -> Result<(), DecodeError> {
+    let encoding =
+        Encoding::of(bytes).ok_or(DecodeError::UnknownEncoding(bytes.first().copied()))?;
+    let length = |detail: String| DecodeError::Length {
+        encoding,
+        len: bytes.len(),
+        detail,
+    };
+    if out.len() != at.len() || parent.heights.len() != parent.at.len() {
+        return Err(length(format!(
+            "{} samples at a {}-sample placement, a parent of {} heights at {}",
+            out.len(),
+            at.len(),
+            parent.heights.len(),
+            parent.at.len()
+        )));
+    }
+    let mut body = &bytes[1..];
+    let q = match encoding {
+        Encoding::LatticeFromParent => {
+            let (q, rest) = body
+                .split_first_chunk::<8>()
+                .ok_or_else(|| length("shorter than its step".into()))?;
+            let q = f64::from_le_bytes(*q);
+            if !(q.is_finite() && q > 0.0) {
+                return Err(DecodeError::Step(q));
+            }
+            body = rest;
+            Some(q)
+        }
+        Encoding::FloatFromParent => None,
+        _ => return Err(length("not coded against a parent".into())),
+    };
+    let n = out.len();
+    let (voids, rest) = match body.split_first() {
+        Some((0, rest)) => (None, rest),
+        Some((1, rest)) if rest.len() >= n.div_ceil(8) => {
+            let (m, rest) = rest.split_at(n.div_ceil(8));
+            (Some(m), rest)
+        }
+        _ => return Err(length("a void flag and its bitmap".into())),
+    };
+    let void = |i: usize| voids.is_some_and(|m| m[i / 8] >> (i % 8) & 1 == 1);
+    let (cols, rows) = plan(at, parent.at)
+        .ok_or_else(|| length("the placement is not inside the parent".into()))?;
+    let w = at.cols.len();
+    let held_cols = cols.iter().filter(|c| matches!(c, Along::Held(_))).count();
+    let held_rows = rows.iter().filter(|r| matches!(r, Along::Held(_))).count();
+    let voids_total = voids.map_or(0, |m| {
+        (0..n).filter(|&i| m[i / 8] >> (i % 8) & 1 == 1).count()
+    });
+    // Voids among the held samples are neither held nor coded: count them back.
+    let held_voids = if voids_total == 0 {
+        0
+    } else {
+        rows.iter()
+            .enumerate()
+            .filter(|(_, r)| matches!(r, Along::Held(_)))
+            .map(|(j, _)| {
+                cols.iter()
+                    .enumerate()
+                    .filter(|&(i, c)| matches!(c, Along::Held(_)) && void(j * w + i))
+                    .count()
+            })
+            .sum()
+    };
+    let coded = n - voids_total - (held_cols * held_rows - held_voids);
+    let pw = parent.at.cols.len();
+    let predictor = Predictor::new(&cols, &rows, &parent);
+    // Row by row: what a sample needs (held, void, or its prediction) is known from its
+    // column's and row's plans.
+    match q {
+        Some(q) => {
+            // The prediction's index: `p · (1/q)`, one division a block (container.md §7).
+            let inv_q = 1.0 / q;
+            let mut r = vec![0i64; coded];
+            pco_decode(rest, &mut r)?;
+            let mut next = 0usize;
+            let mut out_of_range = false;
+            for (j, (ry, row)) in rows.iter().zip(out.chunks_exact_mut(w.max(1))).enumerate() {
+                let along = predictor.row(j);
+                for (i, (cx, o)) in cols.iter().zip(row.iter_mut()).enumerate() {
+                    let idx = j * w + i;
+                    *o = if void(idx) {
+                        f32::from_bits(VOID_BITS)
+                    } else if let (Along::Held(pi), Along::Held(pj)) = (cx, ry) {
+                        parent.heights[pj * pw + pi]
+                    } else {
+                        let p = along.at(i);
+                        let k =
+                            round_to_i64(p * inv_q).wrapping_add(r.get(next).copied().unwrap_or(0));
+                        next += 1;
+                        out_of_range |= k.unsigned_abs() > MAX_LATTICE_INDEX as u64;
+                        lattice_value(k as f64, q)
+                    };
+                }
+            }
+            if out_of_range {
+                return Err(DecodeError::Pco("a lattice index is out of range".into()));
+            }
+        }
+        None => {
+            let mut r = vec![0u32; coded];
+            pco_decode(rest, &mut r)?;
+            let mut next = r.into_iter();
+            for (j, (ry, row)) in rows.iter().zip(out.chunks_exact_mut(w.max(1))).enumerate() {
+                let along = predictor.row(j);
+                for (i, (cx, o)) in cols.iter().zip(row.iter_mut()).enumerate() {
+                    let idx = j * w + i;
+                    *o = if void(idx) {
+                        f32::from_bits(VOID_BITS)
+                    } else if let (Along::Held(pi), Along::Held(pj)) = (cx, ry) {
+                        parent.heights[pj * pw + pi]
+                    } else {
+                        let z = next.next().unwrap_or(0);
+                        let d = ((z >> 1) as i32 ^ -((z & 1) as i32)) as u32;
+                        from_ordered(to_ordered(along.at(i) as f32).wrapping_add(d))
+                    };
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    #[test]
+    fn round_to_i64_is_round_then_cast() {
+        let cases = [
+            0.0,
+            -0.0,
+            0.5,
+            -0.5,
+            1.5,
+            -2.5,
+            0.49999999999999994,
+            -0.49999999999999994,
+            4503599627370495.5,
+            4503599627370497.0,
+            9.3e18,
+            -9.3e18,
+            9.223372036854775e18,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+            f64::MAX,
+            f64::MIN_POSITIVE,
+            1e-310,
+        ];
+        for x in cases {
+            assert_eq!(round_to_i64(x), x.round() as i64, "{x:e}");
+        }
+    }
+
+    proptest! {
+        #[test]
+        fn round_to_i64_agrees_everywhere(bits in any::<u64>()) {
+            let x = f64::from_bits(bits);
+            prop_assert_eq!(round_to_i64(x), x.round() as i64);
+        }
+
+        #[test]
+        fn round_to_i64_agrees_on_halves(k in -(1i64 << 53)..(1i64 << 53)) {
+            let x = k as f64 / 2.0;
+            prop_assert_eq!(round_to_i64(x), x.round() as i64);
+        }
+    }
+
+    /// A parent grid of side `b` at stride `2s` from `origin`, clamped to `edge`, and its
+    /// child in quadrant `(dx, dy)` at stride `s`: coordinates as format §7 gives them.
+    fn axis(origin: u64, stride: u64, b: u64, edge: u64) -> Vec<u64> {
+        let k = (0..b).filter(|&i| origin + i * stride <= edge).count() as u64;
+        let n = if k == b { b } else { k + 1 };
+        (0..n).map(|i| (origin + i * stride).min(edge)).collect()
+    }
+
+    fn field(c: u64, r: u64, seed: u64, lattice: bool) -> f32 {
+        let v = ((c as f64 * 0.37 + seed as f64).sin() * 40.0
+            + (r as f64 * 0.23).cos() * 25.0
+            + ((c * 7 + r * 13 + seed) % 5) as f64 * 0.3) as f32;
+        if lattice {
+            v.round() + 0.0 // -0.0 is on no lattice
+        } else {
+            v
+        }
+    }
+
+    proptest! {
+        /// Any child of any parent (clipped at the data edge or not, lattice or float, with
+        /// voids): encoding against the parent, then decoding, gives the child's bits.
+        #[test]
+        fn a_child_round_trips_against_its_parent(
+            b in prop::sample::select(vec![5u64, 9, 17]),
+            s in prop::sample::select(vec![1u64, 2, 4]),
+            q in 0u64..4,
+            width in 3u64..80,
+            height in 3u64..80,
+            seed in 0u64..1000,
+            lattice in any::<bool>(),
+            voids in any::<bool>(),
+        ) {
+            let (dx, dy) = (q & 1, q >> 1);
+            let cells = (b - 1) * s; // a child's span; the parent's is twice it
+            let (w1, h1) = (width - 1, height - 1);
+            let (pc, pr) = (axis(0, 2 * s, b, w1), axis(0, 2 * s, b, h1));
+            let (c0, r0) = (dx * cells, dy * cells);
+            prop_assume!(c0 <= w1 && r0 <= h1);
+            let (cc, cr) = (axis(c0, s, b, w1), axis(r0, s, b, h1));
+            let heights: Vec<f32> = pr.iter().flat_map(|&r| pc.iter().map(move |&c| field(c, r, seed, lattice))).collect();
+            let samples: Vec<f32> = cr.iter().flat_map(|&r| cc.iter().map(move |&c| {
+                if voids && (c * 3 + r * 5 + seed) % 11 == 0 { f32::from_bits(VOID_BITS) } else { field(c, r, seed, lattice) }
+            })).collect();
+            let parent = Parent { at: Axes { cols: &pc, rows: &pr }, heights: &heights };
+            let at = Axes { cols: &cc, rows: &cr };
+            let bytes = encode_against(&samples, at, parent, None).expect("a child of its parent encodes");
+            prop_assert_eq!(
+                Encoding::of(&bytes),
+                Some(if lattice { Encoding::LatticeFromParent } else { Encoding::FloatFromParent })
+            );
+            let mut out = vec![0.0f32; samples.len()];
+            decode_against(&bytes, at, parent, &mut out).expect("decodes");
+            for (a, b) in samples.iter().zip(&out) {
+                prop_assert_eq!(a.to_bits(), b.to_bits());
+            }
+            // The plain decoder refuses it: it needs the parent.
+            prop_assert!(super::super::decode(&bytes, cc.len(), &mut out).is_err());
+        }
+
+        /// Damaged bytes, a wrong parent or a wrong placement decode or fail; nothing
+        /// panics.
+        #[test]
+        fn damaged_bytes_decode_or_fail(at_byte in 0usize..400, value in any::<u8>(), cut in 0usize..400, shift in 0u64..3) {
+            let pc: Vec<u64> = (0..9).map(|i| i * 2).collect();
+            let heights: Vec<f32> = (0..81).map(|i| (i % 9 * 3 + i / 9) as f32).collect();
+            let cc: Vec<u64> = (0..9).collect();
+            let samples: Vec<f32> = (0..81).map(|i| {
+                let (c, r) = (i % 9, i / 9);
+                if c % 2 == 0 && r % 2 == 0 { heights[(r / 2) * 9 + c / 2] } else { (c * 3 + r) as f32 + 0.5 }
+            }).collect();
+            let parent = Parent { at: Axes { cols: &pc, rows: &pc }, heights: &heights };
+            let mut bytes = encode_against(&samples, Axes { cols: &cc, rows: &cc }, parent, None).unwrap();
+            let i = at_byte % bytes.len();
+            bytes[i] = value;
+            bytes.truncate(cut.max(1));
+            let moved: Vec<u64> = cc.iter().map(|c| c + shift).collect();
+            let mut out = vec![0.0f32; 81];
+            let _ = decode_against(&bytes, Axes { cols: &moved, rows: &cc }, parent, &mut out);
+        }
+    }
+
+    #[test]
+    fn a_held_sample_that_differs_from_the_parent_is_not_encoded() {
+        let pc = [0u64, 2, 4];
+        let heights = [1.0f32; 9];
+        let cc = [0u64, 1, 2];
+        let mut samples = [1.0f32; 9];
+        let parent = Parent {
+            at: Axes {
+                cols: &pc,
+                rows: &pc,
+            },
+            heights: &heights,
+        };
+        let at = Axes {
+            cols: &cc,
+            rows: &cc,
+        };
+        assert!(encode_against(&samples, at, parent, None).is_some());
+        samples[0] = 2.0; // (0, 0) is held
+        assert!(encode_against(&samples, at, parent, None).is_none());
+        // Outside the parent: not its child.
+        let far = [5u64, 6, 7];
+        let outside = Axes {
+            cols: &far,
+            rows: &cc,
+        };
+        assert!(encode_against(&[1.0; 9], outside, parent, None).is_none());
+    }
+}
