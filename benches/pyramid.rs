@@ -24,7 +24,8 @@
 //! `u32` map of their `f32` bits. Voids are left out of the residuals (a
 //! bitmap bit each). Every residual stream is decoded back and checked before it counts.
 //!
-//!     cargo bench --bench pyramid          (needs ../shared/data)
+//!     cargo bench --bench pyramid          (needs ../shared/data; PYRAMID_SCENES=1 adds
+//!                                           the per-scene estimate)
 
 use std::path::PathBuf;
 
@@ -298,6 +299,8 @@ struct Measured {
     within: usize,
     today_of: Vec<usize>,
     cubic_of: Vec<usize>,
+    /// Per finest node: its block's non-held samples coded with the planar predictor.
+    planar_held_of: Vec<usize>,
 }
 
 impl Measured {
@@ -305,6 +308,27 @@ impl Measured {
     /// smaller than coding it alone.
     fn against_parent(&self, i: usize) -> bool {
         self.cubic_of[i] < self.today_of[i]
+    }
+
+    /// File bytes when only finest-level nodes may be coded against their parent, taking
+    /// the smallest of alone, the parent's interpolation and (`planar`) the planar predictor
+    /// over the block's own samples with the held ones free.
+    fn finest_hybrid(&self, levels: &[u8], finest: u8, planar: bool) -> usize {
+        let in_tree_today: usize = self.today_of.iter().sum();
+        let chosen: usize = (0..self.today_of.len())
+            .map(|i| {
+                if levels[i] != finest {
+                    return self.today_of[i];
+                }
+                let best = self.today_of[i].min(self.cubic_of[i]);
+                if planar {
+                    best.min(self.planar_held_of[i])
+                } else {
+                    best
+                }
+            })
+            .sum();
+        self.today_grids + self.today_blocks - in_tree_today + chosen
     }
 
     /// File bytes when each payload takes the smaller of the two codings (physical blocks
@@ -356,6 +380,7 @@ fn measure(model: &Model, space: Space) -> Measured {
         within: 0,
         today_of: vec![0; nodes.len()],
         cubic_of: vec![0; nodes.len()],
+        planar_held_of: vec![usize::MAX; nodes.len()],
     };
     let hier = |v: &[f32], w: usize| {
         let (r, voids) = hierarchical(v, w, v.len() / w, space, true);
@@ -423,10 +448,59 @@ fn measure(model: &Model, space: Space) -> Measured {
             if let Some(&i) = node_at.get(&(finest, x, y)) {
                 m.today_of[i] = today;
                 m.cubic_of[i] = c;
+                let (r, voids) = planar_held(&s, &v, ps, space);
+                m.planar_held_of[i] = coded_len(&r, v.len(), voids);
             }
         }
     }
     m
+}
+
+/// Residuals of the samples of block `child` that `parent` does not hold, predicted with the
+/// planar predictor of the codec (`left + up − up_left` over the coded integers, in raster
+/// order) from the block's own samples: the held ones are known before any is decoded, so
+/// they cost nothing and still serve as neighbours. Voids take their prediction.
+fn planar_held(child: &Samples, cv: &[f32], parent: &Samples, space: Space) -> (Vec<i64>, usize) {
+    let w = child.cols.len();
+    let held_col: Vec<bool> = child
+        .cols
+        .iter()
+        .map(|c| parent.cols.binary_search(c).is_ok())
+        .collect();
+    let held_row: Vec<bool> = child
+        .rows
+        .iter()
+        .map(|r| parent.rows.binary_search(r).is_ok())
+        .collect();
+    let mut k: Vec<i64> = cv
+        .iter()
+        .map(|&x| if x.is_nan() { 0 } else { Space::of(x, space) })
+        .collect();
+    let mut out = Vec::new();
+    let mut voids = 0;
+    for (j, &hr) in held_row.iter().enumerate() {
+        for (i, &hc) in held_col.iter().enumerate() {
+            let idx = j * w + i;
+            let p = match (i, j) {
+                (0, 0) => 0,
+                (_, 0) => k[idx - 1],
+                (0, _) => k[idx - w],
+                _ => k[idx - 1]
+                    .wrapping_add(k[idx - w])
+                    .wrapping_sub(k[idx - w - 1]),
+            };
+            if cv[idx].is_nan() {
+                voids += 1;
+                k[idx] = p;
+                continue;
+            }
+            if hr && hc {
+                continue; // known from the parent
+            }
+            out.push(k[idx].wrapping_sub(p));
+        }
+    }
+    (out, voids)
 }
 
 /// The space a DEM's heights are coded in: the coarsest lattice every height lies on, else
@@ -458,6 +532,7 @@ fn main() {
         "| DEM | space | today grids | today blocks | today total | bilinear total | cubic total | cubic / today | within payloads | / today | hybrid | / today | codec::parent total |"
     );
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    let mut finest_rows = Vec::new();
     for (name, rel) in files {
         let hf = load(&data(rel), &IngestOptions::default())
             .unwrap_or_else(|e| panic!("{rel}: {e} (this benchmark needs ../shared/data)"));
@@ -466,6 +541,17 @@ fn main() {
         let m = measure(&model, space);
         let today = m.today_grids + m.today_blocks;
         let hybrid = m.hybrid();
+        let levels: Vec<u8> = model.tree().nodes().iter().map(|n| n.level).collect();
+        let f = model.domain().finest_level();
+        let (f2, f3) = (
+            m.finest_hybrid(&levels, f, false),
+            m.finest_hybrid(&levels, f, true),
+        );
+        finest_rows.push(format!(
+            "| {name} | {today} | {f2} | {:.2} | {f3} | {:.2} |",
+            f2 as f64 / today as f64,
+            f3 as f64 / today as f64
+        ));
         println!(
             "| {name} | {label} | {} | {} | {today} | {} | {} | {:.2} | {} | {:.2} | {hybrid} | {:.2} | {} |",
             m.today_grids,
@@ -479,7 +565,19 @@ fn main() {
             m.codec
         );
     }
-    scenes();
+    println!(
+        "\nFormat 4 codes only physical blocks against their parent: payload bytes with the \
+         smaller of alone and the parent's interpolation (format 4.0), and with a third \
+         choice, the planar predictor over the block's own samples with the held ones free.\n"
+    );
+    println!("| DEM | today (alone) | 4.0: alone or interpolation | / today | + planar with held | / today |");
+    println!("|---|---|---|---|---|---|");
+    for r in finest_rows {
+        println!("{r}");
+    }
+    if std::env::var_os("PYRAMID_SCENES").is_some() {
+        scenes();
+    }
 }
 
 /// What a scene would read: its blocks' payloads today, against the cubic pyramid's

@@ -31,6 +31,14 @@ fn bytes_of(field: &Heightfield, block_size: u32, options: &WriteOptions) -> Vec
     out.into_inner()
 }
 
+/// Every block coded alone, as format 3 coded them.
+fn alone_options() -> WriteOptions {
+    WriteOptions {
+        blocks_against_parents: false,
+        ..WriteOptions::default()
+    }
+}
+
 /// Blocks coded against their parent, over all blocks.
 fn coded_against<S: fmrh::store::Source>(store: &Store<S>) -> (usize, usize) {
     let d = *store.domain();
@@ -59,14 +67,7 @@ fn verify_full(bytes: Vec<u8>) -> fmrh::VerifyReport {
 fn a_lattice_field_codes_blocks_against_parents_and_is_smaller() {
     let field = hills(300, 230);
     let with = bytes_of(&field, 33, &WriteOptions::default());
-    let alone = bytes_of(
-        &field,
-        33,
-        &WriteOptions {
-            blocks_against_parents: false,
-            ..WriteOptions::default()
-        },
-    );
+    let alone = bytes_of(&field, 33, &alone_options());
     let store = Store::from_bytes(with.clone()).unwrap();
     assert_eq!(store.state().format_version, (4, 0));
     let (against, all) = coded_against(&store);
@@ -189,14 +190,7 @@ fn a_block_naming_another_node_is_corrupt() {
         "{report:#?}"
     );
     // A block coded alone whose record names its parent does not decode against it.
-    let alone = bytes_of(
-        &field,
-        33,
-        &WriteOptions {
-            blocks_against_parents: false,
-            ..WriteOptions::default()
-        },
-    );
+    let alone = bytes_of(&field, 33, &alone_options());
     let store = Store::from_bytes(alone.clone()).unwrap();
     let parent = store
         .nodes()
@@ -260,7 +254,7 @@ proptest! {
 #[test]
 fn the_cli_picks_small_pages_and_codes_against_parents_unless_told() {
     let dir = tempfile::tempdir().unwrap();
-    let input = common::data("mount-st-helens-usgs/SainteHelens.json");
+    let input = common::data("mount-st-helens-usgs/SainteHelens.dem");
     let build = |name: &str, extra: &[&str]| {
         let out = dir.path().join(name);
         let mut args = vec![

@@ -401,32 +401,35 @@ pub fn decode_against(
     let predictor = Predictor::new(&cols, &rows, &parent);
     // Row by row: what a sample needs (held, void, or its prediction) is known from its
     // column's and row's plans.
+    // Row by row: a sample is a void, held (the parent's height), or coded (its prediction
+    // and the next residual).
+    let fill = |out: &mut [f32], coded_value: &mut dyn FnMut(f64) -> f32| {
+        for (j, (ry, row)) in rows.iter().zip(out.chunks_exact_mut(w.max(1))).enumerate() {
+            let along = predictor.row(j);
+            for (i, (cx, o)) in cols.iter().zip(row.iter_mut()).enumerate() {
+                *o = if void(j * w + i) {
+                    f32::from_bits(VOID_BITS)
+                } else if let (Along::Held(pi), Along::Held(pj)) = (cx, ry) {
+                    parent.heights[pj * pw + pi]
+                } else {
+                    coded_value(along.at(i))
+                };
+            }
+        }
+    };
     match q {
         Some(q) => {
             // The prediction's index: `p · (1/q)`, one division a block (container.md §7).
             let inv_q = 1.0 / q;
             let mut r = vec![0i64; coded];
             pco_decode(rest, &mut r)?;
-            let mut next = 0usize;
+            let mut next = r.into_iter();
             let mut out_of_range = false;
-            for (j, (ry, row)) in rows.iter().zip(out.chunks_exact_mut(w.max(1))).enumerate() {
-                let along = predictor.row(j);
-                for (i, (cx, o)) in cols.iter().zip(row.iter_mut()).enumerate() {
-                    let idx = j * w + i;
-                    *o = if void(idx) {
-                        f32::from_bits(VOID_BITS)
-                    } else if let (Along::Held(pi), Along::Held(pj)) = (cx, ry) {
-                        parent.heights[pj * pw + pi]
-                    } else {
-                        let p = along.at(i);
-                        let k =
-                            round_to_i64(p * inv_q).wrapping_add(r.get(next).copied().unwrap_or(0));
-                        next += 1;
-                        out_of_range |= k.unsigned_abs() > MAX_LATTICE_INDEX as u64;
-                        lattice_value(k as f64, q)
-                    };
-                }
-            }
+            fill(out, &mut |p| {
+                let k = round_to_i64(p * inv_q).wrapping_add(next.next().unwrap_or(0));
+                out_of_range |= k.unsigned_abs() > MAX_LATTICE_INDEX as u64;
+                lattice_value(k as f64, q)
+            });
             if out_of_range {
                 return Err(DecodeError::Pco("a lattice index is out of range".into()));
             }
@@ -435,21 +438,11 @@ pub fn decode_against(
             let mut r = vec![0u32; coded];
             pco_decode(rest, &mut r)?;
             let mut next = r.into_iter();
-            for (j, (ry, row)) in rows.iter().zip(out.chunks_exact_mut(w.max(1))).enumerate() {
-                let along = predictor.row(j);
-                for (i, (cx, o)) in cols.iter().zip(row.iter_mut()).enumerate() {
-                    let idx = j * w + i;
-                    *o = if void(idx) {
-                        f32::from_bits(VOID_BITS)
-                    } else if let (Along::Held(pi), Along::Held(pj)) = (cx, ry) {
-                        parent.heights[pj * pw + pi]
-                    } else {
-                        let z = next.next().unwrap_or(0);
-                        let d = ((z >> 1) as i32 ^ -((z & 1) as i32)) as u32;
-                        from_ordered(to_ordered(along.at(i) as f32).wrapping_add(d))
-                    };
-                }
-            }
+            fill(out, &mut |p| {
+                let z = next.next().unwrap_or(0);
+                let d = ((z >> 1) as i32 ^ -((z & 1) as i32)) as u32;
+                from_ordered(to_ordered(p as f32).wrapping_add(d))
+            });
         }
     }
     Ok(())

@@ -150,20 +150,34 @@ pub fn store_block(
     void_count: u32,
     coding: Coding,
 ) -> Vec<u8> {
+    store_block_with(raw, (width, height, void_count), coding, |samples| {
+        Some(coding.code(samples, width.max(1) as usize))
+    })
+    .unwrap_or_default()
+}
+
+/// A block's stored form: the samples' code from `code_samples` (`None`: it does not apply),
+/// then the stand-ins coded as `coding` says.
+fn store_block_with(
+    raw: &[u8],
+    (width, height, void_count): (u32, u32, u32),
+    coding: Coding,
+    code_samples: impl FnOnce(&[f32]) -> Option<Vec<u8>>,
+) -> Option<Vec<u8>> {
     let n = width as usize * height as usize;
     let floats: Vec<f32> = raw
         .chunks_exact(4)
         .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
         .collect();
     let (samples, stand_ins) = floats.split_at(n.min(floats.len()));
-    let a = coding.code(samples, width.max(1) as usize);
+    let a = code_samples(samples)?;
     let mut out = Vec::with_capacity(4 + a.len() + 8);
-    out.extend_from_slice(&u32::try_from(a.len()).unwrap_or(u32::MAX).to_le_bytes());
+    out.extend_from_slice(&u32::try_from(a.len()).ok()?.to_le_bytes());
     out.extend_from_slice(&a);
     if void_count > 0 && !stand_ins.is_empty() {
         out.extend_from_slice(&coding.code(stand_ins, stand_ins.len()));
     }
-    out
+    Some(out)
 }
 
 /// Format 2: a block's layout from its stored form, or why it does not decode.
@@ -184,7 +198,7 @@ pub fn load_block(
 /// sample the parent holds differs from the parent's height, or `coding` is raw.
 pub fn store_block_against(
     raw: &[u8],
-    (width, height, void_count): (u32, u32, u32),
+    shape: (u32, u32, u32),
     coding: Coding,
     at: Axes<'_>,
     parent: Parent<'_>,
@@ -192,20 +206,9 @@ pub fn store_block_against(
     if coding.raw {
         return None;
     }
-    let n = width as usize * height as usize;
-    let floats: Vec<f32> = raw
-        .chunks_exact(4)
-        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-        .collect();
-    let (samples, stand_ins) = floats.split_at(n.min(floats.len()));
-    let a = codec::parent::encode_against(samples, at, parent, coding.step)?;
-    let mut out = Vec::with_capacity(4 + a.len() + 8);
-    out.extend_from_slice(&u32::try_from(a.len()).ok()?.to_le_bytes());
-    out.extend_from_slice(&a);
-    if void_count > 0 && !stand_ins.is_empty() {
-        out.extend_from_slice(&coding.code(stand_ins, stand_ins.len()));
-    }
-    Some(out)
+    store_block_with(raw, shape, coding, |samples| {
+        codec::parent::encode_against(samples, at, parent, coding.step)
+    })
 }
 
 /// Format 4: a block's layout from its stored form when its samples (at `at`) are coded
