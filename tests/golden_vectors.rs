@@ -190,10 +190,11 @@ fn vectors_are_byte_exact_and_read_as_recorded() {
 }
 
 /// The vectors pin format 4's blocks coded against their parent's grid: the voids vectors
-/// have such blocks (encodings 5 and 6, the block record naming the parent), and a block
+/// have such blocks (encodings 5 to 8, the block record naming the parent), and a block
 /// whose record names no parent is coded alone.
 #[test]
 fn vectors_pin_blocks_coded_against_their_parents() {
+    let mut seen = std::collections::BTreeSet::new();
     for v in vectors() {
         let store = fmrh::Store::open(&dir().join(format!("{}.fmrh", v.name))).unwrap();
         let d = *store.domain();
@@ -206,7 +207,8 @@ fn vectors_pin_blocks_coded_against_their_parents() {
                 let encoding = bytes[4];
                 if let Some(n) = b.against {
                     against += 1;
-                    assert!(matches!(encoding, 5 | 6), "{} ({x}, {y})", v.name);
+                    assert!((5..=8).contains(&encoding), "{} ({x}, {y})", v.name);
+                    seen.insert(encoding);
                     let parent = store.node(n).unwrap();
                     assert_eq!(
                         (parent.level, parent.x, parent.y),
@@ -221,6 +223,12 @@ fn vectors_pin_blocks_coded_against_their_parents() {
             assert!(against > 0, "{}: no block coded against its parent", v.name);
         }
     }
+    // Both predictions against a parent are pinned: the grid's interpolation (5 or 6) and
+    // the planar predictor over the block's own samples (7 or 8).
+    assert!(
+        seen.iter().any(|e| (5..=6).contains(e)) && seen.iter().any(|e| (7..=8).contains(e)),
+        "encodings seen: {seen:?}"
+    );
 }
 
 /// The metadata bundle of a vector (format §6.7), decompressed by zstd itself (not by

@@ -279,14 +279,23 @@ fn encoding_of<S: fmrh::store::Source>(store: &Store<S>, x: u32, y: u32) -> Enco
     let b = store.stored_block(x, y).unwrap();
     let bytes = store.payload(b.payload).unwrap();
     let e = Encoding::of(&bytes[4..]).unwrap();
-    let from_parent = matches!(e, Encoding::LatticeFromParent | Encoding::FloatFromParent);
+    let from_parent = matches!(
+        e,
+        Encoding::LatticeFromParent
+            | Encoding::FloatFromParent
+            | Encoding::LatticePlanarFromParent
+            | Encoding::FloatPlanarFromParent
+    );
     assert_eq!(from_parent, b.against.is_some(), "block ({x}, {y}): {e:?}");
     e
 }
 
 /// Whether `e` codes heights as indexes on a lattice (alone or against the parent's grid).
 fn on_lattice(e: Encoding) -> bool {
-    matches!(e, Encoding::Lattice | Encoding::LatticeFromParent)
+    matches!(
+        e,
+        Encoding::Lattice | Encoding::LatticeFromParent | Encoding::LatticePlanarFromParent
+    )
 }
 
 /// Heights within a few centimetres of 100 m are one constant at a 0.1 m step.
@@ -468,7 +477,11 @@ fn patches_keep_the_precision_and_change_the_best_codec() {
     let s = Store::open(&path).unwrap();
     assert!(matches!(
         encoding_of(&s, 1, 1),
-        Encoding::FloatPco | Encoding::FloatPredicted | Encoding::Raw | Encoding::FloatFromParent
+        Encoding::FloatPco
+            | Encoding::FloatPredicted
+            | Encoding::Raw
+            | Encoding::FloatFromParent
+            | Encoding::FloatPlanarFromParent
     ));
     let back = s
         .read_window(SampleRect {

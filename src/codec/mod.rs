@@ -12,11 +12,13 @@
 //! | 2 | lattice: integers `k` with `h = (k · q) as f32` exactly, predicted in 2D | every real sample lies on a lattice step `q` of [`LATTICE_STEPS`] |
 //! | 3 | pco on the `f32` values | floats off any lattice |
 //! | 4 | pco on 2D-predicted residuals of the `f32` bits | floats off any lattice |
-//! | 5, 6 | lattice or float, against a parent grid ([`parent`]) | a block whose parent's grid holds a quarter of its samples |
+//! | 5, 6 | lattice or float, against a parent grid ([`parent`]): the held samples free, the others predicted from the grid | a block whose parent's grid holds a quarter of its samples |
+//! | 7, 8 | lattice or float, the held samples free, the others 2D-predicted as in 2 and 4 | the same, where the block's own neighbours predict better |
 //!
-//! Encodings 5 and 6 code a block *against its parent's grid*: the samples the parent holds
-//! cost nothing, the others are residuals against an interpolation of the parent. [`decode`]
-//! refuses them (it has no parent); [`parent::decode_against`] takes one.
+//! Encodings 5 to 8 code a block *against its parent's grid*: the samples the parent holds
+//! cost nothing, the others are residuals against an interpolation of the parent (5, 6) or
+//! against the planar predictor over the block's own samples (7, 8). [`decode`] refuses them
+//! (it has no parent); [`parent::decode_against`] takes one.
 //!
 //! **The 2D predictor** is the planar (Lorenzo) predictor `left + up - up_left`, which is
 //! exact on any plane: residuals on terrain are small and centred on zero. **pco**
@@ -71,6 +73,12 @@ pub enum Encoding {
     LatticeFromParent = 5,
     /// The `f32` bits of the samples the parent's grid does not hold, predicted from it.
     FloatFromParent = 6,
+    /// Lattice integers of the samples the parent's grid does not hold, 2D-predicted from
+    /// the block's own samples (the held ones known from the parent first).
+    LatticePlanarFromParent = 7,
+    /// The `f32` bits of the samples the parent's grid does not hold, 2D-predicted from
+    /// the block's own samples.
+    FloatPlanarFromParent = 8,
 }
 
 impl Encoding {
@@ -84,6 +92,8 @@ impl Encoding {
             4 => Encoding::FloatPredicted,
             5 => Encoding::LatticeFromParent,
             6 => Encoding::FloatFromParent,
+            7 => Encoding::LatticePlanarFromParent,
+            8 => Encoding::FloatPlanarFromParent,
             _ => return None,
         })
     }
@@ -261,7 +271,10 @@ pub fn decode(bytes: &[u8], width: usize, out: &mut [f32]) -> Result<(), DecodeE
             }
         }
         Encoding::FloatPco => pco_decode(body, out)?,
-        Encoding::LatticeFromParent | Encoding::FloatFromParent => {
+        Encoding::LatticeFromParent
+        | Encoding::FloatFromParent
+        | Encoding::LatticePlanarFromParent
+        | Encoding::FloatPlanarFromParent => {
             return Err(length(
                 "coded against a parent grid: decode with codec::parent".into(),
             ));

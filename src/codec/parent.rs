@@ -24,8 +24,8 @@ use pco::standalone::simple_compress;
 use pco::{ChunkConfig, DeltaSpec};
 
 use super::{
-    from_ordered, is_lattice_value, lattice_value, pco_decode, to_ordered, DecodeError, Encoding,
-    LATTICE_STEPS, MAX_LATTICE_INDEX, VOID_BITS,
+    from_ordered, is_lattice_value, lattice_value, pco_decode, predict, to_ordered, DecodeError,
+    Encoding, LATTICE_STEPS, MAX_LATTICE_INDEX, VOID_BITS,
 };
 
 /// Where a grid's samples lie: sample columns and rows, each non-decreasing.
@@ -237,17 +237,34 @@ fn void_bitmap(samples: &[f32]) -> Option<Vec<u8>> {
     any.then_some(bitmap)
 }
 
-/// Encodes `samples` (row-major, at `at`, voids the canonical NaN) against `parent`: the
-/// lattice encoding when every real sample lies on a lattice step (one of
-/// [`LATTICE_STEPS`] or `step`), else the float one. `None` when the child does not lie
-/// inside the parent, a held sample differs from the parent's height, or a sample is a NaN
-/// that is not the canonical void.
+/// Encodes `samples` (row-major, at `at`, voids the canonical NaN) against `parent`: as
+/// lattice integers when every real sample lies on a lattice step (one of
+/// [`LATTICE_STEPS`] or `step`), else as float bits; of the two predictions (the parent's
+/// interpolation, encodings 5 and 6, or the planar predictor over the block's own samples,
+/// 7 and 8) the one that codes smaller. `None` when the child does not lie inside the
+/// parent, a held sample differs from the parent's height, or a sample is a NaN that is not
+/// the canonical void.
 pub fn encode_against(
     samples: &[f32],
     at: Axes<'_>,
     parent: Parent<'_>,
     step: Option<f64>,
 ) -> Option<Vec<u8>> {
+    let (interpolated, planar) = encode_both(samples, at, parent, step)?;
+    Some(if planar.len() <= interpolated.len() {
+        planar
+    } else {
+        interpolated
+    })
+}
+
+/// Both codings [`encode_against`] chooses from: (interpolated, planar).
+fn encode_both(
+    samples: &[f32],
+    at: Axes<'_>,
+    parent: Parent<'_>,
+    step: Option<f64>,
+) -> Option<(Vec<u8>, Vec<u8>)> {
     if samples.len() != at.len() || parent.heights.len() != parent.at.len() {
         return None;
     }
@@ -270,56 +287,105 @@ pub fn encode_against(
     });
     let w = at.cols.len();
     let pw = parent.at.cols.len();
-    let predictor = Predictor::new(&cols, &rows, &parent);
-    let mut ints: Vec<i64> = Vec::new();
-    let mut bits: Vec<u32> = Vec::new();
-    for (j, ry) in rows.iter().enumerate() {
-        for (i, cx) in cols.iter().enumerate() {
+    let held = |i: usize, j: usize| match (&cols[i], &rows[j]) {
+        (Along::Held(pi), Along::Held(pj)) => Some(pj * pw + pi),
+        _ => None,
+    };
+    // Every held sample that is not a void is the parent's height, bit for bit.
+    for j in 0..rows.len() {
+        for i in 0..w {
             let v = samples[j * w + i];
-            if v.is_nan() {
-                continue;
-            }
-            if let (Along::Held(pi), Along::Held(pj)) = (cx, ry) {
-                if parent.heights[pj * pw + pi].to_bits() != v.to_bits() {
+            if let Some(h) = held(i, j) {
+                if !v.is_nan() && parent.heights[h].to_bits() != v.to_bits() {
                     return None;
                 }
+            }
+        }
+    }
+    let predictor = Predictor::new(&cols, &rows, &parent);
+    let config = ChunkConfig::default().with_delta_spec(DeltaSpec::NoOp);
+    // The codes of the samples in the coding's space: lattice indexes or ordered bits.
+    let code_of = |v: f32| -> i64 {
+        match lattice {
+            Some(q) => (f64::from(v) / q).round() as i64,
+            None => i64::from(to_ordered(v)),
+        }
+    };
+    let mut interp_ints: Vec<i64> = Vec::new();
+    let mut interp_bits: Vec<u32> = Vec::new();
+    let mut planar_ints: Vec<i64> = Vec::new();
+    let mut planar_bits: Vec<u32> = Vec::new();
+    let mut k_lattice = vec![0i64; samples.len()];
+    let mut k_float = vec![0u32; samples.len()];
+    for j in 0..rows.len() {
+        for i in 0..w {
+            let idx = j * w + i;
+            let v = samples[idx];
+            let (pl, pf) = (predict(&k_lattice, idx, w), predict(&k_float, idx, w));
+            if v.is_nan() {
+                // Predicted through, as the plain encodings do.
+                k_lattice[idx] = pl;
+                k_float[idx] = pf;
+                continue;
+            }
+            let code = code_of(v);
+            k_lattice[idx] = code;
+            k_float[idx] = to_ordered(v);
+            if held(i, j).is_some() {
                 continue;
             }
             let p = predictor.at(i, j);
             match lattice {
                 Some(q) => {
-                    let k = (f64::from(v) / q).round() as i64;
-                    ints.push(k.wrapping_sub(round_to_i64(p * (1.0 / q))));
+                    interp_ints.push(code.wrapping_sub(round_to_i64(p * (1.0 / q))));
+                    planar_ints.push(code.wrapping_sub(pl));
                 }
                 None => {
-                    let d = to_ordered(v).wrapping_sub(to_ordered(p as f32)) as i32;
-                    bits.push(((d << 1) ^ (d >> 31)) as u32);
+                    let zigzag = |d: u32| {
+                        let d = d as i32;
+                        ((d << 1) ^ (d >> 31)) as u32
+                    };
+                    interp_bits.push(zigzag(to_ordered(v).wrapping_sub(to_ordered(p as f32))));
+                    planar_bits.push(zigzag(to_ordered(v).wrapping_sub(pf)));
                 }
             }
         }
     }
-    let config = ChunkConfig::default().with_delta_spec(DeltaSpec::NoOp);
-    let mut out = Vec::new();
-    match lattice {
-        Some(q) => {
-            out.push(Encoding::LatticeFromParent as u8);
+    let header = |id: Encoding| {
+        let mut out = vec![id as u8];
+        if let Some(q) = lattice {
             out.extend_from_slice(&q.to_le_bytes());
         }
-        None => out.push(Encoding::FloatFromParent as u8),
-    }
-    match void_bitmap(samples) {
-        Some(bitmap) => {
-            out.push(1);
-            out.extend_from_slice(&bitmap);
+        match void_bitmap(samples) {
+            Some(bitmap) => {
+                out.push(1);
+                out.extend_from_slice(&bitmap);
+            }
+            None => out.push(0),
         }
-        None => out.push(0),
-    }
-    let coded = match lattice {
-        Some(_) => simple_compress(&ints, &config).ok()?,
-        None => simple_compress(&bits, &config).ok()?,
+        out
     };
-    out.extend_from_slice(&coded);
-    Some(out)
+    let (mut interpolated, mut planar) = match lattice {
+        Some(_) => (
+            header(Encoding::LatticeFromParent),
+            header(Encoding::LatticePlanarFromParent),
+        ),
+        None => (
+            header(Encoding::FloatFromParent),
+            header(Encoding::FloatPlanarFromParent),
+        ),
+    };
+    match lattice {
+        Some(_) => {
+            interpolated.extend_from_slice(&simple_compress(&interp_ints, &config).ok()?);
+            planar.extend_from_slice(&simple_compress(&planar_ints, &config).ok()?);
+        }
+        None => {
+            interpolated.extend_from_slice(&simple_compress(&interp_bits, &config).ok()?);
+            planar.extend_from_slice(&simple_compress(&planar_bits, &config).ok()?);
+        }
+    }
+    Some((interpolated, planar))
 }
 
 /// Decodes `bytes` (encoding 5 or 6) at `at` against `parent` into `out` (`at`'s samples,
@@ -348,8 +414,12 @@ pub fn decode_against(
         )));
     }
     let mut body = &bytes[1..];
+    let planar = matches!(
+        encoding,
+        Encoding::LatticePlanarFromParent | Encoding::FloatPlanarFromParent
+    );
     let q = match encoding {
-        Encoding::LatticeFromParent => {
+        Encoding::LatticeFromParent | Encoding::LatticePlanarFromParent => {
             let (q, rest) = body
                 .split_first_chunk::<8>()
                 .ok_or_else(|| length("shorter than its step".into()))?;
@@ -360,7 +430,7 @@ pub fn decode_against(
             body = rest;
             Some(q)
         }
-        Encoding::FloatFromParent => None,
+        Encoding::FloatFromParent | Encoding::FloatPlanarFromParent => None,
         _ => return Err(length("not coded against a parent".into())),
     };
     let n = out.len();
@@ -398,9 +468,10 @@ pub fn decode_against(
     };
     let coded = n - voids_total - (held_cols * held_rows - held_voids);
     let pw = parent.at.cols.len();
+    if planar {
+        return decode_planar(rest, (&cols, &rows), parent, q, voids, coded, out);
+    }
     let predictor = Predictor::new(&cols, &rows, &parent);
-    // Row by row: what a sample needs (held, void, or its prediction) is known from its
-    // column's and row's plans.
     // Row by row: a sample is a void, held (the parent's height), or coded (its prediction
     // and the next residual).
     let fill = |out: &mut [f32], coded_value: &mut dyn FnMut(f64) -> f32| {
@@ -446,6 +517,98 @@ pub fn decode_against(
         }
     }
     Ok(())
+}
+
+/// Decodes the residual stream `stream` of encodings 7 (`q`: lattice) and 8 (float): in
+/// raster order, a void takes the planar prediction, a held sample the parent's height (and
+/// its code), a coded sample the prediction plus the next residual.
+fn decode_planar(
+    stream: &[u8],
+    (cols, rows): (&[Along], &[Along]),
+    parent: Parent<'_>,
+    q: Option<f64>,
+    voids: Option<&[u8]>,
+    coded: usize,
+    out: &mut [f32],
+) -> Result<(), DecodeError> {
+    match q {
+        Some(q) => {
+            let mut r = vec![0i64; coded];
+            pco_decode(stream, &mut r)?;
+            let mut next = r.into_iter();
+            let mut k = vec![0i64; out.len()];
+            let mut out_of_range = false;
+            planar_fill(
+                (cols, rows),
+                parent,
+                voids,
+                out,
+                &mut k,
+                |h| (f64::from(h) / q).round() as i64,
+                |p| {
+                    let k = p.wrapping_add(next.next().unwrap_or(0));
+                    out_of_range |= k.unsigned_abs() > MAX_LATTICE_INDEX as u64;
+                    (k, lattice_value(k as f64, q))
+                },
+            );
+            if out_of_range {
+                return Err(DecodeError::Pco("a lattice index is out of range".into()));
+            }
+        }
+        None => {
+            let mut r = vec![0u32; coded];
+            pco_decode(stream, &mut r)?;
+            let mut next = r.into_iter();
+            let mut u = vec![0u32; out.len()];
+            planar_fill((cols, rows), parent, voids, out, &mut u, to_ordered, |p| {
+                let z = next.next().unwrap_or(0);
+                let d = ((z >> 1) as i32 ^ -((z & 1) as i32)) as u32;
+                let u = p.wrapping_add(d);
+                (u, from_ordered(u))
+            });
+        }
+    }
+    Ok(())
+}
+
+/// The raster loop of encodings 7 and 8 over codes `k`: a void takes the planar prediction,
+/// a held sample the parent's height and `code_of` it, a coded sample what `coded_value`
+/// makes of the prediction (its code and value). Row by row, without a division per sample.
+fn planar_fill<T: super::Wrapping>(
+    (cols, rows): (&[Along], &[Along]),
+    parent: Parent<'_>,
+    voids: Option<&[u8]>,
+    out: &mut [f32],
+    k: &mut [T],
+    code_of: impl Fn(f32) -> T,
+    mut coded_value: impl FnMut(T) -> (T, f32),
+) {
+    let w = cols.len();
+    let pw = parent.at.cols.len();
+    for (j, ry) in rows.iter().enumerate() {
+        let row = j * w;
+        for (i, cx) in cols.iter().enumerate() {
+            let idx = row + i;
+            let p = match (i, j) {
+                (0, 0) => T::default(),
+                (_, 0) => k[idx - 1],
+                (0, _) => k[idx - w],
+                _ => k[idx - 1].plus(k[idx - w]).minus(k[idx - w - 1]),
+            };
+            if voids.is_some_and(|m| m[idx / 8] >> (idx % 8) & 1 == 1) {
+                k[idx] = p;
+                out[idx] = f32::from_bits(VOID_BITS);
+            } else if let (Along::Held(pi), Along::Held(pj)) = (cx, ry) {
+                let h = parent.heights[pj * pw + pi];
+                k[idx] = code_of(h);
+                out[idx] = h;
+            } else {
+                let (code, value) = coded_value(p);
+                k[idx] = code;
+                out[idx] = value;
+            }
+        }
+    }
 }
 
 #[cfg(test)]
@@ -541,18 +704,24 @@ mod tests {
             })).collect();
             let parent = Parent { at: Axes { cols: &pc, rows: &pr }, heights: &heights };
             let at = Axes { cols: &cc, rows: &cr };
-            let bytes = encode_against(&samples, at, parent, None).expect("a child of its parent encodes");
-            prop_assert_eq!(
-                Encoding::of(&bytes),
-                Some(if lattice { Encoding::LatticeFromParent } else { Encoding::FloatFromParent })
+            let (interpolated, planar) = encode_both(&samples, at, parent, None).expect("a child of its parent encodes");
+            let chosen = encode_against(&samples, at, parent, None).expect("encodes");
+            prop_assert_eq!(chosen.len(), interpolated.len().min(planar.len()));
+            let (lattice_ids, float_ids) = (
+                [Encoding::LatticeFromParent, Encoding::LatticePlanarFromParent],
+                [Encoding::FloatFromParent, Encoding::FloatPlanarFromParent],
             );
-            let mut out = vec![0.0f32; samples.len()];
-            decode_against(&bytes, at, parent, &mut out).expect("decodes");
-            for (a, b) in samples.iter().zip(&out) {
-                prop_assert_eq!(a.to_bits(), b.to_bits());
+            // Both codings decode to the child's bits; the plain decoder refuses them.
+            for (bytes, k) in [(&interpolated, 0), (&planar, 1)] {
+                let id = Encoding::of(bytes).expect("an id");
+                prop_assert_eq!(id, if lattice { lattice_ids[k] } else { float_ids[k] });
+                let mut out = vec![0.0f32; samples.len()];
+                decode_against(bytes, at, parent, &mut out).expect("decodes");
+                for (a, b) in samples.iter().zip(&out) {
+                    prop_assert_eq!(a.to_bits(), b.to_bits());
+                }
+                prop_assert!(super::super::decode(bytes, cc.len(), &mut out).is_err());
             }
-            // The plain decoder refuses it: it needs the parent.
-            prop_assert!(super::super::decode(&bytes, cc.len(), &mut out).is_err());
         }
 
         /// Damaged bytes, a wrong parent or a wrong placement decode or fail; nothing
@@ -567,7 +736,8 @@ mod tests {
                 if c % 2 == 0 && r % 2 == 0 { heights[(r / 2) * 9 + c / 2] } else { (c * 3 + r) as f32 + 0.5 }
             }).collect();
             let parent = Parent { at: Axes { cols: &pc, rows: &pc }, heights: &heights };
-            let mut bytes = encode_against(&samples, Axes { cols: &cc, rows: &cc }, parent, None).unwrap();
+            let (interpolated, planar) = encode_both(&samples, Axes { cols: &cc, rows: &cc }, parent, None).unwrap();
+            let mut bytes = if at_byte % 2 == 0 { interpolated } else { planar };
             let i = at_byte % bytes.len();
             bytes[i] = value;
             bytes.truncate(cut.max(1));
