@@ -5,6 +5,7 @@
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::sync::Arc;
 
+use rayon::prelude::*;
 use serde::Serialize;
 use zerocopy::IntoBytes;
 
@@ -187,6 +188,7 @@ pub(crate) fn write_state<I: Io>(
         .collect();
     let mut new_at: HashMap<(u8, u32, u32), u32> = HashMap::new();
     let mut grid_ref = vec![PayloadRef::default(); tree.nodes().len()];
+    let mut rewrite_grids: Vec<usize> = Vec::new();
     let mut seen = HashSet::with_capacity(tree.nodes().len());
     for (i, n) in tree.nodes().iter().enumerate() {
         let at = (n.level, n.x, n.y);
@@ -217,16 +219,22 @@ pub(crate) fn write_state<I: Io>(
                 kept.push(o.payload());
                 grid_ref[i] = o.payload();
             }
-            _ => {
-                let bytes = tables::encode_grid(model, id, grid_voids[i], false);
-                grid_ref[i] = sink.payload(bytes)?;
-                summary.grids += 1;
-            }
+            _ => rewrite_grids.push(i),
         }
+    }
+    // The grids to write are coded on every core, then written in order.
+    let coded: Vec<Vec<u8>> = rewrite_grids
+        .par_iter()
+        .map(|&i| tables::encode_grid(model, tables::node_id(i), grid_voids[i], false))
+        .collect();
+    for (&i, bytes) in rewrite_grids.iter().zip(coded) {
+        grid_ref[i] = sink.payload(bytes)?;
+        summary.grids += 1;
     }
     let (cols, _) = d.nodes_across(finest);
     let mut block_ref = Vec::with_capacity(shapes.len());
     let mut against = Vec::with_capacity(shapes.len());
+    let mut rewrite_blocks: Vec<(usize, Option<u32>)> = Vec::new();
     for (i, shape) in shapes.iter().enumerate() {
         let old = old_blocks.get(i).ok_or_else(|| {
             base.corrupt(Violation::new(
@@ -260,14 +268,23 @@ pub(crate) fn write_state<I: Io>(
                 against.push(a);
             }
             None => {
+                block_ref.push(PayloadRef::default());
+                against.push(None);
                 let node = new_at.get(&(finest, x, y)).copied();
-                let (bytes, a) =
-                    tables::encode_block(model, shape, tables::block_parent(model, node), false);
-                block_ref.push(sink.payload(bytes)?);
-                against.push(a);
-                summary.blocks += 1;
+                rewrite_blocks.push((i, tables::block_parent(model, node)));
             }
         }
+    }
+    // The blocks to write are coded on every core (each tries alone and against its
+    // parent), then written in order.
+    let coded: Vec<(Vec<u8>, Option<u32>)> = rewrite_blocks
+        .par_iter()
+        .map(|&(i, parent)| tables::encode_block(model, &shapes[i], parent, false))
+        .collect();
+    for (&(i, _), (bytes, a)) in rewrite_blocks.iter().zip(coded) {
+        block_ref[i] = sink.payload(bytes)?;
+        against[i] = a;
+        summary.blocks += 1;
     }
     summary.nodes_removed = old_nodes
         .iter()
