@@ -283,7 +283,7 @@ pub fn decode(bytes: &[u8], width: usize, out: &mut [f32]) -> Result<(), DecodeE
             let mut u = vec![0u32; out.len()];
             pco_decode(body, &mut u)?;
             for r in &mut u {
-                *r = ((*r >> 1) as i32 ^ -((*r & 1) as i32)) as u32;
+                *r = unzigzag(*r);
             }
             unpredict(&mut u, width);
             for (o, &ui) in out.iter_mut().zip(&u) {
@@ -447,13 +447,21 @@ fn from_ordered(u: u32) -> f32 {
     })
 }
 
+/// A wrapping `u32` difference as an unsigned code, small for small differences either way.
+fn zigzag(d: u32) -> u32 {
+    let d = d as i32;
+    ((d << 1) ^ (d >> 31)) as u32
+}
+
+/// The inverse of [`zigzag`].
+fn unzigzag(z: u32) -> u32 {
+    ((z >> 1) as i32 ^ -((z & 1) as i32)) as u32
+}
+
 fn float_predicted(samples: &[f32], width: usize) -> Option<Vec<u8>> {
     let u: Vec<u32> = samples.iter().map(|&v| to_ordered(v)).collect();
     let residuals: Vec<u32> = (0..u.len())
-        .map(|i| {
-            let d = u[i].wrapping_sub(predict(&u, i, width)) as i32;
-            ((d << 1) ^ (d >> 31)) as u32
-        })
+        .map(|i| zigzag(u[i].wrapping_sub(predict(&u, i, width))))
         .collect();
     let config = ChunkConfig::default().with_delta_spec(DeltaSpec::NoOp);
     let coded = simple_compress(&residuals, &config).ok()?;

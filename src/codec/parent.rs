@@ -24,8 +24,8 @@ use pco::standalone::simple_compress;
 use pco::{ChunkConfig, DeltaSpec};
 
 use super::{
-    from_ordered, is_lattice_value, lattice_value, pco_decode, predict, to_ordered, DecodeError,
-    Encoding, LATTICE_STEPS, MAX_LATTICE_INDEX, VOID_BITS,
+    from_ordered, is_lattice_value, lattice_value, pco_decode, predict, to_ordered, unzigzag,
+    zigzag, DecodeError, Encoding, LATTICE_STEPS, MAX_LATTICE_INDEX, VOID_BITS,
 };
 
 /// Where a grid's samples lie: sample columns and rows, each non-decreasing.
@@ -341,10 +341,6 @@ fn encode_both(
                     planar_ints.push(code.wrapping_sub(pl));
                 }
                 None => {
-                    let zigzag = |d: u32| {
-                        let d = d as i32;
-                        ((d << 1) ^ (d >> 31)) as u32
-                    };
                     interp_bits.push(zigzag(to_ordered(v).wrapping_sub(to_ordered(p as f32))));
                     planar_bits.push(zigzag(to_ordered(v).wrapping_sub(pf)));
                 }
@@ -510,8 +506,7 @@ pub fn decode_against(
             pco_decode(rest, &mut r)?;
             let mut next = r.into_iter();
             fill(out, &mut |p| {
-                let z = next.next().unwrap_or(0);
-                let d = ((z >> 1) as i32 ^ -((z & 1) as i32)) as u32;
+                let d = unzigzag(next.next().unwrap_or(0));
                 from_ordered(to_ordered(p as f32).wrapping_add(d))
             });
         }
@@ -561,9 +556,7 @@ fn decode_planar(
             let mut next = r.into_iter();
             let mut u = vec![0u32; out.len()];
             planar_fill((cols, rows), parent, voids, out, &mut u, to_ordered, |p| {
-                let z = next.next().unwrap_or(0);
-                let d = ((z >> 1) as i32 ^ -((z & 1) as i32)) as u32;
-                let u = p.wrapping_add(d);
+                let u = p.wrapping_add(unzigzag(next.next().unwrap_or(0)));
                 (u, from_ordered(u))
             });
         }
