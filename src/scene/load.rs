@@ -110,7 +110,7 @@ pub fn load_blocks_reusing<S: Source>(
         .chain(parents.iter().map(|(_, n)| n.payload))
         .collect();
     let mut payloads = store.payloads(&refs, gap)?;
-    let parent_bytes = payloads.split_off(blocks.len());
+    let grid_payloads = payloads.split_off(blocks.len());
     let grid_of = |((index, node), bytes): (&(u32, StoredNode), Cow<'_, [u8]>)| {
         let grid = store.grid_from(node, bytes)?;
         Ok((*index, ParentGrid::of(store, *index, node, &grid)))
@@ -118,13 +118,13 @@ pub fn load_blocks_reusing<S: Source>(
     let read: Vec<(u32, ParentGrid)> = if parents.len() >= PARALLEL_FROM {
         parents
             .par_iter()
-            .zip(parent_bytes)
+            .zip(grid_payloads)
             .map(grid_of)
             .collect::<Result<_>>()?
     } else {
         parents
             .iter()
-            .zip(parent_bytes)
+            .zip(grid_payloads)
             .map(grid_of)
             .collect::<Result<_>>()?
     };

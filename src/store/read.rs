@@ -422,13 +422,27 @@ impl<S: Source> Store<S> {
         parent: &mut Option<ParentGrid>,
     ) -> Result<Block<'_>> {
         let info = self.stored_block(x, y)?;
-        if let Some((index, node)) = self.against_node(x, y, &info)? {
+        self.keep_parent(x, y, &info, parent)?;
+        let bytes = self.payload(info.payload)?;
+        self.block_with(x, y, info, bytes, parent.as_ref())
+    }
+
+    /// Makes `parent` hold the grid block `(x, y)` of record `info` is coded against, reading
+    /// it only when `parent` holds another (or none); leaves it as it is for a block coded
+    /// alone. What [`Store::block_reusing`] and the validator share.
+    pub(crate) fn keep_parent(
+        &self,
+        x: u32,
+        y: u32,
+        info: &StoredBlock,
+        parent: &mut Option<ParentGrid>,
+    ) -> Result<()> {
+        if let Some((index, node)) = self.against_node(x, y, info)? {
             if parent.as_ref().is_none_or(|p| p.node != index) {
                 *parent = Some(ParentGrid::of(self, index, &node, &self.grid(&node)?));
             }
         }
-        let bytes = self.payload(info.payload)?;
-        self.block_with(x, y, info, bytes, parent.as_ref())
+        Ok(())
     }
 
     /// The node whose grid block `(x, y)` of record `info` is coded against, if any: checked

@@ -9,7 +9,7 @@ use crate::format::{
 };
 use crate::progress::{Phase, Progress, Unit};
 use crate::store::btree::PageSet;
-use crate::store::{ParentGrid, Source, Store};
+use crate::store::{Source, Store};
 
 /// Checks every payload (I-9): in the file, aligned, disjoint, CRC, zero gaps, block
 /// content. Returns the pages payloads occupy.
@@ -49,7 +49,7 @@ pub(super) fn check_payloads<S: Source>(
     let total: u64 = runs.iter().map(|r| u64::from(r.0.len)).sum();
     let phase = Phase::start(progress, "checking payloads", total, Unit::Bytes);
     let mut prev: Option<PayloadRef> = None;
-    let mut last_parent: Option<ParentGrid> = None;
+    let mut last_parent = None;
     for &(r, what) in &runs {
         let (offset, len) = (r.offset, r.len);
         let at = format!("{what} payload at byte {offset}");
@@ -102,28 +102,11 @@ pub(super) fn check_payloads<S: Source>(
                 let info = b.decode();
                 // A block coded against its parent's grid (format 4) decodes with it; a
                 // parent's children follow it in file order, so one grid is kept at a time.
-                let parent = match store.against_node(x, y, &info) {
-                    Ok(None) => None,
-                    Ok(Some((index, node))) => match &last_parent {
-                        Some(p) if p.node == index => last_parent.clone(),
-                        _ => match store.grid(&node) {
-                            Ok(g) => {
-                                last_parent = Some(ParentGrid::of(store, index, &node, &g));
-                                last_parent.clone()
-                            }
-                            Err(e) => {
-                                checks
-                                    .fail(id, format!("block ({x}, {y}): its parent's grid: {e}"));
-                                continue;
-                            }
-                        },
-                    },
-                    Err(e) => {
-                        checks.fail(id, format!("block ({x}, {y}): {e}"));
-                        continue;
-                    }
-                };
-                match store.block_with(x, y, info, bytes, parent.as_ref()) {
+                if let Err(e) = store.keep_parent(x, y, &info, &mut last_parent) {
+                    checks.fail(id, format!("block ({x}, {y}): {e}"));
+                    continue;
+                }
+                match store.block_with(x, y, info, bytes, last_parent.as_ref()) {
                     Ok(block) => std::borrow::Cow::Owned(block.bytes().to_vec()),
                     Err(e) => {
                         checks.fail(id, format!("block ({x}, {y}): {e}"));
