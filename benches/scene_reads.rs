@@ -12,7 +12,7 @@
 //! codec: the warm time of the same scene from a copy of the file whose payloads are stored
 //! raw (`WriteOptions::raw_payloads`: nothing to decode, as format 1 stored them), and the
 //! ratio; and the same scene from a copy whose blocks are all coded alone
-//! (`WriteOptions::blocks_against_parents` off, as format 3 coded them): its bytes read and
+//! (`WriteOptions::against_parents` off, as format 3 coded them): its bytes read and
 //! warm time, the price of format 4's blocks coded against their parent's grid. Every
 //! configuration runs in the same process, so the ratios are side by side.
 //! `cargo bench --bench scene_reads`.
@@ -74,7 +74,7 @@ fn main() {
         ..Default::default()
     };
     let alone = fmrh::store::WriteOptions {
-        blocks_against_parents: false,
+        against_parents: false,
         ..Default::default()
     };
     let sets: Vec<(dems::Dem, PathBuf, PathBuf, PathBuf)> = dems::dems()

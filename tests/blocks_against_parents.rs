@@ -34,7 +34,7 @@ fn bytes_of(field: &Heightfield, block_size: u32, options: &WriteOptions) -> Vec
 /// Every block coded alone, as format 3 coded them.
 fn alone_options() -> WriteOptions {
     WriteOptions {
-        blocks_against_parents: false,
+        against_parents: false,
         ..WriteOptions::default()
     }
 }
@@ -69,7 +69,7 @@ fn a_lattice_field_codes_blocks_against_parents_and_is_smaller() {
     let with = bytes_of(&field, 33, &WriteOptions::default());
     let alone = bytes_of(&field, 33, &alone_options());
     let store = Store::from_bytes(with.clone()).unwrap();
-    assert_eq!(store.state().format_version, (4, 0));
+    assert_eq!(store.state().format_version, (5, 0));
     let (against, all) = coded_against(&store);
     assert!(against * 2 > all, "{against} of {all} blocks");
     let back = store.read_window(store.domain().data_rect()).unwrap();
@@ -315,8 +315,9 @@ fn the_cli_picks_small_pages_and_codes_against_parents_unless_told() {
 
 /// A loader that already holds a parent's decoded grid (a renderer drew the parent in an
 /// earlier frame) need not read it again: `load_blocks_reusing` decodes the same heights
-/// from the held grid and reads only the blocks' own payloads; a held grid of the wrong
-/// size is not used (the grid is read instead).
+/// from the held grid and reads only the blocks' own payloads; the store keeps the grids a
+/// load decoded for the next one; a held grid of the wrong size is not used (the grid is
+/// read instead).
 #[test]
 fn a_held_parent_grid_is_not_read_again() {
     use fmrh::scene::{load_blocks, load_blocks_reusing, Camera, SceneOptions, Terrain};
@@ -324,7 +325,8 @@ fn a_held_parent_grid_is_not_read_again() {
     use std::sync::Arc;
 
     let field = hills(129, 129);
-    let store = Store::from_bytes(bytes_of(&field, 33, &WriteOptions::default())).unwrap();
+    let bytes = bytes_of(&field, 33, &WriteOptions::default());
+    let store = Store::from_bytes(bytes.clone()).unwrap();
     let terrain = Terrain::new(&store).unwrap();
     let cam = Camera::looking_at(
         glam::DVec3::new(64.0, 64.0, 900.0),
@@ -342,11 +344,13 @@ fn a_held_parent_grid_is_not_read_again() {
         !parents.is_empty(),
         "the scene has blocks coded against parents"
     );
+    // The grids a renderer would hold, decoded by another store (this one caches nothing yet).
+    let other = Store::from_bytes(bytes.clone()).unwrap();
     let grids: HashMap<u32, Arc<[f32]>> = parents
         .iter()
         .map(|&n| {
-            let node = store.node(n).unwrap();
-            (n, Arc::from(store.grid(&node).unwrap().view().expanded()))
+            let node = other.node(n).unwrap();
+            (n, Arc::from(other.grid(&node).unwrap().view().expanded()))
         })
         .collect();
     let own: u64 = scene.blocks.iter().map(|b| u64::from(b.payload.len)).sum();
@@ -365,10 +369,20 @@ fn a_held_parent_grid_is_not_read_again() {
         assert_eq!(b.parent_bytes, 0);
     }
 
-    let wrong = |_: u32, _: &fmrh::format::StoredNode| Some(Arc::from(vec![0.0f32; 7]));
+    // The store keeps the grids it decoded for the next load (Store::parent_grid).
     let before = store.read_stats();
-    let fallback = load_blocks_reusing(&store, &scene.blocks, 0, &wrong).unwrap();
-    assert_eq!(store.read_stats().since(&before).payload_bytes, read_plain);
+    let again = load_blocks(&store, &scene.blocks, 0).unwrap();
+    assert_eq!(store.read_stats().since(&before).payload_bytes, own);
+    for (a, b) in plain.iter().zip(&again) {
+        assert_eq!(a.heights, b.heights);
+    }
+
+    // Held grids that do not fit are not used: a fresh store (nothing cached) reads them.
+    let fresh = Store::from_bytes(bytes.clone()).unwrap();
+    let wrong = |_: u32, _: &fmrh::format::StoredNode| Some(Arc::from(vec![0.0f32; 7]));
+    let before = fresh.read_stats();
+    let fallback = load_blocks_reusing(&fresh, &scene.blocks, 0, &wrong).unwrap();
+    assert_eq!(fresh.read_stats().since(&before).payload_bytes, read_plain);
     for (a, b) in plain.iter().zip(&fallback) {
         assert_eq!(a.heights, b.heights);
     }

@@ -184,8 +184,31 @@ fn commits_move_a_file_between_bundle_and_pages() {
     assert_valid(&disk.current(), "closed");
 }
 
+/// A bundled vector as this version writes it (5.0: a frame per page).
 fn bundled_vector() -> Vec<u8> {
     common::vector("hills-20x13-voids.fmrh")
+}
+
+/// The same vector as 4.0 wrote it: the bundle one zstd frame.
+fn single_frame_vector() -> Vec<u8> {
+    common::vector("v4.0/hills-20x13-voids.fmrh")
+}
+
+/// The current vector's bundle pages, each compressed as a frame of its own (by page), and
+/// the head's pages (the dataset header's and the directory's).
+fn frames_of(bytes: &[u8]) -> (Vec<Vec<u8>>, Vec<usize>) {
+    let raw = common::bundle::pages(bytes);
+    let pages: Vec<&[u8]> = raw.chunks(1024).collect();
+    let head = (0..pages.len())
+        .filter(|&i| &pages[i][..4] == b"FMHD" || &pages[i][..4] == b"FMCD")
+        .collect();
+    (
+        pages
+            .iter()
+            .map(|p| zstd::bulk::compress(p, 3).unwrap())
+            .collect(),
+        head,
+    )
 }
 
 fn corrupt(bytes: &[u8]) -> (Invariant, String) {
@@ -204,7 +227,7 @@ fn corrupt(bytes: &[u8]) -> (Invariant, String) {
 
 #[test]
 fn a_frame_that_inflates_past_its_pages_is_refused() {
-    let mut bytes = bundled_vector();
+    let mut bytes = single_frame_vector();
     let pages = common::bundle::pages(&bytes);
     let count = (pages.len() / 1024) as u32;
     // 64 MiB of zeros in a few KiB: the record says `count` pages.
@@ -217,7 +240,7 @@ fn a_frame_that_inflates_past_its_pages_is_refused() {
 #[test]
 fn a_page_count_that_lies_is_refused() {
     for delta in [-1i64, 1] {
-        let mut bytes = bundled_vector();
+        let mut bytes = single_frame_vector();
         let pages = common::bundle::pages(&bytes);
         let count = (pages.len() / 1024) as i64 + delta;
         let stored = zstd::bulk::compress(&pages, 3).unwrap();
@@ -229,10 +252,106 @@ fn a_page_count_that_lies_is_refused() {
 
 #[test]
 fn bytes_that_are_not_zstd_are_refused() {
-    let mut bytes = bundled_vector();
+    let mut bytes = single_frame_vector();
     common::bundle::store_raw(&mut bytes, b"certainly not a zstd frame", 3);
     let (inv, detail) = corrupt(&bytes);
     assert_eq!(inv, Invariant::Page, "{detail}");
+}
+
+/// Whether `report` fails I-5 naming bundle page `i`.
+fn names_page(report: &fmrh::VerifyReport, i: usize) -> bool {
+    let name = format!("page {}", (1u64 << 40) + i as u64);
+    report
+        .checks
+        .iter()
+        .any(|c| c.id == Invariant::Page && c.failures.iter().any(|f| f.contains(&name)))
+}
+
+/// The same hostile frames in a 5.0 bundle, one per page: in the head, opening refuses them;
+/// elsewhere, the first lookup that reaches the page does, and the validator always does.
+/// A page in another page's frame, and a frame table whose page count lies, are refused too.
+#[test]
+fn hostile_frames_of_a_framed_bundle_are_refused() {
+    let clean = bundled_vector();
+    let (frames, head) = frames_of(&clean);
+    let pages = frames.len() as u32;
+    assert!(
+        head.len() >= 2 && frames.len() > head.len() + 2,
+        "{head:?} of {}",
+        frames.len()
+    );
+    let rest: Vec<usize> = (0..frames.len()).filter(|i| !head.contains(i)).collect();
+    let bomb = zstd::bulk::compress(&vec![0u8; 64 << 20], 19).unwrap();
+    let bad_frames: [&[u8]; 3] = [
+        &bomb,
+        b"certainly not a zstd frame",
+        &zstd::bulk::compress(&vec![7u8; 1024], 3).unwrap(),
+    ];
+    for bad in bad_frames {
+        // In the head: opening reads and checks it.
+        let mut in_head = frames.clone();
+        in_head[head[0]] = bad.to_vec();
+        let mut bytes = clean.clone();
+        common::bundle::store_frames(&mut bytes, &in_head, &head, pages);
+        let (inv, detail) = corrupt(&bytes);
+        assert_eq!(inv, Invariant::Page, "{detail}");
+        // Past the head: every page is damaged in turn; a lookup that reaches it, or the
+        // validator, refuses it.
+        let mut refused_by_a_lookup = 0;
+        for &k in &rest {
+            let mut later = frames.clone();
+            later[k] = bad.to_vec();
+            let mut bytes = clean.clone();
+            common::bundle::store_frames(&mut bytes, &later, &head, pages);
+            let store = Store::from_bytes(&bytes[..]).expect("opening reads only the head");
+            match store
+                .nodes()
+                .and_then(|_| store.read_window(store.domain().data_rect()))
+            {
+                Err(Error::Corrupt { invariant, .. }) => {
+                    assert_eq!(invariant, Invariant::Page);
+                    refused_by_a_lookup += 1;
+                }
+                Err(e) => panic!("{e}"),
+                Ok(_) => {}
+            }
+            let report = verify(Bytes(&bytes[..]), VerifyMode::Fast).unwrap();
+            assert!(names_page(&report, k), "frame {k}: {report:#?}");
+        }
+        assert!(refused_by_a_lookup > 0);
+    }
+    // Two frames swapped: each holds another page's number.
+    let mut swapped = frames.clone();
+    swapped.swap(rest[0], rest[1]);
+    let mut bytes = clean.clone();
+    common::bundle::store_frames(&mut bytes, &swapped, &head, pages);
+    let report = verify(Bytes(&bytes[..]), VerifyMode::Fast).unwrap();
+    assert!(
+        names_page(&report, rest[0]) || names_page(&report, rest[1]),
+        "{report:#?}"
+    );
+    // A page count that lies: the table is read as that many entries.
+    for lie in [pages - 1, pages + 1] {
+        let mut bytes = clean.clone();
+        common::bundle::store_frames(&mut bytes, &frames, &head, lie);
+        assert!(Store::from_bytes(&bytes[..]).is_err(), "{lie} pages");
+    }
+    // Untouched, the same construction reads as the file it came from (it is not valid as a
+    // whole: the old bundle's bytes stay in the file, owned by nothing).
+    let mut bytes = clean.clone();
+    common::bundle::store_frames(&mut bytes, &frames, &head, pages);
+    let (a, b) = (
+        Store::from_bytes(&bytes[..]).unwrap(),
+        Store::from_bytes(&clean[..]).unwrap(),
+    );
+    assert_eq!(a.nodes().unwrap(), b.nodes().unwrap());
+    let rect = b.domain().data_rect();
+    let (sa, sb) = (a.read_window(rect).unwrap(), b.read_window(rect).unwrap());
+    assert!(sa
+        .samples()
+        .iter()
+        .zip(sb.samples())
+        .all(|(x, y)| x.to_bits() == y.to_bits()));
 }
 
 #[test]

@@ -6,9 +6,9 @@
 //! regenerate with `FMRH_BLESS=1 cargo test --release --test golden_vectors`.
 //!
 //! Files of older versions stay readable: `format-spec/vectors/v1.1/`, `v1.2/`, `v2.0/`,
-//! `v2.1/` and `v3.0/` keep the same vectors as those versions wrote them. They must read and
-//! verify exactly as the current ones do; 2.x and 3.x files accept a transaction (which makes
-//! them 4.0), 1.x files refuse one.
+//! `v2.1/`, `v3.0/` and `v4.0/` keep the same vectors as those versions wrote them. They must
+//! read and verify exactly as the current ones do; 2.x to 4.x files accept a transaction
+//! (which makes them 5.0), 1.x files refuse one.
 
 use std::io::Cursor;
 use std::path::PathBuf;
@@ -231,17 +231,74 @@ fn vectors_pin_blocks_coded_against_their_parents() {
     );
 }
 
-/// The metadata bundle of a vector (format §6.7), decompressed by zstd itself (not by
-/// fmrh): offset, stored length, CRC and pages from commit record bytes 176..196.
+/// The vectors pin format 5's grids: some grid is coded against its parent's (flag bit 1,
+/// encodings 5 to 8), every grid with a bitmap keeps it behind a void flag (bit 2), and some
+/// void bitmap is stored as runs (void flag 2).
+#[test]
+fn vectors_pin_grids_coded_against_their_parents_and_flagged_bitmaps() {
+    let (mut against, mut flagged, mut runs) = (0, 0, 0);
+    for v in vectors() {
+        let store = fmrh::Store::open(&dir().join(format!("{}.fmrh", v.name))).unwrap();
+        let finest = store.domain().finest_level();
+        for n in store.nodes().unwrap().iter().filter(|n| n.level < finest) {
+            let bytes = store.payload(n.payload).unwrap();
+            let a = u32::from_le_bytes(bytes[..4].try_into().unwrap()) as usize;
+            let encoding = bytes[4];
+            assert_eq!(
+                n.grid_against_parent,
+                (5..=8).contains(&encoding),
+                "{}",
+                v.name
+            );
+            against += usize::from(n.grid_against_parent);
+            assert_eq!(n.grid_bitmap_flagged, n.grid_has_voids, "{}", v.name);
+            if n.grid_bitmap_flagged {
+                flagged += 1;
+                runs += usize::from(bytes[4 + a] == 2);
+            }
+        }
+    }
+    assert!(
+        against > 0 && flagged > 0 && runs > 0,
+        "{against} {flagged} {runs}"
+    );
+}
+
+/// The metadata bundle of a vector (format §6.7, 5.0: a frame per page), decompressed by
+/// zstd itself (not by fmrh): offset, stored length, CRC, pages and head length from commit
+/// record bytes 176..200; the frame table (an `(offset, len, crc)` per page) first, its CRC
+/// in the record; the head ends where the dataset header's and directory's frames, stored first, do.
 fn bundle_of(bytes: &[u8]) -> Vec<u8> {
     let offset = u64::from_le_bytes(bytes[176..184].try_into().unwrap()) as usize;
     let len = u32::from_le_bytes(bytes[184..188].try_into().unwrap()) as usize;
     let crc = u32::from_le_bytes(bytes[188..192].try_into().unwrap());
     let pages = u32::from_le_bytes(bytes[192..196].try_into().unwrap()) as usize;
+    let head_len = u32::from_le_bytes(bytes[196..200].try_into().unwrap()) as usize;
     let stored = &bytes[offset..offset + len];
-    assert_eq!(crc32fast::hash(stored), crc, "the bundle's CRC");
-    let raw = zstd::stream::decode_all(stored).unwrap();
-    assert_eq!(raw.len(), pages * 1024, "the bundle holds its pages");
+    let table = &stored[..12 * pages];
+    assert_eq!(crc32fast::hash(table), crc, "the frame table's CRC");
+    let mut raw = Vec::new();
+    let mut head_end = 12 * pages;
+    for e in table.chunks_exact(12) {
+        let at = u32::from_le_bytes(e[..4].try_into().unwrap()) as usize;
+        let flen = u32::from_le_bytes(e[4..8].try_into().unwrap()) as usize;
+        let frame = &stored[at..at + flen];
+        assert_eq!(
+            crc32fast::hash(frame),
+            u32::from_le_bytes(e[8..].try_into().unwrap()),
+            "a frame's CRC"
+        );
+        let page = zstd::stream::decode_all(frame).unwrap();
+        assert_eq!(page.len(), 1024, "a frame holds one page");
+        if &page[..4] == b"FMHD" || &page[..4] == b"FMCD" {
+            head_end = head_end.max(at + flen);
+        }
+        raw.extend(page);
+    }
+    assert_eq!(
+        head_len, head_end,
+        "the head is the table and the opening pages' frames"
+    );
     raw
 }
 
@@ -250,7 +307,7 @@ fn vector_commit_record_fields_sit_where_the_spec_says() {
     // Spot checks against the byte table of format-spec/container.md §3.
     let bytes = build(&vectors()[1]);
     assert_eq!(&bytes[0..8], b"FMRH\r\n\x1a\n");
-    assert_eq!(u16::from_le_bytes([bytes[8], bytes[9]]), 4); // major
+    assert_eq!(u16::from_le_bytes([bytes[8], bytes[9]]), 5); // major
     assert_eq!(u16::from_le_bytes([bytes[10], bytes[11]]), 0); // minor
     assert_eq!(u32::from_le_bytes(bytes[12..16].try_into().unwrap()), 1024); // page size
     assert_eq!(u64::from_le_bytes(bytes[16..24].try_into().unwrap()), 1); // txn id
@@ -260,8 +317,9 @@ fn vector_commit_record_fields_sit_where_the_spec_says() {
     );
     // pages_txn (1.2 and later): the fresh file's one transaction wrote every structured page.
     assert_eq!(u64::from_le_bytes(bytes[168..176].try_into().unwrap()), 1);
-    // The bundle's reserved field and the record's reserved tail are zero.
-    assert!(bytes[196..252].iter().all(|&b| b == 0));
+    // The bundle's head length (5.0) is set; the record's reserved tail is zero.
+    assert!(u32::from_le_bytes(bytes[196..200].try_into().unwrap()) > 0);
+    assert!(bytes[200..252].iter().all(|&b| b == 0));
     let crc = crc32fast::hash(&bytes[..252]);
     assert_eq!(u32::from_le_bytes(bytes[252..256].try_into().unwrap()), crc);
     assert!(
@@ -345,12 +403,12 @@ fn format_1_vectors_read_verify_and_refuse_writes() {
     }
 }
 
-/// Format 2.x and 3.x files (the vectors as 2.0 and 2.1 wrote them, every table in pages of
+/// Format 2.x to 4.x files (the vectors as 2.0 and 2.1 wrote them, every table in pages of
 /// its own, in 2.0 the dataset header's precision field still reserved and zero; as 3.0 wrote
-/// them, every block coded alone) read sample for sample, pass `verify --full`, and accept a
-/// transaction, whose commit makes them 4.0 (format §8) with their metadata in a bundle.
+/// them, every block coded alone; as 4.0 wrote them, every grid coded alone) read sample for sample, pass `verify --full`, and accept a
+/// transaction, whose commit makes them 5.0 (format §8) with their metadata in a bundle.
 #[test]
-fn format_2_and_3_vectors_read_verify_and_take_a_transaction() {
+fn format_2_to_4_vectors_read_verify_and_take_a_transaction() {
     let old_vectors = lossless_vectors()
         .into_iter()
         .map(|v| ((2u16, 0u16), v))
@@ -360,7 +418,8 @@ fn format_2_and_3_vectors_read_verify_and_take_a_transaction() {
                 .filter(|v| !v.paged)
                 .map(|v| ((2, 1), v)),
         )
-        .chain(vectors().into_iter().map(|v| ((3, 0), v)));
+        .chain(vectors().into_iter().map(|v| ((3, 0), v)))
+        .chain(vectors().into_iter().map(|v| ((4, 0), v)));
     for ((major, minor), v) in old_vectors {
         let old = dir()
             .join(format!("v{major}.{minor}"))
@@ -398,7 +457,7 @@ fn format_2_and_3_vectors_read_verify_and_take_a_transaction() {
         txn.commit().unwrap();
         drop(c);
         let store = fmrh::Store::open(&copy).unwrap();
-        assert_eq!(store.state().format_version, (4, 0), "{}", v.name);
+        assert_eq!(store.state().format_version, (5, 0), "{}", v.name);
         assert!(store.layout().unwrap().bundle_bytes > 0, "{}", v.name);
         let got = store
             .read_window(fmrh::model::SampleRect {

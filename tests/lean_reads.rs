@@ -133,23 +133,42 @@ fn n_len(b: &serde_json::Value) -> u64 {
 
 /// The payload bytes loading `blocks` (each `(level, x, y, payload bytes)`) must read: their
 /// own, and once each the grid of every parent a physical block is coded against (format 4).
+/// The payload bytes of `blocks` (level, x, y, own payload length) and of every ancestor
+/// their payloads decode with, each once: the grid a physical block is coded against (format
+/// 4), and up the chain of grids coded against their parents (format 5).
 fn payload_bytes_with_parents<S: fmrh::store::Source>(
     store: &Store<S>,
     blocks: impl IntoIterator<Item = (u8, u32, u32, u64)>,
 ) -> u64 {
     let finest = store.domain().finest_level();
-    let mut parents = std::collections::BTreeSet::new();
+    let nodes = store.nodes().unwrap();
+    let at: std::collections::HashMap<(u8, u32, u32), u32> = nodes
+        .iter()
+        .enumerate()
+        .map(|(i, n)| ((n.level, n.x, n.y), i as u32))
+        .collect();
+    let up = |i: u32| {
+        let n = &nodes[i as usize];
+        n.grid_against_parent.then(|| n.parent.unwrap())
+    };
+    let mut ancestors = std::collections::BTreeSet::new();
     let mut total = 0;
     for (level, x, y, len) in blocks {
         total += len;
-        if level == finest {
-            parents.extend(store.stored_block(x, y).unwrap().against);
+        let mut next = if level == finest {
+            store.stored_block(x, y).unwrap().against
+        } else {
+            up(at[&(level, x, y)])
+        };
+        while let Some(i) = next {
+            ancestors.insert(i);
+            next = up(i);
         }
     }
     total
-        + parents
+        + ancestors
             .into_iter()
-            .map(|n| u64::from(store.node(n).unwrap().payload.len))
+            .map(|n| u64::from(nodes[n as usize].payload.len))
             .sum::<u64>()
 }
 

@@ -67,7 +67,7 @@ fn container() -> Vec<u8> {
     build_bytes_paged(&terrain(), 17, &Thresholds::Ladder)
 }
 
-/// The same container with its metadata in a bundle (format §6.7), read whole at open.
+/// The same container with its metadata in a bundle (format §6.7, 5.0: a frame per page).
 fn bundled() -> Vec<u8> {
     build_bytes(&terrain(), 17, &Thresholds::Ladder)
 }
@@ -143,11 +143,23 @@ fn a_failed_read_of_a_table_page_or_payload_is_an_io_error() {
     assert_io(e, "verify");
 }
 
-/// With the metadata in a bundle, a failed read of it fails opening with the I/O error (not
-/// a corruption report), and once open, lookups and scans read nothing that could fail.
+/// The same container as format 4.0 wrote it: the bundle one frame, read whole at open.
+fn bundled_4_0() -> Vec<u8> {
+    common::vector("v4.0/hills-20x13-voids.fmrh")
+}
+
+/// Where the head of a 5.0 bundle ends (commit record bytes 196..200): the frame table and
+/// the frames opening reads.
+fn head_end(bytes: &[u8]) -> u64 {
+    bundle_range(bytes).start + u64::from(u32::from_le_bytes(bytes[196..200].try_into().unwrap()))
+}
+
+/// With the metadata in a 4.0 bundle (one frame), a failed read of it fails opening with the
+/// I/O error (not a corruption report), and once open, lookups and scans read nothing that
+/// could fail.
 #[test]
-fn a_failed_read_of_the_bundle_is_an_io_error_and_lookups_read_nothing() {
-    let bytes = bundled();
+fn a_failed_read_of_a_whole_bundle_is_an_io_error_and_lookups_read_nothing() {
+    let bytes = bundled_4_0();
     let range = bundle_range(&bytes);
     let e =
         Store::from_source(failing(bytes.clone(), range.start..range.start + 1, 0)).unwrap_err();
@@ -170,25 +182,105 @@ fn a_failed_read_of_the_bundle_is_an_io_error_and_lookups_read_nothing() {
     store.stored_block(cols - 1, rows - 1).unwrap();
 }
 
-/// A damaged byte in the bundle's stored bytes fails its CRC at open: corruption (I-9),
-/// naming the file, and the validator reports it rather than failing.
+/// With the metadata in a 5.0 bundle (a frame per page), a failed read of its head fails
+/// opening with the I/O error; once open, a failed read of a frame a lookup reaches is the
+/// lookup's I/O error, never corruption; and a page read once is not read again.
 #[test]
-fn a_damaged_bundle_is_corrupt_at_open() {
-    let mut bytes = bundled();
+fn a_failed_read_of_a_bundle_frame_is_an_io_error_where_it_is_read() {
+    let bytes = bundled();
     let range = bundle_range(&bytes);
-    bytes[(range.start + range.end) as usize / 2] ^= 0x10;
-    let e = Store::from_source(failing(bytes.clone(), 0..0, u64::MAX)).unwrap_err();
-    match e {
+    let head = head_end(&bytes);
+    assert!(head < range.end, "the bundle has frames past its head");
+    let e = Store::from_source(failing(bytes.clone(), range.start..head, 0)).unwrap_err();
+    assert_io(e, "open, head read");
+    let e = verify(failing(bytes.clone(), head..range.end, 0), VerifyMode::Fast).unwrap_err();
+    assert_io(e, "verify, frame read");
+    // Opening reads nothing past the head.
+    let store = Store::from_source(failing(bytes.clone(), head..range.end, 0)).unwrap();
+    assert_io(store.node(0).unwrap_err(), "node lookup, frame read");
+    let e = match store
+        .scan_hilbert(0, 0..=u64::MAX)
+        .map(|s| s.collect::<Result<Vec<_>, _>>())
+    {
+        Err(e) | Ok(Err(e)) => e,
+        Ok(Ok(_)) => panic!("the scan read no frame"),
+    };
+    assert_io(e, "scan, frame read");
+    // Frames read once are kept: after a whole pass, every table lookup reads nothing.
+    let opened = {
+        let st = Store::from_source(failing(bytes.clone(), 0..0, u64::MAX)).unwrap();
+        st.nodes().unwrap();
+        st.scan_hilbert(0, 0..=u64::MAX)
+            .unwrap()
+            .collect::<Result<Vec<_>, _>>()
+            .unwrap();
+        st.source().reads.load(Ordering::Relaxed)
+    };
+    let store = Store::from_source(failing(bytes.clone(), 0..range.end, opened)).unwrap();
+    store.nodes().unwrap();
+    store
+        .scan_hilbert(0, 0..=u64::MAX)
+        .unwrap()
+        .collect::<Result<Vec<_>, _>>()
+        .unwrap();
+    let reads = store.source().reads.load(Ordering::Relaxed);
+    store.nodes().unwrap();
+    store.node(0).unwrap();
+    assert_eq!(store.source().reads.load(Ordering::Relaxed), reads);
+}
+
+/// A damaged byte in a 4.0 bundle's stored bytes fails its CRC at open: corruption (I-9),
+/// naming the file, and the validator reports it rather than failing. In a 5.0 bundle, a
+/// damaged byte in the head fails opening the same way, and one in a later frame fails its
+/// frame's CRC when a lookup reaches it (I-5), and the validator, which reads every frame.
+#[test]
+fn a_damaged_bundle_is_corrupt_where_it_is_read() {
+    let corrupt_named = |e: Error, want: Invariant| match e {
         Error::Corrupt {
             path, invariant, ..
         } => {
-            assert_eq!(invariant, Invariant::Payload);
+            assert_eq!(invariant, want);
             assert_eq!(path, Path::new("/disk/failing.fmrh"));
         }
         other => panic!("{other}"),
-    }
-    let report = verify(failing(bytes, 0..0, u64::MAX), VerifyMode::Fast).unwrap();
-    assert!(!report.valid);
+    };
+    let mut old = bundled_4_0();
+    let range = bundle_range(&old);
+    old[(range.start + range.end) as usize / 2] ^= 0x10;
+    let e = Store::from_source(failing(old.clone(), 0..0, u64::MAX)).unwrap_err();
+    corrupt_named(e, Invariant::Payload);
+    assert!(
+        !verify(failing(old, 0..0, u64::MAX), VerifyMode::Fast)
+            .unwrap()
+            .valid
+    );
+
+    let clean = bundled();
+    let range = bundle_range(&clean);
+    let head = head_end(&clean);
+    let mut in_head = clean.clone();
+    in_head[(range.start + head) as usize / 2] ^= 0x10;
+    let e = Store::from_source(failing(in_head.clone(), 0..0, u64::MAX)).unwrap_err();
+    assert!(matches!(e, Error::Corrupt { .. }), "{e}");
+    assert!(
+        !verify(failing(in_head, 0..0, u64::MAX), VerifyMode::Fast)
+            .unwrap()
+            .valid
+    );
+    let mut later = clean.clone();
+    later[(head + range.end) as usize / 2] ^= 0x10;
+    let store = Store::from_source(failing(later.clone(), 0..0, u64::MAX)).unwrap();
+    let rect = store.domain().data_rect();
+    let e = store
+        .nodes()
+        .and_then(|_| store.read_window(rect))
+        .unwrap_err();
+    corrupt_named(e, Invariant::Page);
+    assert!(
+        !verify(failing(later, 0..0, u64::MAX), VerifyMode::Fast)
+            .unwrap()
+            .valid
+    );
 }
 
 #[test]

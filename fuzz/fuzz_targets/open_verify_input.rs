@@ -2,7 +2,7 @@
 //! which replays the target's corpus (its seeds and every input that once crashed it) on every
 //! test run. See `open_verify.rs` for the modes.
 
-const VECTORS: [&[u8]; 7] = [
+const VECTORS: [&[u8]; 8] = [
     include_bytes!("../../format-spec/vectors/ramp-9x9.fmrh"),
     include_bytes!("../../format-spec/vectors/hills-20x13-voids.fmrh"),
     include_bytes!("../../format-spec/vectors/cliff-33x33.fmrh"),
@@ -10,6 +10,7 @@ const VECTORS: [&[u8]; 7] = [
     include_bytes!("../../format-spec/vectors/waves-17x17-precision-0.3.fmrh"),
     include_bytes!("../../format-spec/vectors/hills-20x13-voids-paged.fmrh"),
     include_bytes!("../../format-spec/vectors/v2.1/cliff-33x33.fmrh"),
+    include_bytes!("../../format-spec/vectors/v4.0/hills-20x13-voids.fmrh"),
 ];
 
 const TAGS: [&[u8; 4]; 7] = [
@@ -18,8 +19,9 @@ const TAGS: [&[u8; 4]; 7] = [
 
 /// `original` with `edits` applied and every checksum recomputed. An edit whose offset has
 /// its top bit set lands in the decompressed metadata bundle (format 3.0) when the file has
-/// one; the bundle is then compressed again and stored at the end of the file, and the
-/// record names it (offset, length, CRC, file length).
+/// one; the bundle is then compressed again (one frame before 5.0, a frame per page from 5.0
+/// on) and stored at the end of the file, and the record names it (offset, length, CRC,
+/// pages, head, file length).
 pub fn resealed(original: &[u8], edits: &[u8]) -> Vec<u8> {
     let mut bytes = original.to_vec();
     let mut bundle = bundle_pages(&bytes);
@@ -48,7 +50,20 @@ pub fn resealed(original: &[u8], edits: &[u8]) -> Vec<u8> {
         for page in b.chunks_exact_mut(p) {
             reseal_page(page);
         }
-        let stored = fmrh::format::bundle::compress(&[b.clone()], 1).unwrap_or_default();
+        let pages: Vec<Vec<u8>> = b.chunks(p).map(|c| c.to_vec()).collect();
+        let (stored, crc, head_len) = if framed(&bytes) {
+            let head: Vec<usize> = (0..pages.len())
+                .filter(|&i| pages[i][..4] == *b"FMHD" || pages[i][..4] == *b"FMCD")
+                .collect();
+            let (stored, head_len) =
+                fmrh::format::bundle::compress_framed(&pages, &head, 1).unwrap_or_default();
+            let crc = crc32fast::hash(stored.get(..12 * pages.len()).unwrap_or(&[]));
+            (stored, crc, head_len)
+        } else {
+            let stored = fmrh::format::bundle::compress(&[b.clone()], 1).unwrap_or_default();
+            let crc = crc32fast::hash(&stored);
+            (stored, crc, 0)
+        };
         let offset = bytes.len();
         bytes.extend_from_slice(&stored);
         bytes.resize(bytes.len().next_multiple_of(p), 0);
@@ -56,8 +71,9 @@ pub fn resealed(original: &[u8], edits: &[u8]) -> Vec<u8> {
         let r = &mut bytes[..256];
         r[176..184].copy_from_slice(&(offset as u64).to_le_bytes());
         r[184..188].copy_from_slice(&(stored.len() as u32).to_le_bytes());
-        r[188..192].copy_from_slice(&crc32fast::hash(&stored).to_le_bytes());
-        r[192..196].copy_from_slice(&((b.len() / p) as u32).to_le_bytes());
+        r[188..192].copy_from_slice(&crc.to_le_bytes());
+        r[192..196].copy_from_slice(&(pages.len() as u32).to_le_bytes());
+        r[196..200].copy_from_slice(&head_len.to_le_bytes());
         r[24..32].copy_from_slice(&len.to_le_bytes());
     }
     for slot in 0..2 {
@@ -79,8 +95,13 @@ fn reseal_page(page: &mut [u8]) {
     }
 }
 
+/// Whether slot 0's record stores its bundle a frame per page (major 5 and later).
+fn framed(bytes: &[u8]) -> bool {
+    bytes.len() >= 10 && u16::from_le_bytes([bytes[8], bytes[9]]) >= 5
+}
+
 /// Slot 0's metadata bundle, decompressed, if the file has one (commit record bytes
-/// 176..196: offset, stored length, CRC, pages).
+/// 176..196: offset, stored length, CRC, pages; from 5.0 a frame table first).
 fn bundle_pages(bytes: &[u8]) -> Option<Vec<u8>> {
     let r = bytes.get(..256)?;
     let offset = usize::try_from(u64::from_le_bytes(r[176..184].try_into().ok()?)).ok()?;
@@ -89,7 +110,21 @@ fn bundle_pages(bytes: &[u8]) -> Option<Vec<u8>> {
         return None;
     }
     let stored = bytes.get(offset..offset.checked_add(len)?)?;
-    zstd::bulk::decompress(stored, 1 << 20).ok()
+    if !framed(bytes) {
+        return zstd::bulk::decompress(stored, 1 << 20).ok();
+    }
+    let pages = u32::from_le_bytes(r[192..196].try_into().ok()?) as usize;
+    let mut out = Vec::new();
+    for e in stored.get(..pages.checked_mul(12)?)?.chunks_exact(12) {
+        let at = u32::from_le_bytes(e[..4].try_into().ok()?) as usize;
+        let flen = u32::from_le_bytes(e[4..8].try_into().ok()?) as usize;
+        let frame = stored.get(at..at.checked_add(flen)?)?;
+        out.extend(zstd::bulk::decompress(frame, 1 << 16).ok()?);
+        if out.len() > 1 << 20 {
+            return None;
+        }
+    }
+    Some(out)
 }
 
 pub fn check(bytes: &[u8]) {

@@ -51,11 +51,11 @@ pub struct BuildArgs {
     /// of a small file), else 4096.
     #[arg(long)]
     page_size: Option<u32>,
-    /// Code every physical block alone, not against its parent's grid where that is
-    /// smaller: a larger file (about a fifth more on integer DEMs) whose blocks decode
-    /// faster and whose scenes read no parent grids.
-    #[arg(long)]
-    blocks_alone: bool,
+    /// Code every payload (physical blocks and grids) alone, not against its parent's grid
+    /// where that is smaller: a larger file (about a quarter more on integer DEMs) whose
+    /// payloads decode faster and whose scenes read no ancestor grids.
+    #[arg(long, alias = "blocks-alone")]
+    payloads_alone: bool,
     /// No progress bar.
     #[arg(long, short)]
     quiet: bool,
@@ -216,7 +216,7 @@ pub fn run(args: &BuildArgs) -> Result<ExitCode, Error> {
                         u64::from(model.domain().width()) * u64::from(model.domain().height()),
                     )
                 }),
-                blocks_against_parents: !args.blocks_alone,
+                against_parents: !args.payloads_alone,
                 ..WriteOptions::default()
             };
             if let Some(b) = &bar {

@@ -364,10 +364,22 @@ fn print_info(path: &std::path::Path, i: &Info) {
         );
     }
     if s.metadata_bundle > 0 {
+        // 5.0 stores a frame per page, read as lookups reach them (format §6.7).
+        let framed = i
+            .format_version
+            .split('.')
+            .next()
+            .and_then(|m| m.parse::<u16>().ok())
+            .is_some_and(|m| m >= 5);
         println!(
             "  the dataset header, directory and tables are in the bundle: {} pages, \
-             compressed, read whole on open",
-            s.metadata_bundle_pages
+             compressed, {}",
+            s.metadata_bundle_pages,
+            if framed {
+                "each read when first needed"
+            } else {
+                "read whole on open"
+            }
         );
     }
 }

@@ -40,6 +40,7 @@
 //! The module knows nothing of files: the format stores its output as payload bytes.
 
 pub mod parent;
+pub mod voids;
 
 use pco::standalone::{simple_compress, DecompressorItem, FileDecompressor};
 use pco::{ChunkConfig, DeltaSpec};
@@ -222,7 +223,6 @@ pub fn decode(bytes: &[u8], width: usize, out: &mut [f32]) -> Result<(), DecodeE
         }
         Encoding::Lattice => {
             let n = out.len();
-            let bitmap_len = n.div_ceil(8);
             if body.len() < 9 {
                 return Err(length("shorter than its step and flags".into()));
             }
@@ -230,13 +230,8 @@ pub fn decode(bytes: &[u8], width: usize, out: &mut [f32]) -> Result<(), DecodeE
             if !(q.is_finite() && q > 0.0) {
                 return Err(DecodeError::Step(q));
             }
-            let (voids, rest) = match body[8] {
-                0 => (None, &body[9..]),
-                1 if body.len() >= 9 + bitmap_len => {
-                    (Some(&body[9..9 + bitmap_len]), &body[9 + bitmap_len..])
-                }
-                flag => return Err(length(format!("void flag {flag}, or a short bitmap"))),
-            };
+            let (voids, rest) = voids::read(body[8], &body[9..], n, width).map_err(length)?;
+            let voids = voids.as_deref();
             let mut k = vec![0i64; n];
             pco_decode(rest, &mut k)?;
             // In place: each residual becomes its index once the cells it is predicted
@@ -412,10 +407,9 @@ fn lattice(samples: &[f32], width: usize, q: f64) -> Option<Vec<u8>> {
     out.push(Encoding::Lattice as u8);
     out.extend_from_slice(&q.to_le_bytes());
     if any_void {
-        out.push(1);
-        out.extend_from_slice(&bitmap);
+        voids::write(&bitmap, n, width, true, &mut out);
     } else {
-        out.push(0);
+        out.push(voids::NONE);
     }
     out.extend_from_slice(&coded);
     Some(out)

@@ -25,7 +25,7 @@ use pco::{ChunkConfig, DeltaSpec};
 
 use super::{
     from_ordered, is_lattice_value, lattice_value, pco_decode, predict, to_ordered, unzigzag,
-    zigzag, DecodeError, Encoding, LATTICE_STEPS, MAX_LATTICE_INDEX, VOID_BITS,
+    voids, zigzag, DecodeError, Encoding, LATTICE_STEPS, MAX_LATTICE_INDEX, VOID_BITS,
 };
 
 /// Where a grid's samples lie: sample columns and rows, each non-decreasing.
@@ -353,11 +353,8 @@ fn encode_both(
             out.extend_from_slice(&q.to_le_bytes());
         }
         match void_bitmap(samples) {
-            Some(bitmap) => {
-                out.push(1);
-                out.extend_from_slice(&bitmap);
-            }
-            None => out.push(0),
+            Some(bitmap) => voids::write(&bitmap, samples.len(), w, true, &mut out),
+            None => out.push(voids::NONE),
         }
         out
     };
@@ -431,13 +428,10 @@ pub fn decode_against(
     };
     let n = out.len();
     let (voids, rest) = match body.split_first() {
-        Some((0, rest)) => (None, rest),
-        Some((1, rest)) if rest.len() >= n.div_ceil(8) => {
-            let (m, rest) = rest.split_at(n.div_ceil(8));
-            (Some(m), rest)
-        }
-        _ => return Err(length("a void flag and its bitmap".into())),
+        Some((&flag, rest)) => voids::read(flag, rest, n, at.cols.len()).map_err(length)?,
+        None => return Err(length("no void flag".into())),
     };
+    let voids = voids.as_deref();
     let void = |i: usize| voids.is_some_and(|m| m[i / 8] >> (i % 8) & 1 == 1);
     let (cols, rows) = plan(at, parent.at)
         .ok_or_else(|| length("the placement is not inside the parent".into()))?;

@@ -39,9 +39,11 @@ pub const BUNDLE_FIRST_PAGE: u64 = 1 << 40;
 pub const MAX_BUNDLE_BYTES: u64 = 16 << 20;
 
 /// The default most stored bytes a writer gives a bundle: a state whose compressed
-/// metadata is larger keeps it in file pages, read page by page as lookups reach them,
-/// so that opening never reads more than about 16 KiB (issue 15's open target).
-pub const DEFAULT_BUNDLE_LIMIT: u64 = 16 << 10;
+/// metadata is larger keeps it in file pages, read page by page as lookups reach them. Since
+/// 5.0 a reader reads a bundle page by page too (opening reads only its head), so the limit
+/// no longer bounds opening; it bounds what every commit compresses and writes again (a
+/// bundle is rewritten whole, where paged tables rewrite only the pages that change).
+pub const DEFAULT_BUNDLE_LIMIT: u64 = 32 << 10;
 
 /// The zstd level a writer compresses a bundle with.
 pub const BUNDLE_ZSTD_LEVEL: i32 = 19;
@@ -70,8 +72,9 @@ pub struct BundleRef {
     pub crc: U32,
     /// Pages the bundle decompresses to.
     pub pages: U32,
-    /// Zero.
-    pub reserved: U32,
+    /// 5.0: bytes of the stored run's *head*, the frame table and the frames stored first,
+    /// which a reader reads when it opens the state. Zero (reserved) before 5.0.
+    pub head_len: U32,
 }
 
 const _: () = assert!(size_of::<BundleRef>() == 24);
@@ -93,8 +96,9 @@ impl BundleRef {
 
     /// Checks the reference against the record it sits in: absent means all zero; present
     /// means past the commit slots, inside `file_length`, at least one page and at most
-    /// [`MAX_BUNDLE_BYTES`] decompressed. (The reserved field is the record's to check.)
-    pub fn check(&self, page_size: u32, file_length: u64) -> Result<(), String> {
+    /// [`MAX_BUNDLE_BYTES`] decompressed, and (`framed`, 5.0) a head that holds the frame
+    /// table and lies within the run. (`head_len` before 5.0 is the record's to check.)
+    pub fn check(&self, page_size: u32, file_length: u64, framed: bool) -> Result<(), String> {
         if !self.is_present() {
             if self.as_bytes().iter().any(|&b| b != 0) {
                 return Err("a bundle of 0 bytes with other fields set".into());
@@ -113,6 +117,12 @@ impl BundleRef {
             return Err(format!(
                 "bundle of {pages} pages: 1 to {} allowed at this page size",
                 MAX_BUNDLE_BYTES / u64::from(page_size)
+            ));
+        }
+        let head = u64::from(self.head_len.get());
+        if framed && (head < pages * FRAME_ENTRY_LEN as u64 || head > len) {
+            return Err(format!(
+                "a head of {head} bytes: the frame table of {pages} pages to the run's {len}"
             ));
         }
         Ok(())
@@ -137,7 +147,7 @@ const BUNDLE_TAGS: [[u8; 4]; 6] = [
 ];
 
 /// Compresses `pages` (each `page_size` bytes, numbered from [`BUNDLE_FIRST_PAGE`]) into
-/// the stored form: one zstd frame.
+/// the stored form of 3.x and 4.x: one zstd frame.
 pub fn compress(pages: &[Vec<u8>], level: i32) -> std::io::Result<Vec<u8>> {
     let raw: Vec<u8> = pages.concat();
     zstd::bulk::compress(&raw, level)
@@ -169,33 +179,191 @@ pub fn decompress(
         )));
     }
     for (i, page) in raw.chunks_exact(page_size as usize).enumerate() {
-        let page_no = BUNDLE_FIRST_PAGE + i as u64;
-        let Some(h) = PageHeader::read(page) else {
-            return Err(bad(format!("page {page_no} is short")));
-        };
-        if !BUNDLE_TAGS.contains(&h.tag) {
-            return Err(Violation::new(
-                Invariant::Page,
-                format!("page {page_no}"),
-                format!(
-                    "tag {:?} in the metadata bundle",
-                    String::from_utf8_lossy(&h.tag)
-                ),
-            ));
-        }
-        let h = super::page::check_page(page, page_no, h.tag)?;
-        if h.txn_tag.get() != txn_tag {
-            return Err(Violation::new(
-                Invariant::Page,
-                format!("page {page_no}"),
-                format!(
-                    "carries txn tag {:#06x}; the state's pages carry {txn_tag:#06x}",
-                    h.txn_tag.get()
-                ),
-            ));
-        }
+        check_bundle_page(page, BUNDLE_FIRST_PAGE + i as u64, txn_tag)?;
     }
     Ok(raw)
+}
+
+/// Bytes of a frame table entry (5.0): the frame's offset from the start of the stored run,
+/// its length and the CRC of its stored bytes, each `u32`. The record's CRC covers the table,
+/// and the table's CRCs the frames: every stored byte is bound, as a payload's are.
+pub const FRAME_ENTRY_LEN: usize = 12;
+
+/// Compresses `pages` into the stored form of 5.0: a frame table, then one zstd frame per
+/// page. The frames of the pages `head` lists (those opening reads: the dataset header and
+/// the cluster directory) come first, in page order, then the others in page order. Returns
+/// the stored run and the length of its head: the table and the head's frames, which a
+/// reader reads in one call when it opens the state.
+pub fn compress_framed(
+    pages: &[Vec<u8>],
+    head: &[usize],
+    level: i32,
+) -> std::io::Result<(Vec<u8>, u32)> {
+    let frames: Vec<Vec<u8>> = pages
+        .iter()
+        .map(|p| zstd::bulk::compress(p, level))
+        .collect::<std::io::Result<_>>()?;
+    let too_long = || std::io::Error::other("a metadata bundle past 4 GiB");
+    let table_len = pages.len() * FRAME_ENTRY_LEN;
+    let order: Vec<usize> = head
+        .iter()
+        .copied()
+        .filter(|&i| i < pages.len())
+        .chain((0..pages.len()).filter(|i| !head.contains(i)))
+        .collect();
+    let mut table = vec![0u8; table_len];
+    let mut body = Vec::new();
+    let mut head_len = table_len;
+    for (k, &i) in order.iter().enumerate() {
+        let at = u32::try_from(table_len + body.len()).map_err(|_| too_long())?;
+        let len = u32::try_from(frames[i].len()).map_err(|_| too_long())?;
+        let e = &mut table[i * FRAME_ENTRY_LEN..(i + 1) * FRAME_ENTRY_LEN];
+        e[..4].copy_from_slice(&at.to_le_bytes());
+        e[4..8].copy_from_slice(&len.to_le_bytes());
+        e[8..].copy_from_slice(&crc32(&frames[i]).to_le_bytes());
+        body.extend_from_slice(&frames[i]);
+        if k < head.len() {
+            head_len = table_len + body.len();
+        }
+    }
+    table.extend_from_slice(&body);
+    Ok((table, u32::try_from(head_len).map_err(|_| too_long())?))
+}
+
+/// A page's frame in a 5.0 stored run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Frame {
+    /// Offset from the run's start.
+    pub offset: u32,
+    /// Stored bytes.
+    pub len: u32,
+    /// CRC of the stored bytes.
+    pub crc: u32,
+}
+
+/// Where each page's frame lies in a 5.0 stored run, by page. Checked to tile the run after
+/// the table exactly, each frame non-empty, and the head (`head_len` bytes) to end on a
+/// frame's end.
+pub fn frame_table(
+    table: &[u8],
+    pages: u32,
+    stored_len: u32,
+    head_len: u32,
+) -> Result<Vec<Frame>, Violation> {
+    let bad = |detail: String| Violation::new(Invariant::Page, "metadata bundle", detail);
+    let n = pages as usize;
+    let table_len = n
+        .checked_mul(FRAME_ENTRY_LEN)
+        .filter(|&l| l == table.len())
+        .ok_or_else(|| {
+            bad(format!(
+                "a frame table of {} bytes for {pages} pages",
+                table.len()
+            ))
+        })?;
+    let frames: Vec<Frame> = table
+        .chunks_exact(FRAME_ENTRY_LEN)
+        .map(|e| Frame {
+            offset: u32::from_le_bytes([e[0], e[1], e[2], e[3]]),
+            len: u32::from_le_bytes([e[4], e[5], e[6], e[7]]),
+            crc: u32::from_le_bytes([e[8], e[9], e[10], e[11]]),
+        })
+        .collect();
+    let mut sorted: Vec<(u32, u32)> = frames.iter().map(|f| (f.offset, f.len)).collect();
+    sorted.sort_unstable();
+    let mut at = u64::try_from(table_len).unwrap_or(u64::MAX);
+    let mut head_on_boundary = u64::from(head_len) == at;
+    for &(offset, len) in &sorted {
+        if u64::from(offset) != at || len == 0 {
+            return Err(bad(format!(
+                "a frame of {len} bytes at {offset}, where the frames before it end at {at}"
+            )));
+        }
+        at += u64::from(len);
+        head_on_boundary |= u64::from(head_len) == at;
+    }
+    if at != u64::from(stored_len) {
+        return Err(bad(format!(
+            "frames end at {at}; the run is {stored_len} bytes"
+        )));
+    }
+    if !head_on_boundary {
+        return Err(bad(format!(
+            "a head of {head_len} bytes does not end where a frame does"
+        )));
+    }
+    Ok(frames)
+}
+
+/// Checks one frame of a 5.0 bundle against the CRC its table entry holds (`crc`), then
+/// decompresses it: exactly one sealed structured page carrying bundle page number
+/// `page_no`, a bundle tag and `txn_tag`. Never allocates more than a page.
+pub fn decompress_page(
+    frame: &[u8],
+    crc: u32,
+    page_no: u64,
+    page_size: u32,
+    txn_tag: u16,
+) -> Result<Vec<u8>, Violation> {
+    let at = || format!("page {page_no}");
+    let computed = crc32(frame);
+    if computed != crc {
+        return Err(Violation::new(
+            Invariant::Page,
+            at(),
+            format!("its frame's CRC is {computed:#010x}; the frame table says {crc:#010x}"),
+        ));
+    }
+    let page = zstd::bulk::decompress(frame, page_size as usize).map_err(|e| {
+        Violation::new(
+            Invariant::Page,
+            at(),
+            format!("its frame does not decompress within {page_size} bytes: {e}"),
+        )
+    })?;
+    if page.len() != page_size as usize {
+        return Err(Violation::new(
+            Invariant::Page,
+            at(),
+            format!("its frame decompresses to {} bytes", page.len()),
+        ));
+    }
+    check_bundle_page(&page, page_no, txn_tag)?;
+    Ok(page)
+}
+
+/// Checks a page of a bundle: a sealed structured page with its own bundle page number, a
+/// bundle tag and the state's `txn_tag`.
+fn check_bundle_page(page: &[u8], page_no: u64, txn_tag: u16) -> Result<(), Violation> {
+    let Some(h) = PageHeader::read(page) else {
+        return Err(Violation::new(
+            Invariant::Page,
+            format!("page {page_no}"),
+            "short",
+        ));
+    };
+    if !BUNDLE_TAGS.contains(&h.tag) {
+        return Err(Violation::new(
+            Invariant::Page,
+            format!("page {page_no}"),
+            format!(
+                "tag {:?} in the metadata bundle",
+                String::from_utf8_lossy(&h.tag)
+            ),
+        ));
+    }
+    let h = super::page::check_page(page, page_no, h.tag)?;
+    if h.txn_tag.get() != txn_tag {
+        return Err(Violation::new(
+            Invariant::Page,
+            format!("page {page_no}"),
+            format!(
+                "carries txn tag {:#06x}; the state's pages carry {txn_tag:#06x}",
+                h.txn_tag.get()
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// The CRC a [`BundleRef`] holds for `stored`.
@@ -246,6 +414,38 @@ mod tests {
     }
 
     #[test]
+    fn a_framed_bundle_reads_page_by_page_and_checks_each() {
+        let p = pages(4);
+        let (stored, head) = compress_framed(&p, &[2], 3).unwrap();
+        let table_len = 4 * FRAME_ENTRY_LEN;
+        let frames = frame_table(&stored[..table_len], 4, stored.len() as u32, head).unwrap();
+        // Page 2's frame is stored first, and the head ends with it.
+        assert_eq!(frames[2].offset as usize, table_len);
+        assert_eq!(head as usize, table_len + frames[2].len as usize);
+        for (i, f) in frames.iter().enumerate() {
+            let frame = &stored[f.offset as usize..(f.offset + f.len) as usize];
+            let no = BUNDLE_FIRST_PAGE + i as u64;
+            let page = decompress_page(frame, f.crc, no, 4096, 3).unwrap();
+            assert_eq!(page, p[i]);
+            // Another page's number, another state's tag, or another CRC is refused.
+            assert!(decompress_page(frame, f.crc, no + 1, 4096, 3).is_err());
+            assert!(decompress_page(frame, f.crc, no, 4096, 4).is_err());
+            assert!(decompress_page(frame, f.crc ^ 1, no, 4096, 3).is_err());
+        }
+        // A table whose frames overlap, leave a gap, run past the run, or whose head ends
+        // inside a frame is refused.
+        let mut overlap = stored[..table_len].to_vec();
+        overlap[FRAME_ENTRY_LEN..FRAME_ENTRY_LEN + 4]
+            .copy_from_slice(&frames[0].offset.to_le_bytes());
+        assert!(frame_table(&overlap, 4, stored.len() as u32, head).is_err());
+        assert!(frame_table(&stored[..table_len], 4, stored.len() as u32 + 1, head).is_err());
+        assert!(frame_table(&stored[..table_len], 4, stored.len() as u32, head + 1).is_err());
+        assert!(frame_table(&stored[..table_len - 1], 4, stored.len() as u32, head).is_err());
+        let bomb = zstd::bulk::compress(&vec![0u8; 64 << 20], 1).unwrap();
+        assert!(decompress_page(&bomb, crc32(&bomb), BUNDLE_FIRST_PAGE, 4096, 3).is_err());
+    }
+
+    #[test]
     fn a_frame_larger_than_its_pages_is_refused_without_allocating_it() {
         // 64 MiB of zeros compresses to a few KiB: a bomb a reader must not inflate.
         let bomb = zstd::bulk::compress(&vec![0u8; 64 << 20], 1).unwrap();
@@ -261,25 +461,39 @@ mod tests {
             stored_len: U32::new(100),
             crc: U32::new(1),
             pages: U32::new(2),
-            reserved: U32::new(0),
+            head_len: U32::new(0),
         };
-        assert!(r.check(4096, 12288).is_ok());
-        assert!(r.check(4096, 8200).is_err());
+        assert!(r.check(4096, 12288, false).is_ok());
+        assert!(r.check(4096, 8200, false).is_err());
+        // Framed (5.0): the head holds the frame table and lies within the run.
+        assert!(r.check(4096, 12288, true).is_err());
+        let framed = BundleRef {
+            head_len: U32::new(40),
+            ..r
+        };
+        assert!(framed.check(4096, 12288, true).is_ok());
+        for head in [15, 101] {
+            let bad = BundleRef {
+                head_len: U32::new(head),
+                ..r
+            };
+            assert!(bad.check(4096, 12288, true).is_err(), "{head}");
+        }
         let early = BundleRef {
             offset: U64::new(4096),
             ..r
         };
-        assert!(early.check(4096, 12288).is_err());
+        assert!(early.check(4096, 12288, false).is_err());
         let huge = BundleRef {
             pages: U32::new(u32::MAX),
             ..r
         };
-        assert!(huge.check(4096, 12288).is_err());
+        assert!(huge.check(4096, 12288, false).is_err());
         let stray = BundleRef {
             stored_len: U32::new(0),
             ..r
         };
-        assert!(stray.check(4096, 12288).is_err());
-        assert!(BundleRef::default().check(4096, 8192).is_ok());
+        assert!(stray.check(4096, 12288, false).is_err());
+        assert!(BundleRef::default().check(4096, 8192, false).is_ok());
     }
 }

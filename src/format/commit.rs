@@ -29,7 +29,8 @@ use super::bundle::BundleRef;
 use super::tree::TreeRef;
 use super::{
     crc32, is_zero, page_size_is_valid, Invariant, Violation, FORMAT_MAJOR, FORMAT_MINOR,
-    LAST_MINOR_OF_1, LAST_MINOR_OF_2, LAST_MINOR_OF_3, MAGIC, MAX_PAGE_SIZE, MIN_PAGE_SIZE,
+    LAST_MINOR_OF_1, LAST_MINOR_OF_2, LAST_MINOR_OF_3, LAST_MINOR_OF_4, MAGIC, MAX_PAGE_SIZE,
+    MIN_PAGE_SIZE,
 };
 
 /// Bytes of a commit record at the start of its slot page; the rest of the page is zero.
@@ -190,6 +191,18 @@ impl CommitRecord {
         self.major.get() >= 4
     }
 
+    /// Whether its nodes' grids may be coded against their parent's grid (format 5.x):
+    /// before, the node record's flag bit 1 was reserved, zero.
+    pub fn grids_against_parents(&self) -> bool {
+        self.major.get() >= 5
+    }
+
+    /// Whether its metadata bundle is stored a frame per page, read page by page (5.x), not
+    /// as one frame read whole at open.
+    pub fn bundle_framed(&self) -> bool {
+        self.major.get() >= 5
+    }
+
     /// Whether `flag` is set.
     pub fn has_flag(&self, flag: u32) -> bool {
         self.flags.get() & flag != 0
@@ -324,6 +337,7 @@ pub fn classify(bytes: &[u8], slot: u8, offset: u64) -> Slot {
     }
     let newer_minor = match r.major.get() {
         FORMAT_MAJOR => r.minor.get() > FORMAT_MINOR,
+        4 => r.minor.get() > LAST_MINOR_OF_4,
         3 => r.minor.get() > LAST_MINOR_OF_3,
         2 => r.minor.get() > LAST_MINOR_OF_2,
         _ => r.minor.get() > LAST_MINOR_OF_1,
@@ -334,13 +348,13 @@ pub fn classify(bytes: &[u8], slot: u8, offset: u64) -> Slot {
             || r.reserved0.get() != 0
             || (!r.binds_pages() && r.pages_txn.get() != 0)
             || (!has_bundle && !is_zero(r.bundle.as_bytes()))
-            || r.bundle.reserved.get() != 0
+            || (r.major.get() < 5 && r.bundle.head_len.get() != 0)
             || !is_zero(&r.reserved))
     {
         return invalid("reserved fields are not zero".into());
     }
     if has_bundle {
-        if let Err(why) = r.bundle.check(p, len) {
+        if let Err(why) = r.bundle.check(p, len, r.bundle_framed()) {
             return invalid(why);
         }
     }

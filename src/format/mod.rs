@@ -76,7 +76,8 @@ pub use page::{tag, PageHeader, PAGE_HEADER_LEN};
 pub use payload::PayloadRef;
 pub use records::{
     AdjacencyEntry, BlockRecord, FreeEntry, FreePage, IndexEntry, NodeRecord, ScanEntry,
-    StoredBlock, StoredNode, NODE_GRID_HAS_VOIDS, ROOT_PARENT,
+    StoredBlock, StoredNode, NODE_GRID_AGAINST_PARENT, NODE_GRID_BITMAP_FLAGGED,
+    NODE_GRID_HAS_VOIDS, ROOT_PARENT,
 };
 pub use tree::{TreeRef, TreeSpec, MAX_TREE_DEPTH};
 
@@ -84,7 +85,13 @@ pub use tree::{TreeRef, TreeSpec, MAX_TREE_DEPTH};
 /// transfers, as PNG's signature does.
 pub const MAGIC: [u8; 8] = *b"FMRH\r\n\x1a\n";
 
-/// Incompatible revisions of the format. Writers write 4; readers read 1 to 4.
+/// Incompatible revisions of the format. Writers write 5; readers read 1 to 5.
+///
+/// 5.0 may code a node's coarse grid *against its parent's grid* as 4.0 codes physical
+/// blocks (the node record's flag [`records::NODE_GRID_AGAINST_PARENT`]): decoding a grid may
+/// then need its ancestors' grids, up to one coded alone. A 4.x reader would take such a grid
+/// for a corrupt one. Everything else is as in 4.0, so a 4.x file is read as it is and a
+/// transaction on it writes a 5.0 state.
 ///
 /// 4.0 may code a physical block *against its parent's grid* (payload encodings 5 and 6,
 /// the block record's `against` field, formerly reserved): a 3.x reader would take such a
@@ -97,10 +104,13 @@ pub const MAGIC: [u8; 8] = *b"FMRH\r\n\x1a\n";
 /// writes a 3.0 state. 2.0 stored payloads coded ([`payload::store_block`],
 /// [`crate::codec`]) where 1.x stored raw `f32`: a 1.x file is read as it is, and refused
 /// for writing (it would mix raw and coded payloads): rebuild it with `fmrh build`.
-pub const FORMAT_MAJOR: u16 = 4;
+pub const FORMAT_MAJOR: u16 = 5;
 
 /// Compatible additions within [`FORMAT_MAJOR`]: none yet.
 pub const FORMAT_MINOR: u16 = 0;
+
+/// The last minor version of major 4.
+pub const LAST_MINOR_OF_4: u16 = 0;
 
 /// The last minor version of major 3.
 pub const LAST_MINOR_OF_3: u16 = 0;

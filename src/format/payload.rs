@@ -24,7 +24,7 @@
 //! coded ([`crate::codec`]): a block as `u32` length of the samples' encoding, the samples'
 //! encoding (rows of `width`), then the stand-ins' encoding (one row) if there are voids; a
 //! grid as `u32` length of the heights' encoding, the heights' encoding (rows of `gw`), then
-//! the void bitmap as it is. [`store_block`] and [`store_grid`] code; [`load_block`] and
+//! the void bitmap as it is (format 5: behind a flag, raw or as runs, [`crate::codec::voids`]). [`store_block`] and [`store_grid`] code; [`load_block`] and
 //! [`load_grid`] give back the layout above, which the views read. The CRC covers the stored
 //! bytes, so damage is caught before any decoding.
 //!
@@ -34,6 +34,7 @@
 //! the grid. The block record names that node; [`grid_axes`] and [`block_axes`] say where
 //! each one's samples lie, which is all the prediction needs.
 
+use std::borrow::Cow;
 use std::ops::Range;
 
 use serde::Serialize;
@@ -282,32 +283,123 @@ pub fn grid_axes(domain: &Domain, level: u8, x: u32, y: u32) -> (Vec<u64>, Vec<u
 /// Format 2: the stored form of a grid's layout `raw` of `gw × gh` heights (see the module
 /// docs), trying the lattice `step` as [`store_block`] does.
 pub fn store_grid(raw: &[u8], gw: u32, gh: u32, coding: Coding) -> Vec<u8> {
+    store_grid_with(raw, gw, gh, |heights| {
+        Some(coding.code(heights, gw.max(1) as usize))
+    })
+    .unwrap_or_default()
+}
+
+/// Format 5: the stored form of a grid's layout `raw` of `gw × gh` heights at `at`, its
+/// heights coded against `parent`'s grid ([`codec::parent`]) and its bitmap as
+/// [`store_grid`] stores it. `None` when the grid does not lie inside the parent, a height
+/// the parent holds differs from the parent's, or `coding` is raw.
+pub fn store_grid_against(
+    raw: &[u8],
+    (gw, gh): (u32, u32),
+    coding: Coding,
+    at: Axes<'_>,
+    parent: Parent<'_>,
+) -> Option<Vec<u8>> {
+    if coding.raw {
+        return None;
+    }
+    store_grid_with(raw, gw, gh, |heights| {
+        codec::parent::encode_against(heights, at, parent, coding.step)
+    })
+}
+
+/// A grid's stored form: the heights' code from `code_heights` (`None`: it does not apply),
+/// then the void bitmap as it is.
+fn store_grid_with(
+    raw: &[u8],
+    gw: u32,
+    gh: u32,
+    code_heights: impl FnOnce(&[f32]) -> Option<Vec<u8>>,
+) -> Option<Vec<u8>> {
     let n = gw as usize * gh as usize;
     let heights: Vec<f32> = raw[..(4 * n).min(raw.len())]
         .chunks_exact(4)
         .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
         .collect();
-    let a = coding.code(&heights, gw.max(1) as usize);
-    let mut out = Vec::with_capacity(4 + a.len() + raw.len().saturating_sub(4 * n));
-    out.extend_from_slice(&u32::try_from(a.len()).unwrap_or(u32::MAX).to_le_bytes());
+    let a = code_heights(&heights)?;
+    let mut out = Vec::with_capacity(5 + a.len() + raw.len().saturating_sub(4 * n));
+    out.extend_from_slice(&u32::try_from(a.len()).ok()?.to_le_bytes());
     out.extend_from_slice(&a);
-    out.extend_from_slice(raw.get(4 * n..).unwrap_or(&[]));
-    out
+    // Format 5: the bitmap behind a flag, as runs where that is smaller.
+    if let Some(bitmap) = raw.get(4 * n..).filter(|b| !b.is_empty()) {
+        crate::codec::voids::write(bitmap, n, gw.max(1) as usize, true, &mut out);
+    }
+    Some(out)
 }
 
-/// Format 2: a grid's layout from its stored form, or why it does not decode.
-pub fn load_grid(stored: &[u8], gw: u32, gh: u32, has_voids: bool) -> Result<Vec<u8>, String> {
+/// Format 2: a grid's layout from its stored form, or why it does not decode. `flagged_bitmap`
+/// (the node's flag bit 2, format 5): the bitmap follows a void flag
+/// ([`crate::codec::voids`]), else it is raw.
+pub fn load_grid(
+    stored: &[u8],
+    (gw, gh): (u32, u32),
+    has_voids: bool,
+    flagged_bitmap: bool,
+) -> Result<Vec<u8>, String> {
+    load_grid_with(
+        stored,
+        (gw, gh),
+        (has_voids, flagged_bitmap),
+        |a, heights| codec::decode(a, gw.max(1) as usize, heights).map_err(|e| e.to_string()),
+    )
+}
+
+/// Format 5: a grid's layout from its stored form when its heights (at `at`) are coded
+/// against `parent`'s grid, or why it does not decode (`flagged_bitmap` as [`load_grid`]).
+pub fn load_grid_against(
+    stored: &[u8],
+    (gw, gh): (u32, u32),
+    (has_voids, flagged_bitmap): (bool, bool),
+    at: Axes<'_>,
+    parent: Parent<'_>,
+) -> Result<Vec<u8>, String> {
+    load_grid_with(
+        stored,
+        (gw, gh),
+        (has_voids, flagged_bitmap),
+        |a, heights| {
+            codec::parent::decode_against(a, at, parent, heights).map_err(|e| e.to_string())
+        },
+    )
+}
+
+/// A grid's layout from its stored form, its heights decoded by `heights_from`.
+fn load_grid_with(
+    stored: &[u8],
+    (gw, gh): (u32, u32),
+    (has_voids, flagged_bitmap): (bool, bool),
+    heights_from: impl FnOnce(&[u8], &mut [f32]) -> Result<(), String>,
+) -> Result<Vec<u8>, String> {
     check_shape(gw, gh)?;
     let n = gw as usize * gh as usize;
-    let (a, bitmap) = split_stored(stored)?;
+    let (a, tail) = split_stored(stored)?;
+    let bitmap = match (has_voids, flagged_bitmap, tail.split_first()) {
+        (false, _, _) => None,
+        (true, false, _) => Some(Cow::Borrowed(tail)),
+        (true, true, Some((&flag, rest))) if flag != crate::codec::voids::NONE => {
+            let (m, rest) = crate::codec::voids::read(flag, rest, n, gw as usize)
+                .map_err(|e| format!("bitmap: {e}"))?;
+            if !rest.is_empty() {
+                return Err(format!("{} bytes after the bitmap", rest.len()));
+            }
+            m.map(Cow::Owned)
+        }
+        (true, true, _) => return Err("no bitmap where the node record says there is".into()),
+    };
+    let bitmap = bitmap.unwrap_or(Cow::Borrowed(tail));
     let want = if has_voids { n.div_ceil(8) } else { 0 };
     if bitmap.len() != want {
         return Err(format!("{} bitmap bytes, {want} expected", bitmap.len()));
     }
     let mut heights = vec![0f32; n];
-    codec::decode(a, gw.max(1) as usize, &mut heights).map_err(|e| format!("heights: {e}"))?;
+    heights_from(a, &mut heights).map_err(|e| format!("heights: {e}"))?;
     let mut out: Vec<u8> = heights.iter().flat_map(|v| v.to_le_bytes()).collect();
-    out.extend_from_slice(bitmap);
+    out.extend_from_slice(&bitmap);
     Ok(out)
 }
 
@@ -529,7 +621,10 @@ mod stored_tests {
         refused(load_block(&stored, 9, 9, 82), "voids in");
         refused(load_block(&stored, 1 << 20, 9, 0), "a side");
         refused(load_block(&stored, 0, 9, 0), "a side");
-        refused(load_grid(&stored, u32::MAX, u32::MAX, true), "a side");
+        refused(
+            load_grid(&stored, (u32::MAX, u32::MAX), true, true),
+            "a side",
+        );
     }
 
     #[test]
@@ -546,13 +641,22 @@ mod stored_tests {
         let void: Vec<bool> = (0..25).map(|i| i % 7 == 0).collect();
         let raw = encode_grid(&heights, &void, true);
         let stored = store_grid(&raw, 5, 5, Coding::default());
-        assert_eq!(load_grid(&stored, 5, 5, true).expect("decodes"), raw);
+        assert_eq!(
+            load_grid(&stored, (5, 5), true, true).expect("decodes"),
+            raw
+        );
         assert!(
-            load_grid(&stored, 5, 5, false).is_err(),
+            load_grid(&stored, (5, 5), false, true).is_err(),
             "the bitmap is not expected"
         );
         let mut longer = stored.clone();
         longer.push(0);
-        assert!(load_grid(&longer, 5, 5, true).is_err());
+        assert!(load_grid(&longer, (5, 5), true, true).is_err());
+        // Before format 5 the bitmap followed raw, with no flag.
+        let a = u32::from_le_bytes(stored[..4].try_into().expect("a length")) as usize;
+        let mut old = stored[..4 + a].to_vec();
+        old.extend_from_slice(&raw[4 * 25..]);
+        assert_eq!(load_grid(&old, (5, 5), true, false).expect("decodes"), raw);
+        assert!(load_grid(&old, (5, 5), true, true).is_err());
     }
 }

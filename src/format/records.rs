@@ -20,6 +20,15 @@ pub const ROOT_PARENT: u32 = u32::MAX;
 /// [`NodeRecord::flags`]: the grid has void or padding samples (a bitmap follows the heights).
 pub const NODE_GRID_HAS_VOIDS: u16 = 1;
 
+/// [`NodeRecord::flags`] (format 5): the grid is coded against its parent node's grid, so
+/// decoding it needs that grid first.
+pub const NODE_GRID_AGAINST_PARENT: u16 = 2;
+
+/// [`NodeRecord::flags`] (format 5): the grid's void bitmap follows a void flag
+/// ([`crate::codec::voids`]: raw or as runs) instead of lying raw; set only with
+/// [`NODE_GRID_HAS_VOIDS`]. A grid kept from an older state keeps its raw bitmap.
+pub const NODE_GRID_BITMAP_FLAGGED: u16 = 4;
+
 /// One node of the FMRH.
 #[derive(
     Clone, Copy, Debug, PartialEq, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned,
@@ -33,7 +42,9 @@ pub struct NodeRecord {
     /// Kept children: bit `dy * 2 + dx`.
     pub child_mask: u8,
     /// Bit 0 ([`NODE_GRID_HAS_VOIDS`]): the coarse grid has void or padding samples, and its
-    /// payload carries the void bitmap.
+    /// payload carries the void bitmap. Bit 1 ([`NODE_GRID_AGAINST_PARENT`], format 5): the
+    /// grid is coded against its parent's. Bit 2 ([`NODE_GRID_BITMAP_FLAGGED`], format 5):
+    /// the bitmap follows a void flag.
     pub flags: U16,
     /// Column among the level's nodes.
     pub x: U32,
@@ -95,6 +106,10 @@ pub struct StoredNode {
     pub payload: PayloadRef,
     /// Whether its coarse grid carries a void bitmap.
     pub grid_has_voids: bool,
+    /// Whether its coarse grid is coded against its parent's grid (format 5).
+    pub grid_against_parent: bool,
+    /// Whether its coarse grid's void bitmap follows a void flag (format 5).
+    pub grid_bitmap_flagged: bool,
 }
 
 impl NodeRecord {
@@ -116,6 +131,8 @@ impl NodeRecord {
             valid_samples: self.valid_samples.get(),
             payload: self.payload(),
             grid_has_voids: self.flags.get() & NODE_GRID_HAS_VOIDS != 0,
+            grid_against_parent: self.flags.get() & NODE_GRID_AGAINST_PARENT != 0,
+            grid_bitmap_flagged: self.flags.get() & NODE_GRID_BITMAP_FLAGGED != 0,
         }
     }
 
@@ -125,11 +142,21 @@ impl NodeRecord {
             key: U64::new(node.key.0),
             level: node.level,
             child_mask: node.child_mask,
-            flags: U16::new(if node.grid_has_voids {
-                NODE_GRID_HAS_VOIDS
-            } else {
-                0
-            }),
+            flags: U16::new(
+                if node.grid_has_voids {
+                    NODE_GRID_HAS_VOIDS
+                } else {
+                    0
+                } | if node.grid_against_parent {
+                    NODE_GRID_AGAINST_PARENT
+                } else {
+                    0
+                } | if node.grid_bitmap_flagged {
+                    NODE_GRID_BITMAP_FLAGGED
+                } else {
+                    0
+                },
+            ),
             x: U32::new(node.x),
             y: U32::new(node.y),
             parent: U32::new(node.parent.unwrap_or(ROOT_PARENT)),

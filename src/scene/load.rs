@@ -39,8 +39,9 @@ pub struct LoadedBlock {
     /// The heights it draws, row-major from the north-west corner, voids mended (the
     /// node's grid, or the block's full-resolution samples).
     pub heights: Arc<[f32]>,
-    /// Payload bytes read for it besides its own: the stored grid it is coded against
-    /// (format 4), counted with the first block of a load that needs that grid, else 0.
+    /// Payload bytes read for it besides its own: the stored grids of the ancestors its
+    /// payload is coded against (format 4, 5), each counted with the first block of a load
+    /// whose chain reaches it, else 0.
     pub parent_bytes: u64,
 }
 
@@ -52,9 +53,11 @@ impl LoadedBlock {
 }
 
 /// Reads and decodes `blocks` (in the order given), coalescing reads of payloads at most
-/// `gap` bytes apart. A physical block coded against its parent's grid (format 4) needs that
-/// grid: it is read in the same batch (it lies just before its children in the file) and
-/// its bytes count among the load's, but it is not one of the blocks returned.
+/// `gap` bytes apart. A payload coded against its parent's grid (a physical block since
+/// format 4, a node's grid since 5) needs that grid, and that grid may need its own parent's,
+/// up to one coded alone: those ancestors are read in the same batch (a parent lies just
+/// before its children in the file) and their bytes count among the load's, but they are
+/// not among the blocks returned.
 pub fn load_blocks<S: Source>(
     store: &Store<S>,
     blocks: &[SceneBlock],
@@ -67,9 +70,12 @@ pub fn load_blocks<S: Source>(
 /// block it keeps resident), by node index and record; `None` when it holds none.
 pub type HeldGrid<'a> = dyn Fn(u32, &StoredNode) -> Option<Arc<[f32]>> + Sync + 'a;
 
-/// [`load_blocks`], taking the grids a block is coded against from `held` when it has them,
-/// instead of reading and decoding them again: a renderer that drew a parent in an earlier
-/// frame still holds its grid when the parent's children come into view.
+/// [`load_blocks`], taking the grids a payload is coded against from `held` when it has
+/// them, instead of reading and decoding them (and their own ancestors) again: a renderer
+/// that drew a parent in an earlier frame still holds its grid when the parent's children
+/// come into view. Ancestors it decodes go into the store's small cache
+/// ([`Store::parent_grid`]), and the next load takes them from there (its bytes count only
+/// what it reads).
 pub fn load_blocks_reusing<S: Source>(
     store: &Store<S>,
     blocks: &[SceneBlock],
@@ -78,75 +84,115 @@ pub fn load_blocks_reusing<S: Source>(
 ) -> Result<Vec<LoadedBlock>> {
     let finest = store.domain().finest_level();
     let b = store.domain().block_size();
-    // Block records, and the grids the blocks are coded against.
+    // Block records and grid nodes, and the node each block's payload is coded against.
     let mut records = Vec::with_capacity(blocks.len());
-    let mut parents: BTreeMap<u32, StoredNode> = BTreeMap::new();
+    let mut nodes = Vec::with_capacity(blocks.len());
+    let mut needs: Vec<Option<(u32, StoredNode)>> = Vec::with_capacity(blocks.len());
     for block in blocks {
         if block.level == finest {
             let info = store.stored_block(block.x, block.y)?;
-            if let Some((index, node)) = store.against_node(block.x, block.y, &info)? {
-                parents.insert(index, node);
-            }
+            needs.push(store.against_node(block.x, block.y, &info)?);
             records.push(Some(info));
+            nodes.push(None);
         } else {
+            let index = block.node.ok_or_else(|| {
+                crate::Error::Internal("a block above the finest level without a node".into())
+            })?;
+            let node = store.node(index)?;
+            needs.push(store.grid_against_node(&node)?);
             records.push(None);
+            nodes.push(Some(node));
         }
     }
-    // Grids the caller holds need no read.
-    let mut grids: HashMap<u32, ParentGrid> = HashMap::new();
-    parents.retain(|&index, node| {
-        match held(index, node).and_then(|h| ParentGrid::from_expanded(store, index, node, &h)) {
-            Some(grid) => {
-                grids.insert(index, grid);
-                false
-            }
-            None => true,
+    // The ancestors to decode first: the grids the blocks need, then the grids those need,
+    // up to grids coded alone or held by the caller (which need nothing more).
+    let mut grids: HashMap<u32, Arc<ParentGrid>> = HashMap::new();
+    let mut to_read: BTreeMap<u32, StoredNode> = BTreeMap::new();
+    let mut next: Vec<(u32, StoredNode)> = needs.iter().flatten().copied().collect();
+    while let Some((index, node)) = next.pop() {
+        if grids.contains_key(&index) || to_read.contains_key(&index) {
+            continue;
         }
-    });
-    let parents: Vec<(u32, StoredNode)> = parents.into_iter().collect();
+        let have = held(index, &node)
+            .and_then(|h| ParentGrid::from_expanded(store, index, &node, &h))
+            .map(Arc::new)
+            .or_else(|| store.cached_parent_grid(index, &node));
+        if let Some(grid) = have {
+            grids.insert(index, grid);
+            continue;
+        }
+        if let Some(up) = store.grid_against_node(&node)? {
+            next.push(up);
+        }
+        to_read.insert(index, node);
+    }
+    let ancestors: Vec<(u32, StoredNode)> = to_read.into_iter().collect();
     let refs: Vec<_> = blocks
         .iter()
         .map(|b| b.payload)
-        .chain(parents.iter().map(|(_, n)| n.payload))
+        .chain(ancestors.iter().map(|(_, n)| n.payload))
         .collect();
     let mut payloads = store.payloads(&refs, gap)?;
-    let grid_payloads = payloads.split_off(blocks.len());
-    let grid_of = |((index, node), bytes): (&(u32, StoredNode), Cow<'_, [u8]>)| {
-        let grid = store.grid_from(node, bytes)?;
-        Ok((*index, ParentGrid::of(store, *index, node, &grid)))
-    };
-    let read: Vec<(u32, ParentGrid)> = if parents.len() >= PARALLEL_FROM {
-        parents
-            .par_iter()
-            .zip(grid_payloads)
-            .map(grid_of)
-            .collect::<Result<_>>()?
-    } else {
-        parents
-            .iter()
-            .zip(grid_payloads)
-            .map(grid_of)
-            .collect::<Result<_>>()?
-    };
-    grids.extend(read);
-    let grid_len: HashMap<u32, u64> = parents
+    let ancestor_payloads = payloads.split_off(blocks.len());
+    // Ancestors decode from the root down, a level at a time (each needs the one above).
+    let mut by_level: BTreeMap<u8, Vec<Ancestor<'_>>> = BTreeMap::new();
+    for ((index, node), bytes) in ancestors.iter().zip(ancestor_payloads) {
+        by_level
+            .entry(node.level)
+            .or_default()
+            .push((*index, *node, bytes));
+    }
+    for (_, level) in by_level {
+        let decode = |(index, node, bytes): Ancestor<'_>| {
+            let parent = node
+                .grid_against_parent
+                .then(|| node.parent.and_then(|p| grids.get(&p)))
+                .flatten();
+            let grid = store.grid_with(&node, bytes, parent.map(|p| &**p))?;
+            Ok((index, Arc::new(ParentGrid::of(store, index, &node, &grid))))
+        };
+        let decoded: Vec<(u32, Arc<ParentGrid>)> = if level.len() >= PARALLEL_FROM {
+            level.into_par_iter().map(decode).collect::<Result<_>>()?
+        } else {
+            level.into_iter().map(decode).collect::<Result<_>>()?
+        };
+        for (index, grid) in decoded {
+            store.keep_parent_grid(&grid);
+            grids.insert(index, grid);
+        }
+    }
+    // Each ancestor read is counted once, with the first block whose chain reaches it.
+    let read_len: HashMap<u32, u64> = ancestors
         .iter()
         .map(|(i, n)| (*i, u64::from(n.payload.len)))
         .collect();
     let mut counted = HashSet::new();
-    let parent_bytes: Vec<u64> = records
+    let parent_bytes: Vec<u64> = needs
         .iter()
-        .map(|r| {
-            r.and_then(|info| info.against)
-                .filter(|&n| counted.insert(n))
-                .map_or(0, |n| grid_len.get(&n).copied().unwrap_or(0))
+        .map(|need| {
+            let mut sum = 0;
+            let mut at = need.map(|(i, _)| i);
+            while let Some(i) = at {
+                let Some(len) = read_len.get(&i) else { break };
+                if counted.insert(i) {
+                    sum += len;
+                }
+                at = ancestors
+                    .binary_search_by_key(&i, |(k, _)| *k)
+                    .ok()
+                    .and_then(|k| {
+                        let n = &ancestors[k].1;
+                        n.grid_against_parent.then_some(n.parent).flatten()
+                    });
+            }
+            sum
         })
         .collect();
-    let decode = |(((block, info), bytes), &parent_bytes): Job<'_, '_>| {
+    let decode = |((((block, info), node), bytes), &parent_bytes): Job<'_, '_>| {
         let stored: Arc<[u8]> = Arc::from(&*bytes);
         if let Some(info) = *info {
             let parent = info.against.and_then(|n| grids.get(&n));
-            let decoded = store.block_with(block.x, block.y, info, bytes, parent)?;
+            let decoded = store.block_with(block.x, block.y, info, bytes, parent.map(|p| &**p))?;
             let view = decoded.view();
             Ok(LoadedBlock {
                 stored,
@@ -156,11 +202,14 @@ pub fn load_blocks_reusing<S: Source>(
                 parent_bytes,
             })
         } else {
-            let index = block.node.ok_or_else(|| {
+            let node = node.as_ref().ok_or_else(|| {
                 crate::Error::Internal("a block above the finest level without a node".into())
             })?;
-            let node = store.node(index)?;
-            let grid = store.grid_from(&node, bytes)?;
+            let parent = node
+                .grid_against_parent
+                .then(|| node.parent.and_then(|p| grids.get(&p)))
+                .flatten();
+            let grid = store.grid_with(node, bytes, parent.map(|p| &**p))?;
             Ok(LoadedBlock {
                 stored,
                 width: b,
@@ -176,6 +225,7 @@ pub fn load_blocks_reusing<S: Source>(
         blocks
             .par_iter()
             .zip(records.par_iter())
+            .zip(nodes.par_iter())
             .zip(payloads)
             .zip(parent_bytes.par_iter())
             .map(decode)
@@ -184,6 +234,7 @@ pub fn load_blocks_reusing<S: Source>(
         blocks
             .iter()
             .zip(records.iter())
+            .zip(nodes.iter())
             .zip(payloads)
             .zip(parent_bytes.iter())
             .map(decode)
@@ -191,12 +242,21 @@ pub fn load_blocks_reusing<S: Source>(
     }
 }
 
-/// One block to decode: the block, its record (physical blocks), its stored bytes, and the
-/// bytes of the grid it is coded against that it accounts for.
+/// One block to decode: the block, its record (physical blocks) or node (grids), its stored
+/// bytes, and the bytes of the ancestors it accounts for.
 type Job<'a, 'b> = (
-    ((&'a SceneBlock, &'a Option<StoredBlock>), Cow<'b, [u8]>),
+    (
+        (
+            (&'a SceneBlock, &'a Option<StoredBlock>),
+            &'a Option<StoredNode>,
+        ),
+        Cow<'b, [u8]>,
+    ),
     &'a u64,
 );
+
+/// An ancestor to decode: its index, record and stored bytes.
+type Ancestor<'b> = (u32, StoredNode, Cow<'b, [u8]>);
 
 /// Loads of at least this many blocks decode in parallel.
 const PARALLEL_FROM: usize = 8;

@@ -10,6 +10,7 @@ use std::sync::Arc;
 
 use zerocopy::FromBytes;
 
+use super::bundled::{PageError, PageRef};
 use super::pagecache::PageCache;
 use super::source::{self, Source};
 use crate::error::{Error, Result};
@@ -96,9 +97,9 @@ pub(crate) struct Pages<'a, S: Source + ?Sized> {
     /// state's `pages_txn`. Each page read first is then checked to be within 2^16
     /// transactions of it, so its 16-bit txn tag cannot have been reused (format §4).
     pub wrap_guard: Option<u64>,
-    /// The state's metadata bundle, decompressed, every page checked when it was opened
-    /// (format §6.7): pages from `BUNDLE_FIRST_PAGE` on are served from it.
-    pub bundle: Option<&'a [u8]>,
+    /// The state's metadata bundle (format §6.7): pages from `BUNDLE_FIRST_PAGE` on are
+    /// served from it, each checked when it was opened (4.x) or first read (5.0).
+    pub bundle: Option<&'a super::bundled::Bundle>,
 }
 
 /// The bytes of a page: lent by the source, or a checked copy the cache shares.
@@ -141,14 +142,24 @@ impl<'a, S: Source + ?Sized> Pages<'a, S> {
     #[inline]
     pub fn get(&self, page: u64, tag: [u8; 4]) -> Result<PageBytes<'a>> {
         if bundle::is_bundle_page(page) {
-            // Checked (number, CRC, txn tag) when the bundle was opened; the kind a
-            // reference expects is checked on every read.
-            return match self
-                .bundle
-                .and_then(|b| bundle::page_of(b, page, self.page_size))
-            {
-                Some(bytes) => self.tagged(page, tag, PageBytes::Source(Cow::Borrowed(bytes))),
-                None => Err(self.outside(page)),
+            // Checked (number, CRC, txn tag) when the bundle was opened or the page first
+            // read; the kind a reference expects is checked on every read.
+            let Some(b) = self.bundle else {
+                return Err(self.outside(page));
+            };
+            let counted = |n: usize| {
+                if let Some(c) = self.cache {
+                    c.counters.metadata(n);
+                }
+            };
+            return match b.page(self.src, page, self.page_size, &counted) {
+                Ok(PageRef::Borrowed(bytes)) => {
+                    self.tagged(page, tag, PageBytes::Source(Cow::Borrowed(bytes)))
+                }
+                Ok(PageRef::Shared(bytes)) => self.tagged(page, tag, PageBytes::Shared(bytes)),
+                Err(PageError::Outside) => Err(self.outside(page)),
+                Err(PageError::Read(e)) => Err(e),
+                Err(PageError::Bad(v)) => Err(self.reused_or_corrupt(v)),
             };
         }
         if page < 2 || page >= self.page_count {

@@ -54,6 +54,7 @@
 #![warn(clippy::cast_possible_truncation)]
 
 pub(crate) mod btree;
+mod bundled;
 pub mod io;
 pub mod lock;
 mod open;
@@ -72,7 +73,7 @@ use serde::Serialize;
 
 pub use crate::format::{ClusterInfo, FreePage, PayloadRef, ScanEntry, StoredBlock, StoredNode};
 pub use pagecache::ReadStats;
-pub use read::{Block, Children, CodeScan, Grid, HilbertScan, Layout, ParentGrid};
+pub use read::{Block, Children, CodeScan, Grid, HilbertScan, Layout, ParentGrid, ANCESTOR_CACHE};
 pub use source::{Bytes, Counted, FileSource, MmapSource, Source};
 pub use txn::{CommitSummary, Container, Recovery, Snapshot, WriteTxn};
 pub use verify::{
@@ -91,8 +92,8 @@ use crate::model::Domain;
 #[derive(Debug)]
 pub struct Store<S: Source = FileSource> {
     src: S,
-    /// The state's metadata bundle, decompressed and checked at open (format §6.7).
-    bundle: Option<std::sync::Arc<[u8]>>,
+    /// The state's metadata bundle (format §6.7).
+    bundle: Option<std::sync::Arc<bundled::Bundle>>,
     page_size: u32,
     page_count: u64,
     slot: u8,
@@ -109,6 +110,9 @@ pub struct Store<S: Source = FileSource> {
     wrap_guard: Option<u64>,
     /// What opening read.
     open_reads: ReadStats,
+    /// Decoded grids that payloads are coded against (format 4, 5), most recent last
+    /// ([`Store::parent_grid`]).
+    ancestors: std::sync::Mutex<Vec<std::sync::Arc<ParentGrid>>>,
 }
 
 /// The state a store reads, as its commit record describes it.
@@ -298,7 +302,29 @@ impl<S: Source> Store<S> {
     pub(crate) fn bundle_pages(&self) -> u64 {
         self.bundle
             .as_ref()
-            .map_or(0, |b| crate::format::bundle::page_count(b, self.page_size))
+            .map_or(0, |b| b.page_count(self.page_size))
+    }
+
+    /// Reads and checks every page of the state's metadata bundle (5.0 reads each when a
+    /// lookup first reaches it): what the validator does to find a damaged frame that no
+    /// lookup has reached yet.
+    pub(crate) fn check_bundle_pages(&self) -> Result<()> {
+        let Some(b) = &self.bundle else {
+            return Ok(());
+        };
+        for i in 0..self.bundle_pages() {
+            let page = crate::format::bundle::BUNDLE_FIRST_PAGE + i;
+            match b.page(&self.src, page, self.page_size, &|n| {
+                self.cache.counters.metadata(n)
+            }) {
+                Ok(_) | Err(bundled::PageError::Outside) => {}
+                Err(bundled::PageError::Read(e)) => return Err(e),
+                Err(bundled::PageError::Bad(v)) => {
+                    return Err(open::superseded_or_corrupt(&self.src, self.txn_id(), v))
+                }
+            }
+        }
+        Ok(())
     }
 
     /// Whether this store registered its state against page reuse by writers in other

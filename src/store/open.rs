@@ -30,7 +30,6 @@ use super::source::{Counted, Source};
 use super::Store;
 use crate::error::{Error, Result};
 use crate::format::blob::{blob_page_content, check_blob_ref};
-use crate::format::bundle;
 use crate::format::commit::{self, NoState, Slot};
 use crate::format::dataset::MAX_DATASET_HEADER_LEN;
 use crate::format::directory::{self, MAX_DIRECTORY_LEN};
@@ -119,9 +118,7 @@ fn read_blob<S: Source + ?Sized>(
     name: &str,
     seen: &mut PageSet,
 ) -> Result<Vec<u8>> {
-    let bundle_pages = pages
-        .bundle
-        .map_or(0, |b| bundle::page_count(b, pages.page_size));
+    let bundle_pages = pages.bundle.map_or(0, |b| b.page_count(pages.page_size));
     let count = check_blob_ref(
         blob,
         max_len,
@@ -148,40 +145,6 @@ fn read_blob<S: Source + ?Sized>(
         out.extend_from_slice(content);
     }
     Ok(out)
-}
-
-/// Reads, checks and decompresses the state's metadata bundle, if it has one (format
-/// §6.7): one read of the stored bytes, their CRC against the record (a mismatch is a
-/// superseded state or corruption, as for a page), then every page's header.
-fn read_bundle<S: Source + ?Sized>(
-    src: &S,
-    commit: &crate::format::CommitRecord,
-) -> Result<Option<Vec<u8>>> {
-    let b = commit.bundle;
-    if !b.is_present() {
-        return Ok(None);
-    }
-    let r = b.payload();
-    let stored = src
-        .read_at(r.offset, r.len as usize)
-        .map_err(|e| super::source::read_error(src.name(), r.offset, r.len as usize, e))?;
-    let crc = bundle::stored_crc(&stored);
-    if crc != r.crc {
-        let v = Violation::new(
-            Invariant::Payload,
-            format!("metadata bundle at byte {}", r.offset),
-            format!("CRC {:#010x} stored, {crc:#010x} computed", r.crc),
-        );
-        return Err(superseded_or_corrupt(src, commit.txn_id.get(), v));
-    }
-    let raw = bundle::decompress(
-        &stored,
-        b.pages.get(),
-        commit.page_size.get(),
-        commit.page_txn_tag(),
-    )
-    .map_err(|v| v.in_file(src.name()))?;
-    Ok(Some(raw))
 }
 
 /// How many times opening starts again because a writer published a newer state (or, for an
@@ -266,7 +229,7 @@ pub(crate) fn open<S: Source>(src: S, walk: Walk) -> Result<Store<S>> {
 
 /// What opening found, before the store owns its source.
 struct Opened {
-    bundle: Option<Arc<[u8]>>,
+    bundle: Option<Arc<super::bundled::Bundle>>,
     page_size: u32,
     page_count: u64,
     slot: u8,
@@ -297,6 +260,7 @@ impl Opened {
             cache: PageCache::new(self.page_count, src.stable(), DEFAULT_CACHED_PAGES),
             registered: self.registered,
             open_reads: self.open_reads,
+            ancestors: std::sync::Mutex::default(),
             src,
         }
     }
@@ -317,7 +281,7 @@ fn open_once<S: Source>(src: &S, walk: Walk) -> Result<Opened> {
     commit::check_length(&commit, len).map_err(|v| v.in_file(src.name()))?;
     let page_size = commit.page_size.get();
     let page_count = commit.file_length.get() / u64::from(page_size);
-    let bundle = read_bundle(src, &commit)?;
+    let bundle = super::bundled::read(src, &commit)?;
     let pages = Pages {
         src,
         page_size,
@@ -329,11 +293,9 @@ fn open_once<S: Source>(src: &S, walk: Walk) -> Result<Opened> {
         },
         cache: None,
         wrap_guard: None,
-        bundle: bundle.as_deref(),
+        bundle: bundle.as_ref(),
     };
-    let bundle_pages = bundle
-        .as_ref()
-        .map_or(0, |b| bundle::page_count(b, page_size));
+    let bundle_pages = bundle.as_ref().map_or(0, |b| b.page_count(page_size));
     let mut seen = PageSet::with_bundle(page_count, bundle_pages);
     let header_bytes = read_blob(
         &pages,
@@ -387,7 +349,7 @@ fn open_once<S: Source>(src: &S, walk: Walk) -> Result<Opened> {
         }
     }
     Ok(Opened {
-        bundle: bundle.map(Arc::from),
+        bundle: bundle.map(Arc::new),
         page_size,
         page_count,
         slot,

@@ -7,6 +7,7 @@
 
 use std::borrow::Cow;
 use std::ops::{Range, RangeInclusive};
+use std::sync::Arc;
 
 use serde::Serialize;
 use zerocopy::FromBytes;
@@ -23,6 +24,11 @@ use crate::format::{
     NodeRecord, PayloadRef, ScanEntry, StoredBlock, StoredNode, TreeRef, TreeSpec, Violation,
 };
 use crate::model::SampleRect;
+
+/// How many decoded grids a store keeps for the payloads coded against them
+/// ([`Store::parent_grid`]): a path from the root to the finest level, with room for its
+/// siblings. At most about 17 KB each (65² heights).
+pub const ANCESTOR_CACHE: usize = 32;
 
 /// Where a file's bytes go, section by section.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize)]
@@ -406,10 +412,10 @@ impl<S: Source> Store<S> {
         bytes: Cow<'a, [u8]>,
     ) -> Result<Block<'a>> {
         let parent = match self.against_node(x, y, &info)? {
-            Some((index, node)) => Some(ParentGrid::of(self, index, &node, &self.grid(&node)?)),
+            Some((index, node)) => Some(self.parent_grid(index, &node)?),
             None => None,
         };
-        self.block_with(x, y, info, bytes, parent.as_ref())
+        self.block_with(x, y, info, bytes, parent.as_deref())
     }
 
     /// [`Store::block`] for callers that read many blocks in turn: the grid a block is coded
@@ -419,12 +425,12 @@ impl<S: Source> Store<S> {
         &self,
         x: u32,
         y: u32,
-        parent: &mut Option<ParentGrid>,
+        parent: &mut Option<Arc<ParentGrid>>,
     ) -> Result<Block<'_>> {
         let info = self.stored_block(x, y)?;
         self.keep_parent(x, y, &info, parent)?;
         let bytes = self.payload(info.payload)?;
-        self.block_with(x, y, info, bytes, parent.as_ref())
+        self.block_with(x, y, info, bytes, parent.as_deref())
     }
 
     /// Makes `parent` hold the grid block `(x, y)` of record `info` is coded against, reading
@@ -435,14 +441,102 @@ impl<S: Source> Store<S> {
         x: u32,
         y: u32,
         info: &StoredBlock,
-        parent: &mut Option<ParentGrid>,
+        parent: &mut Option<Arc<ParentGrid>>,
     ) -> Result<()> {
         if let Some((index, node)) = self.against_node(x, y, info)? {
             if parent.as_ref().is_none_or(|p| p.node != index) {
-                *parent = Some(ParentGrid::of(self, index, &node, &self.grid(&node)?));
+                *parent = Some(self.parent_grid(index, &node)?);
             }
         }
         Ok(())
+    }
+
+    /// The decoded grid of node `index` (`node`, above the finest level), as the payloads
+    /// coded against it decode with. Decoding a grid coded against its parent's (format 5)
+    /// needs that grid first, and so on up to one coded alone; readers that walk the tree
+    /// (windows, `extract`, the validator) ask for the same ancestors again and again, so the
+    /// last [`ANCESTOR_CACHE`] decoded are kept.
+    pub fn parent_grid(&self, index: u32, node: &StoredNode) -> Result<Arc<ParentGrid>> {
+        if let Some(g) = self.cached_parent_grid(index, node) {
+            return Ok(g);
+        }
+        let grid = Arc::new(ParentGrid::of(self, index, node, &self.grid(node)?));
+        self.keep_parent_grid(&grid);
+        Ok(grid)
+    }
+
+    /// The decoded grid of node `index` (`node`) if the store's cache of ancestors holds it.
+    pub(crate) fn cached_parent_grid(
+        &self,
+        index: u32,
+        node: &StoredNode,
+    ) -> Option<Arc<ParentGrid>> {
+        self.lock_ancestors()
+            .iter()
+            .find(|g| g.node == index && g.payload == node.payload)
+            .cloned()
+    }
+
+    /// Puts `grid` in the store's cache of ancestors, dropping the oldest beyond
+    /// [`ANCESTOR_CACHE`].
+    pub(crate) fn keep_parent_grid(&self, grid: &Arc<ParentGrid>) {
+        let mut cache = self.lock_ancestors();
+        if cache
+            .iter()
+            .any(|g| g.node == grid.node && g.payload == grid.payload)
+        {
+            return;
+        }
+        if cache.len() >= ANCESTOR_CACHE {
+            cache.remove(0);
+        }
+        cache.push(Arc::clone(grid));
+    }
+
+    fn lock_ancestors(&self) -> std::sync::MutexGuard<'_, Vec<Arc<ParentGrid>>> {
+        // A panic elsewhere cannot leave the list half changed: take it as it is.
+        self.ancestors
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    /// The node whose grid `node`'s grid is coded against, if it is (format 5): checked to be
+    /// its parent, the node at the level above covering it (I-10).
+    pub fn grid_against_node(&self, node: &StoredNode) -> Result<Option<(u32, StoredNode)>> {
+        if !node.grid_against_parent {
+            return Ok(None);
+        }
+        let at = || format!("node at level {} ({}, {})", node.level, node.x, node.y);
+        let Some(index) = node.parent.filter(|_| self.commit.grids_against_parents()) else {
+            return Err(self.corrupt(Violation::new(
+                Invariant::NodeTable,
+                at(),
+                format!(
+                    "a grid coded against its parent, which {} in format {}.{}",
+                    if node.parent.is_none() {
+                        "the root has not"
+                    } else {
+                        "no grid may be"
+                    },
+                    self.commit.major.get(),
+                    self.commit.minor.get()
+                ),
+            )));
+        };
+        let parent = self.node(index)?;
+        if node.level == 0
+            || (parent.level, parent.x, parent.y) != (node.level - 1, node.x / 2, node.y / 2)
+        {
+            return Err(self.corrupt(Violation::new(
+                Invariant::NodeTable,
+                at(),
+                format!(
+                    "its grid is coded against node {index} at level {} ({}, {}), not its parent",
+                    parent.level, parent.x, parent.y
+                ),
+            )));
+        }
+        Ok(Some((index, parent)))
     }
 
     /// The node whose grid block `(x, y)` of record `info` is coded against, if any: checked
@@ -561,8 +655,25 @@ impl<S: Source> Store<S> {
     }
 
     /// The coarse grid of `node` from its stored payload `bytes` (already checked against
-    /// their CRC, by [`Store::payload`] or [`Store::payloads`]).
+    /// their CRC, by [`Store::payload`] or [`Store::payloads`]). A grid coded against its
+    /// parent's (format 5) decodes with that grid, read (or taken from the store's cache of
+    /// ancestors) as [`Store::parent_grid`] does.
     pub fn grid_from<'a>(&self, node: &StoredNode, bytes: Cow<'a, [u8]>) -> Result<Grid<'a>> {
+        let parent = match self.grid_against_node(node)? {
+            Some((index, p)) => Some(self.parent_grid(index, &p)?),
+            None => None,
+        };
+        self.grid_with(node, bytes, parent.as_deref())
+    }
+
+    /// [`Store::grid_from`] with the grid `node`'s is coded against, if it is, already
+    /// decoded (`parent`, for the node [`Store::grid_against_node`] names).
+    pub fn grid_with<'a>(
+        &self,
+        node: &StoredNode,
+        bytes: Cow<'a, [u8]>,
+        parent: Option<&ParentGrid>,
+    ) -> Result<Grid<'a>> {
         let d = self.domain();
         if node.level >= d.finest_level() {
             return Err(Error::InvalidArgument(
@@ -570,17 +681,42 @@ impl<S: Source> Store<S> {
             ));
         }
         let size = d.block_size();
+        let at = || format!("node at level {} ({}, {})", node.level, node.x, node.y);
         if !d.exists(node.level, node.x, node.y) {
             return Err(self.corrupt(Violation::new(
                 Invariant::NodeTable,
-                format!("node at level {} ({}, {})", node.level, node.x, node.y),
+                at(),
                 "not a node of the domain",
             )));
         }
         let dims = payload::grid_dims(d, node.level, node.x, node.y);
         let has_voids = node.grid_has_voids;
         let bytes = if self.commit.payloads_coded() {
-            let decoded = payload::load_grid(&bytes, dims.0, dims.1, has_voids).map_err(|e| {
+            let decoded = if node.grid_against_parent {
+                let p = match parent {
+                    Some(p) if Some(p.node) == node.parent => p,
+                    _ => {
+                        return Err(Error::Internal(format!(
+                            "the grid of the {} is coded against its parent's, which was not given",
+                            at()
+                        )))
+                    }
+                };
+                let (cols, rows) = payload::grid_axes(d, node.level, node.x, node.y);
+                payload::load_grid_against(
+                    &bytes,
+                    dims,
+                    (has_voids, node.grid_bitmap_flagged),
+                    crate::codec::parent::Axes {
+                        cols: &cols,
+                        rows: &rows,
+                    },
+                    p.parent(),
+                )
+            } else {
+                payload::load_grid(&bytes, dims, has_voids, node.grid_bitmap_flagged)
+            }
+            .map_err(|e| {
                 self.corrupt(Violation::new(
                     Invariant::Payload,
                     format!("grid at byte {}", node.payload.offset),
@@ -735,6 +871,8 @@ impl Block<'_> {
 pub struct ParentGrid {
     /// The node's index in the node table.
     pub node: u32,
+    /// The node's payload (what the grid was decoded from; a cache's check).
+    pub payload: PayloadRef,
     cols: Vec<u64>,
     rows: Vec<u64>,
     heights: Vec<f32>,
@@ -746,6 +884,7 @@ impl ParentGrid {
         let (cols, rows) = payload::grid_axes(store.domain(), node.level, node.x, node.y);
         ParentGrid {
             node: index,
+            payload: node.payload,
             cols,
             rows,
             heights: grid.view().stored().iter().map(|h| h.get()).collect(),
@@ -775,13 +914,14 @@ impl ParentGrid {
             .collect();
         Some(ParentGrid {
             node: index,
+            payload: node.payload,
             cols,
             rows,
             heights: stored,
         })
     }
 
-    fn parent(&self) -> crate::codec::parent::Parent<'_> {
+    pub(crate) fn parent(&self) -> crate::codec::parent::Parent<'_> {
         crate::codec::parent::Parent {
             at: crate::codec::parent::Axes {
                 cols: &self.cols,

@@ -177,8 +177,14 @@ pub(crate) fn write_state<I: Io>(
         ..CommitSummary::default()
     };
 
-    // Payloads: changed ones are written, the others kept where they are. Grids first: a
-    // kept block coded against its parent's grid (format 4) stays only if that grid does.
+    // Payloads: changed ones are written, the others kept where they are. A payload coded
+    // against its parent's grid (blocks since format 4, grids since 5) decodes with whatever
+    // that grid's payload holds, so a kept one stays only while the parent's *heights* are
+    // as they were: while no changed sample lies in the parent's footprint (a grid is a
+    // decimation of the samples in its footprint, mended within it). The parent's payload
+    // may still be written again (coded anew against a changed grandparent): its heights,
+    // and so its children's payloads, stay good. A child is coded anew at most one level
+    // below a changed node, never down the whole tree.
     let shapes = tables::block_shapes(model);
     let grid_voids = tables::grid_void_flags(model);
     let mut kept: Vec<PayloadRef> = Vec::new();
@@ -188,8 +194,12 @@ pub(crate) fn write_state<I: Io>(
         .collect();
     let mut new_at: HashMap<(u8, u32, u32), u32> = HashMap::new();
     let mut grid_ref = vec![PayloadRef::default(); tree.nodes().len()];
+    let mut grid_against = vec![false; tree.nodes().len()];
+    let mut grid_raw_bitmap = vec![false; tree.nodes().len()];
     let mut rewrite_grids: Vec<usize> = Vec::new();
     let mut seen = HashSet::with_capacity(tree.nodes().len());
+    // Whether the heights of node `i`'s grid changed: a changed sample in its footprint.
+    let heights_changed = |i: u32| meets(&tree.footprint(i));
     for (i, n) in tree.nodes().iter().enumerate() {
         let at = (n.level, n.x, n.y);
         seen.insert(at);
@@ -214,21 +224,32 @@ pub(crate) fn write_state<I: Io>(
         if n.level == finest {
             continue;
         }
-        match old {
-            Some(o) if o.level < finest && !meets(&tree.footprint(id)) => {
+        let keep = old.filter(|o| {
+            let against = o.decode().grid_against_parent;
+            o.level < finest
+                && !heights_changed(id)
+                && (!against || (n.parent != crate::model::NO_PARENT && !heights_changed(n.parent)))
+        });
+        match keep {
+            Some(o) => {
                 kept.push(o.payload());
                 grid_ref[i] = o.payload();
+                let old = o.decode();
+                grid_against[i] = old.grid_against_parent;
+                // A grid kept from a state older than 5.0 keeps its raw bitmap.
+                grid_raw_bitmap[i] = old.grid_has_voids && !old.grid_bitmap_flagged;
             }
-            _ => rewrite_grids.push(i),
+            None => rewrite_grids.push(i),
         }
     }
     // The grids to write are coded on every core, then written in order.
-    let coded: Vec<Vec<u8>> = rewrite_grids
+    let coded: Vec<(Vec<u8>, bool)> = rewrite_grids
         .par_iter()
-        .map(|&i| tables::encode_grid(model, tables::node_id(i), grid_voids[i], false))
+        .map(|&i| tables::encode_grid(model, tables::node_id(i), grid_voids[i], false, true))
         .collect();
-    for (&i, bytes) in rewrite_grids.iter().zip(coded) {
+    for (&i, (bytes, against)) in rewrite_grids.iter().zip(coded) {
         grid_ref[i] = sink.payload(bytes)?;
+        grid_against[i] = against;
         summary.grids += 1;
     }
     let (cols, _) = d.nodes_across(finest);
@@ -250,16 +271,12 @@ pub(crate) fn write_state<I: Io>(
         let parent_now = (finest > 0)
             .then(|| new_at.get(&(finest - 1, x / 2, y / 2)).copied())
             .flatten();
-        // A kept block coded against a grid still decodes if that grid is kept as it was.
+        // A kept block coded against a grid still decodes while that grid's heights are
+        // as they were.
         let keep = match old.decode().against {
             _ if meets(&shape.rect) => None,
             None => Some(None),
-            Some(o) => {
-                let old_grid = old_nodes.get(o as usize).map(|n| n.payload());
-                parent_now
-                    .filter(|&p| Some(grid_ref[p as usize]) == old_grid)
-                    .map(Some)
-            }
+            Some(_) => parent_now.filter(|&p| !heights_changed(p)).map(Some),
         };
         match keep {
             Some(a) => {
@@ -299,6 +316,8 @@ pub(crate) fn write_state<I: Io>(
         grid: grid_ref,
         block: block_ref,
         against,
+        grid_against,
+        grid_raw_bitmap,
         grid_voids,
         shapes,
     };

@@ -78,18 +78,20 @@ pub(super) fn check_payloads<S: Source>(
             }
         }
         if matches!(what, Payload::Bundle) {
+            // Opening checked the record's CRC and the pages it read; a 5.0 bundle's other
+            // pages are read when a lookup reaches them: every one is checked here.
+            checks.absorb(store.check_bundle_pages())?;
             continue;
         }
         let Some(bytes) = checks.absorb(store.payload(r))? else {
             continue;
         };
         if let Payload::Grid(i) = what {
-            // A coded grid must decode to its layout.
-            let n = &l.nodes[i];
+            // A coded grid must decode to its layout: against its parent's grid when it is
+            // coded so (format 5), which the store decodes (and keeps) first.
+            let n = l.nodes[i].decode();
             if store.commit_record().payloads_coded() {
-                let (gw, gh) = crate::format::payload::grid_dims(d, n.level, n.x.get(), n.y.get());
-                let voids = n.flags.get() & crate::format::NODE_GRID_HAS_VOIDS != 0;
-                if let Err(e) = crate::format::payload::load_grid(&bytes, gw, gh, voids) {
+                if let Err(e) = store.grid_from(&n, bytes.clone()) {
                     checks.fail(id, format!("{at}: {e}"));
                 }
             }
@@ -106,7 +108,7 @@ pub(super) fn check_payloads<S: Source>(
                     checks.fail(id, format!("block ({x}, {y}): {e}"));
                     continue;
                 }
-                match store.block_with(x, y, info, bytes, last_parent.as_ref()) {
+                match store.block_with(x, y, info, bytes, last_parent.as_deref()) {
                     Ok(block) => std::borrow::Cow::Owned(block.bytes().to_vec()),
                     Err(e) => {
                         checks.fail(id, format!("block ({x}, {y}): {e}"));

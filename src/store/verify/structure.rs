@@ -4,7 +4,9 @@
 use super::{Checks, Loaded};
 use crate::curve::HilbertKey;
 use crate::format::payload;
-use crate::format::{FreePage, Invariant, NODE_GRID_HAS_VOIDS};
+use crate::format::{
+    FreePage, Invariant, NODE_GRID_AGAINST_PARENT, NODE_GRID_BITMAP_FLAGGED, NODE_GRID_HAS_VOIDS,
+};
 use crate::model::{cluster, NO_PARENT};
 use crate::store::btree::PageSet;
 use crate::store::{Source, Store};
@@ -109,13 +111,24 @@ pub(super) fn check_nodes<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut 
             );
         }
         let flags = n.flags.get();
-        if flags & !NODE_GRID_HAS_VOIDS != 0
+        let known = if store.commit_record().grids_against_parents() {
+            NODE_GRID_HAS_VOIDS | NODE_GRID_AGAINST_PARENT | NODE_GRID_BITMAP_FLAGGED
+        } else {
+            NODE_GRID_HAS_VOIDS
+        };
+        if flags & !known != 0
             || (level == finest && flags != 0)
+            || (flags & NODE_GRID_BITMAP_FLAGGED != 0 && flags & NODE_GRID_HAS_VOIDS == 0)
             || n.reserved.get() != 0
         {
             checks.fail(
                 id,
                 format!("{at}: unknown flags {flags:#x} or reserved bits set"),
+            );
+        } else if flags & NODE_GRID_AGAINST_PARENT != 0 && i == 0 {
+            checks.fail(
+                id,
+                format!("{at}: the root's grid is coded against a parent"),
             );
         }
         // Children: those kept are exactly the mask's, each right after its elder sibling's

@@ -200,6 +200,7 @@ fn write_payloads<W: Write>(
     let mut grid = vec![PayloadRef::default(); tree.nodes().len()];
     let mut block = vec![PayloadRef::default(); shapes.len()];
     let mut against = vec![None; shapes.len()];
+    let mut grid_against = vec![false; tree.nodes().len()];
     // Small payloads that repeat (sea, void and flat blocks code to a few bytes, the same
     // ones by the thousand) are stored once and shared by every record that has them.
     let mut small: HashMap<Vec<u8>, PayloadRef> = HashMap::new();
@@ -209,19 +210,20 @@ fn write_payloads<W: Write>(
         let encoded: Vec<(Vec<u8>, Option<u32>)> = w_items
             .par_iter()
             .map(|item| match *item {
-                Item::Grid { node } => (
-                    tables::encode_grid(
+                Item::Grid { node } => {
+                    let (bytes, against) = tables::encode_grid(
                         model,
                         node,
                         grid_voids[node as usize],
                         options.raw_payloads,
-                    ),
-                    None,
-                ),
+                        options.against_parents,
+                    );
+                    (bytes, against.then(|| tree.node(node).parent))
+                }
                 Item::Block { x, y, node } => tables::encode_block(
                     model,
                     &shapes[block_index(x, y, cols)],
-                    tables::block_parent(model, node).filter(|_| options.blocks_against_parents),
+                    tables::block_parent(model, node).filter(|_| options.against_parents),
                     options.raw_payloads,
                 ),
             })
@@ -254,7 +256,10 @@ fn write_payloads<W: Write>(
                 }
             };
             match *item {
-                Item::Grid { node } => grid[node as usize] = r,
+                Item::Grid { node } => {
+                    grid[node as usize] = r;
+                    grid_against[node as usize] = parent.is_some();
+                }
                 Item::Block { x, y, .. } => {
                     block[block_index(x, y, cols)] = r;
                     against[block_index(x, y, cols)] = parent;
@@ -267,6 +272,8 @@ fn write_payloads<W: Write>(
         grid,
         block,
         against,
+        grid_raw_bitmap: vec![false; grid_against.len()],
+        grid_against,
         grid_voids,
         shapes,
     })

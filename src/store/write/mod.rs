@@ -41,12 +41,12 @@ pub struct WriteOptions {
     /// decode nothing, what a benchmark compares the codec's cost with (format 1 stored raw
     /// `f32`). Commits code their payloads as usual. `fmrh build` never sets it.
     pub raw_payloads: bool,
-    /// Code a physical block against its parent's grid where that is smaller (format §7,
-    /// encodings 5 and 6): the samples the parent holds are then stored once. Off, every
-    /// block is coded alone (as before format 4), so drawing one needs no other payload: what
-    /// the bytes-per-scene benchmarks compare with. Commits code the blocks they rewrite
-    /// as a default build does.
-    pub blocks_against_parents: bool,
+    /// Code a physical block (format 4) or a node's grid (format 5) against its parent's
+    /// grid where that is smaller (format §7, encodings 5 to 8): the samples the parent holds
+    /// are then stored once. Off, every payload is coded alone (as before format 4), so
+    /// drawing one needs no other payload: what the bytes-per-scene benchmarks compare with.
+    /// Commits code the payloads they rewrite as a default build does.
+    pub against_parents: bool,
 }
 
 impl Default for WriteOptions {
@@ -56,7 +56,7 @@ impl Default for WriteOptions {
             progress: Arc::new(Silent),
             bundle_limit: crate::format::bundle::DEFAULT_BUNDLE_LIMIT,
             raw_payloads: false,
-            blocks_against_parents: true,
+            against_parents: true,
         }
     }
 }
@@ -67,7 +67,7 @@ impl fmt::Debug for WriteOptions {
             .field("page_size", &self.page_size)
             .field("bundle_limit", &self.bundle_limit)
             .field("raw_payloads", &self.raw_payloads)
-            .field("blocks_against_parents", &self.blocks_against_parents)
+            .field("against_parents", &self.against_parents)
             .finish_non_exhaustive()
     }
 }

@@ -77,15 +77,23 @@ pub(crate) struct Bundled {
 }
 
 impl Bundled {
-    fn new(stored: Vec<u8>, pages: usize, dataset_header: BlobRef, roots: TableRoots) -> Self {
+    fn new(
+        (stored, head_len): (Vec<u8>, u32),
+        pages: usize,
+        dataset_header: BlobRef,
+        roots: TableRoots,
+    ) -> Self {
         use zerocopy::byteorder::little_endian::{U32, U64};
         let reference = bundle::BundleRef {
             offset: U64::new(0),
             // `stored` is at most the limit, and `pages` at most 16 MiB of pages.
             stored_len: U32::new(u32::try_from(stored.len()).unwrap_or(u32::MAX)),
-            crc: U32::new(bundle::stored_crc(&stored)),
+            // The CRC covers the frame table; each frame's page carries its own.
+            crc: U32::new(bundle::stored_crc(
+                &stored[..(pages * bundle::FRAME_ENTRY_LEN).min(stored.len())],
+            )),
             pages: U32::new(u32::try_from(pages).unwrap_or(u32::MAX)),
-            reserved: U32::new(0),
+            head_len: U32::new(head_len),
         };
         Bundled {
             stored,
@@ -143,8 +151,18 @@ pub(crate) fn bundle_metadata(
     {
         return Ok(None);
     }
-    let stored = bundle::compress(&sink.pages, level).map_err(io)?;
-    if stored.len() as u64 > limit {
+    // The pages opening reads (the dataset header and the cluster directory) are stored
+    // first, so that opening reads them with the frame table in one call (format §6.7).
+    let blob_pages = |b: &BlobRef| {
+        let first = b.first_page.get().saturating_sub(bundle::BUNDLE_FIRST_PAGE);
+        let n = crate::format::blob::blob_pages(b.length.get(), page_size);
+        (first..first + n).filter_map(|i| usize::try_from(i).ok())
+    };
+    let head: Vec<usize> = blob_pages(&dataset_header)
+        .chain(blob_pages(&roots.cluster_directory))
+        .collect();
+    let stored = bundle::compress_framed(&sink.pages, &head, level).map_err(io)?;
+    if stored.0.len() as u64 > limit {
         return Ok(None);
     }
     Ok(Some(Bundled::new(
@@ -185,6 +203,11 @@ pub(crate) struct PayloadRefs {
     pub block: Vec<PayloadRef>,
     /// Per block: the node whose grid it is coded against (format 4), if any.
     pub against: Vec<Option<u32>>,
+    /// Per node: whether its grid is coded against its parent's (format 5).
+    pub grid_against: Vec<bool>,
+    /// Per node: whether its grid's void bitmap lies raw, as before format 5 (a grid a
+    /// commit keeps from an older state); grids written now put it behind a void flag.
+    pub grid_raw_bitmap: Vec<bool>,
     pub grid_voids: Vec<bool>,
     pub shapes: Vec<BlockShape>,
 }
@@ -231,6 +254,8 @@ pub(crate) fn write_tables(
                 refs.grid[i]
             },
             grid_has_voids: !at_finest && refs.grid_voids[i],
+            grid_against_parent: !at_finest && refs.grid_against[i],
+            grid_bitmap_flagged: !at_finest && refs.grid_voids[i] && !refs.grid_raw_bitmap[i],
         };
         node_records.extend_from_slice(NodeRecord::encode(&stored).as_bytes());
     }
@@ -357,15 +382,51 @@ pub(crate) fn node_id(i: usize) -> u32 {
     u32::try_from(i).unwrap_or(u32::MAX)
 }
 
-/// The stored payload of `node`'s coarse grid (format 2: coded; every code raw when `raw`).
-pub(crate) fn encode_grid(model: &Model, node: u32, has_voids: bool, raw: bool) -> Vec<u8> {
+/// The stored payload of `node`'s coarse grid (format 2: coded; every code raw when `raw`),
+/// and whether it is coded against its parent's grid: when `against_parent` allows it and
+/// that codes it smaller (format 5). The parent's grid is the model's, which is what its
+/// stored payload decodes to, whether it is written now or kept.
+pub(crate) fn encode_grid(
+    model: &Model,
+    node: u32,
+    has_voids: bool,
+    raw: bool,
+    against_parent: bool,
+) -> (Vec<u8>, bool) {
     let (g, gw, gh) = clipped_grid(model, node);
-    payload::store_grid(
-        &payload::encode_grid(&g.heights, &g.void, has_voids),
-        gw,
-        gh,
-        coding(model, raw),
-    )
+    let layout = payload::encode_grid(&g.heights, &g.void, has_voids);
+    let coding = coding(model, raw);
+    let alone = payload::store_grid(&layout, gw, gh, coding);
+    let n = model.tree().node(node);
+    let against = (against_parent && !raw && n.parent != NO_PARENT)
+        .then(|| {
+            let p = model.tree().node(n.parent);
+            let (pg, _, _) = clipped_grid(model, n.parent);
+            let (pc, pr) = payload::grid_axes(model.domain(), p.level, p.x, p.y);
+            let (cols, rows) = payload::grid_axes(model.domain(), n.level, n.x, n.y);
+            payload::store_grid_against(
+                &layout,
+                (gw, gh),
+                coding,
+                Axes {
+                    cols: &cols,
+                    rows: &rows,
+                },
+                Parent {
+                    at: Axes {
+                        cols: &pc,
+                        rows: &pr,
+                    },
+                    heights: &pg.heights,
+                },
+            )
+        })
+        .flatten();
+    // A tie goes to coding alone: then a reader needs nothing else to draw the grid.
+    match against {
+        Some(bytes) if bytes.len() < alone.len() => (bytes, true),
+        _ => (alone, false),
+    }
 }
 
 /// How `model`'s payloads are coded: every code raw when `raw`, else the smallest, with the
