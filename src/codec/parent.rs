@@ -168,12 +168,6 @@ impl<'a> Predictor<'a> {
         }
     }
 
-    /// The prediction at child column `c`, row `r`.
-    #[inline]
-    fn at(&self, c: usize, r: usize) -> f64 {
-        self.row(r).at(c)
-    }
-
     /// Child row `r`'s terms, resolved to rows of `inner`: the decoder's inner loop.
     #[inline]
     fn row(&self, r: usize) -> RowPredictor<'_> {
@@ -258,6 +252,72 @@ pub fn encode_against(
     })
 }
 
+/// [`encode_against`] for a writer in a hurry (a commit): the prediction whose residuals
+/// have the fewer significant bits in all is the one coded, so pco runs once, not twice.
+/// The choice can differ from [`encode_against`]'s on a near tie; both decode the same.
+pub fn encode_against_quick(
+    samples: &[f32],
+    at: Axes<'_>,
+    parent: Parent<'_>,
+    step: Option<f64>,
+) -> Option<Vec<u8>> {
+    let s = streams(samples, at, parent, step)?;
+    let bits = |r: &mut dyn Iterator<Item = u64>| -> u64 {
+        r.map(|z| u64::from(64 - z.leading_zeros())).sum()
+    };
+    let zig64 = |d: i64| ((d << 1) ^ (d >> 63)) as u64;
+    let planar_first = match &s.residuals {
+        Residuals::Lattice(i, p) => {
+            bits(&mut p.iter().map(|&d| zig64(d))) <= bits(&mut i.iter().map(|&d| zig64(d)))
+        }
+        Residuals::Float(i, p) => {
+            bits(&mut p.iter().map(|&z| u64::from(z))) <= bits(&mut i.iter().map(|&z| u64::from(z)))
+        }
+    };
+    s.code(!planar_first, planar_first)
+        .map(|(i, p)| if planar_first { p } else { i })
+}
+
+/// The residual streams of both predictions, before pco: (interpolated, planar).
+enum Residuals {
+    Lattice(Vec<i64>, Vec<i64>),
+    Float(Vec<u32>, Vec<u32>),
+}
+
+/// What both codings share: their headers and residuals.
+struct Streams {
+    interpolated: Vec<u8>,
+    planar: Vec<u8>,
+    residuals: Residuals,
+}
+
+impl Streams {
+    /// The codings asked for (the others left as their bare headers).
+    fn code(self, interp: bool, plan: bool) -> Option<(Vec<u8>, Vec<u8>)> {
+        let config = ChunkConfig::default().with_delta_spec(DeltaSpec::NoOp);
+        let (mut interpolated, mut planar) = (self.interpolated, self.planar);
+        match self.residuals {
+            Residuals::Lattice(i, p) => {
+                if interp {
+                    interpolated.extend_from_slice(&simple_compress(&i, &config).ok()?);
+                }
+                if plan {
+                    planar.extend_from_slice(&simple_compress(&p, &config).ok()?);
+                }
+            }
+            Residuals::Float(i, p) => {
+                if interp {
+                    interpolated.extend_from_slice(&simple_compress(&i, &config).ok()?);
+                }
+                if plan {
+                    planar.extend_from_slice(&simple_compress(&p, &config).ok()?);
+                }
+            }
+        }
+        Some((interpolated, planar))
+    }
+}
+
 /// Both codings [`encode_against`] chooses from: (interpolated, planar).
 fn encode_both(
     samples: &[f32],
@@ -265,6 +325,16 @@ fn encode_both(
     parent: Parent<'_>,
     step: Option<f64>,
 ) -> Option<(Vec<u8>, Vec<u8>)> {
+    streams(samples, at, parent, step)?.code(true, true)
+}
+
+/// The headers and residual streams of both codings of `samples` against `parent`.
+fn streams(
+    samples: &[f32],
+    at: Axes<'_>,
+    parent: Parent<'_>,
+    step: Option<f64>,
+) -> Option<Streams> {
     if samples.len() != at.len() || parent.heights.len() != parent.at.len() {
         return None;
     }
@@ -303,46 +373,61 @@ fn encode_both(
         }
     }
     let predictor = Predictor::new(&cols, &rows, &parent);
-    let config = ChunkConfig::default().with_delta_spec(DeltaSpec::NoOp);
-    // The codes of the samples in the coding's space: lattice indexes or ordered bits.
-    let code_of = |v: f32| -> i64 {
-        match lattice {
-            Some(q) => (f64::from(v) / q).round() as i64,
-            None => i64::from(to_ordered(v)),
-        }
-    };
+    let held_col: Vec<bool> = cols.iter().map(|c| matches!(c, Along::Held(_))).collect();
     let mut interp_ints: Vec<i64> = Vec::new();
     let mut interp_bits: Vec<u32> = Vec::new();
     let mut planar_ints: Vec<i64> = Vec::new();
     let mut planar_bits: Vec<u32> = Vec::new();
-    let mut k_lattice = vec![0i64; samples.len()];
-    let mut k_float = vec![0u32; samples.len()];
-    for j in 0..rows.len() {
-        for i in 0..w {
-            let idx = j * w + i;
-            let v = samples[idx];
-            let (pl, pf) = (predict(&k_lattice, idx, w), predict(&k_float, idx, w));
-            if v.is_nan() {
-                // Predicted through, as the plain encodings do.
-                k_lattice[idx] = pl;
-                k_float[idx] = pf;
-                continue;
-            }
-            let code = code_of(v);
-            k_lattice[idx] = code;
-            k_float[idx] = to_ordered(v);
-            if held(i, j).is_some() {
-                continue;
-            }
-            let p = predictor.at(i, j);
-            match lattice {
-                Some(q) => {
-                    interp_ints.push(code.wrapping_sub(round_to_i64(p * (1.0 / q))));
+    // The codes of the samples in the coding's space (lattice indexes or ordered bits), in
+    // row-major order; a void takes its planar prediction, as the plain encodings do. One
+    // loop per space, the row's prediction resolved once (this is most of a commit's
+    // coding time).
+    match lattice {
+        Some(q) => {
+            let inv = 1.0 / q;
+            let mut k = vec![0i64; samples.len()];
+            for (j, r) in rows.iter().enumerate() {
+                let row = predictor.row(j);
+                let held_row = matches!(r, Along::Held(_));
+                for (i, &held_c) in held_col.iter().enumerate() {
+                    let idx = j * w + i;
+                    let v = samples[idx];
+                    let pl = predict(&k, idx, w);
+                    if v.is_nan() {
+                        k[idx] = pl;
+                        continue;
+                    }
+                    let code = round_to_i64(f64::from(v) / q);
+                    k[idx] = code;
+                    if held_row && held_c {
+                        continue;
+                    }
+                    interp_ints.push(code.wrapping_sub(round_to_i64(row.at(i) * inv)));
                     planar_ints.push(code.wrapping_sub(pl));
                 }
-                None => {
-                    interp_bits.push(zigzag(to_ordered(v).wrapping_sub(to_ordered(p as f32))));
-                    planar_bits.push(zigzag(to_ordered(v).wrapping_sub(pf)));
+            }
+        }
+        None => {
+            let mut k = vec![0u32; samples.len()];
+            for (j, r) in rows.iter().enumerate() {
+                let row = predictor.row(j);
+                let held_row = matches!(r, Along::Held(_));
+                for (i, &held_c) in held_col.iter().enumerate() {
+                    let idx = j * w + i;
+                    let v = samples[idx];
+                    let pf = predict(&k, idx, w);
+                    if v.is_nan() {
+                        k[idx] = pf;
+                        continue;
+                    }
+                    let code = to_ordered(v);
+                    k[idx] = code;
+                    if held_row && held_c {
+                        continue;
+                    }
+                    let p = row.at(i);
+                    interp_bits.push(zigzag(code.wrapping_sub(to_ordered(p as f32))));
+                    planar_bits.push(zigzag(code.wrapping_sub(pf)));
                 }
             }
         }
@@ -358,27 +443,18 @@ fn encode_both(
         }
         out
     };
-    let (mut interpolated, mut planar) = match lattice {
-        Some(_) => (
-            header(Encoding::LatticeFromParent),
-            header(Encoding::LatticePlanarFromParent),
-        ),
-        None => (
-            header(Encoding::FloatFromParent),
-            header(Encoding::FloatPlanarFromParent),
-        ),
-    };
-    match lattice {
-        Some(_) => {
-            interpolated.extend_from_slice(&simple_compress(&interp_ints, &config).ok()?);
-            planar.extend_from_slice(&simple_compress(&planar_ints, &config).ok()?);
-        }
-        None => {
-            interpolated.extend_from_slice(&simple_compress(&interp_bits, &config).ok()?);
-            planar.extend_from_slice(&simple_compress(&planar_bits, &config).ok()?);
-        }
-    }
-    Some((interpolated, planar))
+    Some(match lattice {
+        Some(_) => Streams {
+            interpolated: header(Encoding::LatticeFromParent),
+            planar: header(Encoding::LatticePlanarFromParent),
+            residuals: Residuals::Lattice(interp_ints, planar_ints),
+        },
+        None => Streams {
+            interpolated: header(Encoding::FloatFromParent),
+            planar: header(Encoding::FloatPlanarFromParent),
+            residuals: Residuals::Float(interp_bits, planar_bits),
+        },
+    })
 }
 
 /// Decodes `bytes` (encoding 5 or 6) at `at` against `parent` into `out` (`at`'s samples,

@@ -199,9 +199,11 @@ pub fn compress_framed(
     head: &[usize],
     level: i32,
 ) -> std::io::Result<(Vec<u8>, u32)> {
+    // One context for every page: making one costs about as much as compressing a page.
+    let mut z = zstd::bulk::Compressor::new(level)?;
     let frames: Vec<Vec<u8>> = pages
         .iter()
-        .map(|p| zstd::bulk::compress(p, level))
+        .map(|p| z.compress(p))
         .collect::<std::io::Result<_>>()?;
     let too_long = || std::io::Error::other("a metadata bundle past 4 GiB");
     let table_len = pages.len() * FRAME_ENTRY_LEN;
@@ -305,6 +307,11 @@ pub fn decompress_page(
     page_size: u32,
     txn_tag: u16,
 ) -> Result<Vec<u8>, Violation> {
+    thread_local! {
+        // One decompression context a thread: making one per page cost as much as the page.
+        static DCTX: std::cell::RefCell<Option<zstd::bulk::Decompressor<'static>>> =
+            const { std::cell::RefCell::new(None) };
+    }
     let at = || format!("page {page_no}");
     let computed = crc32(frame);
     if computed != crc {
@@ -314,13 +321,24 @@ pub fn decompress_page(
             format!("its frame's CRC is {computed:#010x}; the frame table says {crc:#010x}"),
         ));
     }
-    let page = zstd::bulk::decompress(frame, page_size as usize).map_err(|e| {
-        Violation::new(
-            Invariant::Page,
-            at(),
-            format!("its frame does not decompress within {page_size} bytes: {e}"),
-        )
-    })?;
+    let page = DCTX
+        .with(|d| {
+            let mut d = d.borrow_mut();
+            if d.is_none() {
+                *d = Some(zstd::bulk::Decompressor::new()?);
+            }
+            match d.as_mut() {
+                Some(d) => d.decompress(frame, page_size as usize),
+                None => Err(std::io::Error::other("no zstd context")),
+            }
+        })
+        .map_err(|e| {
+            Violation::new(
+                Invariant::Page,
+                at(),
+                format!("its frame does not decompress within {page_size} bytes: {e}"),
+            )
+        })?;
     if page.len() != page_size as usize {
         return Err(Violation::new(
             Invariant::Page,

@@ -130,6 +130,10 @@ pub struct Coding {
     /// Store every code raw (encoding 0): larger payloads with nothing to decode. What
     /// measuring the codec's cost compares with; `fmrh build` never writes it.
     pub raw: bool,
+    /// Against a parent, pick between the two predictions by an estimate and code one
+    /// ([`codec::parent::encode_against_quick`]): what a commit does, where coding is most
+    /// of its time. A build codes both and keeps the smaller.
+    pub quick: bool,
 }
 
 impl Coding {
@@ -208,7 +212,11 @@ pub fn store_block_against(
         return None;
     }
     store_block_with(raw, shape, coding, |samples| {
-        codec::parent::encode_against(samples, at, parent, coding.step)
+        if coding.quick {
+            codec::parent::encode_against_quick(samples, at, parent, coding.step)
+        } else {
+            codec::parent::encode_against(samples, at, parent, coding.step)
+        }
     })
 }
 
@@ -304,7 +312,11 @@ pub fn store_grid_against(
         return None;
     }
     store_grid_with(raw, gw, gh, |heights| {
-        codec::parent::encode_against(heights, at, parent, coding.step)
+        if coding.quick {
+            codec::parent::encode_against_quick(heights, at, parent, coding.step)
+        } else {
+            codec::parent::encode_against(heights, at, parent, coding.step)
+        }
     })
 }
 

@@ -184,7 +184,9 @@ pub(crate) fn write_state<I: Io>(
     // decimation of the samples in its footprint, mended within it). The parent's payload
     // may still be written again (coded anew against a changed grandparent): its heights,
     // and so its children's payloads, stay good. A child is coded anew at most one level
-    // below a changed node, never down the whole tree.
+    // below a changed node, never down the whole tree, and not at all when its own samples
+    // are unchanged and its coding is planar (7, 8), which reads only the parent's heights
+    // at the child's own samples (the interpolation, 5 and 6, reaches past them).
     let shapes = tables::block_shapes(model);
     let grid_voids = tables::grid_void_flags(model);
     let mut kept: Vec<PayloadRef> = Vec::new();
@@ -200,6 +202,22 @@ pub(crate) fn write_state<I: Io>(
     let mut seen = HashSet::with_capacity(tree.nodes().len());
     // Whether the heights of node `i`'s grid changed: a changed sample in its footprint.
     let heights_changed = |i: u32| meets(&tree.footprint(i));
+    // Whether a payload coded against its parent's grid uses only the heights the parent
+    // holds at the payload's own samples (the planar encodings 7 and 8): then its own
+    // samples being unchanged is enough, whatever else changed in the parent.
+    let planar_only = |r: PayloadRef| -> Result<bool> {
+        let bytes = base.payload(r)?;
+        Ok(matches!(
+            bytes
+                .get(4)
+                .copied()
+                .and_then(crate::codec::Encoding::from_id),
+            Some(
+                crate::codec::Encoding::LatticePlanarFromParent
+                    | crate::codec::Encoding::FloatPlanarFromParent
+            )
+        ))
+    };
     for (i, n) in tree.nodes().iter().enumerate() {
         let at = (n.level, n.x, n.y);
         seen.insert(at);
@@ -224,12 +242,15 @@ pub(crate) fn write_state<I: Io>(
         if n.level == finest {
             continue;
         }
-        let keep = old.filter(|o| {
-            let against = o.decode().grid_against_parent;
-            o.level < finest
-                && !heights_changed(id)
-                && (!against || (n.parent != crate::model::NO_PARENT && !heights_changed(n.parent)))
-        });
+        let keep = match old {
+            Some(o) if o.level < finest && !heights_changed(id) => {
+                let against = o.decode().grid_against_parent;
+                let parent_same = n.parent != crate::model::NO_PARENT
+                    && (!heights_changed(n.parent) || planar_only(o.payload())?);
+                (!against || parent_same).then_some(o)
+            }
+            _ => None,
+        };
         match keep {
             Some(o) => {
                 kept.push(o.payload());
@@ -245,7 +266,7 @@ pub(crate) fn write_state<I: Io>(
     // The grids to write are coded on every core, then written in order.
     let coded: Vec<(Vec<u8>, bool)> = rewrite_grids
         .par_iter()
-        .map(|&i| tables::encode_grid(model, tables::node_id(i), grid_voids[i], false, true))
+        .map(|&i| tables::encode_grid(model, tables::node_id(i), grid_voids[i], false, true, true))
         .collect();
     for (&i, (bytes, against)) in rewrite_grids.iter().zip(coded) {
         grid_ref[i] = sink.payload(bytes)?;
@@ -276,7 +297,10 @@ pub(crate) fn write_state<I: Io>(
         let keep = match old.decode().against {
             _ if meets(&shape.rect) => None,
             None => Some(None),
-            Some(_) => parent_now.filter(|&p| !heights_changed(p)).map(Some),
+            Some(_) => match parent_now {
+                Some(p) if !heights_changed(p) || planar_only(old.payload())? => Some(Some(p)),
+                _ => None,
+            },
         };
         match keep {
             Some(a) => {
@@ -296,7 +320,7 @@ pub(crate) fn write_state<I: Io>(
     // parent), then written in order.
     let coded: Vec<(Vec<u8>, Option<u32>)> = rewrite_blocks
         .par_iter()
-        .map(|&(i, parent)| tables::encode_block(model, &shapes[i], parent, false))
+        .map(|&(i, parent)| tables::encode_block(model, &shapes[i], parent, false, true))
         .collect();
     for (&(i, _), (bytes, a)) in rewrite_blocks.iter().zip(coded) {
         block_ref[i] = sink.payload(bytes)?;

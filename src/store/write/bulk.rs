@@ -217,6 +217,7 @@ fn write_payloads<W: Write>(
                         grid_voids[node as usize],
                         options.raw_payloads,
                         options.against_parents,
+                        false,
                     );
                     (bytes, against.then(|| tree.node(node).parent))
                 }
@@ -225,6 +226,7 @@ fn write_payloads<W: Write>(
                     &shapes[block_index(x, y, cols)],
                     tables::block_parent(model, node).filter(|_| options.against_parents),
                     options.raw_payloads,
+                    false,
                 ),
             })
             .collect();

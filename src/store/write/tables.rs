@@ -392,10 +392,11 @@ pub(crate) fn encode_grid(
     has_voids: bool,
     raw: bool,
     against_parent: bool,
+    quick: bool,
 ) -> (Vec<u8>, bool) {
     let (g, gw, gh) = clipped_grid(model, node);
     let layout = payload::encode_grid(&g.heights, &g.void, has_voids);
-    let coding = coding(model, raw);
+    let coding = coding(model, raw, quick);
     let alone = payload::store_grid(&layout, gw, gh, coding);
     let n = model.tree().node(node);
     let against = (against_parent && !raw && n.parent != NO_PARENT)
@@ -431,10 +432,11 @@ pub(crate) fn encode_grid(
 
 /// How `model`'s payloads are coded: every code raw when `raw`, else the smallest, with the
 /// model's storage precision as one more lattice step.
-fn coding(model: &Model, raw: bool) -> payload::Coding {
+fn coding(model: &Model, raw: bool, quick: bool) -> payload::Coding {
     payload::Coding {
         step: model.precision().map(Precision::step),
         raw,
+        quick,
     }
 }
 
@@ -444,17 +446,16 @@ pub(crate) fn clipped_grid(model: &Model, node: u32) -> (NodeGrid, u32, u32) {
     let (gw, gh) = payload::grid_dims(model.domain(), n.level, n.x, n.y);
     let mut g = model.node_grid(node);
     let b = g.size as usize;
-    let inside = |k: usize| k % b < gw as usize && k / b < gh as usize;
-    let mut k = 0;
-    g.heights.retain(|_| {
-        k += 1;
-        inside(k - 1)
-    });
-    k = 0;
-    g.void.retain(|_| {
-        k += 1;
-        inside(k - 1)
-    });
+    let (w, h) = (gw as usize, gh as usize);
+    // The top-left gw x gh, row by row (a commit clips a grid for every payload it codes).
+    if w < b || h < b {
+        for j in 0..h {
+            g.heights.copy_within(j * b..j * b + w, j * w);
+            g.void.copy_within(j * b..j * b + w, j * w);
+        }
+        g.heights.truncate(w * h);
+        g.void.truncate(w * h);
+    }
     (g, gw, gh)
 }
 
@@ -467,6 +468,7 @@ pub(crate) fn encode_block(
     shape: &BlockShape,
     parent: Option<u32>,
     raw_codes: bool,
+    quick: bool,
 ) -> (Vec<u8>, Option<u32>) {
     let raster = model.raster();
     let r = shape.rect;
@@ -475,7 +477,7 @@ pub(crate) fn encode_block(
     });
     let raw = payload::encode_block(samples, usize::try_from(r.samples()).unwrap_or(0));
     let (w, h) = shape.size();
-    let coding = coding(model, raw_codes);
+    let coding = coding(model, raw_codes, quick);
     let alone = payload::store_block(&raw, w, h, shape.void_count, coding);
     let against = parent.filter(|_| !raw_codes).and_then(|p| {
         let (g, _, _) = clipped_grid(model, p);
