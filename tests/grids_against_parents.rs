@@ -166,9 +166,27 @@ fn a_scene_reads_every_ancestor_it_decodes_with_and_counts_it_once() {
 
 #[test]
 fn a_commit_codes_again_at_most_one_level_below_a_changed_grid() {
+    // A float field, and a separable one (f(x) + g(y), on a lattice), where the planar
+    // prediction is nearly exact and wins.
+    let separable = Heightfield::from_fn(257, 257, |x, y| {
+        (300.0 + 40.0 * (x as f32 * 0.37).sin() + 25.0 * (y as f32 * 0.23).cos()).round()
+    })
+    .unwrap();
+    let kept_planar: usize = [float_hills(257, 257), separable]
+        .into_iter()
+        .map(commits_on)
+        .sum();
+    assert!(
+        kept_planar > 0,
+        "no planar payload was kept over a parent whose heights changed"
+    );
+}
+
+/// Three 3 x 3 commits on `field`, each checked; the payloads kept planar over a parent
+/// whose heights changed.
+fn commits_on(field: Heightfield) -> usize {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("hills.fmrh");
-    let field = float_hills(257, 257);
     fmrh::create(
         &path,
         field.clone(),
@@ -189,10 +207,14 @@ fn a_commit_codes_again_at_most_one_level_below_a_changed_grid() {
         )
     };
     let mut expected = field.clone();
+    // Kept payloads whose parent's heights changed: each must be a planar coding (7, 8),
+    // which reads the parent only at its own samples.
+    let mut kept_planar = 0;
     for (k, (col, row)) in [(100u64, 37u64), (3, 250), (128, 128)]
         .into_iter()
         .enumerate()
     {
+        let before = payloads_of(&Store::open(&path).unwrap());
         let patch = common::txn::patch(3, 3, 40.0 + k as f32);
         let c = Container::open(&path).unwrap();
         let mut txn = c.begin_write().unwrap();
@@ -214,10 +236,66 @@ fn a_commit_codes_again_at_most_one_level_below_a_changed_grid() {
             common::txn::digest_samples(back.samples()),
             common::txn::digest_samples(expected.samples())
         );
+        // A payload kept over a parent whose payload was written again: when the patch
+        // lies in the parent's footprint (its heights changed), only a planar coding may
+        // stay; otherwise the parent was only coded anew, and any coding stays.
+        let d = *store.domain();
+        let patch_rect = fmrh::model::SampleRect {
+            col0: col,
+            row0: row,
+            col1: col + 2,
+            row1: row + 2,
+        };
+        for now in payloads_of(&store) {
+            let Some(old) = before.iter().find(|b| b.at == now.at) else {
+                continue;
+            };
+            if old.payload == now.payload && now.against.is_some() && old.against != now.against {
+                let (level, x, y) = now.at;
+                let parent_rect = d.footprint(level - 1, x / 2, y / 2);
+                if parent_rect.intersect(&patch_rect).is_some() {
+                    let encoding = store.payload(now.payload).unwrap()[4];
+                    assert!(
+                        matches!(encoding, 7 | 8),
+                        "{:?} kept with encoding {encoding} over changed heights",
+                        now.at
+                    );
+                    kept_planar += 1;
+                }
+            }
+        }
         drop(store);
         let report = fmrh::verify(FileSource::open(&path).unwrap(), VerifyMode::Full).unwrap();
         assert!(report.valid, "{report:#?}");
     }
+    kept_planar
+}
+
+/// A node's payload and, when it is coded against its parent's grid, that grid's payload.
+struct Coded {
+    at: (u8, u32, u32),
+    payload: fmrh::format::PayloadRef,
+    against: Option<fmrh::format::PayloadRef>,
+}
+
+fn payloads_of<S: fmrh::store::Source>(s: &Store<S>) -> Vec<Coded> {
+    let nodes = s.nodes().unwrap();
+    let finest = s.domain().finest_level();
+    nodes
+        .iter()
+        .map(|n| {
+            let against = if n.level == finest {
+                s.stored_block(n.x, n.y).unwrap().against
+            } else {
+                n.grid_against_parent.then(|| n.parent.unwrap())
+            };
+            Coded {
+                at: (n.level, n.x, n.y),
+                payload: n.payload,
+                against: against.map(|p| nodes[p as usize].payload),
+            }
+        })
+        .collect()
 }
 
 /// Sets or clears flag bit 1 of node `ordinal` (record offset 10) in the node table pages of a
