@@ -12,7 +12,7 @@
 //! | 2 | lattice: integers `k` with `h = (k · q) as f32` exactly, predicted in 2D | every real sample lies on a lattice step `q` of [`LATTICE_STEPS`] |
 //! | 3 | pco on the `f32` values | floats off any lattice |
 //! | 4 | pco on 2D-predicted residuals of the `f32` bits | floats off any lattice |
-//! | 5, 6 | lattice or float, against a parent grid ([`parent`]): the held samples free, the others predicted from the grid | a block whose parent's grid holds a quarter of its samples |
+//! | 5, 6 | lattice or float, against a parent grid ([`parent`]): the held samples free, the others predicted from the grid | a block (format 4) or grid (format 5) whose parent's grid holds a quarter of its samples |
 //! | 7, 8 | lattice or float, the held samples free, the others 2D-predicted as in 2 and 4 | the same, where the block's own neighbours predict better |
 //!
 //! Encodings 5 to 8 code a block *against its parent's grid*: the samples the parent holds
@@ -27,7 +27,8 @@
 //! Sound 1k's bytes where zstd keeps 57 % and plain pco 33 %, and decodes at about 1 GB/s.
 //!
 //! **Voids** are the canonical NaN (`0x7FC00000`). The lattice encoding lists them in a
-//! bitmap and predicts through them; any other NaN bits, `-0.0`, or infinities send the block
+//! bitmap ([`voids`]: raw, or since format 5 as runs of the row-to-row changes) and predicts
+//! through them; any other NaN bits, `-0.0`, or infinities send the block
 //! to an encoding that keeps bits as they are (1, 3, 4 or 0), so every encoding round-trips
 //! bit for bit.
 //!

@@ -1,5 +1,6 @@
 //! Coding a payload against its parent's grid (format 4: a physical block against the grid
-//! of its parent node; `docs/next-pyramid.md` says why and what was measured).
+//! of its parent node; format 5: a node's grid against its parent's too;
+//! `docs/next-pyramid.md` says why and what was measured).
 //!
 //! A node's samples lie on a grid of sample coordinates (columns and rows, clamped to the
 //! data edge as format §7's coarse grids are); its parent's grid lies on a coarser one that
@@ -14,6 +15,7 @@
 //! |---|---|
 //! | 5 lattice from parent | `q: f64`, a void flag (and bitmap over all samples, as encoding 2), a pco stream of `i64` residuals `k − round(p · (1/q))` |
 //! | 6 float from parent | a void flag (and bitmap), a pco stream of `u32` zigzag residuals of the order-preserving bits against those of `p as f32` |
+//! | 7, 8 planar with parent | as 5, 6; the residuals against the planar predictor over the payload's own codes, the held ones known first |
 //!
 //! `p` is the prediction, computed in `f64` in a fixed order, so encoder and decoder agree
 //! bit for bit. A void sample is coded by its bitmap bit alone. An encoding applies only
