@@ -250,7 +250,8 @@ proptest! {
 
 /// `fmrh build` on a small real DEM (St Helens, bundled): 1 KiB pages unless told
 /// otherwise (its data is at most 1024² samples), blocks coded against their parents unless
-/// `--blocks-alone`; every variant reads back the same samples and verifies in full.
+/// `--payloads-alone` (or its 4.0 name `--blocks-alone`); every variant reads back the same
+/// samples and verifies in full.
 #[test]
 fn the_cli_picks_small_pages_and_codes_against_parents_unless_told() {
     let dir = tempfile::tempdir().unwrap();
@@ -275,13 +276,18 @@ fn the_cli_picks_small_pages_and_codes_against_parents_unless_told() {
     };
     let default = build("default.fmrh", &[]);
     let paged = build("paged.fmrh", &["--page-size", "4096"]);
-    let alone = build("alone.fmrh", &["--blocks-alone"]);
+    let alone = build("alone.fmrh", &["--payloads-alone"]);
+    // The flag's 4.0 name still works.
+    let old_name = build("old-name.fmrh", &["--blocks-alone"]);
+    assert_eq!(std::fs::read(&alone).unwrap(), std::fs::read(&old_name).unwrap());
     let open = |p: &std::path::Path| Store::open(p).unwrap();
     let (d, p, a) = (open(&default), open(&paged), open(&alone));
     assert_eq!(d.page_size(), 1024);
     assert_eq!(p.page_size(), 4096);
     assert!(coded_against(&d).0 > 0);
+    assert!(d.nodes().unwrap().iter().any(|n| n.grid_against_parent));
     assert_eq!(coded_against(&a).0, 0);
+    assert!(a.nodes().unwrap().iter().all(|n| !n.grid_against_parent));
     let size = |p: &std::path::Path| std::fs::metadata(p).unwrap().len();
     assert!(size(&default) < size(&paged), "1 KiB pages cost less");
     assert!(
