@@ -9,27 +9,12 @@
 
 mod common;
 
-use std::io::Cursor;
-
 use proptest::prelude::*;
 
-use fmrh::model::{BuildOptions, Model, SampleRect};
-use fmrh::store::{write_to, Container, CreateOptions, FileSource, WriteOptions};
+use common::bytes_of;
+use fmrh::model::SampleRect;
+use fmrh::store::{Container, CreateOptions, FileSource, WriteOptions};
 use fmrh::{Error, Heightfield, Invariant, Store, VerifyMode};
-
-fn bytes_of(field: &Heightfield, block_size: u32, options: &WriteOptions) -> Vec<u8> {
-    let model = Model::build(
-        field.clone(),
-        &BuildOptions {
-            block_size,
-            ..BuildOptions::default()
-        },
-    )
-    .unwrap();
-    let mut out = Cursor::new(Vec::new());
-    write_to(&model, &field.metadata, options, &mut out).unwrap();
-    out.into_inner()
-}
 
 /// Every block coded alone, as format 3 coded them.
 fn alone_options() -> WriteOptions {
@@ -279,7 +264,10 @@ fn the_cli_picks_small_pages_and_codes_against_parents_unless_told() {
     let alone = build("alone.fmrh", &["--payloads-alone"]);
     // The flag's 4.0 name still works.
     let old_name = build("old-name.fmrh", &["--blocks-alone"]);
-    assert_eq!(std::fs::read(&alone).unwrap(), std::fs::read(&old_name).unwrap());
+    assert_eq!(
+        std::fs::read(&alone).unwrap(),
+        std::fs::read(&old_name).unwrap()
+    );
     let open = |p: &std::path::Path| Store::open(p).unwrap();
     let (d, p, a) = (open(&default), open(&paged), open(&alone));
     assert_eq!(d.page_size(), 1024);

@@ -11,26 +11,11 @@
 mod common;
 
 use std::collections::{BTreeMap, HashSet};
-use std::io::Cursor;
 
-use fmrh::model::{BuildOptions, Model};
+use common::bytes_of;
 use fmrh::scene::{load_blocks, Camera, SceneOptions, Terrain};
-use fmrh::store::{write_to, Container, CreateOptions, FileSource, WriteOptions};
+use fmrh::store::{Container, CreateOptions, FileSource, WriteOptions};
 use fmrh::{Error, Heightfield, Invariant, Store, VerifyMode};
-
-fn bytes_of(field: &Heightfield, block_size: u32, options: &WriteOptions) -> Vec<u8> {
-    let model = Model::build(
-        field.clone(),
-        &BuildOptions {
-            block_size,
-            ..BuildOptions::default()
-        },
-    )
-    .unwrap();
-    let mut out = Cursor::new(Vec::new());
-    write_to(&model, &field.metadata, options, &mut out).unwrap();
-    out.into_inner()
-}
 
 fn alone() -> WriteOptions {
     WriteOptions {

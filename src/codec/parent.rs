@@ -27,7 +27,7 @@ use pco::{ChunkConfig, DeltaSpec};
 
 use super::{
     from_ordered, is_lattice_value, lattice_value, pco_decode, predict, to_ordered, unzigzag,
-    voids, zigzag, DecodeError, Encoding, LATTICE_STEPS, MAX_LATTICE_INDEX, VOID_BITS,
+    voids, zigzag, DecodeError, Encoding, Wrapping, LATTICE_STEPS, MAX_LATTICE_INDEX, VOID_BITS,
 };
 
 /// Where a grid's samples lie: sample columns and rows, each non-decreasing.
@@ -387,52 +387,27 @@ fn streams(
     match lattice {
         Some(q) => {
             let inv = 1.0 / q;
-            let mut k = vec![0i64; samples.len()];
-            for (j, r) in rows.iter().enumerate() {
-                let row = predictor.row(j);
-                let held_row = matches!(r, Along::Held(_));
-                for (i, &held_c) in held_col.iter().enumerate() {
-                    let idx = j * w + i;
-                    let v = samples[idx];
-                    let pl = predict(&k, idx, w);
-                    if v.is_nan() {
-                        k[idx] = pl;
-                        continue;
-                    }
-                    let code = round_to_i64(f64::from(v) / q);
-                    k[idx] = code;
-                    if held_row && held_c {
-                        continue;
-                    }
-                    interp_ints.push(code.wrapping_sub(round_to_i64(row.at(i) * inv)));
-                    planar_ints.push(code.wrapping_sub(pl));
-                }
-            }
+            residuals_in(
+                samples,
+                (w, &rows, &held_col),
+                &predictor,
+                |v| round_to_i64(f64::from(v) / q),
+                |code, planar, p| {
+                    interp_ints.push(code.wrapping_sub(round_to_i64(p * inv)));
+                    planar_ints.push(code.wrapping_sub(planar));
+                },
+            );
         }
-        None => {
-            let mut k = vec![0u32; samples.len()];
-            for (j, r) in rows.iter().enumerate() {
-                let row = predictor.row(j);
-                let held_row = matches!(r, Along::Held(_));
-                for (i, &held_c) in held_col.iter().enumerate() {
-                    let idx = j * w + i;
-                    let v = samples[idx];
-                    let pf = predict(&k, idx, w);
-                    if v.is_nan() {
-                        k[idx] = pf;
-                        continue;
-                    }
-                    let code = to_ordered(v);
-                    k[idx] = code;
-                    if held_row && held_c {
-                        continue;
-                    }
-                    let p = row.at(i);
-                    interp_bits.push(zigzag(code.wrapping_sub(to_ordered(p as f32))));
-                    planar_bits.push(zigzag(code.wrapping_sub(pf)));
-                }
-            }
-        }
+        None => residuals_in(
+            samples,
+            (w, &rows, &held_col),
+            &predictor,
+            to_ordered,
+            |code, planar, p| {
+                interp_bits.push(zigzag(code.wrapping_sub(to_ordered(p as f32))));
+                planar_bits.push(zigzag(code.wrapping_sub(planar)));
+            },
+        ),
     }
     let header = |id: Encoding| {
         let mut out = vec![id as u8];
@@ -457,6 +432,40 @@ fn streams(
             residuals: Residuals::Float(interp_bits, planar_bits),
         },
     })
+}
+
+/// Walks `samples` (rows of `w`, placed by `rows` and `held_col`) in row-major order with
+/// their codes in one coding space (`code`: lattice indexes or ordered bits): a void takes
+/// its planar prediction, as the plain encodings do, and for each sample neither void nor
+/// held `push` gets its code, its planar prediction over the codes before it and the
+/// interpolated prediction. The row's interpolation is resolved once (this loop is most of
+/// a commit's coding time).
+fn residuals_in<T: Wrapping + Copy + Default>(
+    samples: &[f32],
+    (w, rows, held_col): (usize, &[Along], &[bool]),
+    predictor: &Predictor<'_>,
+    code: impl Fn(f32) -> T,
+    mut push: impl FnMut(T, T, f64),
+) {
+    let mut k = vec![T::default(); samples.len()];
+    for (j, r) in rows.iter().enumerate() {
+        let row = predictor.row(j);
+        let held_row = matches!(r, Along::Held(_));
+        for (i, &held_c) in held_col.iter().enumerate() {
+            let idx = j * w + i;
+            let planar = predict(&k, idx, w);
+            let v = samples[idx];
+            if v.is_nan() {
+                k[idx] = planar;
+                continue;
+            }
+            let c = code(v);
+            k[idx] = c;
+            if !(held_row && held_c) {
+                push(c, planar, row.at(i));
+            }
+        }
+    }
 }
 
 /// Decodes `bytes` (encoding 5 or 6) at `at` against `parent` into `out` (`at`'s samples,

@@ -137,6 +137,16 @@ pub struct Coding {
 }
 
 impl Coding {
+    /// `samples` at `at` coded against `parent` (both predictions tried, or one chosen by
+    /// an estimate when `quick`); `None` when that does not apply.
+    fn code_against(&self, samples: &[f32], at: Axes<'_>, parent: Parent<'_>) -> Option<Vec<u8>> {
+        if self.quick {
+            codec::parent::encode_against_quick(samples, at, parent, self.step)
+        } else {
+            codec::parent::encode_against(samples, at, parent, self.step)
+        }
+    }
+
     fn code(&self, samples: &[f32], width: usize) -> Vec<u8> {
         if self.raw {
             codec::encode_raw(samples)
@@ -212,11 +222,7 @@ pub fn store_block_against(
         return None;
     }
     store_block_with(raw, shape, coding, |samples| {
-        if coding.quick {
-            codec::parent::encode_against_quick(samples, at, parent, coding.step)
-        } else {
-            codec::parent::encode_against(samples, at, parent, coding.step)
-        }
+        coding.code_against(samples, at, parent)
     })
 }
 
@@ -312,11 +318,7 @@ pub fn store_grid_against(
         return None;
     }
     store_grid_with(raw, gw, gh, |heights| {
-        if coding.quick {
-            codec::parent::encode_against_quick(heights, at, parent, coding.step)
-        } else {
-            codec::parent::encode_against(heights, at, parent, coding.step)
-        }
+        coding.code_against(heights, at, parent)
     })
 }
 

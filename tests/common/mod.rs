@@ -69,6 +69,25 @@ pub fn ok_json(out: &std::process::Output) -> serde_json::Value {
     serde_json::from_slice(&out.stdout).expect("stdout is JSON")
 }
 
+/// A container of `field` with blocks of `block_size`, written with `options`, in memory.
+pub fn bytes_of(
+    field: &fmrh::Heightfield,
+    block_size: u32,
+    options: &fmrh::store::WriteOptions,
+) -> Vec<u8> {
+    let model = fmrh::model::Model::build(
+        field.clone(),
+        &fmrh::model::BuildOptions {
+            block_size,
+            ..fmrh::model::BuildOptions::default()
+        },
+    )
+    .unwrap();
+    let mut out = std::io::Cursor::new(Vec::new());
+    fmrh::store::write_to(&model, &field.metadata, options, &mut out).unwrap();
+    out.into_inner()
+}
+
 pub mod bundle;
 pub mod fields;
 pub mod oracle;

@@ -401,9 +401,7 @@ pub(crate) fn encode_grid(
     let n = model.tree().node(node);
     let against = (against_parent && !raw && n.parent != NO_PARENT)
         .then(|| {
-            let p = model.tree().node(n.parent);
-            let (pg, _, _) = clipped_grid(model, n.parent);
-            let (pc, pr) = payload::grid_axes(model.domain(), p.level, p.x, p.y);
+            let p = ParentOf::new(model, n.parent);
             let (cols, rows) = payload::grid_axes(model.domain(), n.level, n.x, n.y);
             payload::store_grid_against(
                 &layout,
@@ -413,13 +411,7 @@ pub(crate) fn encode_grid(
                     cols: &cols,
                     rows: &rows,
                 },
-                Parent {
-                    at: Axes {
-                        cols: &pc,
-                        rows: &pr,
-                    },
-                    heights: &pg.heights,
-                },
+                p.parent(),
             )
         })
         .flatten();
@@ -437,6 +429,37 @@ fn coding(model: &Model, raw: bool, quick: bool) -> payload::Coding {
         step: model.precision().map(Precision::step),
         raw,
         quick,
+    }
+}
+
+/// A node's grid as a payload coded against it sees it: its stored heights (the model's,
+/// which its payload decodes to, whether written now or kept) and where they lie.
+struct ParentOf {
+    heights: Vec<f32>,
+    cols: Vec<u64>,
+    rows: Vec<u64>,
+}
+
+impl ParentOf {
+    fn new(model: &Model, node: u32) -> ParentOf {
+        let n = model.tree().node(node);
+        let (g, _, _) = clipped_grid(model, node);
+        let (cols, rows) = payload::grid_axes(model.domain(), n.level, n.x, n.y);
+        ParentOf {
+            heights: g.heights,
+            cols,
+            rows,
+        }
+    }
+
+    fn parent(&self) -> Parent<'_> {
+        Parent {
+            at: Axes {
+                cols: &self.cols,
+                rows: &self.rows,
+            },
+            heights: &self.heights,
+        }
     }
 }
 
@@ -480,9 +503,6 @@ pub(crate) fn encode_block(
     let coding = coding(model, raw_codes, quick);
     let alone = payload::store_block(&raw, w, h, shape.void_count, coding);
     let against = parent.filter(|_| !raw_codes).and_then(|p| {
-        let (g, _, _) = clipped_grid(model, p);
-        let n = model.tree().node(p);
-        let (pc, pr) = payload::grid_axes(model.domain(), n.level, n.x, n.y);
         let (cols, rows) = payload::block_axes(&r);
         let bytes = payload::store_block_against(
             &raw,
@@ -492,13 +512,7 @@ pub(crate) fn encode_block(
                 cols: &cols,
                 rows: &rows,
             },
-            Parent {
-                at: Axes {
-                    cols: &pc,
-                    rows: &pr,
-                },
-                heights: &g.heights,
-            },
+            ParentOf::new(model, p).parent(),
         )?;
         Some((bytes, p))
     });
