@@ -83,6 +83,7 @@
 pub mod codec;
 pub mod crs;
 pub mod curve;
+pub mod dataset;
 pub mod error;
 pub mod format;
 pub mod heightfield;
