@@ -4,6 +4,8 @@
 //! `docs/datasets-design.md`; this module grows room by room as it is built.
 //!
 //! Built so far: [`placement`], where the tiles lie (a layout, or their georeferences) and
-//! which edges they share.
+//! which edges they share; [`seams`], whether neighbours agree on a shared edge, and how a
+//! policy settles them when they do not.
 
 pub mod placement;
+pub mod seams;
