@@ -128,6 +128,21 @@ mod tests {
         (a, b)
     }
 
+    /// `a` at the origin and `b` east of it, sharing `a`'s last column.
+    fn side_by_side<'a>(a: &'a Heightfield, b: &'a Heightfield) -> (Placed<'a>, Placed<'a>) {
+        let pa = Placed {
+            field: a,
+            col0: 0,
+            row0: 0,
+        };
+        let pb = Placed {
+            field: b,
+            col0: u64::from(a.width() - 1),
+            row0: 0,
+        };
+        (pa, pb)
+    }
+
     fn edge() -> SampleRect {
         SampleRect {
             col0: 3,
@@ -140,18 +155,7 @@ mod tests {
     #[test]
     fn agreeing_neighbours_settle_to_their_samples() {
         let (a, b) = tiles();
-        let (pa, pb) = (
-            Placed {
-                field: &a,
-                col0: 0,
-                row0: 0,
-            },
-            Placed {
-                field: &b,
-                col0: 3,
-                row0: 0,
-            },
-        );
+        let (pa, pb) = side_by_side(&a, &b);
         assert_eq!(first_difference(pa, pb, &edge()), None);
         assert_eq!(
             settle(pa, pb, &edge(), SeamPolicy::Strict),
@@ -168,18 +172,7 @@ mod tests {
             _ => (10 * y + x + 3) as f32,
         })
         .unwrap();
-        let (pa, pb) = (
-            Placed {
-                field: &a,
-                col0: 0,
-                row0: 0,
-            },
-            Placed {
-                field: &b,
-                col0: 3,
-                row0: 0,
-            },
-        );
+        let (pa, pb) = side_by_side(&a, &b);
         let d = Disagreement {
             col: 3,
             row: 1,

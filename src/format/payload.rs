@@ -138,9 +138,11 @@ pub struct Coding {
 
 impl Coding {
     /// `samples` at `at` coded against `parent` (both predictions tried, or one chosen by
-    /// an estimate when `quick`); `None` when that does not apply.
+    /// an estimate when `quick`); `None` when that does not apply, or the coding is raw.
     fn code_against(&self, samples: &[f32], at: Axes<'_>, parent: Parent<'_>) -> Option<Vec<u8>> {
-        if self.quick {
+        if self.raw {
+            None
+        } else if self.quick {
             codec::parent::encode_against_quick(samples, at, parent, self.step)
         } else {
             codec::parent::encode_against(samples, at, parent, self.step)
@@ -218,9 +220,6 @@ pub fn store_block_against(
     at: Axes<'_>,
     parent: Parent<'_>,
 ) -> Option<Vec<u8>> {
-    if coding.raw {
-        return None;
-    }
     store_block_with(raw, shape, coding, |samples| {
         coding.code_against(samples, at, parent)
     })
@@ -314,9 +313,6 @@ pub fn store_grid_against(
     at: Axes<'_>,
     parent: Parent<'_>,
 ) -> Option<Vec<u8>> {
-    if coding.raw {
-        return None;
-    }
     store_grid_with(raw, gw, gh, |heights| {
         coding.code_against(heights, at, parent)
     })
