@@ -82,6 +82,10 @@ enum Command {
     /// length and a torn record in the unused commit slot, which `verify` reports (I-3, I-4).
     /// Any writer's open recovers the file; this command does only that, then closes it.
     Recover(cli::recover::RecoverArgs),
+    /// Datasets of many tiles: build one, add a tile. Every other command takes a dataset's
+    /// directory where it takes a container.
+    #[command(subcommand)]
+    Dataset(cli::dataset::DatasetCommand),
     /// Print a shell completion script (bash, zsh, fish, elvish, powershell) to standard output.
     ///
     /// e.g. `fmrh completions bash > ~/.local/share/bash-completion/completions/fmrh`.
@@ -105,6 +109,7 @@ impl Command {
             Command::Fly(a) => a.json,
             Command::Replace(a) => a.json,
             Command::Recover(a) => a.json,
+            Command::Dataset(c) => c.json(),
             Command::Extract(_) | Command::Completions { .. } | Command::Man => false,
         }
     }
@@ -139,6 +144,7 @@ fn main() -> ExitCode {
         Command::Fly(args) => cli::fly::run(args),
         Command::Replace(args) => cli::replace::run(args),
         Command::Recover(args) => cli::recover::run(args),
+        Command::Dataset(command) => cli::dataset::run(command),
         Command::Completions { shell } => {
             let mut command = <Cli as clap::CommandFactory>::command();
             clap_complete::generate(*shell, &mut command, "fmrh", &mut std::io::stdout());

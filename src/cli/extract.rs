@@ -8,7 +8,8 @@ use fmrh::Error;
 
 #[derive(clap::Args)]
 pub struct ExtractArgs {
-    /// The container.
+    /// The container, or a dataset's directory (the window is then in dataset samples;
+    /// samples where no tile lies are voids).
     file: PathBuf,
     /// The window, inclusive sample coordinates `c0,r0,c1,r1` (default: the whole dataset).
     #[arg(long)]
@@ -26,6 +27,17 @@ pub struct ExtractArgs {
 
 /// Runs `fmrh extract`.
 pub fn run(args: &ExtractArgs) -> Result<ExitCode, Error> {
+    if fmrh::dataset::is_dataset(&args.file) {
+        let ds = fmrh::dataset::Dataset::open(&args.file)?;
+        let window = match &args.window {
+            Some(text) => super::parse_window(text)?,
+            None => ds.grid(),
+        };
+        let out = super::sidecar::F32Output::new(&args.output, args.force)?;
+        let hf = ds.read_window(window)?;
+        out.write_dataset(&hf, window, &args.file, ds.txn_id())?;
+        return Ok(ExitCode::SUCCESS);
+    }
     let store = super::open(&args.file)?;
     let data = store.domain().data_rect();
     let window = match &args.window {

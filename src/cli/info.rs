@@ -12,7 +12,7 @@ use fmrh::Error;
 
 #[derive(clap::Args)]
 pub struct InfoArgs {
-    /// The container.
+    /// The container, or a dataset's directory.
     file: PathBuf,
     /// Print JSON.
     #[arg(long)]
@@ -199,8 +199,151 @@ impl Sections {
     }
 }
 
+/// What `info --json` prints for a dataset.
+#[derive(Serialize)]
+struct DatasetInfo {
+    kind: &'static str,
+    manifest_version: String,
+    txn_id: u64,
+    commit_slot: u8,
+    manifest_bytes: u64,
+    /// What opening the dataset read: the manifest's slots and head.
+    open_reads: u64,
+    open_bytes: u64,
+    columns: u64,
+    rows: u64,
+    tile_count: u64,
+    spacing_m: Option<[f64; 2]>,
+    georeference: Option<GeoInfo>,
+    seam: &'static str,
+    /// The manifest and every tile file, as the file system says.
+    total_bytes: u64,
+    tiles: Vec<TileInfo>,
+}
+
+#[derive(Serialize)]
+struct TileInfo {
+    index: u64,
+    name: String,
+    col0: u64,
+    row0: u64,
+    width: u32,
+    height: u32,
+    height_range: [f32; 2],
+    pin: fmrh::format::manifest::StatePin,
+    file_bytes: Option<u64>,
+}
+
+fn run_dataset(args: &InfoArgs) -> Result<ExitCode, Error> {
+    use fmrh::format::manifest::{MANIFEST_MAJOR, SEAM_FIRST, SEAM_MEAN};
+    let ds = fmrh::dataset::Dataset::open(&args.file)?;
+    let open = ds.open_reads();
+    let tiles = ds.tiles()?;
+    let record = ds.state().record;
+    let grid = ds.grid();
+    let manifest_bytes = std::fs::metadata(args.file.join(fmrh::dataset::manifest::MANIFEST_NAME))
+        .map_err(|e| Error::io(&args.file, e))?
+        .len();
+    let tiles: Vec<TileInfo> = tiles
+        .iter()
+        .map(|t| TileInfo {
+            index: t.index,
+            name: t.name().to_string(),
+            col0: t.rect().col0,
+            row0: t.rect().row0,
+            width: t.record.width.get(),
+            height: t.record.height.get(),
+            height_range: [t.record.min_height.get(), t.record.max_height.get()],
+            pin: t.pin(),
+            file_bytes: std::fs::metadata(ds.tile_path(t)).ok().map(|m| m.len()),
+        })
+        .collect();
+    let to_u32 = |v: u64| u32::try_from(v).unwrap_or(u32::MAX);
+    let info = DatasetInfo {
+        kind: "dataset",
+        manifest_version: format!("{MANIFEST_MAJOR}.{}", record.minor.get()),
+        txn_id: ds.txn_id(),
+        commit_slot: ds.state().slot,
+        manifest_bytes,
+        open_reads: open.metadata_reads,
+        open_bytes: open.metadata_bytes,
+        columns: grid.col1 + 1,
+        rows: grid.row1 + 1,
+        tile_count: ds.tile_count(),
+        spacing_m: ds.spacing_m(),
+        georeference: ds
+            .georeference()
+            .map(|g| GeoInfo::of(&g, to_u32(grid.col1 + 1), to_u32(grid.row1 + 1))),
+        seam: match record.seam {
+            SEAM_FIRST => "first",
+            SEAM_MEAN => "mean",
+            _ => "strict",
+        },
+        total_bytes: manifest_bytes + tiles.iter().filter_map(|t| t.file_bytes).sum::<u64>(),
+        tiles,
+    };
+    if args.json {
+        super::print_json(&info)?;
+        return Ok(ExitCode::SUCCESS);
+    }
+    println!(
+        "{}: fmrh dataset (manifest {}), txn {}, {} tiles, {} bytes in all",
+        args.file.display(),
+        info.manifest_version,
+        info.txn_id,
+        info.tile_count,
+        info.total_bytes
+    );
+    println!("  grid        {} x {} samples", info.columns, info.rows);
+    match info.spacing_m {
+        Some(s) => println!("  spacing     {} m x {} m", s[0], s[1]),
+        None => println!("  spacing     unknown (scenes need --spacing)"),
+    }
+    if let Some(g) = &info.georeference {
+        println!(
+            "  georef      {} origin {:?} step {:?}",
+            g.crs.as_deref().map_or("(no CRS)".into(), crs_label),
+            g.origin,
+            g.step
+        );
+        if let Some([w, s, e, n]) = g.lon_lat_bounds {
+            println!("  lon/lat     {w} .. {e} E, {s} .. {n} N");
+        }
+    }
+    println!("  seams       {}", info.seam);
+    println!(
+        "  manifest    {} bytes; opening read {} bytes in {} reads",
+        info.manifest_bytes, info.open_bytes, info.open_reads
+    );
+    const SHOWN: usize = 20;
+    for t in info.tiles.iter().take(SHOWN) {
+        println!(
+            "  {:>5} {:<28} columns {}..={}, rows {}..={}, heights {} .. {}, {} bytes",
+            t.index,
+            t.name,
+            t.col0,
+            t.col0 + u64::from(t.width) - 1,
+            t.row0,
+            t.row0 + u64::from(t.height) - 1,
+            t.height_range[0],
+            t.height_range[1],
+            t.file_bytes.map_or("(missing)".into(), |b| b.to_string())
+        );
+    }
+    if info.tiles.len() > SHOWN {
+        println!(
+            "  ... and {} more (--json lists them all)",
+            info.tiles.len() - SHOWN
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
 /// Runs `fmrh info`.
 pub fn run(args: &InfoArgs) -> Result<ExitCode, Error> {
+    if fmrh::dataset::is_dataset(&args.file) {
+        return run_dataset(args);
+    }
     let store = super::open(&args.file)?;
     let h = store.header();
     let d = h.domain;

@@ -3,6 +3,7 @@
 //! the progress bar, JSON output and argument parsers.
 
 pub mod build;
+pub mod dataset;
 pub mod extract;
 pub mod fly;
 pub mod info;

@@ -11,7 +11,8 @@ use fmrh::Error;
 
 #[derive(clap::Args)]
 pub struct RecoverArgs {
-    /// The container.
+    /// The container, or a dataset's directory (every tile an interrupted change moved on
+    /// gets its pinned state back; every tile is recovered as a container).
     file: PathBuf,
     /// Print the report as JSON.
     #[arg(long)]
@@ -20,6 +21,28 @@ pub struct RecoverArgs {
 
 /// Runs `fmrh recover`.
 pub fn run(args: &RecoverArgs) -> Result<ExitCode, Error> {
+    if fmrh::dataset::is_dataset(&args.file) {
+        let r = fmrh::dataset::recover(&fmrh::dataset::Dir(args.file.clone()))?;
+        if args.json {
+            super::print_json(&r)?;
+        } else if r.republished.is_empty() && r.recovered.is_empty() {
+            println!(
+                "{}: nothing to recover (txn {})",
+                args.file.display(),
+                r.txn_id
+            );
+        } else {
+            println!(
+                "{}: recovered at txn {}: pinned states republished in [{}]; tiles recovered \
+                 as containers: [{}]",
+                args.file.display(),
+                r.txn_id,
+                r.republished.join(", "),
+                r.recovered.join(", ")
+            );
+        }
+        return Ok(ExitCode::SUCCESS);
+    }
     let (container, recovery) = Container::open_recovering(&args.file)?;
     container.close()?;
     if args.json {

@@ -15,7 +15,8 @@ use fmrh::Error;
 
 #[derive(clap::Args)]
 pub struct ReplaceArgs {
-    /// The container to change.
+    /// The container to change, or a dataset's directory (COL,ROW are then dataset samples,
+    /// and every tile the patch meets changes in one atomic dataset commit).
     file: PathBuf,
     /// Where the patch's north-west sample goes: COL,ROW of the full-resolution data.
     #[arg(long)]
@@ -63,6 +64,59 @@ fn parse_at(text: &str) -> Result<[u64; 2], Error> {
 pub fn run(args: &ReplaceArgs) -> Result<ExitCode, Error> {
     let [col0, row0] = parse_at(&args.at)?;
     let patch = ingest::load(&args.patch, &args.ingest.options())?;
+    if fmrh::dataset::is_dataset(&args.file) {
+        let started = Instant::now();
+        let r = fmrh::dataset::replace(&fmrh::dataset::Dir(args.file.clone()), col0, row0, &patch)?;
+        let ms = started.elapsed().as_secs_f64() * 1e3;
+        if args.json {
+            #[derive(Serialize)]
+            struct Report<'a> {
+                dataset: String,
+                patch: String,
+                at: [u64; 2],
+                width: u32,
+                height: u32,
+                #[serde(flatten)]
+                commit: &'a fmrh::dataset::DatasetCommit,
+                commit_time_ms: f64,
+            }
+            super::print_json(&Report {
+                dataset: args.file.display().to_string(),
+                patch: args.patch.display().to_string(),
+                at: [col0, row0],
+                width: patch.width(),
+                height: patch.height(),
+                commit: &r,
+                commit_time_ms: ms,
+            })?;
+        } else {
+            println!(
+                "replaced {} x {} samples at dataset column {col0}, row {row0} of {}: {} tiles, \
+                 one manifest commit (txn {}) in {ms:.2} ms",
+                patch.width(),
+                patch.height(),
+                args.file.display(),
+                r.tiles.len(),
+                r.txn_id
+            );
+            for t in &r.tiles {
+                println!(
+                    "  tile {:>5} {:<28} txn {}: {} blocks, {} grids rewritten{}",
+                    t.index,
+                    t.name,
+                    t.summary.txn_id,
+                    t.summary.blocks,
+                    t.summary.grids,
+                    if t.republished {
+                        " (its pinned state republished first)"
+                    } else {
+                        ""
+                    }
+                );
+            }
+        }
+        return Ok(ExitCode::SUCCESS);
+    }
     let (container, recovery) = Container::open_recovering(&args.file)?;
     let units = container.read()?.header().metadata.units.clone();
     if let (Some(file), Some(patch_units)) = (&units, &patch.metadata.units) {

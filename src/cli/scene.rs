@@ -108,7 +108,8 @@ impl ViewArgs {
 
 #[derive(clap::Args)]
 pub struct SceneArgs {
-    /// The container.
+    /// The container, or a dataset's directory (the camera is then in the dataset's world
+    /// frame, the window in dataset samples).
     file: PathBuf,
     /// Eye position x,y,z in metres (x = col * dx east, y = row * dy south, z height).
     #[arg(long, allow_hyphen_values = true)]
@@ -187,6 +188,9 @@ pub fn run(args: &SceneArgs) -> Result<ExitCode, Error> {
         .as_deref()
         .map(|p| super::sidecar::F32Output::new(p, args.force))
         .transpose()?;
+    if fmrh::dataset::is_dataset(&args.file) {
+        return run_dataset(args, camera, options, output);
+    }
     if args.view.mmap && fmrh::store::lock::SUPPORTED {
         // SAFETY: the --mmap contract, stated in its help: the state is registered, so fmrh
         // writers leave its pages alone, and no other tool modifies the file meanwhile.
@@ -321,4 +325,138 @@ fn print_text(scene: &Scene, uncovered: Option<u64>, reads: &Reads) {
             nb(b.neighbours[3]),
         );
     }
+}
+
+/// The JSON report of a dataset scene: a container's, with each block's tile, and each
+/// tile's part and reads.
+#[derive(Serialize)]
+struct DatasetReport<'a> {
+    mode: Mode,
+    tau: f64,
+    threshold: Option<f64>,
+    window: Option<SampleRect>,
+    blocks: &'a [fmrh::dataset::DatasetBlock],
+    stats: &'a fmrh::scene::SceneStats,
+    uncovered_samples: Option<u64>,
+    tiles: &'a [fmrh::dataset::TilePart],
+    reads: DatasetReads,
+}
+
+/// What a dataset scene read.
+#[derive(Serialize)]
+struct DatasetReads {
+    /// Opening the dataset: the manifest's slots and head.
+    open: ReadStats,
+    /// The manifest's tile pages the scene needed.
+    manifest: ReadStats,
+    /// Opening the tiles the scene met (each one's slots, header and directory).
+    tiles_open: ReadStats,
+    /// Scheduling, over all tiles: index and node pages.
+    schedule: ReadStats,
+    /// Loading the blocks (--load or --reconstruct).
+    load: Option<ReadStats>,
+    /// Tile files opened.
+    tiles_opened: u64,
+}
+
+fn run_dataset(
+    args: &SceneArgs,
+    camera: Camera,
+    options: SceneOptions,
+    output: Option<super::sidecar::F32Output>,
+) -> Result<ExitCode, Error> {
+    let ds = fmrh::dataset::Dataset::open(&args.file)?;
+    let spacing = args
+        .view
+        .spacing
+        .as_deref()
+        .map(super::build::parse_spacing)
+        .transpose()?;
+    let scene = ds.scene(&camera, &options, spacing)?;
+    let schedule = scene
+        .tiles
+        .iter()
+        .fold(ReadStats::default(), |a, t| a.plus(&t.reads));
+    let mut tiles_open = ReadStats::default();
+    for part in &scene.tiles {
+        let tile = ds.tile(part.tile)?;
+        tiles_open = tiles_open.plus(&ds.open_tile(&tile)?.open_reads());
+    }
+    let mut uncovered = None;
+    let mut load = None;
+    if args.load && output.is_none() {
+        load = Some(ds.load(&scene)?);
+    }
+    if let Some(out) = &output {
+        let window = scene.window.ok_or_else(|| {
+            Error::InvalidArgument(
+                "the camera sees no terrain: there is no window to reconstruct (give --window)"
+                    .into(),
+            )
+        })?;
+        let rec = ds.reconstruct(&scene, window)?;
+        uncovered = Some(rec.uncovered);
+        let metadata = fmrh::heightfield::Metadata {
+            spacing_m: spacing.or(ds.spacing_m()),
+            georeference: ds.georeference(),
+            units: None,
+            source_format: "fmrh-dataset".into(),
+        };
+        let hf = rec.to_heightfield(&metadata)?;
+        out.write_dataset(&hf, window, &args.file, ds.txn_id())?;
+    }
+    let reads = DatasetReads {
+        open: ds.open_reads(),
+        manifest: ds.manifest_reads(),
+        tiles_open,
+        schedule,
+        load,
+        tiles_opened: ds.tiles_opened(),
+    };
+    if args.json {
+        super::print_json(&DatasetReport {
+            mode: scene.mode,
+            tau: scene.tau,
+            threshold: scene.stats.threshold,
+            window: scene.window,
+            blocks: &scene.blocks,
+            stats: &scene.stats,
+            uncovered_samples: uncovered,
+            tiles: &scene.tiles,
+            reads,
+        })?;
+        return Ok(ExitCode::SUCCESS);
+    }
+    let as_scene = Scene {
+        mode: scene.mode,
+        tau: scene.tau,
+        window: scene.window,
+        blocks: scene.blocks.iter().map(|b| b.block).collect(),
+        stats: scene.stats,
+    };
+    println!(
+        "dataset {}: {} tiles met ({} opened), manifest read {} bytes at open and {} since",
+        args.file.display(),
+        scene.tiles.len(),
+        reads.tiles_opened,
+        reads.open.bytes(),
+        reads.manifest.bytes()
+    );
+    for t in &scene.tiles {
+        println!(
+            "  tile {:>5} {:<28} {:>6} blocks{}",
+            t.tile,
+            t.name,
+            t.blocks,
+            t.cluster
+                .map_or(String::new(), |c| format!(", cluster {c}"))
+        );
+    }
+    let container_reads = Reads {
+        open: reads.tiles_open,
+        schedule: reads.schedule,
+        load: reads.load,
+    };
+    print_text(&as_scene, uncovered, &container_reads);
+    Ok(ExitCode::SUCCESS)
 }

@@ -100,6 +100,47 @@ impl F32Output {
         container: &Path,
         store: &Store<S>,
     ) -> Result<(), Error> {
+        self.write_from(
+            hf,
+            window,
+            Source {
+                kind,
+                container: container.display().to_string(),
+                txn_id: store.txn_id(),
+                original_format: store.header().metadata.source_format.clone(),
+                storage_precision: store.header().precision.map(|p| p.step()),
+            },
+        )
+    }
+
+    /// Writes `hf` (the dataset's samples `window`, in dataset coordinates) and its sidecar.
+    /// The sidecar's `source.txn_id` is the manifest's.
+    pub fn write_dataset(
+        &self,
+        hf: &Heightfield,
+        window: SampleRect,
+        dir: &Path,
+        txn_id: u64,
+    ) -> Result<(), Error> {
+        self.write_from(
+            hf,
+            window,
+            Source {
+                kind: "fmrh extract",
+                container: dir.display().to_string(),
+                txn_id,
+                original_format: "fmrh-dataset".into(),
+                storage_precision: None,
+            },
+        )
+    }
+
+    fn write_from(
+        &self,
+        hf: &Heightfield,
+        window: SampleRect,
+        source: Source,
+    ) -> Result<(), Error> {
         let samples = hf.samples();
         let (mut min, mut max, mut sum, mut valid) = (f32::INFINITY, f32::NEG_INFINITY, 0f64, 0u64);
         for &v in samples {
@@ -134,13 +175,7 @@ impl F32Output {
                 step: g.step,
             }),
             window: [window.col0, window.row0, window.col1, window.row1],
-            source: Source {
-                kind,
-                container: container.display().to_string(),
-                txn_id: store.txn_id(),
-                original_format: store.header().metadata.source_format.clone(),
-                storage_precision: store.header().precision.map(|p| p.step()),
-            },
+            source,
         };
         let json = serde_json::to_vec_pretty(&sidecar)
             .map_err(|e| Error::InvalidArgument(format!("cannot format the sidecar: {e}")))?;

@@ -9,7 +9,7 @@ use fmrh::Error;
 
 #[derive(clap::Args)]
 pub struct VerifyArgs {
-    /// The container.
+    /// The container, or a dataset's directory.
     file: PathBuf,
     /// Also recompute every error from the physical blocks, and check every cut and
     /// adjacency list.
@@ -29,6 +29,9 @@ const EXIT_BUSY: u8 = 75;
 /// Runs `fmrh verify`: exit 0 valid, 1 invalid, 2 unusable, 75 busy (a writer was
 /// committing: run again).
 pub fn run(args: &VerifyArgs) -> Result<ExitCode, Error> {
+    if fmrh::dataset::is_dataset(&args.file) {
+        return run_dataset(args);
+    }
     let path = &args.file;
     let file = File::open(path).map_err(|e| Error::input(path, e.to_string()))?;
     let src = FileSource::new(file, path)?;
@@ -69,22 +72,7 @@ pub fn run(args: &VerifyArgs) -> Result<ExitCode, Error> {
                 .map_or_else(|| "none".to_string(), |t| t.to_string())
         );
         for c in &report.checks {
-            let status = match c.status {
-                CheckStatus::Passed => "ok",
-                CheckStatus::Failed => "FAILED",
-                CheckStatus::Skipped => "skipped",
-                CheckStatus::Busy => "busy",
-            };
-            println!("  {:<5} {:<26} {status}", c.id, c.name);
-            for f in &c.failures {
-                println!("        {f}");
-            }
-            if c.failure_count > c.failures.len() as u64 {
-                println!(
-                    "        ... and {} more",
-                    c.failure_count - c.failures.len() as u64
-                );
-            }
+            print_check(c);
         }
     }
     let failed = report
@@ -95,6 +83,79 @@ pub fn run(args: &VerifyArgs) -> Result<ExitCode, Error> {
         ExitCode::SUCCESS
     } else if report.busy && !failed {
         ExitCode::from(EXIT_BUSY)
+    } else {
+        ExitCode::from(1)
+    })
+}
+
+/// Prints one check's line and its first failures.
+fn print_check(c: &fmrh::store::CheckReport) {
+    let status = match c.status {
+        CheckStatus::Passed => "ok",
+        CheckStatus::Failed => "FAILED",
+        CheckStatus::Skipped => "skipped",
+        CheckStatus::Busy => "busy",
+    };
+    println!("  {:<5} {:<26} {status}", c.id, c.name);
+    for f in &c.failures {
+        println!("        {f}");
+    }
+    if c.failure_count > c.failures.len() as u64 {
+        println!(
+            "        ... and {} more",
+            c.failure_count - c.failures.len() as u64
+        );
+    }
+}
+
+/// `fmrh verify DIR`: the dataset validator. Exit 0 valid, 1 invalid.
+fn run_dataset(args: &VerifyArgs) -> Result<ExitCode, Error> {
+    let mode = if args.full {
+        VerifyMode::Full
+    } else {
+        VerifyMode::Fast
+    };
+    let report = if args.quiet || args.json {
+        fmrh::dataset::verify(&args.file, mode, &fmrh::progress::Silent)?
+    } else {
+        fmrh::dataset::verify(&args.file, mode, &super::progress::Bar::new())?
+    };
+    if args.json {
+        super::print_json(&report)?;
+    } else {
+        println!(
+            "{}: {} ({} check of the manifest and {} tiles, txn {})",
+            args.file.display(),
+            if report.valid { "valid" } else { "INVALID" },
+            match report.mode {
+                VerifyMode::Fast => "fast",
+                VerifyMode::Full => "full",
+            },
+            report.tiles,
+            report
+                .txn_id
+                .map_or_else(|| "none".to_string(), |t| t.to_string())
+        );
+        for c in &report.checks {
+            print_check(c);
+        }
+        let bad = report.tile_reports.iter().filter(|t| !t.valid).count();
+        println!(
+            "  tiles: {} valid, {bad} invalid",
+            report.tile_reports.len() - bad
+        );
+        for t in report.tile_reports.iter().filter(|t| !t.valid) {
+            println!("    {} ({}): {}", t.index, t.name, t.failures.join("; "));
+        }
+        if !report.stray_files.is_empty() {
+            println!(
+                "  note: files no tile record names (not part of the dataset): {}",
+                report.stray_files.join(", ")
+            );
+        }
+    }
+    Ok(if report.valid {
+        ExitCode::SUCCESS
     } else {
         ExitCode::from(1)
     })

@@ -1,11 +1,28 @@
 //! Datasets of many files (issue 16): a directory of ordinary containers, one per tile, and a
 //! manifest that places them in one sample grid and makes a change to several of them
 //! atomic. The design, with the commit protocol's correctness argument, is
-//! `docs/datasets-design.md`; this module grows room by room as it is built.
+//! `docs/datasets-design.md`; the bytes are `format-spec/dataset.md`.
 //!
-//! Built so far: [`placement`], where the tiles lie (a layout, or their georeferences) and
-//! which edges they share; [`seams`], whether neighbours agree on a shared edge, and how a
-//! policy settles them when they do not.
+//! Read in order: [`placement`] (where the tiles lie, which edges they share), [`seams`]
+//! (whether neighbours agree on a shared edge, and how a policy settles them), [`manifest`]
+//! (the manifest's commit slots, head and tile pages, read and written), [`reader`] (a
+//! dataset opened: its tiles, each container at its pinned state, windows across them),
+//! [`mod@scene`] (scenes across tiles), [`build`] (tiles in, a dataset out, one tile in
+//! memory at a time), [`commit`] (a change to several tiles, atomic across the files) and
+//! [`mod@verify`] (the validator).
 
+pub mod build;
+pub mod commit;
+pub mod manifest;
 pub mod placement;
+pub mod reader;
+pub mod scene;
 pub mod seams;
+pub mod verify;
+
+pub use build::{build, BuiltTile, DatasetOptions, DatasetSummary, TileInput};
+pub use commit::{recover, replace, DatasetCommit, DatasetRecovery, Dir, Files, TileCommit};
+pub use reader::{is_dataset, Dataset, Tile, OPEN_TILES};
+pub use scene::{DatasetBlock, DatasetScene, TilePart};
+pub use seams::SeamPolicy;
+pub use verify::{verify, DatasetReport, TileReport};

@@ -49,6 +49,15 @@ pub enum Invariant {
     Measured,
     /// I-16: the free list names free pages only.
     FreeList,
+    /// D-1 (datasets, `format-spec/dataset.md`): a manifest commit record is valid.
+    ManifestRecord,
+    /// D-2: the manifest head and its tile pages: inside the file, checksummed, in order.
+    ManifestPages,
+    /// D-3: the tile records: names, placement, order, the tiling.
+    TileRecords,
+    /// D-4: every tile file holds its pinned state, of the size and heights its record says,
+    /// and neighbours agree on their shared edges.
+    TilePins,
 }
 
 impl Invariant {
@@ -72,7 +81,15 @@ impl Invariant {
         Invariant::FreeList,
     ];
 
-    /// Its number in the spec: 1 for I-1.
+    /// The invariants of a dataset's manifest (`format-spec/dataset.md` §6), in id order.
+    pub const DATASET: [Invariant; 4] = [
+        Invariant::ManifestRecord,
+        Invariant::ManifestPages,
+        Invariant::TileRecords,
+        Invariant::TilePins,
+    ];
+
+    /// Its number in the spec: 1 for I-1; the dataset invariants follow, from 17 for D-1.
     pub fn number(self) -> u8 {
         // The variants are declared in id order, from 0.
         self as u8 + 1
@@ -80,9 +97,9 @@ impl Invariant {
 
     /// `I-1`, `I-2`, ...
     pub fn id(self) -> &'static str {
-        const IDS: [&str; 16] = [
+        const IDS: [&str; 20] = [
             "I-1", "I-2", "I-3", "I-4", "I-5", "I-6", "I-7", "I-8", "I-9", "I-10", "I-11", "I-12",
-            "I-13", "I-14", "I-15", "I-16",
+            "I-13", "I-14", "I-15", "I-16", "D-1", "D-2", "D-3", "D-4",
         ];
         IDS[self as usize]
     }
@@ -106,6 +123,10 @@ impl Invariant {
             Invariant::Adjacency => "adjacency lists",
             Invariant::Measured => "measured content",
             Invariant::FreeList => "free list",
+            Invariant::ManifestRecord => "manifest record",
+            Invariant::ManifestPages => "manifest pages",
+            Invariant::TileRecords => "tile records",
+            Invariant::TilePins => "tile pins",
         }
     }
 }
@@ -178,6 +199,10 @@ mod tests {
         for (i, inv) in Invariant::ALL.iter().enumerate() {
             assert_eq!(usize::from(inv.number()), i + 1);
             assert_eq!(inv.id(), format!("I-{}", i + 1));
+        }
+        for (i, inv) in Invariant::DATASET.iter().enumerate() {
+            assert_eq!(usize::from(inv.number()), Invariant::ALL.len() + i + 1);
+            assert_eq!(inv.id(), format!("D-{}", i + 1));
         }
     }
 }

@@ -20,6 +20,7 @@
 //! | [`tables`] | the list of a state's tables | §6 |
 //! | [`payload`] | physical blocks and coarse grids | §7 |
 //! | [`invariant`] | the numbered invariants | §9 |
+//! | [`manifest`] | a dataset's manifest | `dataset.md` |
 //!
 //! Adding a section means one file here, one entry in [`tables`] (for a table) or a root in
 //! [`commit::StateRoots`] (for a blob), and its section in the spec.
@@ -58,6 +59,7 @@ pub mod commit;
 pub mod dataset;
 pub mod directory;
 pub mod invariant;
+pub mod manifest;
 pub mod page;
 pub mod payload;
 pub mod records;

@@ -263,6 +263,18 @@ impl<'s, S: Source> Terrain<'s, S> {
 
     /// Selects the blocks `camera` needs at tolerance `options.tau`.
     pub fn scene(&self, camera: &Camera, options: &SceneOptions) -> Result<Scene> {
+        self.scene_with(camera, options, None)
+    }
+
+    /// As [`Terrain::scene`]; in uniform mode, with `p_min` (when given) as the nearest
+    /// distance instead of the region's own. A dataset gives every tile the nearest distance
+    /// over all of them, so that one static bound holds over the whole view.
+    pub fn scene_with(
+        &self,
+        camera: &Camera,
+        options: &SceneOptions,
+        p_min: Option<f64>,
+    ) -> Result<Scene> {
         let started = Instant::now();
         let view = camera.view()?;
         if !options.tau.is_finite() || options.tau < 0.0 {
@@ -285,11 +297,12 @@ impl<'s, S: Source> Terrain<'s, S> {
         };
         match options.mode {
             Mode::Uniform => {
-                let p_min = match options.window {
-                    Some(w) => self
+                let p_min = match (p_min, options.window) {
+                    (Some(p), _) => p,
+                    (None, Some(w)) => self
                         .rect_box(&w, self.root.min_height, self.root.max_height)
                         .distance(view.eye),
-                    None => quadrants
+                    (None, None) => quadrants
                         .iter()
                         .map(|q| self.quadrant_box(q).distance(view.eye))
                         .fold(f64::INFINITY, f64::min),

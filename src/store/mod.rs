@@ -57,7 +57,7 @@ pub(crate) mod btree;
 mod bundled;
 pub mod io;
 pub mod lock;
-mod open;
+pub(crate) mod open;
 pub mod pagecache;
 mod read;
 pub mod source;
@@ -77,7 +77,7 @@ pub use read::{Block, Children, CodeScan, Grid, HilbertScan, Layout, ParentGrid,
 pub use source::{Bytes, Counted, FileSource, MmapSource, Source};
 pub use txn::{CommitSummary, Container, Recovery, Snapshot, WriteTxn};
 pub use verify::{
-    verify, verify_with_progress, CheckReport, CheckStatus, VerifyMode, VerifyReport,
+    verify, verify_pinned, verify_with_progress, CheckReport, CheckStatus, VerifyMode, VerifyReport,
 };
 pub use write::{
     create, write_atomically, write_file, write_to, CreateOptions, Progress, SectionBytes,
@@ -154,6 +154,13 @@ impl Store<FileSource> {
     /// ```
     pub fn open(path: &Path) -> Result<Self> {
         Store::from_source(FileSource::open(path)?)
+    }
+
+    /// Opens the container at `path` at the state `pin` names, which need not be its latest:
+    /// a dataset's tile (`format-spec/dataset.md` §4). Fails with a `D-4` corruption error
+    /// when neither commit slot publishes that state.
+    pub fn open_pinned(path: &Path, pin: crate::format::manifest::StatePin) -> Result<Self> {
+        open::open_at(FileSource::open(path)?, open::Walk::Lean, Some(pin))
     }
 }
 
@@ -253,6 +260,12 @@ impl<S: Source> Store<S> {
             recovery_needed: r.has_flag(COMMIT_RECOVERY_NEEDED),
             payload_slack: r.has_flag(COMMIT_PAYLOAD_SLACK),
         }
+    }
+
+    /// The pin of the state this store reads: what a dataset's manifest records to name it
+    /// (`format-spec/dataset.md` §4).
+    pub fn pin(&self) -> crate::format::manifest::StatePin {
+        crate::format::manifest::StatePin::of(&self.commit)
     }
 
     /// The transaction id of the state this store reads.

@@ -33,6 +33,7 @@ use crate::format::blob::{blob_page_content, check_blob_ref};
 use crate::format::commit::{self, NoState, Slot};
 use crate::format::dataset::MAX_DATASET_HEADER_LEN;
 use crate::format::directory::{self, MAX_DIRECTORY_LEN};
+use crate::format::manifest::StatePin;
 use crate::format::tables::state_trees;
 use crate::format::{
     tag, BlobRef, DatasetHeader, Invariant, TreeRef, Violation, COMMIT_RECORD_LEN, FORMAT_MAJOR,
@@ -174,12 +175,20 @@ pub(crate) fn superseded_or_corrupt<S: Source + ?Sized>(src: &S, txn: u64, v: Vi
 }
 
 /// Chooses the state and registers it (see the module docs). Returns the slot, the record,
-/// and whether it is registered.
-fn choose_state<S: Source + ?Sized>(src: &S) -> Result<(u8, crate::format::CommitRecord, bool)> {
+/// and whether it is registered. With a `pin`, the state is the one the pin names (a
+/// dataset's tile, `format-spec/dataset.md` §4), whichever slot holds it, and not
+/// necessarily the latest.
+fn choose_state<S: Source + ?Sized>(
+    src: &S,
+    pin: Option<StatePin>,
+) -> Result<(u8, crate::format::CommitRecord, bool)> {
     let mut attempts = 0;
     loop {
         let slots = read_slots(src)?;
-        let (slot, commit) = commit::choose(&slots).map_err(|why| no_state(src, why))?;
+        let (slot, commit) = match pin {
+            None => commit::choose(&slots).map_err(|why| no_state(src, why))?,
+            Some(pin) => pinned(src, &slots, pin)?,
+        };
         let txn = commit.txn_id.get();
         if !src
             .register_reader(txn)
@@ -187,20 +196,64 @@ fn choose_state<S: Source + ?Sized>(src: &S) -> Result<(u8, crate::format::Commi
         {
             return Ok((slot, commit, false));
         }
-        let latest = latest_txn(src)?;
-        if latest == Some(txn) {
-            return Ok((slot, commit, true));
-        }
-        attempts += 1;
-        if attempts >= OPEN_ATTEMPTS {
-            return Err(Error::Superseded {
-                path: src.name().to_path_buf(),
-                txn,
-                latest: latest.unwrap_or(txn),
-                detail: format!("a writer published {attempts} states while this reader chose one"),
-            });
+        match pin {
+            None => {
+                let latest = latest_txn(src)?;
+                if latest == Some(txn) {
+                    return Ok((slot, commit, true));
+                }
+                attempts += 1;
+                if attempts >= OPEN_ATTEMPTS {
+                    return Err(Error::Superseded {
+                        path: src.name().to_path_buf(),
+                        txn,
+                        latest: latest.unwrap_or(txn),
+                        detail: format!(
+                            "a writer published {attempts} states while this reader chose one"
+                        ),
+                    });
+                }
+            }
+            // Registered while the pinned state was still published: writers keep its pages.
+            Some(pin) => {
+                let again = read_slots(src)?;
+                pinned(src, &again, pin)?;
+                return Ok((slot, commit, true));
+            }
         }
     }
+}
+
+/// The valid slot whose record publishes the state `pin` names (the newer, when a mark
+/// copied it into both).
+fn pinned<S: Source + ?Sized>(
+    src: &S,
+    slots: &[Slot; 2],
+    pin: StatePin,
+) -> Result<(u8, crate::format::CommitRecord)> {
+    let mut found: Option<(u8, crate::format::CommitRecord)> = None;
+    for (i, s) in (0u8..).zip(slots) {
+        if let Slot::Valid(r) = s {
+            if pin.matches(r) && found.is_none_or(|(_, f)| r.txn_id.get() > f.txn_id.get()) {
+                found = Some((i, **r));
+            }
+        }
+    }
+    found.ok_or_else(|| pinned_missing(src, pin))
+}
+
+/// The error for a file neither of whose slots publishes the pinned state.
+pub(crate) fn pinned_missing<S: Source + ?Sized>(src: &S, pin: StatePin) -> Error {
+    Violation::new(
+        Invariant::TilePins,
+        "commit slots",
+        format!(
+            "neither slot publishes the state the dataset pins (pages_txn {}, state CRC \
+             {:#010x})",
+            pin.pages_txn, pin.state_crc
+        ),
+    )
+    .in_file(src.name())
 }
 
 /// How much opening checks.
@@ -217,9 +270,14 @@ pub(crate) enum Walk {
 /// Opens the state `src` holds, checking what `walk` says (see the docs of [`crate::store`]
 /// for what that costs).
 pub(crate) fn open<S: Source>(src: S, walk: Walk) -> Result<Store<S>> {
+    open_at(src, walk, None)
+}
+
+/// As [`open`], at the state `pin` names when there is one.
+pub(crate) fn open_at<S: Source>(src: S, walk: Walk, pin: Option<StatePin>) -> Result<Store<S>> {
     let mut attempts = 0;
     loop {
-        match open_once(&src, walk) {
+        match open_once(&src, walk, pin) {
             Ok(opened) => return Ok(opened.into_store(src)),
             Err(Error::Superseded { .. }) if attempts + 1 < OPEN_ATTEMPTS => attempts += 1,
             Err(e) => return Err(e),
@@ -266,11 +324,11 @@ impl Opened {
     }
 }
 
-fn open_once<S: Source>(src: &S, walk: Walk) -> Result<Opened> {
+fn open_once<S: Source>(src: &S, walk: Walk, pin: Option<StatePin>) -> Result<Opened> {
     // What opening reads, counted by a wrapper around the source.
     let counted = Counted::new(src);
     let src = &counted;
-    let (slot, commit, registered) = choose_state(src)?;
+    let (slot, commit, registered) = choose_state(src, pin)?;
     // The state may be newer than the length the source saw when it was opened: a writer
     // grows the file before it publishes a record.
     let len = if commit.file_length.get() > src.len() {

@@ -52,6 +52,16 @@ impl ReadStats {
         self.metadata_bytes + self.payload_bytes
     }
 
+    /// Both together.
+    pub fn plus(&self, other: &ReadStats) -> ReadStats {
+        ReadStats {
+            metadata_reads: self.metadata_reads + other.metadata_reads,
+            metadata_bytes: self.metadata_bytes + other.metadata_bytes,
+            payload_reads: self.payload_reads + other.payload_reads,
+            payload_bytes: self.payload_bytes + other.payload_bytes,
+        }
+    }
+
     /// What was read between `earlier` and `self`.
     pub fn since(&self, earlier: &ReadStats) -> ReadStats {
         ReadStats {

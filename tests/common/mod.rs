@@ -91,6 +91,7 @@ pub fn bytes_of(
 pub mod bundle;
 pub mod fields;
 pub mod oracle;
+pub mod tiles;
 pub mod txn;
 pub mod txn_driver;
 pub mod views;

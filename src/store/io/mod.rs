@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 #[cfg(any(test, feature = "testing"))]
 mod sim;
 #[cfg(any(test, feature = "testing"))]
-pub use sim::{Damage, Fault, OpKind, SimDisk, SECTOR};
+pub use sim::{Damage, Fault, OpKind, SimDisk, SimPower, SECTOR};
 
 /// A byte device with durable writes on `sync`.
 pub trait Io: Send + Sync {
@@ -42,6 +42,39 @@ pub trait Io: Send + Sync {
     fn oldest_reader(&self, up_to: u64) -> io::Result<Option<u64>> {
         let _ = up_to;
         Ok(None)
+    }
+}
+
+/// A shared device is the device: what the commit protocol writes through one handle it
+/// writes through all (a dataset reads a tile's slots, then gives the same device to its
+/// container).
+impl<I: Io + ?Sized> Io for std::sync::Arc<I> {
+    fn len(&self) -> io::Result<u64> {
+        (**self).len()
+    }
+
+    fn read_at(&self, offset: u64, buf: &mut [u8]) -> io::Result<()> {
+        (**self).read_at(offset, buf)
+    }
+
+    fn write_at(&self, offset: u64, data: &[u8]) -> io::Result<()> {
+        (**self).write_at(offset, data)
+    }
+
+    fn sync(&self) -> io::Result<()> {
+        (**self).sync()
+    }
+
+    fn set_len(&self, len: u64) -> io::Result<()> {
+        (**self).set_len(len)
+    }
+
+    fn name(&self) -> &Path {
+        (**self).name()
+    }
+
+    fn oldest_reader(&self, up_to: u64) -> io::Result<Option<u64>> {
+        (**self).oldest_reader(up_to)
     }
 }
 

@@ -79,6 +79,56 @@ struct SimState {
 pub struct SimDisk {
     state: Arc<Mutex<SimState>>,
     name: PathBuf,
+    power: Option<SimPower>,
+}
+
+#[derive(Debug, Default)]
+struct PowerState {
+    ops: u64,
+    power_off_after: Option<u64>,
+    powered_off: bool,
+}
+
+/// One power supply for several disks (the files of a dataset): their mutating operations
+/// are counted together, and power goes off for all of them at once.
+#[derive(Clone, Debug, Default)]
+pub struct SimPower(Arc<Mutex<PowerState>>);
+
+impl SimPower {
+    /// A supply that stays on.
+    pub fn new() -> SimPower {
+        SimPower::default()
+    }
+
+    fn lock(&self) -> MutexGuard<'_, PowerState> {
+        self.0.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Loses power after `ops` more mutating operations on any of its disks.
+    pub fn power_off_after(&self, ops: u64) {
+        let mut s = self.lock();
+        s.power_off_after = Some(s.ops + ops);
+    }
+
+    /// Mutating operations so far, on all its disks.
+    pub fn ops(&self) -> u64 {
+        self.lock().ops
+    }
+
+    /// Whether power is off.
+    pub fn powered_off(&self) -> bool {
+        self.lock().powered_off
+    }
+
+    /// Counts an operation; `false` when power is (now) off.
+    fn tick(&self) -> bool {
+        let mut s = self.lock();
+        s.ops += 1;
+        if s.powered_off || s.power_off_after.is_some_and(|at| s.ops > at) {
+            s.powered_off = true;
+        }
+        !s.powered_off
+    }
 }
 
 fn kind_index(k: OpKind) -> usize {
@@ -121,6 +171,16 @@ impl SimDisk {
                 ..SimState::default()
             })),
             name: PathBuf::from("<simulated disk>"),
+            power: None,
+        }
+    }
+
+    /// A disk holding `bytes`, named `name`, on the shared supply `power`.
+    pub fn on_power(bytes: Vec<u8>, name: &Path, power: &SimPower) -> SimDisk {
+        SimDisk {
+            name: name.to_path_buf(),
+            power: Some(power.clone()),
+            ..SimDisk::new(bytes)
         }
     }
 
@@ -218,6 +278,9 @@ impl SimDisk {
         let i = kind_index(kind);
         s.counts[i] += 1;
         let n = s.counts[i];
+        if self.power.as_ref().is_some_and(|p| !p.tick()) {
+            s.powered_off = true;
+        }
         if s.powered_off || s.power_off_after.is_some_and(|at| s.ops > at) {
             s.powered_off = true;
             return Err(io::Error::other("simulated power loss"));

@@ -84,9 +84,9 @@ impl Alloc {
         self.pool.insert(page, txn);
     }
 
-    /// Drops reusable free pages at the end of the file.
-    pub fn trim(&mut self) {
-        while self.end > 2 {
+    /// Drops reusable free pages at the end of the file, never below `floor` pages.
+    pub fn trim(&mut self, floor: u64) {
+        while self.end > floor.max(2) {
             match self.pool.get(&(self.end - 1)) {
                 Some(&freed) if freed <= self.reuse_limit => {
                     self.pool.remove(&(self.end - 1));
@@ -112,10 +112,15 @@ mod tests {
         assert_eq!(a.reusable_run(3), None, "page 7 is not reusable yet");
         assert_eq!(a.extent(2), 5);
         assert_eq!(a.extent(3), 11, "appended");
-        a.trim();
+        a.trim(0);
         assert_eq!(a.end, 14, "the appended pages end the file");
         let mut b = Alloc::new([(9, 2), (10, 2)].into_iter().collect(), 2, 11);
-        b.trim();
+        b.trim(0);
         assert_eq!(b.end, 9);
+        // A floor (a dataset's pinned state's length) keeps the free pages above it.
+        let mut c = Alloc::new([(9, 2), (10, 2)].into_iter().collect(), 2, 11);
+        c.trim(10);
+        assert_eq!(c.end, 10);
+        assert!(c.pool.contains_key(&9) && !c.pool.contains_key(&10));
     }
 }

@@ -146,6 +146,7 @@ pub(crate) fn write_state<I: Io>(
     dirty: &[SampleRect],
     reuse_limit: u64,
     bundle_limit: u64,
+    min_pages: u64,
 ) -> Result<(CommitRecord, CommitSummary)> {
     let p = base.page_size();
     let txn = base.txn_id() + 1;
@@ -396,7 +397,7 @@ pub(crate) fn write_state<I: Io>(
     for page in freed {
         alloc.free(page, txn);
     }
-    alloc.trim();
+    alloc.trim(min_pages);
 
     let (free_list, free_pages) = write_free_list(io.as_ref(), &mut alloc, p, txn)?;
     summary.pages_written = written + free_pages;

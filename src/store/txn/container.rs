@@ -32,6 +32,8 @@ struct Shared<I: Io> {
     poisoned: AtomicBool,
     /// The most stored bytes a commit gives its metadata bundle (format §6.7).
     bundle_limit: std::sync::atomic::AtomicU64,
+    /// Commits keep the file at least this many bytes long ([`Container::set_min_length`]).
+    min_length: std::sync::atomic::AtomicU64,
 }
 
 #[derive(Default)]
@@ -161,6 +163,7 @@ impl<I: Io> Container<I> {
                     bundle_limit: std::sync::atomic::AtomicU64::new(
                         crate::format::bundle::DEFAULT_BUNDLE_LIMIT,
                     ),
+                    min_length: std::sync::atomic::AtomicU64::new(0),
                 }),
             },
             recovery,
@@ -182,6 +185,23 @@ impl<I: Io> Container<I> {
     /// copy-on-write protocol: this changes bytes, not atomicity or durability.
     pub fn set_bundle_limit(&self, bytes: u64) {
         self.shared.bundle_limit.store(bytes, Ordering::Relaxed);
+    }
+
+    /// Makes later commits keep the file at least `bytes` long: free pages at its end stay
+    /// in the free list instead of being cut off. A dataset (`format-spec/dataset.md` §4)
+    /// sets it to the length of the tile state its manifest pins, so that state stays whole
+    /// (a state needs the file to be as long as its record says) until the manifest moves.
+    pub fn set_min_length(&self, bytes: u64) {
+        self.shared.min_length.store(bytes, Ordering::Relaxed);
+    }
+
+    /// Drops the container **without** the clean close: the current state keeps its
+    /// recovery mark (format §11.2), and the state the mark's commit was based on stays in
+    /// the other slot. A dataset whose manifest commit failed abandons the tiles it committed,
+    /// so that the state its manifest still pins is not overwritten by a clean copy of the
+    /// orphaned new one. The next writer's open recovers the file as after a crash.
+    pub fn abandon(self) {
+        self.shared.poisoned.store(true, Ordering::Release);
     }
 
     /// Whether an I/O error has poisoned the container.
@@ -428,6 +448,11 @@ impl<I: Io> WriteTxn<'_, I> {
                 &self.dirty,
                 limit,
                 container.shared.bundle_limit.load(Ordering::Relaxed),
+                container
+                    .shared
+                    .min_length
+                    .load(Ordering::Relaxed)
+                    .div_ceil(u64::from(base.page_size())),
             )?;
             let store = container.publish(&base, &record)?;
             *lock(&container.shared.current) = Arc::new(store);

@@ -183,12 +183,13 @@ impl Checks {
     pub fn absorb<T>(&mut self, result: Result<T>) -> Result<Option<T>> {
         match result {
             Ok(v) => Ok(Some(v)),
+            // A dataset's invariant (a tile's pin) is the dataset validator's to report.
             Err(Error::Corrupt {
                 invariant,
                 location,
                 detail,
                 ..
-            }) => {
+            }) if Invariant::ALL.contains(&invariant) => {
                 self.fail(invariant, format!("{location}: {detail}"));
                 Ok(None)
             }
@@ -233,10 +234,48 @@ pub fn verify_with_progress<S: Source>(
     mode: VerifyMode,
     progress: &dyn crate::progress::Progress,
 ) -> Result<VerifyReport> {
+    verify_at(src, None, mode, progress)
+}
+
+/// As [`verify_with_progress`], of the state `pin` names (a dataset's tile,
+/// `format-spec/dataset.md` §4). When a newer state of the file exists (a dataset commit
+/// that was interrupted, or is running), the checks around the state (I-3, I-4) are left
+/// out: the other slot is the newer state's.
+pub fn verify_pinned<S: Source>(
+    src: S,
+    pin: crate::format::manifest::StatePin,
+    mode: VerifyMode,
+    progress: &dyn crate::progress::Progress,
+) -> Result<VerifyReport> {
+    verify_at(src, Some(pin), mode, progress)
+}
+
+fn verify_at<S: Source>(
+    src: S,
+    pin: Option<crate::format::manifest::StatePin>,
+    mode: VerifyMode,
+    progress: &dyn crate::progress::Progress,
+) -> Result<VerifyReport> {
     let file_length = src.len();
     let mut checks = Checks::new();
     let slots = read_slots(&src)?;
-    let (slot, record) = match commit::choose(&slots) {
+    let chosen = match pin {
+        None => commit::choose(&slots),
+        Some(pin) => {
+            let found = (0u8..)
+                .zip(&slots)
+                .filter_map(|(i, s)| match s {
+                    commit::Slot::Valid(r) if pin.matches(r) => Some((i, **r)),
+                    _ => None,
+                })
+                .max_by_key(|(_, r)| r.txn_id.get());
+            match found {
+                Some(x) => Ok(x),
+                None => return Err(super::open::pinned_missing(&src, pin)),
+            }
+        }
+    };
+    let (slot, record) = match chosen {
         Ok(x) => x,
         Err(commit::NoState::Corrupt(v)) => {
             checks.fail(v.invariant, format!("{}: {}", v.location, v.detail));
@@ -249,7 +288,7 @@ pub fn verify_with_progress<S: Source>(
     let opened = if file_length < record.file_length.get() {
         None
     } else {
-        checks.absorb(Store::from_source_walked(&src))?
+        checks.absorb(super::open::open_at(&src, super::open::Walk::Full, pin))?
     };
     // The state the store registered (a writer may have published a newer one meanwhile).
     let (slot, record, slots) = match &opened {
@@ -262,7 +301,10 @@ pub fn verify_with_progress<S: Source>(
     };
     let txn = record.txn_id.get();
     let mut around = Checks::new();
-    check_slots(&src, &slots, slot, &record, &mut around)?;
+    let newer = pin.is_some() && latest_txn(&src)? != Some(txn);
+    if !newer {
+        check_slots(&src, &slots, slot, &record, &mut around)?;
+    }
     if let Some(store) = &opened {
         verify_state(store, mode, &mut checks, progress)?;
     }

@@ -1,0 +1,196 @@
+//! `fmrh dataset`: datasets of many tiles (`format-spec/dataset.md`). `build` makes one from
+//! tile DEMs, placed by a layout or by their georeferences; `add` adds a tile. Every other
+//! command takes a dataset's directory where it takes a container.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use fmrh::dataset::{self, DatasetOptions, SeamPolicy, TileInput};
+use fmrh::model::{precision::Precision, BuildOptions, Thresholds, DEFAULT_BLOCK_SIZE};
+use fmrh::store::WriteOptions;
+use fmrh::Error;
+
+#[derive(clap::Subcommand)]
+pub enum DatasetCommand {
+    /// Build a dataset from tile DEMs: one container per tile and a MANIFEST, in a new
+    /// directory that appears only when complete.
+    ///
+    /// Tiles are placed by --layout (a CSV of `path,col0,row0` lines, offsets in dataset
+    /// samples, paths relative to the CSV) or by their georeferences (HGT names, GeoTIFF
+    /// geotransforms, sidecars). Neighbours may share one edge row or column, which must
+    /// agree sample for sample unless --seam says how to settle it.
+    Build(BuildArgs),
+}
+
+#[derive(clap::Args)]
+pub struct BuildArgs {
+    /// The tile DEMs, placed by their georeferences (or give --layout).
+    #[arg(required_unless_present = "layout", conflicts_with = "layout")]
+    tiles: Vec<PathBuf>,
+    /// A layout: one tile a line, `path,col0,row0`.
+    #[arg(long)]
+    layout: Option<PathBuf>,
+    /// The dataset directory to create (it must not exist).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// How neighbours that disagree on a shared edge are settled: strict (an error naming
+    /// both tiles and the first differing sample), first (the tile listed first keeps its
+    /// samples) or mean (both take the mean; a void on either side wins).
+    #[arg(long, default_value = "strict")]
+    seam: SeamPolicy,
+    /// Samples along a block side: 2^k + 1, from 9 to 1025.
+    #[arg(long, default_value_t = DEFAULT_BLOCK_SIZE)]
+    block_size: u32,
+    /// Cluster thresholds in height units, comma-separated (default: each tile's √2 ladder).
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
+    thresholds: Option<Vec<f64>>,
+    /// Store heights to the step Q (see `fmrh build --precision`).
+    #[arg(long, value_name = "Q")]
+    precision: Option<f64>,
+    /// Bytes per page of each tile (default: by the tile's size, as `fmrh build`).
+    #[arg(long)]
+    page_size: Option<u32>,
+    /// Code every payload alone (see `fmrh build --payloads-alone`).
+    #[arg(long, alias = "blocks-alone")]
+    payloads_alone: bool,
+    /// Ground distance between samples in metres, DX or DX,DY, for every tile.
+    #[arg(long, value_delimiter = ',')]
+    spacing: Option<Vec<f64>>,
+    /// No progress.
+    #[arg(long, short)]
+    quiet: bool,
+    /// Print the report as JSON.
+    #[arg(long)]
+    pub json: bool,
+    #[command(flatten)]
+    ingest: super::IngestArgs,
+}
+
+impl DatasetCommand {
+    /// Whether the command prints JSON.
+    pub fn json(&self) -> bool {
+        match self {
+            DatasetCommand::Build(a) => a.json,
+        }
+    }
+}
+
+/// Runs `fmrh dataset ...`.
+pub fn run(command: &DatasetCommand) -> Result<ExitCode, Error> {
+    match command {
+        DatasetCommand::Build(args) => build(args),
+    }
+}
+
+/// The tiles a layout lists, their paths taken relative to the layout's directory.
+fn layout_tiles(layout: &Path) -> Result<Vec<TileInput>, Error> {
+    let text = std::fs::read_to_string(layout).map_err(|e| Error::input(layout, e.to_string()))?;
+    let lines =
+        dataset::placement::parse_layout(&text).map_err(|e| Error::input(layout, e.to_string()))?;
+    let base = layout.parent().unwrap_or(Path::new(""));
+    Ok(lines
+        .into_iter()
+        .map(|l| TileInput {
+            path: base.join(&l.path),
+            at: Some((l.col0, l.row0)),
+        })
+        .collect())
+}
+
+fn build(args: &BuildArgs) -> Result<ExitCode, Error> {
+    let inputs = match &args.layout {
+        Some(layout) => layout_tiles(layout)?,
+        None => args
+            .tiles
+            .iter()
+            .map(|p| TileInput {
+                path: p.clone(),
+                at: None,
+            })
+            .collect(),
+    };
+    let options = DatasetOptions {
+        ingest: args.ingest.options(),
+        build: BuildOptions {
+            block_size: args.block_size,
+            thresholds: match &args.thresholds {
+                Some(t) => Thresholds::Explicit(t.clone()),
+                None => Thresholds::Ladder,
+            },
+            precision: args.precision.map(Precision::new).transpose()?,
+        },
+        write: WriteOptions {
+            page_size: args.page_size.unwrap_or(0),
+            against_parents: !args.payloads_alone,
+            ..WriteOptions::default()
+        },
+        seam: args.seam,
+        spacing_m: args
+            .spacing
+            .as_deref()
+            .map(super::build::parse_spacing)
+            .transpose()?,
+    };
+    let quiet = args.quiet || args.json;
+    let bar = (!quiet).then(super::progress::Bar::new);
+    let silent = fmrh::progress::Silent;
+    let progress: &dyn fmrh::progress::Progress = match &bar {
+        Some(b) => b,
+        None => &silent,
+    };
+    let t0 = std::time::Instant::now();
+    let mut on_tile = |phase: &str, i: usize, n: usize, path: &Path| {
+        if let Some(b) = &bar {
+            b.spin(&format!("{phase} tile {}/{n}: {}", i + 1, path.display()));
+        }
+    };
+    let summary = dataset::build(&inputs, &args.output, &options, progress, &mut on_tile);
+    progress.finish();
+    let summary = summary?;
+    let seconds = t0.elapsed().as_secs_f64();
+    if args.json {
+        #[derive(serde::Serialize)]
+        struct Report<'a> {
+            output: String,
+            #[serde(flatten)]
+            summary: &'a dataset::DatasetSummary,
+            build_time_s: f64,
+        }
+        super::print_json(&Report {
+            output: args.output.display().to_string(),
+            summary: &summary,
+            build_time_s: seconds,
+        })?;
+    } else {
+        println!(
+            "{}: {} tiles, {} x {} samples, {} shared edges",
+            args.output.display(),
+            summary.tiles.len(),
+            summary.columns,
+            summary.rows,
+            summary.shared_edges
+        );
+        for t in &summary.tiles {
+            let r = t.rect;
+            println!(
+                "  {:<28} {:>10} bytes  columns {}..={}, rows {}..={}{}",
+                t.name,
+                t.file_length,
+                r.col0,
+                r.col1,
+                r.row0,
+                r.row1,
+                if t.seam_samples_changed > 0 {
+                    format!("  ({} shared-edge samples settled)", t.seam_samples_changed)
+                } else {
+                    String::new()
+                }
+            );
+        }
+        println!(
+            "  manifest {} bytes; {} bytes in all; built in {seconds:.1} s",
+            summary.manifest_bytes, summary.total_bytes
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}

@@ -1,0 +1,354 @@
+//! Reading and writing a dataset's `MANIFEST` (`format-spec/dataset.md` §2–§3): the two
+//! commit slots, the head read at open, tile pages read when a window first meets them, and
+//! the commit that writes a new body where the active one is not, syncs, then publishes its
+//! record in the other slot. The bytes are [`crate::format::manifest`]'s; this file decides
+//! what to read and write and in which order.
+
+use std::sync::{Arc, OnceLock};
+
+use crate::curve::hilbert::hilbert_encode;
+use crate::error::{Error, Result};
+use crate::format::manifest::{
+    choose, decode_tile_page, head_len_for, Head, HeadFixed, ManifestRecord, ManifestSlot,
+    NoManifest, PageEntry, TileRecord, CRS_LEN, HEAD_FIXED_LEN, HEAD_HAS_GEOREFERENCE, HEAD_MAGIC,
+    MANIFEST_MAJOR, MANIFEST_PAGE, MANIFEST_RECORD_LEN, MAX_TILES, TILES_PER_PAGE,
+};
+use crate::format::{crc32, Invariant, Violation};
+use crate::heightfield::Georeference;
+use crate::model::SampleRect;
+use crate::store::io::Io;
+use crate::store::Source;
+
+/// The manifest's file name inside a dataset's directory.
+pub const MANIFEST_NAME: &str = "MANIFEST";
+
+/// The byte offset of slot `i`.
+fn slot_offset(i: u8) -> u64 {
+    u64::from(i) * u64::from(MANIFEST_PAGE)
+}
+
+/// Reads and classifies both slots.
+pub fn read_slots<S: Source + ?Sized>(src: &S) -> Result<[ManifestSlot; 2]> {
+    let one = |i: u8| -> Result<ManifestSlot> {
+        let at = slot_offset(i);
+        let len = src.len().saturating_sub(at).min(MANIFEST_RECORD_LEN as u64) as usize;
+        if len == 0 {
+            return Ok(ManifestSlot::Empty);
+        }
+        let bytes = src.read_at(at, len).map_err(|e| Error::io(src.name(), e))?;
+        Ok(ManifestRecord::classify(&bytes, i))
+    };
+    Ok([one(0)?, one(1)?])
+}
+
+/// The txn id of the state a reader would take now, if any.
+pub fn latest_txn<S: Source + ?Sized>(src: &S) -> Result<Option<u64>> {
+    Ok(choose(&read_slots(src)?).ok().map(|(_, r)| r.txn_id.get()))
+}
+
+/// The state a reader takes, or why there is none.
+pub fn choose_state<S: Source + ?Sized>(src: &S) -> Result<(u8, ManifestRecord)> {
+    choose(&read_slots(src)?).map_err(|why| match why {
+        NoManifest::NotAManifest => Error::input(
+            src.name(),
+            "not an fmrh dataset manifest (no record with the FMDS magic)",
+        ),
+        NoManifest::Unsupported(major) => Error::unsupported(
+            src.name(),
+            format!("manifest major version {major}; this reader reads {MANIFEST_MAJOR}"),
+        ),
+        NoManifest::Corrupt(v) => v.in_file(src.name()),
+    })
+}
+
+/// Bytes of `src` that should hold what the state `txn` says and do not (`v`): superseded
+/// when a newer state was published since (its body may lie there now), else corruption.
+fn superseded_or_corrupt<S: Source + ?Sized>(src: &S, txn: u64, v: Violation) -> Error {
+    match latest_txn(src) {
+        Ok(Some(latest)) if latest > txn => Error::Superseded {
+            path: src.name().to_path_buf(),
+            txn,
+            latest,
+            detail: format!("{}: {}", v.location, v.detail),
+        },
+        _ => v.in_file(src.name()),
+    }
+}
+
+/// Reads `len` bytes at `offset` that the state `txn` names, checking their CRC.
+fn read_checked<S: Source + ?Sized>(
+    src: &S,
+    txn: u64,
+    offset: u64,
+    len: u64,
+    crc: u32,
+    invariant: Invariant,
+    what: &str,
+) -> Result<Vec<u8>> {
+    let bad =
+        |detail: String| superseded_or_corrupt(src, txn, Violation::new(invariant, what, detail));
+    if offset.checked_add(len).is_none_or(|end| end > src.len()) {
+        return Err(bad(format!(
+            "{len} bytes at {offset}: past the end of the file"
+        )));
+    }
+    let n = usize::try_from(len).map_err(|_| bad(format!("{len} bytes")))?;
+    let bytes = src
+        .read_at(offset, n)
+        .map_err(|e| Error::io(src.name(), e))?
+        .into_owned();
+    if crc32(&bytes) != crc {
+        return Err(bad("CRC mismatch".into()));
+    }
+    Ok(bytes)
+}
+
+/// A dataset state as a reader holds it: its record, its head, and its tile pages as they
+/// are read.
+pub struct ManifestState {
+    /// The slot its record is in.
+    pub slot: u8,
+    /// Its record.
+    pub record: ManifestRecord,
+    /// Its head.
+    pub head: Head,
+    pages: Vec<OnceLock<Arc<Vec<TileRecord>>>>,
+}
+
+impl ManifestState {
+    /// Reads the state a reader takes: the slots and the head, nothing else.
+    pub fn read<S: Source + ?Sized>(src: &S) -> Result<ManifestState> {
+        let (slot, record) = choose_state(src)?;
+        let txn = record.txn_id.get();
+        if record.file_length.get() > src.len() {
+            return Err(superseded_or_corrupt(
+                src,
+                txn,
+                Violation::new(
+                    Invariant::ManifestRecord,
+                    format!("manifest slot {slot}"),
+                    format!(
+                        "the state needs {} bytes, the file has {}",
+                        record.file_length.get(),
+                        src.len()
+                    ),
+                ),
+            ));
+        }
+        let bytes = read_checked(
+            src,
+            txn,
+            record.head_offset.get(),
+            u64::from(record.head_len.get()),
+            record.head_crc.get(),
+            Invariant::ManifestPages,
+            "manifest head",
+        )?;
+        let head = Head::decode(&bytes, &record).map_err(|v| v.in_file(src.name()))?;
+        let pages = head.pages.iter().map(|_| OnceLock::new()).collect();
+        Ok(ManifestState {
+            slot,
+            record,
+            head,
+            pages,
+        })
+    }
+
+    /// The records of tile page `i`, read and checked the first time they are asked for.
+    pub fn page<S: Source + ?Sized>(&self, src: &S, i: usize) -> Result<Arc<Vec<TileRecord>>> {
+        if let Some(p) = self.pages[i].get() {
+            return Ok(p.clone());
+        }
+        let e = &self.head.pages[i];
+        let bytes = read_checked(
+            src,
+            self.record.txn_id.get(),
+            e.offset.get(),
+            u64::from(e.length.get()),
+            e.crc.get(),
+            Invariant::ManifestPages,
+            &format!("manifest tile page {i}"),
+        )?;
+        let records = decode_tile_page(&bytes, e, &self.record)
+            .map_err(|v| superseded_or_corrupt(src, self.record.txn_id.get(), v))?;
+        Ok(self.pages[i].get_or_init(|| Arc::new(records)).clone())
+    }
+
+    /// Tile pages read so far.
+    pub fn pages_read(&self) -> usize {
+        self.pages.iter().filter(|p| p.get().is_some()).count()
+    }
+
+    /// The georeference of the dataset grid, if any.
+    pub fn georeference(&self) -> Option<Georeference> {
+        let f = &self.head.fixed;
+        (f.flags.get() & HEAD_HAS_GEOREFERENCE != 0).then(|| Georeference {
+            crs: crate::format::manifest::crs_name(f).flatten(),
+            origin: f.origin.map(|v| v.get()),
+            step: f.step.map(|v| v.get()),
+        })
+    }
+}
+
+/// What a dataset state holds, before it is written.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Contents {
+    /// The tiles, in any order ([`write_state`] sorts them).
+    pub tiles: Vec<TileRecord>,
+    /// Metres between samples, when known.
+    pub spacing_m: Option<[f64; 2]>,
+    /// The georeference of dataset sample (0, 0), when known.
+    pub georeference: Option<Georeference>,
+    /// The seam policy (`SEAM_*`).
+    pub seam: u8,
+}
+
+/// The order of tiles in a manifest: the Hilbert key of their first sample on a 2^32 grid,
+/// then row and column (tiles never share a first sample, but the order is total anyway).
+pub fn tile_order(t: &TileRecord) -> (u64, u64, u64) {
+    let (c, r) = (t.col0.get(), t.row0.get());
+    let key = hilbert_encode(
+        32,
+        c.min(u64::from(u32::MAX)) as u32,
+        r.min(u64::from(u32::MAX)) as u32,
+    );
+    (key, r, c)
+}
+
+/// Writes `contents` as the state after `active` (none: a new manifest, txn 1): the body
+/// where the active state's is not, a sync, the record in the other slot, a sync. Returns the
+/// new state's slot and record. A crash at any point leaves the active state, or the new one.
+pub fn write_state(
+    io: &dyn Io,
+    active: Option<(u8, &ManifestRecord)>,
+    contents: &Contents,
+) -> Result<(u8, ManifestRecord)> {
+    let name = io.name().to_path_buf();
+    let mut tiles = contents.tiles.clone();
+    tiles.sort_by_key(tile_order);
+    let count = tiles.len() as u64;
+    if count > MAX_TILES {
+        return Err(Error::TooLarge {
+            what: "dataset".into(),
+            detail: format!("{count} tiles; a manifest holds at most {MAX_TILES}"),
+        });
+    }
+    let columns = tiles.iter().map(|t| t.rect().col1 + 1).max().unwrap_or(0);
+    let rows = tiles.iter().map(|t| t.rect().row1 + 1).max().unwrap_or(0);
+    let page = u64::from(MANIFEST_PAGE);
+    let page_count = count.div_ceil(TILES_PER_PAGE as u64);
+    let head_len = head_len_for(page_count);
+    let body_len = page_count * page + head_len;
+    let start = match active {
+        None => 2 * page,
+        Some((_, r)) => {
+            let body = r.body();
+            if 2 * page + body_len <= body.start {
+                2 * page
+            } else {
+                body.end.div_ceil(page) * page
+            }
+        }
+    };
+    let mut entries = Vec::with_capacity(tiles.len().div_ceil(TILES_PER_PAGE));
+    for (i, chunk) in tiles.chunks(TILES_PER_PAGE).enumerate() {
+        let bytes: Vec<u8> = chunk
+            .iter()
+            .flat_map(|t| zerocopy::IntoBytes::as_bytes(t).to_vec())
+            .collect();
+        let mut bounds = chunk[0].rect();
+        for t in chunk {
+            let r = t.rect();
+            bounds.col0 = bounds.col0.min(r.col0);
+            bounds.row0 = bounds.row0.min(r.row0);
+            bounds.col1 = bounds.col1.max(r.col1);
+            bounds.row1 = bounds.row1.max(r.row1);
+        }
+        let offset = start + i as u64 * page;
+        io.write_at(offset, &bytes)
+            .map_err(|e| Error::io(&name, e))?;
+        entries.push(PageEntry {
+            offset: offset.into(),
+            length: (bytes.len() as u32).into(),
+            crc: crc32(&bytes).into(),
+            first_tile: ((i * TILES_PER_PAGE) as u32).into(),
+            count: (chunk.len() as u32).into(),
+            bounds: [bounds.col0, bounds.row0, bounds.col1, bounds.row1].map(Into::into),
+            min_height: chunk
+                .iter()
+                .map(|t| t.min_height.get())
+                .fold(f32::INFINITY, f32::min)
+                .into(),
+            max_height: chunk
+                .iter()
+                .map(|t| t.max_height.get())
+                .fold(f32::NEG_INFINITY, f32::max)
+                .into(),
+        });
+    }
+    let mut crs = [0u8; CRS_LEN];
+    let g = contents.georeference.as_ref();
+    if let Some(name_text) = g.and_then(|g| g.crs.as_deref()) {
+        if name_text.len() > CRS_LEN || name_text.as_bytes().contains(&0) {
+            return Err(Error::InvalidArgument(format!(
+                "CRS name {name_text:?}: a dataset records at most {CRS_LEN} bytes"
+            )));
+        }
+        crs[..name_text.len()].copy_from_slice(name_text.as_bytes());
+    }
+    let head = Head {
+        fixed: HeadFixed {
+            magic: HEAD_MAGIC,
+            page_count: (page_count as u32).into(),
+            tile_count: count.into(),
+            flags: (if g.is_some() {
+                HEAD_HAS_GEOREFERENCE
+            } else {
+                0
+            })
+            .into(),
+            reserved0: 0.into(),
+            origin: g.map_or([0.0; 2], |g| g.origin).map(Into::into),
+            step: g.map_or([0.0; 2], |g| g.step).map(Into::into),
+            crs,
+            reserved: [0; 72],
+        },
+        pages: entries,
+    };
+    let head_bytes = head.encode();
+    debug_assert_eq!(head_bytes.len() as u64, head_len);
+    debug_assert_eq!(HEAD_FIXED_LEN, 256);
+    let head_offset = start + page_count * page;
+    io.write_at(head_offset, &head_bytes)
+        .map_err(|e| Error::io(&name, e))?;
+    io.sync().map_err(|e| Error::io(&name, e))?;
+    let txn = active.map_or(1, |(_, r)| r.txn_id.get() + 1);
+    let record = ManifestRecord::new(
+        txn,
+        head_offset + head_len,
+        (head_offset, head_len as u32, crc32(&head_bytes)),
+        count,
+        columns,
+        rows,
+        contents.spacing_m,
+        contents.seam,
+    );
+    let slot = active.map_or(0, |(s, _)| 1 - s);
+    // The slot pages are whole pages, so a torn record write cannot reach the other slot.
+    let mut page_bytes = vec![0u8; MANIFEST_PAGE as usize];
+    page_bytes[..MANIFEST_RECORD_LEN].copy_from_slice(zerocopy::IntoBytes::as_bytes(&record));
+    io.write_at(slot_offset(slot), &page_bytes)
+        .map_err(|e| Error::io(&name, e))?;
+    io.sync().map_err(|e| Error::io(&name, e))?;
+    Ok((slot, record))
+}
+
+/// The rectangle's tiles' pages: those whose bounds meet `rect`.
+pub fn pages_meeting(head: &Head, rect: &SampleRect) -> Vec<usize> {
+    head.pages
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| p.rect().intersect(rect).is_some())
+        .map(|(i, _)| i)
+        .collect()
+}

@@ -1,0 +1,480 @@
+//! Scenes across tiles (`docs/datasets-design.md` §4). A dataset scene is the single-file
+//! scene run on each tile the view meets, in the dataset's one world frame: tile `t`'s
+//! terrain lies `(col0·dx, row0·dy)` from the dataset's origin, so its scene sees the camera
+//! moved back by as much. Tiles meet only along shared edge lines, so the tiles' covers
+//! together cover the view once: no hole (but the dataset's own holes), no overlap.
+//!
+//! Only the tiles whose box (their rectangle by their height range, both in the manifest)
+//! meets the frustum or the window are opened, and only the manifest's tile pages whose
+//! boxes meet it are read. Neighbour levels across a tile border are filled in from the
+//! blocks on the other side, in the block's own tile's level scale (the level whose blocks
+//! have the same sample stride), so a renderer stitches there as inside a tile.
+
+use glam::DVec3;
+use serde::Serialize;
+
+use super::reader::{Dataset, Tile};
+use crate::error::{Error, Result};
+use crate::model::SampleRect;
+use crate::scene::{
+    Aabb, Camera, Mode, NeighbourLevels, SceneBlock, SceneOptions, SceneStats, Terrain, WorldFrame,
+};
+use crate::store::ReadStats;
+
+/// A block of a dataset scene: a tile's scene block, its rectangle moved into dataset
+/// samples (its level, `x`, `y`, key and payload stay the tile's own).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct DatasetBlock {
+    /// The tile's index in the manifest.
+    pub tile: u64,
+    /// The block.
+    #[serde(flatten)]
+    pub block: SceneBlock,
+}
+
+/// What one tile contributed.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct TilePart {
+    /// The tile's index.
+    pub tile: u64,
+    /// Its file.
+    pub name: String,
+    /// The samples of it the scene covers, in dataset coordinates.
+    pub window: Option<SampleRect>,
+    /// Its blocks.
+    pub blocks: u64,
+    /// Uniform mode: the cluster its blocks come from (`None`: physical blocks).
+    pub cluster: Option<usize>,
+    /// What scheduling read from its file.
+    pub reads: ReadStats,
+}
+
+/// A scene over a dataset.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct DatasetScene {
+    /// The mode.
+    pub mode: Mode,
+    /// The tolerance in pixels.
+    pub tau: f64,
+    /// The window, or the samples the tiles' frustum footprints span, in dataset samples.
+    pub window: Option<SampleRect>,
+    /// The blocks, by tile, then by key.
+    pub blocks: Vec<DatasetBlock>,
+    /// The tiles' statistics summed (blocks, bytes, scans, reads) or maximised (errors); in
+    /// uniform mode `p_min` and `allowed_error` are the dataset's, and `threshold` the
+    /// largest any tile used.
+    pub stats: SceneStats,
+    /// Each tile the scene met.
+    pub tiles: Vec<TilePart>,
+}
+
+/// The box of `rect` (dataset samples) between `lo` and `hi`, in the dataset's frame; an
+/// empty range (an all-void tile) is taken as height 0.
+fn rect_box(frame: &WorldFrame, rect: &SampleRect, lo: f32, hi: f32) -> Aabb {
+    let (lo, hi) = if lo <= hi { (lo, hi) } else { (0.0, 0.0) };
+    Aabb {
+        min: frame.point(rect.col0 as f64, rect.row0 as f64, f64::from(lo)),
+        max: frame.point(rect.col1 as f64, rect.row1 as f64, f64::from(hi)),
+    }
+}
+
+impl Dataset {
+    /// The world frame of the dataset: its spacing, or `spacing_m` when given.
+    pub fn frame(&self, spacing_m: Option<[f64; 2]>) -> Result<WorldFrame> {
+        match spacing_m.or(self.spacing_m()) {
+            Some(s) => Ok(WorldFrame::new(Some(s))),
+            None => Err(Error::InvalidArgument(format!(
+                "{}: the distance between samples is unknown, so a camera in metres cannot be \
+                 placed; give --spacing DX[,DY] in metres",
+                self.dir().display()
+            ))),
+        }
+    }
+
+    /// The tiles a scene may need: those whose boxes meet `window` (dataset samples), or the
+    /// frustum when there is no window. Reads only the tile pages whose boxes meet it.
+    pub fn scene_tiles(
+        &self,
+        camera: &Camera,
+        window: Option<SampleRect>,
+        frame: &WorldFrame,
+    ) -> Result<Vec<Tile>> {
+        let view = camera.view()?;
+        match window {
+            Some(w) => self.tiles_meeting(&w),
+            None => {
+                let head = &self.state().head;
+                let mut out = Vec::new();
+                for (p, e) in head.pages.iter().enumerate() {
+                    let b = rect_box(frame, &e.rect(), e.min_height.get(), e.max_height.get());
+                    if !view.intersects(&b) {
+                        continue;
+                    }
+                    let first = u64::from(e.first_tile.get());
+                    for (i, t) in self
+                        .state()
+                        .page(self.manifest_source(), p)?
+                        .iter()
+                        .enumerate()
+                    {
+                        let b = rect_box(frame, &t.rect(), t.min_height.get(), t.max_height.get());
+                        if view.intersects(&b) {
+                            out.push(Tile {
+                                index: first + i as u64,
+                                record: *t,
+                            });
+                        }
+                    }
+                }
+                Ok(out)
+            }
+        }
+    }
+
+    /// The blocks `camera` (in the dataset's world frame) needs at `options.tau`, with
+    /// `options.window` in dataset samples. `spacing_m` overrides the dataset's spacing.
+    pub fn scene(
+        &self,
+        camera: &Camera,
+        options: &SceneOptions,
+        spacing_m: Option<[f64; 2]>,
+    ) -> Result<DatasetScene> {
+        let started = std::time::Instant::now();
+        let frame = self.frame(spacing_m)?;
+        let view = camera.view()?;
+        if let Some(w) = options.window {
+            let grid = self.grid();
+            if w.col0 > w.col1 || w.row0 > w.row1 || w.intersect(&grid) != Some(w) {
+                return Err(Error::InvalidArgument(format!(
+                    "window {},{},{},{} is not inside the dataset 0,0,{},{}",
+                    w.col0, w.row0, w.col1, w.row1, grid.col1, grid.row1
+                )));
+            }
+        }
+        let tiles = self.scene_tiles(camera, options.window, &frame)?;
+        // Uniform mode: one static bound over the view, from the nearest tile part.
+        let p_min = (options.mode == Mode::Uniform).then(|| {
+            tiles
+                .iter()
+                .map(|t| {
+                    let part = options
+                        .window
+                        .and_then(|w| w.intersect(&t.rect()))
+                        .unwrap_or(t.rect());
+                    rect_box(
+                        &frame,
+                        &part,
+                        t.record.min_height.get(),
+                        t.record.max_height.get(),
+                    )
+                    .distance(view.eye)
+                })
+                .fold(f64::INFINITY, f64::min)
+        });
+        let mut blocks = Vec::new();
+        let mut parts = Vec::new();
+        let mut stats = SceneStats::default();
+        let mut finest = Vec::new();
+        for tile in &tiles {
+            let r = tile.rect();
+            let local_window = match options.window {
+                Some(w) => match w.intersect(&r) {
+                    Some(p) => Some(SampleRect {
+                        col0: p.col0 - r.col0,
+                        row0: p.row0 - r.row0,
+                        col1: p.col1 - r.col0,
+                        row1: p.row1 - r.row0,
+                    }),
+                    None => continue,
+                },
+                None => None,
+            };
+            let store = self.open_tile(tile)?;
+            let before = store.read_stats();
+            let terrain = Terrain::with_spacing(&store, Some([frame.dx, frame.dy]))?;
+            let shift = DVec3::new(r.col0 as f64 * frame.dx, r.row0 as f64 * frame.dy, 0.0);
+            let local_camera = Camera {
+                eye: camera.eye - shift,
+                target: camera.target - shift,
+                ..*camera
+            };
+            let tile_options = SceneOptions {
+                window: local_window,
+                ..*options
+            };
+            let scene = terrain.scene_with(&local_camera, &tile_options, p_min)?;
+            let s = &scene.stats;
+            stats.blocks += s.blocks;
+            stats.samples += s.samples;
+            stats.triangles += s.triangles;
+            stats.bytes += s.bytes;
+            stats.quadrants += s.quadrants;
+            stats.ranges += s.ranges;
+            stats.index_pages += s.index_pages;
+            stats.node_reads += s.node_reads;
+            stats.max_error = stats.max_error.max(s.max_error);
+            stats.max_screen_error = stats.max_screen_error.max(s.max_screen_error);
+            if let Some(t) = s.threshold {
+                stats.threshold = Some(stats.threshold.map_or(t, |m: f64| m.max(t)));
+            }
+            stats.p_min = s.p_min.or(stats.p_min);
+            stats.allowed_error = s.allowed_error.or(stats.allowed_error);
+            parts.push(TilePart {
+                tile: tile.index,
+                name: tile.name().to_string(),
+                window: scene.window.map(|w| shifted(&w, &r)),
+                blocks: scene.blocks.len() as u64,
+                cluster: s.cluster,
+                reads: store.read_stats().since(&before),
+            });
+            let fl = store.domain().finest_level();
+            for b in scene.blocks {
+                let mut block = b;
+                let w = shifted(&b.rect(), &r);
+                (block.col0, block.row0, block.col1, block.row1) = (w.col0, w.row0, w.col1, w.row1);
+                blocks.push(DatasetBlock {
+                    tile: tile.index,
+                    block,
+                });
+                finest.push((fl, store.domain().block_size(), r));
+            }
+        }
+        set_border_neighbours(&mut blocks, &finest);
+        let window = parts
+            .iter()
+            .filter_map(|p| p.window)
+            .reduce(|a, b| SampleRect {
+                col0: a.col0.min(b.col0),
+                row0: a.row0.min(b.row0),
+                col1: a.col1.max(b.col1),
+                row1: a.row1.max(b.row1),
+            });
+        stats.schedule_ns = started.elapsed().as_nanos() as u64;
+        Ok(DatasetScene {
+            mode: options.mode,
+            tau: options.tau,
+            window: options.window.or(window),
+            blocks,
+            stats,
+            tiles: parts,
+        })
+    }
+}
+
+/// `rect` in a tile whose first sample is `tile`'s, moved into dataset samples.
+fn shifted(rect: &SampleRect, tile: &SampleRect) -> SampleRect {
+    SampleRect {
+        col0: rect.col0 + tile.col0,
+        row0: rect.row0 + tile.row0,
+        col1: rect.col1 + tile.col0,
+        row1: rect.row1 + tile.row0,
+    }
+}
+
+/// Whether two spans of sample lines `[a0, a1]` and `[b0, b1]` share a positive length (or
+/// a point, when one of them is a single line).
+fn spans_meet(a0: u64, a1: u64, b0: u64, b1: u64) -> bool {
+    let (lo, hi) = (a0.max(b0), a1.min(b1));
+    lo < hi || (lo == hi && (a0 == a1 || b0 == b1))
+}
+
+/// Fills in the neighbour levels of blocks on tile borders from the blocks of the tiles
+/// across. `geometry[i]` is block `i`'s tile's finest level, block size and rectangle.
+fn set_border_neighbours(blocks: &mut [DatasetBlock], geometry: &[(u8, u32, SampleRect)]) {
+    use std::collections::HashMap;
+    // Blocks on each tile edge, keyed by the edge's line: (side, column or row).
+    let mut edges: HashMap<(usize, u64), Vec<usize>> = HashMap::new();
+    for (i, b) in blocks.iter().enumerate() {
+        let t = geometry[i].2;
+        let r = b.block.rect();
+        if r.row0 == t.row0 {
+            edges.entry((0, r.row0)).or_default().push(i);
+        }
+        if r.col1 == t.col1 {
+            edges.entry((1, r.col1)).or_default().push(i);
+        }
+        if r.row1 == t.row1 {
+            edges.entry((2, r.row1)).or_default().push(i);
+        }
+        if r.col0 == t.col0 {
+            edges.entry((3, r.col0)).or_default().push(i);
+        }
+    }
+    let mut updates = Vec::new();
+    for (&(side, line), own) in &edges {
+        // Across side `side` lie the blocks on the opposite side of another tile, on the
+        // same line (a shared edge) or the next (tiles that meet without sharing).
+        let opposite = (side + 2) % 4;
+        let across: Vec<u64> = match side {
+            0 | 3 => vec![line, line.wrapping_sub(1)],
+            _ => vec![line, line + 1],
+        };
+        for &i in own {
+            let bi = blocks[i];
+            let (fi, bsi, _) = geometry[i];
+            let mut levels: Option<NeighbourLevels> = None;
+            for &l in &across {
+                let Some(others) = edges.get(&(opposite, l)) else {
+                    continue;
+                };
+                for &j in others {
+                    let bj = blocks[j];
+                    if bj.tile == bi.tile {
+                        continue;
+                    }
+                    let (ri, rj) = (bi.block.rect(), bj.block.rect());
+                    let meets = match side {
+                        0 | 2 => spans_meet(ri.col0, ri.col1, rj.col0, rj.col1),
+                        _ => spans_meet(ri.row0, ri.row1, rj.row0, rj.row1),
+                    };
+                    if !meets {
+                        continue;
+                    }
+                    // The level of the same stride in block i's tile.
+                    let (fj, bsj, _) = geometry[j];
+                    let steps_j = i64::from(fj) - i64::from(bj.block.level);
+                    let level = if bsi == bsj {
+                        (i64::from(fi) - steps_j).clamp(0, i64::from(u8::MAX)) as u8
+                    } else {
+                        bj.block.level
+                    };
+                    levels = Some(match levels {
+                        None => NeighbourLevels {
+                            coarsest: level,
+                            finest: level,
+                        },
+                        Some(n) => NeighbourLevels {
+                            coarsest: n.coarsest.min(level),
+                            finest: n.finest.max(level),
+                        },
+                    });
+                }
+            }
+            if let Some(n) = levels {
+                updates.push((i, side, n));
+            }
+        }
+    }
+    for (i, side, n) in updates {
+        let slot = &mut blocks[i].block.neighbours[side];
+        *slot = Some(match *slot {
+            None => n,
+            Some(m) => NeighbourLevels {
+                coarsest: m.coarsest.min(n.coarsest),
+                finest: m.finest.max(n.finest),
+            },
+        });
+    }
+}
+
+impl DatasetScene {
+    /// The part of the scene in `tile` (whose rectangle is `rect`), as that tile's own scene:
+    /// its blocks moved back into the tile's samples.
+    pub fn tile_scene(&self, tile: u64, rect: &SampleRect) -> crate::scene::Scene {
+        let back = |r: &SampleRect| SampleRect {
+            col0: r.col0 - rect.col0,
+            row0: r.row0 - rect.row0,
+            col1: r.col1 - rect.col0,
+            row1: r.row1 - rect.row0,
+        };
+        let blocks: Vec<SceneBlock> = self
+            .blocks
+            .iter()
+            .filter(|b| b.tile == tile)
+            .map(|b| {
+                let mut block = b.block;
+                let r = back(&b.block.rect());
+                (block.col0, block.row0, block.col1, block.row1) = (r.col0, r.row0, r.col1, r.row1);
+                block
+            })
+            .collect();
+        crate::scene::Scene {
+            mode: self.mode,
+            tau: self.tau,
+            window: self
+                .tiles
+                .iter()
+                .find(|p| p.tile == tile)
+                .and_then(|p| p.window)
+                .map(|w| back(&w)),
+            blocks,
+            stats: SceneStats::default(),
+        }
+    }
+}
+
+impl Dataset {
+    /// Reads and decodes every block of `scene`, tile by tile (each tile's payloads in
+    /// coalesced runs), as a renderer would. Returns what that read from the tiles.
+    pub fn load(&self, scene: &DatasetScene) -> Result<ReadStats> {
+        let mut total = ReadStats::default();
+        for part in &scene.tiles {
+            let tile = self.tile(part.tile)?;
+            let store = self.open_tile(&tile)?;
+            let before = store.read_stats();
+            let s = scene.tile_scene(part.tile, &tile.rect());
+            crate::scene::load_blocks(&store, &s.blocks, crate::scene::PAYLOAD_GAP)?;
+            total = total.plus(&store.read_stats().since(&before));
+        }
+        Ok(total)
+    }
+
+    /// Samples `window` (dataset samples) from `scene`'s blocks, tile by tile: the surface
+    /// the scene draws. Samples no block owns (holes, or outside the scene) are NaN.
+    pub fn reconstruct(
+        &self,
+        scene: &DatasetScene,
+        window: SampleRect,
+    ) -> Result<crate::scene::Reconstruction> {
+        let grid = self.grid();
+        if window.col0 > window.col1
+            || window.row0 > window.row1
+            || window.intersect(&grid) != Some(window)
+        {
+            return Err(Error::InvalidArgument(format!(
+                "window {},{},{},{} is not inside the dataset 0,0,{},{}",
+                window.col0, window.row0, window.col1, window.row1, grid.col1, grid.row1
+            )));
+        }
+        let w = (window.col1 - window.col0 + 1) as usize;
+        let h = (window.row1 - window.row0 + 1) as usize;
+        let mut values = vec![f64::NAN; w * h];
+        let mut bound = vec![f64::NAN; w * h];
+        for part in &scene.tiles {
+            let tile = self.tile(part.tile)?;
+            let r = tile.rect();
+            let Some(p) = r.intersect(&window) else {
+                continue;
+            };
+            let store = self.open_tile(&tile)?;
+            let local = SampleRect {
+                col0: p.col0 - r.col0,
+                row0: p.row0 - r.row0,
+                col1: p.col1 - r.col0,
+                row1: p.row1 - r.row0,
+            };
+            let rec = crate::scene::reconstruct(&store, &scene.tile_scene(part.tile, &r), local)?;
+            let pw = (p.col1 - p.col0 + 1) as usize;
+            for y in 0..(p.row1 - p.row0 + 1) as usize {
+                for x in 0..pw {
+                    let v = rec.values[y * pw + x];
+                    if v.is_nan() {
+                        continue;
+                    }
+                    let at = ((p.row0 - window.row0) as usize + y) * w
+                        + (p.col0 - window.col0) as usize
+                        + x;
+                    values[at] = v;
+                    bound[at] = rec.bound[y * pw + x];
+                }
+            }
+        }
+        let uncovered = values.iter().filter(|v| v.is_nan()).count() as u64;
+        Ok(crate::scene::Reconstruction {
+            window,
+            values,
+            bound,
+            uncovered,
+        })
+    }
+}

@@ -1,0 +1,163 @@
+//! The real neighbours: SRTM3 tiles N43E006 and N43E007 (bundled in `data/`) share their
+//! meridian column, on which they disagree in 202 of 1,201 samples. A strict build refuses
+//! them, naming both tiles and the first differing sample; with `--seam first` the dataset
+//! builds, verifies in full, extracts across the border to exactly the two sources (the
+//! shared column from the first tile), and a scene across the border is one cover of its
+//! window, within tau, whose border blocks know the levels across.
+
+mod common;
+
+use std::path::PathBuf;
+
+use common::{fmrh, ok_json};
+
+fn tiles() -> [PathBuf; 2] {
+    [
+        common::data("srtm3-pyhgtmap/N43E006.hgt.gz"),
+        common::data("srtm3-pyhgtmap/N43E007.hgt.gz"),
+    ]
+}
+
+fn load(p: &std::path::Path) -> fmrh::Heightfield {
+    fmrh::ingest::load(p, &Default::default()).unwrap()
+}
+
+fn read_f32(p: &std::path::Path) -> Vec<f32> {
+    std::fs::read(p)
+        .unwrap()
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect()
+}
+
+#[test]
+fn a_strict_build_of_the_real_neighbours_names_the_first_difference() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("ds");
+    let [a, b] = tiles();
+    let r = fmrh(&[
+        "dataset",
+        "build",
+        "-q",
+        "-o",
+        out.to_str().unwrap(),
+        a.to_str().unwrap(),
+        b.to_str().unwrap(),
+    ]);
+    assert_eq!(r.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(err.contains("N43E006") && err.contains("N43E007"), "{err}");
+    assert!(err.contains("dataset column 1200, row 0"), "{err}");
+    assert!(err.contains("--seam"), "{err}");
+    assert!(!out.exists());
+}
+
+#[test]
+fn the_real_neighbours_build_extract_and_scene_across_their_border() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("ds");
+    let ds = out.to_str().unwrap();
+    let [a, b] = tiles();
+    let built = ok_json(&fmrh(&[
+        "dataset",
+        "build",
+        "--json",
+        "--seam",
+        "first",
+        "-o",
+        ds,
+        a.to_str().unwrap(),
+        b.to_str().unwrap(),
+    ]));
+    assert_eq!(built["columns"], 2401);
+    assert_eq!(built["rows"], 1201);
+    assert_eq!(built["shared_edges"], 1);
+    assert_eq!(built["tiles"][1]["seam_samples_changed"], 202);
+    let verified = ok_json(&fmrh(&["verify", "--full", "--json", ds]));
+    assert_eq!(verified["valid"], true);
+    let info = ok_json(&fmrh(&["info", "--json", ds]));
+    assert_eq!(info["tile_count"], 2);
+    assert_eq!(info["georeference"]["origin"][0], 6.0);
+    // A window across the border, as the two sources give it.
+    let (fa, fb) = (load(&a), load(&b));
+    let f32_out = dir.path().join("w.f32");
+    let r = fmrh(&[
+        "extract",
+        ds,
+        "--window",
+        "1000,300,1500,700",
+        "-o",
+        f32_out.to_str().unwrap(),
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let got = read_f32(&f32_out);
+    assert_eq!(got.len(), 501 * 401);
+    for row in 300..=700usize {
+        for col in 1000..=1500usize {
+            let want = if col <= 1200 {
+                fa.samples()[row * 1201 + col]
+            } else {
+                fb.samples()[row * 1201 + col - 1200]
+            };
+            let v = got[(row - 300) * 501 + col - 1000];
+            assert!(
+                v.to_bits() == want.to_bits() || v.is_nan() && want.is_nan(),
+                "({col}, {row}): {v} vs {want}"
+            );
+        }
+    }
+    let sidecar: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("w.json")).unwrap()).unwrap();
+    assert!(
+        (sidecar["georeference"]["origin"][0].as_f64().unwrap() - (6.0 + 1000.0 / 1200.0)).abs()
+            < 1e-9
+    );
+    // A scene across the border: the eye south-west of it, looking north-east.
+    let scene = ok_json(&fmrh(&[
+        "scene",
+        ds,
+        "--eye",
+        "60000,140000,6000",
+        "--target",
+        "90000,60000,500",
+        "--tau",
+        "2",
+        "--window",
+        "900,200,1500,1000",
+        "--json",
+        "--load",
+    ]));
+    let blocks = scene["blocks"].as_array().unwrap();
+    let tiles_used: std::collections::BTreeSet<u64> =
+        blocks.iter().map(|b| b["tile"].as_u64().unwrap()).collect();
+    assert_eq!(tiles_used.len(), 2, "the scene spans both tiles");
+    assert!(scene["stats"]["max_screen_error"].as_f64().unwrap() <= 2.0);
+    // One cover of the window: every cell once.
+    let (c0, r0, c1, r1) = (900u64, 200u64, 1500u64, 1000u64);
+    let w = c1 - c0;
+    let mut cells = vec![0u8; (w * (r1 - r0)) as usize];
+    for bl in blocks {
+        let g = |k: &str| bl[k].as_u64().unwrap();
+        for row in g("row0").max(r0)..g("row1").min(r1) {
+            for col in g("col0").max(c0)..g("col1").min(c1) {
+                cells[((row - r0) * w + col - c0) as usize] += 1;
+            }
+        }
+    }
+    assert!(
+        cells.iter().all(|&c| c == 1),
+        "the window is not covered exactly once"
+    );
+    // Blocks of the west tile on the border know the levels east of it.
+    let west_border: Vec<_> = blocks
+        .iter()
+        .filter(|bl| bl["col1"] == 1200 && bl["col0"].as_u64().unwrap() < 1200)
+        .collect();
+    assert!(!west_border.is_empty());
+    assert!(
+        west_border.iter().all(|bl| !bl["neighbours"][1].is_null()),
+        "a border block lacks its east neighbour"
+    );
+    assert_eq!(scene["reads"]["tiles_opened"], 2);
+    assert!(scene["reads"]["load"]["payload_bytes"].as_u64().unwrap() > 0);
+}

@@ -1,0 +1,627 @@
+//! One tile or many gives the same terrain: a field cut into tiles that share their edge
+//! rows and columns, built as a dataset, extracts to exactly the field's samples, every
+//! window included, and its scenes satisfy what a single file's do: a scene with a window
+//! covers every cell of the window (where a tile lies) exactly once, a frustum scene covers
+//! no cell twice, every view block is within tau where it is seen and every uniform block
+//! within the one static bound, and blocks on a tile border know the levels across it.
+//! Fixed cases: holes read as voids and stay uncovered, tiles of different sizes, opening
+//! reads only the manifest and a scene opens only the tiles it meets, the seam policies, and
+//! a damaged manifest or tile is reported, located.
+
+mod common;
+
+use glam::DVec3;
+use proptest::prelude::*;
+
+use common::fields::{self, Character, Rng};
+use common::tiles;
+use fmrh::dataset::{Dataset, DatasetScene, SeamPolicy};
+use fmrh::format::Invariant;
+use fmrh::model::SampleRect;
+use fmrh::scene::{Camera, Mode, SceneOptions};
+use fmrh::store::CheckStatus;
+
+fn same_bits(a: &[f32], b: &[f32]) -> bool {
+    common::first_difference(a, b).is_none()
+}
+
+/// How many scene blocks cover each cell (unit square between samples) of `window`.
+fn cell_counts(scene: &DatasetScene, window: &SampleRect) -> Vec<u32> {
+    let (w, h) = (window.col1 - window.col0, window.row1 - window.row0);
+    let mut counts = vec![0u32; (w * h) as usize];
+    for b in &scene.blocks {
+        let r = b.block.rect();
+        let (c0, c1) = (r.col0.max(window.col0), r.col1.min(window.col1));
+        let (r0, r1) = (r.row0.max(window.row0), r.row1.min(window.row1));
+        for row in r0..r1 {
+            for col in c0..c1 {
+                counts[((row - window.row0) * w + col - window.col0) as usize] += 1;
+            }
+        }
+    }
+    counts
+}
+
+/// Whether cell `(col, row)` lies in some tile.
+fn in_a_tile(rects: &[SampleRect], col: u64, row: u64) -> bool {
+    rects
+        .iter()
+        .any(|r| col >= r.col0 && col < r.col1 && row >= r.row0 && row < r.row1)
+}
+
+/// Checks `scene` of `camera` over the tiles `rects` of `field` (10 m spacing): within
+/// tau (the screen error recomputed here, in the dataset's frame) or the uniform bound; a
+/// window's cells each covered once where a tile lies, no cell twice; and, without a
+/// window, every sample the frustum sees inside some block.
+fn check_scene(
+    scene: &DatasetScene,
+    field: &fmrh::Heightfield,
+    rects: &[SampleRect],
+    camera: &Camera,
+    mode: Mode,
+    tau: f64,
+    window: Option<SampleRect>,
+) {
+    let view = camera.view().unwrap();
+    let world = |col: u64, row: u64, z: f64| DVec3::new(col as f64 * 10.0, row as f64 * 10.0, z);
+    for b in &scene.blocks {
+        let r = b.block.rect();
+        let bx = fmrh::scene::Aabb {
+            min: world(r.col0, r.row0, f64::from(b.block.min_height)),
+            max: world(r.col1, r.row1, f64::from(b.block.max_height)),
+        };
+        let px = view.screen_error(b.block.error, bx.distance(view.eye));
+        match mode {
+            Mode::View => assert!(
+                px <= tau * (1.0 + 1e-9) || b.block.error == 0.0,
+                "block {r:?} of tile {} is {px} px > tau {tau}",
+                b.tile,
+            ),
+            Mode::Uniform => {
+                let allowed = scene
+                    .stats
+                    .allowed_error
+                    .expect("uniform scenes state their bound");
+                assert!(
+                    b.block.error <= allowed.max(scene.stats.threshold.unwrap_or(0.0)) + 1e-9,
+                    "block error {} above the bound {allowed}",
+                    b.block.error
+                );
+            }
+        }
+    }
+    let grid = SampleRect {
+        col0: 0,
+        row0: 0,
+        col1: rects.iter().map(|r| r.col1).max().unwrap(),
+        row1: rects.iter().map(|r| r.row1).max().unwrap(),
+    };
+    let area = window.unwrap_or(grid);
+    let counts = cell_counts(scene, &area);
+    let w = area.col1 - area.col0;
+    for (i, &c) in counts.iter().enumerate() {
+        let (col, row) = (
+            area.col0 + i as u64 % w.max(1),
+            area.row0 + i as u64 / w.max(1),
+        );
+        assert!(c <= 1, "cell ({col}, {row}) is covered {c} times");
+        if window.is_some() {
+            let expect = u32::from(in_a_tile(rects, col, row));
+            assert_eq!(
+                c, expect,
+                "cell ({col}, {row}) covered {c} times, expected {expect}"
+            );
+        }
+    }
+    if window.is_none() {
+        let w = u64::from(field.width());
+        for row in 0..u64::from(field.height()) {
+            for col in 0..w {
+                let z = field.samples()[(row * w + col) as usize];
+                if z.is_nan() || !rects.iter().any(|r| r.contains(col, row)) {
+                    continue;
+                }
+                let p = world(col, row, f64::from(z));
+                if view
+                    .planes
+                    .iter()
+                    .any(|pl| pl.normal.dot(p) + pl.offset < 0.0)
+                {
+                    continue;
+                }
+                assert!(
+                    scene
+                        .blocks
+                        .iter()
+                        .any(|b| b.block.rect().contains(col, row)),
+                    "visible sample ({col}, {row}) lies in no block"
+                );
+            }
+        }
+    }
+}
+
+fn camera(rng: &mut Rng, w: f64, h: f64) -> Camera {
+    let eye = DVec3::new(
+        (rng.unit() * 2.0 - 0.5) * w * 10.0,
+        (rng.unit() * 2.0 - 0.5) * h * 10.0,
+        20.0 + rng.unit() * 1500.0,
+    );
+    let target = DVec3::new(rng.unit() * w * 10.0, rng.unit() * h * 10.0, 0.0);
+    let mut c = Camera::looking_at(eye, target);
+    c.viewport = [640, 480];
+    c
+}
+
+/// A cut strategy: `k` distinct interior cut lines of `0..n`.
+fn cuts(n: u64, k: usize, rng: &mut Rng) -> Vec<u64> {
+    let mut c: Vec<u64> = (0..k).map(|_| 1 + rng.next_u64() % (n - 2)).collect();
+    c.sort_unstable();
+    c.dedup();
+    c
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 20, ..ProptestConfig::default() })]
+
+    #[test]
+    fn one_tile_or_many_gives_the_same_samples_and_scenes(
+        w in 12u32..70,
+        h in 12u32..70,
+        k in 1usize..=2,
+        character in fields::character(),
+        voids in prop_oneof![Just(0.0), Just(0.05)],
+        seed in any::<u64>(),
+        tau in 0.5f64..6.0,
+        uniform in any::<bool>(),
+    ) {
+        let field = fields::make(w, h, character, voids, seed);
+        let mut rng = Rng::new(seed ^ 0x5eed);
+        let rects = tiles::split(&field, &cuts(u64::from(w), k, &mut rng), &cuts(u64::from(h), k, &mut rng), &[]);
+        let dir = tempfile::tempdir().unwrap();
+        let ds_dir = tiles::build(dir.path(), &field, &rects, &tiles::options(None));
+        let ds = Dataset::open(&ds_dir).unwrap();
+        prop_assert_eq!(ds.tiles_opened(), 0);
+        let all = ds.grid();
+        prop_assert_eq!((all.col1 + 1, all.row1 + 1), (u64::from(w), u64::from(h)));
+        let whole = ds.read_window(all).unwrap();
+        prop_assert!(same_bits(whole.samples(), field.samples()), "the dataset's samples differ from the field's");
+        // A random window.
+        let (c0, c1) = { let a = rng.next_u64() % u64::from(w); let b = rng.next_u64() % u64::from(w); (a.min(b), a.max(b)) };
+        let (r0, r1) = { let a = rng.next_u64() % u64::from(h); let b = rng.next_u64() % u64::from(h); (a.min(b), a.max(b)) };
+        let win = SampleRect { col0: c0, row0: r0, col1: c1, row1: r1 };
+        let part = ds.read_window(win).unwrap();
+        prop_assert!(same_bits(part.samples(), tiles::crop(&field, &win).samples()));
+        // Scenes: with that window and with the frustum alone.
+        let mode = if uniform { Mode::Uniform } else { Mode::View };
+        let cam = camera(&mut rng, f64::from(w), f64::from(h));
+        let options = SceneOptions { tau, mode, window: Some(win), gap: fmrh::scene::DEFAULT_GAP };
+        let scene = ds.scene(&cam, &options, None).unwrap();
+        check_scene(&scene, &field, &rects, &cam, mode, tau, Some(win));
+        let frustum = ds.scene(&cam, &SceneOptions { window: None, ..options }, None).unwrap();
+        check_scene(&frustum, &field, &rects, &cam, mode, tau, None);
+        prop_assert!(fmrh::dataset::verify(&ds_dir, fmrh::store::VerifyMode::Full, &fmrh::progress::Silent).unwrap().valid);
+    }
+}
+
+#[test]
+fn blocks_on_a_tile_border_know_the_levels_across_it() {
+    let field = fields::make(65, 33, Character::Hills, 0.0, 7);
+    let dir = tempfile::tempdir().unwrap();
+    let rects = tiles::split(&field, &[32], &[], &[]);
+    let ds = Dataset::open(&tiles::build(
+        dir.path(),
+        &field,
+        &rects,
+        &tiles::options(None),
+    ))
+    .unwrap();
+    let cam = Camera::looking_at(
+        DVec3::new(320.0, -200.0, 300.0),
+        DVec3::new(320.0, 160.0, 0.0),
+    );
+    let window = SampleRect {
+        col0: 0,
+        row0: 0,
+        col1: 64,
+        row1: 32,
+    };
+    let options = SceneOptions {
+        tau: 1.0,
+        mode: Mode::View,
+        window: Some(window),
+        gap: 4,
+    };
+    let scene = ds.scene(&cam, &options, None).unwrap();
+    let west: Vec<_> = scene
+        .blocks
+        .iter()
+        .filter(|b| b.tile == rects_index(&ds, 0) && b.block.col1 == 32)
+        .collect();
+    let east: Vec<_> = scene
+        .blocks
+        .iter()
+        .filter(|b| b.tile != rects_index(&ds, 0) && b.block.col0 == 32)
+        .collect();
+    assert!(!west.is_empty() && !east.is_empty());
+    for b in &west {
+        let n = b.block.neighbours[1].expect("a block on the shared edge has an east neighbour");
+        // The levels across are those of the east tile's blocks that touch it.
+        let touching: Vec<u8> = east
+            .iter()
+            .filter(|e| e.block.row0.max(b.block.row0) < e.block.row1.min(b.block.row1))
+            .map(|e| e.block.level)
+            .collect();
+        assert_eq!(n.coarsest, *touching.iter().min().unwrap());
+        assert_eq!(n.finest, *touching.iter().max().unwrap());
+    }
+    for b in &east {
+        assert!(
+            b.block.neighbours[3].is_some(),
+            "{:?} has no west neighbour",
+            b.block.rect()
+        );
+    }
+}
+
+/// The manifest index of the tile whose first column is `col0` and first row 0.
+fn rects_index(ds: &Dataset, col0: u64) -> u64 {
+    ds.tiles()
+        .unwrap()
+        .iter()
+        .find(|t| t.rect().col0 == col0 && t.rect().row0 == 0)
+        .unwrap()
+        .index
+}
+
+#[test]
+fn holes_read_as_voids_and_stay_uncovered() {
+    let field = fields::make(41, 41, Character::Hills, 0.0, 3);
+    let dir = tempfile::tempdir().unwrap();
+    let rects = tiles::split(&field, &[20], &[20], &[3]);
+    let ds_dir = tiles::build(dir.path(), &field, &rects, &tiles::options(None));
+    let ds = Dataset::open(&ds_dir).unwrap();
+    assert_eq!(ds.tile_count(), 3);
+    let all = ds.read_window(ds.grid()).unwrap();
+    for row in 0..41u64 {
+        for col in 0..41u64 {
+            let v = all.samples()[(row * 41 + col) as usize];
+            let held = rects.iter().any(|r| r.contains(col, row));
+            let f = field.samples()[(row * 41 + col) as usize];
+            assert!(
+                if held {
+                    v.to_bits() == f.to_bits()
+                } else {
+                    v.is_nan()
+                },
+                "({col}, {row}): {v} vs {f}"
+            );
+        }
+    }
+    let cam = Camera::looking_at(
+        DVec3::new(200.0, -300.0, 500.0),
+        DVec3::new(200.0, 200.0, 0.0),
+    );
+    let window = ds.grid();
+    let scene = ds
+        .scene(
+            &cam,
+            &SceneOptions {
+                tau: 2.0,
+                mode: Mode::View,
+                window: Some(window),
+                gap: 4,
+            },
+            None,
+        )
+        .unwrap();
+    check_scene(&scene, &field, &rects, &cam, Mode::View, 2.0, Some(window));
+    assert!(
+        fmrh::dataset::verify(
+            &ds_dir,
+            fmrh::store::VerifyMode::Fast,
+            &fmrh::progress::Silent
+        )
+        .unwrap()
+        .valid
+    );
+}
+
+#[test]
+fn tiles_may_differ_in_size() {
+    let field = fields::make(90, 50, Character::Noise, 0.02, 11);
+    let dir = tempfile::tempdir().unwrap();
+    // Three tiles across of widths 61, 21 and 10, and two rows of heights 30 and 21.
+    let rects = tiles::split(&field, &[60, 80], &[29], &[]);
+    let ds_dir = tiles::build(
+        dir.path(),
+        &field,
+        &rects,
+        &tiles::options(Some(vec![0.0, 5.0, 40.0])),
+    );
+    let ds = Dataset::open(&ds_dir).unwrap();
+    assert!(same_bits(
+        ds.read_window(ds.grid()).unwrap().samples(),
+        field.samples()
+    ));
+    let cam = Camera::looking_at(
+        DVec3::new(450.0, 700.0, 400.0),
+        DVec3::new(450.0, 100.0, 0.0),
+    );
+    for mode in [Mode::View, Mode::Uniform] {
+        let scene = ds
+            .scene(
+                &cam,
+                &SceneOptions {
+                    tau: 1.0,
+                    mode,
+                    window: Some(ds.grid()),
+                    gap: 4,
+                },
+                None,
+            )
+            .unwrap();
+        check_scene(&scene, &field, &rects, &cam, mode, 1.0, Some(ds.grid()));
+    }
+}
+
+#[test]
+fn opening_reads_the_manifest_and_a_scene_opens_only_the_tiles_it_meets() {
+    let field = fields::make(100, 100, Character::Hills, 0.0, 5);
+    let dir = tempfile::tempdir().unwrap();
+    let rects = tiles::split(&field, &[33, 66], &[33, 66], &[]);
+    let ds = Dataset::open(&tiles::build(
+        dir.path(),
+        &field,
+        &rects,
+        &tiles::options(None),
+    ))
+    .unwrap();
+    assert_eq!(ds.tile_count(), 9);
+    assert_eq!(ds.tiles_opened(), 0);
+    // The two slots and the head (256 bytes + 64 per tile page).
+    assert_eq!(ds.open_reads().metadata_bytes, 2 * 256 + 256 + 64);
+    let cam = Camera::looking_at(
+        DVec3::new(100.0, 100.0, 300.0),
+        DVec3::new(150.0, 150.0, 0.0),
+    );
+    let window = SampleRect {
+        col0: 2,
+        row0: 2,
+        col1: 30,
+        row1: 30,
+    };
+    let scene = ds
+        .scene(
+            &cam,
+            &SceneOptions {
+                tau: 1.0,
+                mode: Mode::View,
+                window: Some(window),
+                gap: 4,
+            },
+            None,
+        )
+        .unwrap();
+    assert_eq!(scene.tiles.len(), 1);
+    assert_eq!(ds.tiles_opened(), 1);
+    // Across the corner of four tiles.
+    let window = SampleRect {
+        col0: 20,
+        row0: 20,
+        col1: 40,
+        row1: 40,
+    };
+    let scene = ds
+        .scene(
+            &cam,
+            &SceneOptions {
+                tau: 1.0,
+                mode: Mode::View,
+                window: Some(window),
+                gap: 4,
+            },
+            None,
+        )
+        .unwrap();
+    assert_eq!(scene.tiles.len(), 4);
+    assert_eq!(ds.tiles_opened(), 4);
+    check_scene(&scene, &field, &rects, &cam, Mode::View, 1.0, Some(window));
+}
+
+/// Two tiles whose shared column disagrees at row 5 (and is void at row 9 in the second).
+fn disagreeing(dir: &std::path::Path) -> Vec<fmrh::dataset::TileInput> {
+    let a = fields::make(17, 17, Character::Hills, 0.0, 1);
+    let mut right: Vec<f32> = (0..17 * 17)
+        .map(|i| a.samples()[(i / 17) * 17 + 16] + (i % 17) as f32)
+        .collect();
+    // Column 0 of the right tile is the left tile's column 16, but for two samples.
+    for y in 0..17 {
+        right[y * 17] = a.samples()[y * 17 + 16];
+    }
+    right[5 * 17] += 3.0;
+    right[9 * 17] = f32::NAN;
+    let b = fmrh::Heightfield::new(17, 17, right).unwrap();
+    vec![
+        fmrh::dataset::TileInput {
+            path: tiles::write_f32(dir, "a", &a, 10.0),
+            at: Some((0, 0)),
+        },
+        fmrh::dataset::TileInput {
+            path: tiles::write_f32(dir, "b", &b, 10.0),
+            at: Some((16, 0)),
+        },
+    ]
+}
+
+#[test]
+fn a_strict_build_names_both_tiles_and_the_first_difference_and_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let inputs = disagreeing(dir.path());
+    let out = dir.path().join("ds");
+    let err = fmrh::dataset::build(
+        &inputs,
+        &out,
+        &tiles::options(None),
+        &fmrh::progress::Silent,
+        &mut |_, _, _, _| {},
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("a.f32") && err.contains("b.f32"), "{err}");
+    assert!(err.contains("column 16, row 5"), "{err}");
+    assert!(!out.exists());
+    let leftovers: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().starts_with(".fmrh"))
+        .collect();
+    assert!(leftovers.is_empty(), "temporary files left: {leftovers:?}");
+}
+
+#[test]
+fn seam_policies_settle_the_shared_edge_in_both_tiles() {
+    let dir = tempfile::tempdir().unwrap();
+    let inputs = disagreeing(dir.path());
+    let a = fmrh::ingest::load(&inputs[0].path, &Default::default()).unwrap();
+    let b = fmrh::ingest::load(&inputs[1].path, &Default::default()).unwrap();
+    for policy in [SeamPolicy::First, SeamPolicy::Mean] {
+        let out = dir.path().join(format!("ds-{policy:?}"));
+        let options = fmrh::dataset::DatasetOptions {
+            seam: policy,
+            ..tiles::options(None)
+        };
+        fmrh::dataset::build(
+            &inputs,
+            &out,
+            &options,
+            &fmrh::progress::Silent,
+            &mut |_, _, _, _| {},
+        )
+        .unwrap();
+        let ds = Dataset::open(&out).unwrap();
+        for t in ds.tiles().unwrap() {
+            let store = ds.open_tile(&t).unwrap();
+            let col = if t.rect().col0 == 0 { 16 } else { 0 };
+            let edge = store
+                .read_window(SampleRect {
+                    col0: col,
+                    row0: 0,
+                    col1: col,
+                    row1: 16,
+                })
+                .unwrap();
+            for y in 0..17usize {
+                let (va, vb) = (a.samples()[y * 17 + 16], b.samples()[y * 17]);
+                let expect = match policy {
+                    SeamPolicy::First => va,
+                    _ if va.is_nan() || vb.is_nan() => f32::NAN,
+                    _ => ((f64::from(va) + f64::from(vb)) / 2.0) as f32,
+                };
+                let got = edge.samples()[y];
+                assert!(
+                    got.to_bits() == expect.to_bits() || got.is_nan() && expect.is_nan(),
+                    "{policy:?} row {y}: {got} vs {expect}"
+                );
+            }
+        }
+        assert!(
+            fmrh::dataset::verify(&out, fmrh::store::VerifyMode::Full, &fmrh::progress::Silent)
+                .unwrap()
+                .valid
+        );
+    }
+}
+
+fn failed(report: &fmrh::dataset::DatasetReport) -> Vec<Invariant> {
+    report
+        .checks
+        .iter()
+        .filter(|c| c.status == CheckStatus::Failed)
+        .map(|c| c.id)
+        .collect()
+}
+
+#[test]
+fn damage_to_the_manifest_or_a_tile_is_reported_located() {
+    let field = fields::make(33, 33, Character::Hills, 0.0, 9);
+    let dir = tempfile::tempdir().unwrap();
+    let rects = tiles::split(&field, &[16], &[], &[]);
+    let ds_dir = tiles::build(dir.path(), &field, &rects, &tiles::options(None));
+    let verify = || {
+        fmrh::dataset::verify(
+            &ds_dir,
+            fmrh::store::VerifyMode::Fast,
+            &fmrh::progress::Silent,
+        )
+        .unwrap()
+    };
+    assert!(verify().valid);
+    let manifest = ds_dir.join("MANIFEST");
+    let original = std::fs::read(&manifest).unwrap();
+    // A flipped bit in the tile page (page 2) and in the head (page 3).
+    for (at, expect) in [
+        (2 * 4096 + 20, Invariant::ManifestPages),
+        (3 * 4096 + 300, Invariant::ManifestPages),
+    ] {
+        let mut bytes = original.clone();
+        bytes[at] ^= 0x10;
+        std::fs::write(&manifest, &bytes).unwrap();
+        assert_eq!(failed(&verify()), vec![expect], "flip at {at}");
+    }
+    std::fs::write(&manifest, &original).unwrap();
+    // A tile's payload damaged, then its file replaced by another state.
+    let ds = Dataset::open(&ds_dir).unwrap();
+    let tile = &ds.tiles().unwrap()[1];
+    let path = ds.tile_path(tile);
+    let good = std::fs::read(&path).unwrap();
+    let mut bad = good.clone();
+    let n = bad.len();
+    bad[n - 100] ^= 0xff;
+    std::fs::write(&path, &bad).unwrap();
+    let r = verify();
+    assert_eq!(failed(&r), vec![Invariant::TilePins]);
+    assert!(!r.tile_reports[1].valid && r.tile_reports[0].valid);
+    std::fs::remove_file(&path).unwrap();
+    let r = verify();
+    assert_eq!(failed(&r), vec![Invariant::TilePins]);
+    // A different file under the tile's name: not the pinned state.
+    let other = fields::make(17, 33, Character::Noise, 0.0, 1);
+    let bytes = common::bytes_of(
+        &other,
+        9,
+        &fmrh::store::WriteOptions {
+            page_size: 1024,
+            ..Default::default()
+        },
+    );
+    std::fs::write(&path, bytes).unwrap();
+    let r = verify();
+    assert_eq!(failed(&r), vec![Invariant::TilePins]);
+    assert!(matches!(
+        ds.open_tile_uncached(tile),
+        Err(fmrh::Error::Corrupt {
+            invariant: Invariant::TilePins,
+            ..
+        })
+    ));
+    std::fs::write(&path, &good).unwrap();
+    assert!(verify().valid);
+}
+
+#[test]
+fn a_directory_without_a_manifest_is_not_a_dataset() {
+    let dir = tempfile::tempdir().unwrap();
+    assert!(!fmrh::dataset::is_dataset(dir.path()));
+    let err = Dataset::open(dir.path())
+        .err()
+        .expect("no manifest, no dataset")
+        .to_string();
+    assert!(err.contains("MANIFEST"), "{err}");
+    std::fs::write(dir.path().join("MANIFEST"), b"hello").unwrap();
+    let err = Dataset::open(dir.path())
+        .err()
+        .expect("not a manifest")
+        .to_string();
+    assert!(err.contains("not an fmrh dataset manifest"), "{err}");
+}
