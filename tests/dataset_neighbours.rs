@@ -161,3 +161,139 @@ fn the_real_neighbours_build_extract_and_scene_across_their_border() {
     assert_eq!(scene["reads"]["tiles_opened"], 2);
     assert!(scene["reads"]["load"]["payload_bytes"].as_u64().unwrap() > 0);
 }
+
+#[test]
+fn a_patch_across_the_real_border_is_exact_in_both_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("ds");
+    let ds = out.to_str().unwrap();
+    let [a, b] = tiles();
+    ok_json(&fmrh(&[
+        "dataset",
+        "build",
+        "--json",
+        "--seam",
+        "first",
+        "-o",
+        ds,
+        a.to_str().unwrap(),
+        b.to_str().unwrap(),
+    ]));
+    // 60 x 40 samples over columns 1170..=1229 (the border is column 1200), with voids.
+    let patch = fmrh::Heightfield::from_fn(60, 40, |x, y| {
+        if (x + y) % 17 == 0 {
+            f32::NAN
+        } else {
+            100.0 + (x * 7 + y * 3) as f32 * 0.25
+        }
+    })
+    .unwrap();
+    let p = common::tiles::write_f32(dir.path(), "patch", &patch, 90.0);
+    let r = ok_json(&fmrh(&[
+        "replace",
+        ds,
+        "--at",
+        "1170,500",
+        p.to_str().unwrap(),
+        "--json",
+    ]));
+    assert_eq!(r["tiles"].as_array().unwrap().len(), 2, "both files change");
+    assert_eq!(r["txn_id"], 2);
+    assert_eq!(
+        ok_json(&fmrh(&["verify", "--full", "--json", ds]))["valid"],
+        true
+    );
+    // Each file alone holds its part of the patch, bit for bit, the shared column in both.
+    let dset = fmrh::dataset::Dataset::open(&out).unwrap();
+    for t in dset.tiles().unwrap() {
+        let store = dset.open_tile(&t).unwrap();
+        let tr = t.rect();
+        let (c0, c1) = (1170u64.max(tr.col0), 1229u64.min(tr.col1));
+        let got = store
+            .read_window(fmrh::model::SampleRect {
+                col0: c0 - tr.col0,
+                row0: 500,
+                col1: c1 - tr.col0,
+                row1: 539,
+            })
+            .unwrap();
+        let w = (c1 - c0 + 1) as usize;
+        for y in 0..40usize {
+            for x in 0..w {
+                let want = patch.samples()[y * 60 + (c0 - 1170) as usize + x];
+                let v = got.samples()[y * w + x];
+                assert!(
+                    v.to_bits() == want.to_bits() || v.is_nan() && want.is_nan(),
+                    "{} ({x}, {y}): {v} vs {want}",
+                    t.name()
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn adding_the_western_neighbour_moves_the_grid_and_settles_the_edge() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("ds");
+    let ds = out.to_str().unwrap();
+    let [a, b] = tiles();
+    ok_json(&fmrh(&[
+        "dataset",
+        "build",
+        "--json",
+        "-o",
+        ds,
+        b.to_str().unwrap(),
+    ]));
+    // Strict: the disagreement is refused, and nothing changes.
+    let r = fmrh(&["dataset", "add", ds, a.to_str().unwrap()]);
+    assert_eq!(r.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&r.stderr).contains("disagree"));
+    assert_eq!(ok_json(&fmrh(&["info", "--json", ds]))["tile_count"], 1);
+    let added = ok_json(&fmrh(&[
+        "dataset",
+        "add",
+        ds,
+        a.to_str().unwrap(),
+        "--seam",
+        "mean",
+        "--json",
+    ]));
+    assert_eq!(added["origin_shift"][0], 1200);
+    assert_eq!(
+        added["tiles"].as_array().unwrap().len(),
+        1,
+        "the eastern tile changes too"
+    );
+    let info = ok_json(&fmrh(&["info", "--json", ds]));
+    assert_eq!(info["columns"], 2401);
+    assert_eq!(info["georeference"]["origin"][0], 6.0);
+    assert_eq!(
+        ok_json(&fmrh(&["verify", "--full", "--json", ds]))["valid"],
+        true
+    );
+    let (fa, fb) = (load(&a), load(&b));
+    let dset = fmrh::dataset::Dataset::open(&out).unwrap();
+    let edge = dset
+        .read_window(fmrh::model::SampleRect {
+            col0: 1200,
+            row0: 0,
+            col1: 1200,
+            row1: 1200,
+        })
+        .unwrap();
+    for y in 0..1201usize {
+        let (va, vb) = (fa.samples()[y * 1201 + 1200], fb.samples()[y * 1201]);
+        let want = if va.is_nan() || vb.is_nan() {
+            f32::NAN
+        } else {
+            ((f64::from(va) + f64::from(vb)) / 2.0) as f32
+        };
+        let v = edge.samples()[y];
+        assert!(
+            v.to_bits() == want.to_bits() || v.is_nan() && want.is_nan(),
+            "row {y}: {v} vs {want}"
+        );
+    }
+}

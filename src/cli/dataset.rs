@@ -20,24 +20,36 @@ pub enum DatasetCommand {
     /// geotransforms, sidecars). Neighbours may share one edge row or column, which must
     /// agree sample for sample unless --seam says how to settle it.
     Build(BuildArgs),
+    /// Add a tile to a dataset (expansion): placed by --at or by its georeference, its
+    /// shared edges settled with its neighbours (the dataset's --seam policy unless given),
+    /// written complete, then added by one manifest commit.
+    Add(AddArgs),
 }
 
 #[derive(clap::Args)]
-pub struct BuildArgs {
-    /// The tile DEMs, placed by their georeferences (or give --layout).
-    #[arg(required_unless_present = "layout", conflicts_with = "layout")]
-    tiles: Vec<PathBuf>,
-    /// A layout: one tile a line, `path,col0,row0`.
+pub struct AddArgs {
+    /// The dataset's directory.
+    dir: PathBuf,
+    /// The tile DEM.
+    tile: PathBuf,
+    /// Where its first sample goes: COL0,ROW0 in dataset samples (default: by its
+    /// georeference).
     #[arg(long)]
-    layout: Option<PathBuf>,
-    /// The dataset directory to create (it must not exist).
-    #[arg(short, long)]
-    output: PathBuf,
-    /// How neighbours that disagree on a shared edge are settled: strict (an error naming
-    /// both tiles and the first differing sample), first (the tile listed first keeps its
-    /// samples) or mean (both take the mean; a void on either side wins).
-    #[arg(long, default_value = "strict")]
-    seam: SeamPolicy,
+    at: Option<String>,
+    /// How a disagreement on a shared edge is settled (default: the policy the dataset was
+    /// built with).
+    #[arg(long)]
+    seam: Option<SeamPolicy>,
+    #[command(flatten)]
+    tile_options: TileOptions,
+    /// Print the report as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// How each tile is built: the options `dataset build` and `dataset add` share.
+#[derive(clap::Args)]
+pub struct TileOptions {
     /// Samples along a block side: 2^k + 1, from 9 to 1025.
     #[arg(long, default_value_t = DEFAULT_BLOCK_SIZE)]
     block_size: u32,
@@ -56,14 +68,61 @@ pub struct BuildArgs {
     /// Ground distance between samples in metres, DX or DX,DY, for every tile.
     #[arg(long, value_delimiter = ',')]
     spacing: Option<Vec<f64>>,
+    #[command(flatten)]
+    ingest: super::IngestArgs,
+}
+
+impl TileOptions {
+    fn options(&self, seam: SeamPolicy) -> Result<DatasetOptions, Error> {
+        Ok(DatasetOptions {
+            ingest: self.ingest.options(),
+            build: BuildOptions {
+                block_size: self.block_size,
+                thresholds: match &self.thresholds {
+                    Some(t) => Thresholds::Explicit(t.clone()),
+                    None => Thresholds::Ladder,
+                },
+                precision: self.precision.map(Precision::new).transpose()?,
+            },
+            write: WriteOptions {
+                page_size: self.page_size.unwrap_or(0),
+                against_parents: !self.payloads_alone,
+                ..WriteOptions::default()
+            },
+            seam,
+            spacing_m: self
+                .spacing
+                .as_deref()
+                .map(super::build::parse_spacing)
+                .transpose()?,
+        })
+    }
+}
+
+#[derive(clap::Args)]
+pub struct BuildArgs {
+    /// The tile DEMs, placed by their georeferences (or give --layout).
+    #[arg(required_unless_present = "layout", conflicts_with = "layout")]
+    tiles: Vec<PathBuf>,
+    /// A layout: one tile a line, `path,col0,row0`.
+    #[arg(long)]
+    layout: Option<PathBuf>,
+    /// The dataset directory to create (it must not exist).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// How neighbours that disagree on a shared edge are settled: strict (an error naming
+    /// both tiles and the first differing sample), first (the tile listed first keeps its
+    /// samples) or mean (both take the mean; a void on either side wins).
+    #[arg(long, default_value = "strict")]
+    seam: SeamPolicy,
+    #[command(flatten)]
+    tile_options: TileOptions,
     /// No progress.
     #[arg(long, short)]
     quiet: bool,
     /// Print the report as JSON.
     #[arg(long)]
     pub json: bool,
-    #[command(flatten)]
-    ingest: super::IngestArgs,
 }
 
 impl DatasetCommand {
@@ -71,6 +130,7 @@ impl DatasetCommand {
     pub fn json(&self) -> bool {
         match self {
             DatasetCommand::Build(a) => a.json,
+            DatasetCommand::Add(a) => a.json,
         }
     }
 }
@@ -79,6 +139,7 @@ impl DatasetCommand {
 pub fn run(command: &DatasetCommand) -> Result<ExitCode, Error> {
     match command {
         DatasetCommand::Build(args) => build(args),
+        DatasetCommand::Add(args) => add(args),
     }
 }
 
@@ -109,28 +170,7 @@ fn build(args: &BuildArgs) -> Result<ExitCode, Error> {
             })
             .collect(),
     };
-    let options = DatasetOptions {
-        ingest: args.ingest.options(),
-        build: BuildOptions {
-            block_size: args.block_size,
-            thresholds: match &args.thresholds {
-                Some(t) => Thresholds::Explicit(t.clone()),
-                None => Thresholds::Ladder,
-            },
-            precision: args.precision.map(Precision::new).transpose()?,
-        },
-        write: WriteOptions {
-            page_size: args.page_size.unwrap_or(0),
-            against_parents: !args.payloads_alone,
-            ..WriteOptions::default()
-        },
-        seam: args.seam,
-        spacing_m: args
-            .spacing
-            .as_deref()
-            .map(super::build::parse_spacing)
-            .transpose()?,
-    };
+    let options = args.tile_options.options(args.seam)?;
     let quiet = args.quiet || args.json;
     let bar = (!quiet).then(super::progress::Bar::new);
     let silent = fmrh::progress::Silent;
@@ -191,6 +231,74 @@ fn build(args: &BuildArgs) -> Result<ExitCode, Error> {
             "  manifest {} bytes; {} bytes in all; built in {seconds:.1} s",
             summary.manifest_bytes, summary.total_bytes
         );
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn add(args: &AddArgs) -> Result<ExitCode, Error> {
+    let at = args
+        .at
+        .as_deref()
+        .map(|t| {
+            let v: Option<Vec<u64>> = t.split(',').map(|p| p.trim().parse().ok()).collect();
+            match v.as_deref() {
+                Some([c, r]) => Ok((*c, *r)),
+                _ => Err(Error::InvalidArgument(format!(
+                    "--at `{t}`: expected COL0,ROW0 (non-negative integers)"
+                ))),
+            }
+        })
+        .transpose()?;
+    let seam = match args.seam {
+        Some(s) => s,
+        None => dataset::add::recorded_policy(&dataset::Dataset::open(&args.dir)?),
+    };
+    let options = args.tile_options.options(seam)?;
+    let (commit, record, shift) =
+        dataset::add(&args.dir, &args.tile, at, &options, &fmrh::progress::Silent)?;
+    let r = record.rect();
+    if args.json {
+        #[derive(serde::Serialize)]
+        struct Report<'a> {
+            dataset: String,
+            tile: String,
+            name: &'a str,
+            rect: fmrh::model::SampleRect,
+            /// How far every other tile's dataset coordinates moved (the new tile lies west
+            /// or north of the old grid).
+            origin_shift: [u64; 2],
+            #[serde(flatten)]
+            commit: &'a dataset::DatasetCommit,
+        }
+        super::print_json(&Report {
+            dataset: args.dir.display().to_string(),
+            tile: args.tile.display().to_string(),
+            name: record.name(),
+            rect: r,
+            origin_shift: [shift.0, shift.1],
+            commit: &commit,
+        })?;
+    } else {
+        println!(
+            "added {} to {} as {}: columns {}..={}, rows {}..={} (manifest txn {}; {} neighbours \
+             changed to settle shared edges)",
+            args.tile.display(),
+            args.dir.display(),
+            record.name(),
+            r.col0,
+            r.col1,
+            r.row0,
+            r.row1,
+            commit.txn_id,
+            commit.tiles.len()
+        );
+        if shift != (0, 0) {
+            println!(
+                "  the tile lies west or north of the old grid: every other tile's dataset \
+                 coordinates moved by +{} columns, +{} rows",
+                shift.0, shift.1
+            );
+        }
     }
     Ok(ExitCode::SUCCESS)
 }

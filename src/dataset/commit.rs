@@ -71,14 +71,17 @@ pub struct DatasetCommit {
 }
 
 /// The manifest state `io` holds.
-fn read_manifest<I: Io>(io: &Arc<I>) -> Result<(ManifestState, IoSource<Arc<I>>)> {
+pub(crate) fn read_manifest<I: Io>(io: &Arc<I>) -> Result<(ManifestState, IoSource<Arc<I>>)> {
     let len = io.len().map_err(|e| Error::io(io.name(), e))?;
     let src = IoSource::new(Arc::new(Arc::clone(io)), len);
     Ok((ManifestState::read(&src)?, src))
 }
 
 /// Every tile record of `state`.
-fn records<S: crate::store::Source>(state: &ManifestState, src: &S) -> Result<Vec<TileRecord>> {
+pub(crate) fn records<S: crate::store::Source>(
+    state: &ManifestState,
+    src: &S,
+) -> Result<Vec<TileRecord>> {
     let mut out = Vec::new();
     for p in 0..state.head.pages.len() {
         out.extend(state.page(src, p)?.iter().copied());
@@ -122,7 +125,7 @@ pub fn republish<I: Io>(io: &Arc<I>, pin: StatePin) -> Result<bool> {
 
 /// The part of `patch` (placed at dataset `(col0, row0)`) inside `rect`, and where it goes
 /// in the tile.
-fn part_in(
+pub(crate) fn part_in(
     patch: &Heightfield,
     col0: u64,
     row0: u64,
@@ -194,15 +197,49 @@ pub fn replace<F: Files>(
             }
         }
     }
-    let touched: Vec<usize> = (0..all.len())
-        .filter(|&i| all[i].rect().intersect(&p).is_some())
-        .collect();
-    let mut open: Vec<Container<Arc<F::File>>> = Vec::with_capacity(touched.len());
-    let mut commits = Vec::with_capacity(touched.len());
-    let mut updated = all.clone();
+    let mut changes = Vec::new();
+    for (i, t) in all.iter().enumerate() {
+        if let Some(part) = part_in(patch, col0, row0, &t.rect()) {
+            changes.push((i, vec![part]));
+        }
+    }
+    let (open, commits, updated) = commit_tiles(files, &all, &changes)?;
+    publish::<F>(
+        &manifest,
+        &state,
+        updated,
+        state.georeference(),
+        open,
+        commits,
+    )
+}
+
+/// Patches for one tile, each in the tile's own samples: the samples, and the column and
+/// row of its first one.
+pub type TilePatches = (usize, Vec<(Heightfield, u64, u64)>);
+
+/// Tiles committed but not yet published by the manifest: their containers, still open
+/// (so that no clean close overwrites the pinned state's slot).
+pub(crate) type Committed<F> = Vec<Container<Arc<<F as Files>::File>>>;
+
+/// What [`commit_tiles`] returns: the open containers, what each commit did, and the tile
+/// records with the new pins.
+pub(crate) type TilesCommitted<F> = (Committed<F>, Vec<TileCommit>, Vec<TileRecord>);
+
+/// Commits `changes` (tile index, and the patches in its own samples) to their tiles, each
+/// keeping the state the manifest pins (§4 step 1). On an error, every tile committed so
+/// far is abandoned (left marked, its pinned state whole) and the error returned.
+pub(crate) fn commit_tiles<F: Files>(
+    files: &F,
+    all: &[TileRecord],
+    changes: &[TilePatches],
+) -> Result<TilesCommitted<F>> {
+    let mut open: Committed<F> = Vec::with_capacity(changes.len());
+    let mut commits = Vec::with_capacity(changes.len());
+    let mut updated = all.to_vec();
     let result = (|| -> Result<()> {
-        for &i in &touched {
-            let t = all[i];
+        for (i, parts) in changes {
+            let t = all[*i];
             let io = Arc::new(files.open(t.name())?);
             let republished = republish(&io, t.pin())?;
             let (container, _) = Container::open_io(io)?;
@@ -215,17 +252,14 @@ pub fn replace<F: Files>(
             }
             container.set_min_length(base.commit_record().file_length.get());
             drop(base);
-            let Some((part, c, r)) = part_in(patch, col0, row0, &t.rect()) else {
-                return Err(Error::Internal(
-                    "a touched tile without a part of the patch".into(),
-                ));
-            };
             let mut txn = container.begin_write()?;
-            txn.replace_region(c, r, &part)?;
+            for (part, c, r) in parts {
+                txn.replace_region(*c, *r, part)?;
+            }
             let summary = txn.commit()?;
             let now = container.read()?;
             let root = now.node(0)?;
-            updated[i] = TileRecord::new(
+            updated[*i] = TileRecord::new(
                 t.name(),
                 t.rect(),
                 now.pin(),
@@ -234,7 +268,7 @@ pub fn replace<F: Files>(
             drop(now);
             open.push(container);
             commits.push(TileCommit {
-                index: i as u64,
+                index: *i as u64,
                 name: t.name().to_string(),
                 republished,
                 summary,
@@ -242,21 +276,36 @@ pub fn replace<F: Files>(
         }
         Ok(())
     })();
-    if let Err(e) = result {
-        open.into_iter().for_each(Container::abandon);
-        return Err(e);
+    match result {
+        Ok(()) => Ok((open, commits, updated)),
+        Err(e) => {
+            open.into_iter().for_each(Container::abandon);
+            Err(e)
+        }
     }
+}
+
+/// Publishes `records` as the state after `state` (§4 steps 2 and 3), then closes the tiles
+/// committed for it; abandons them if the manifest commit fails.
+pub(crate) fn publish<F: Files>(
+    manifest: &Arc<F::File>,
+    state: &ManifestState,
+    records: Vec<TileRecord>,
+    georeference: Option<crate::heightfield::Georeference>,
+    open: Committed<F>,
+    tiles: Vec<TileCommit>,
+) -> Result<DatasetCommit> {
     let contents = Contents {
-        tiles: updated,
+        tiles: records,
         spacing_m: state.record.spacing_m(),
-        georeference: state.georeference(),
+        georeference,
         seam: match state.record.seam {
             SEAM_FIRST => SEAM_FIRST,
             SEAM_MEAN => SEAM_MEAN,
             _ => SEAM_STRICT,
         },
     };
-    match write_state(&*manifest, Some((state.slot, &state.record)), &contents) {
+    match write_state(&**manifest, Some((state.slot, &state.record)), &contents) {
         Ok((_, record)) => {
             // The dataset is at its new state: the tiles may now close cleanly (a clean copy
             // of a new state matches its pin).
@@ -265,7 +314,7 @@ pub fn replace<F: Files>(
             }
             Ok(DatasetCommit {
                 txn_id: record.txn_id.get(),
-                tiles: commits,
+                tiles,
             })
         }
         Err(e) => {

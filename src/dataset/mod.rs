@@ -8,9 +8,10 @@
 //! (the manifest's commit slots, head and tile pages, read and written), [`reader`] (a
 //! dataset opened: its tiles, each container at its pinned state, windows across them),
 //! [`mod@scene`] (scenes across tiles), [`build`] (tiles in, a dataset out, one tile in
-//! memory at a time), [`commit`] (a change to several tiles, atomic across the files) and
+//! memory at a time), [`add`] (one more tile), [`commit`] (a change to several tiles, atomic across the files) and
 //! [`mod@verify`] (the validator).
 
+pub mod add;
 pub mod build;
 pub mod commit;
 pub mod manifest;
@@ -20,6 +21,7 @@ pub mod scene;
 pub mod seams;
 pub mod verify;
 
+pub use add::add;
 pub use build::{build, BuiltTile, DatasetOptions, DatasetSummary, TileInput};
 pub use commit::{recover, replace, DatasetCommit, DatasetRecovery, Dir, Files, TileCommit};
 pub use reader::{is_dataset, Dataset, Tile, OPEN_TILES};
