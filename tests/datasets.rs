@@ -625,3 +625,49 @@ fn a_directory_without_a_manifest_is_not_a_dataset() {
         .to_string();
     assert!(err.contains("not an fmrh dataset manifest"), "{err}");
 }
+
+#[test]
+fn frames_across_tiles_load_what_each_scene_needs_and_keep_the_rest() {
+    let field = fields::make(100, 100, Character::Hills, 0.0, 21);
+    let dir = tempfile::tempdir().unwrap();
+    let rects = tiles::split(&field, &[33, 66], &[33, 66], &[]);
+    let ds = Dataset::open(&tiles::build(
+        dir.path(),
+        &field,
+        &rects,
+        &tiles::options(None),
+    ))
+    .unwrap();
+    let mut s =
+        fmrh::dataset::DatasetScheduler::new(&ds, fmrh::scene::ScheduleOptions::new(1.0)).unwrap();
+    let mut previous: Option<std::collections::HashSet<(u64, u8, u32, u32)>> = None;
+    let mut dropped = 0;
+    for i in 0..40 {
+        let t = f64::from(i) / 39.0;
+        let eye = DVec3::new(50.0 + 900.0 * t, 80.0 + 300.0 * t, 120.0);
+        let cam = Camera::looking_at(eye, eye + DVec3::new(200.0, 150.0, -100.0));
+        let f = s.frame(&cam).unwrap();
+        let scene = ds.scene(&cam, &SceneOptions::new(1.0), None).unwrap();
+        let now: std::collections::HashSet<_> = scene
+            .blocks
+            .iter()
+            .map(|b| (b.tile, b.block.level, b.block.x, b.block.y))
+            .collect();
+        assert_eq!(f.stats.visible, now.len() as u64, "frame {i}");
+        assert_eq!(
+            f.stats.resident,
+            now.len() as u64,
+            "frame {i}: no memory radius, nothing else stays"
+        );
+        let new = previous
+            .as_ref()
+            .map_or(now.len(), |p| now.difference(p).count());
+        assert_eq!(
+            f.stats.loaded, new as u64,
+            "frame {i}: loaded what the last frame did not hold"
+        );
+        dropped += f.tiles_dropped;
+        previous = Some(now);
+    }
+    assert!(dropped > 0, "the path leaves some tile behind");
+}

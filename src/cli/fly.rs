@@ -15,7 +15,7 @@ use super::scene::ViewArgs;
 
 #[derive(clap::Args)]
 pub struct FlyArgs {
-    /// The container.
+    /// The container, or a dataset's directory (the path in the dataset's world frame).
     file: PathBuf,
     /// The camera path: CSV, one camera a line, eye_x,eye_y,eye_z,target_x,target_y,target_z.
     #[arg(long)]
@@ -71,6 +71,9 @@ pub fn run(args: &FlyArgs) -> Result<ExitCode, Error> {
         ..Camera::looking_at(glam::DVec3::ZERO, glam::DVec3::X)
     };
     let cameras = path::parse(&text, &template)?;
+    if fmrh::dataset::is_dataset(&args.file) {
+        return replay_dataset(args, &cameras);
+    }
     if args.view.mmap && fmrh::store::lock::SUPPORTED {
         // SAFETY: the --mmap contract, stated in its help: the state is registered, so fmrh
         // writers leave its pages alone, and no other tool modifies the file meanwhile.
@@ -122,6 +125,53 @@ fn replay<S: fmrh::store::Source + 'static>(
         super::print_json(&report)?;
     } else {
         print_text(&report);
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `fmrh fly DIR`: the frames across tiles.
+fn replay_dataset(args: &FlyArgs, cameras: &[Camera]) -> Result<ExitCode, Error> {
+    let ds = fmrh::dataset::Dataset::open(&args.file)?;
+    let options = ScheduleOptions {
+        scene: args.view.options(),
+        memory_radius: args.memory_radius,
+        cache_radius: args.cache_radius,
+        memory_budget: args.budget,
+        prefetch: args.prefetch,
+        spacing_m: args
+            .view
+            .spacing
+            .as_deref()
+            .map(super::build::parse_spacing)
+            .transpose()?,
+    };
+    let mut scheduler = fmrh::dataset::DatasetScheduler::new(&ds, options)?;
+    let mut frames = Vec::with_capacity(cameras.len());
+    for cam in cameras {
+        let f = scheduler.frame(cam)?;
+        frames.push(FrameReport {
+            frame: f.index,
+            stats: f.stats,
+        });
+    }
+    scheduler.wait_prefetch();
+    let later_load_fraction = (frames.len() > 1 && frames[0].stats.loaded > 0).then(|| {
+        let later: u64 = frames[1..].iter().map(|f| f.stats.loaded).sum();
+        later as f64 / (frames.len() - 1) as f64 / frames[0].stats.loaded as f64
+    });
+    let report = Report {
+        frames,
+        later_load_fraction,
+        reads: Reads {
+            open: ds.open_reads(),
+            path: scheduler.read_stats().plus(&ds.manifest_reads()),
+        },
+    };
+    if args.json {
+        super::print_json(&report)?;
+    } else {
+        print_text(&report);
+        println!("tiles opened: {} of {}", ds.tiles_opened(), ds.tile_count());
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -7,13 +7,14 @@
 //! (whether neighbours agree on a shared edge, and how a policy settles them), [`manifest`]
 //! (the manifest's commit slots, head and tile pages, read and written), [`reader`] (a
 //! dataset opened: its tiles, each container at its pinned state, windows across them),
-//! [`mod@scene`] (scenes across tiles), [`build`] (tiles in, a dataset out, one tile in
+//! [`mod@scene`] (scenes across tiles), [`fly`] (frames across tiles), [`build`] (tiles in, a dataset out, one tile in
 //! memory at a time), [`add`] (one more tile), [`commit`] (a change to several tiles, atomic across the files) and
 //! [`mod@verify`] (the validator).
 
 pub mod add;
 pub mod build;
 pub mod commit;
+pub mod fly;
 pub mod manifest;
 pub mod placement;
 pub mod reader;
@@ -24,6 +25,7 @@ pub mod verify;
 pub use add::add;
 pub use build::{build, BuiltTile, DatasetOptions, DatasetSummary, TileInput};
 pub use commit::{recover, replace, DatasetCommit, DatasetRecovery, Dir, Files, TileCommit};
+pub use fly::{DatasetFrame, DatasetScheduler};
 pub use reader::{is_dataset, Dataset, Tile, OPEN_TILES};
 pub use scene::{DatasetBlock, DatasetScene, TilePart};
 pub use seams::SeamPolicy;

@@ -191,6 +191,11 @@ impl<S: Source + 'static> Scheduler<S> {
         })
     }
 
+    /// The store it schedules.
+    pub fn store(&self) -> &Arc<Store<S>> {
+        &self.store
+    }
+
     /// The stored (coded) payload of a resident block.
     pub fn payload(&self, id: &BlockId) -> Option<&[u8]> {
         self.resident.get(id).map(|r| &*r.loaded.stored)

@@ -1,0 +1,192 @@
+//! Frames across tiles: the single-file [`Scheduler`] run per tile, each in its own frame
+//! (the camera moved back by the tile's offset), with the dataset deciding which tiles take
+//! part. A tile joins when its box meets the frustum, or lies within the memory or cache
+//! radius of the eye; a tile that no longer does is dropped, its blocks evicted. Each tile's
+//! scheduler keeps its resident set, memory ring, budget and prefetch thread as it does for a
+//! single file, so prefetch works across tiles: a tile ahead of the camera joins as soon as
+//! its box comes within the cache radius.
+//!
+//! In uniform mode each tile picks its own bound from its own nearest distance (a dataset
+//! scene, [`Dataset::scene`], gives every tile the nearest distance over all of them).
+
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+use glam::DVec3;
+use serde::Serialize;
+
+use super::reader::{Dataset, Tile};
+use crate::error::Result;
+use crate::model::SampleRect;
+use crate::scene::{Camera, FrameStats, ScheduleOptions, Scheduler, WorldFrame};
+use crate::store::{FileSource, ReadStats};
+
+/// One frame over a dataset.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct DatasetFrame {
+    /// 0 for the first.
+    pub index: u64,
+    /// The tiles' frame figures summed (times included: the frame's wall time is
+    /// `schedule_ns`, tile choice included, plus `load_ns`).
+    #[serde(flatten)]
+    pub stats: FrameStats,
+    /// Tiles scheduled this frame.
+    pub tiles: u64,
+    /// Tiles dropped this frame (out of every radius), their blocks evicted.
+    pub tiles_dropped: u64,
+}
+
+/// Keeps the resident set of a moving camera over a dataset.
+pub struct DatasetScheduler<'d> {
+    dataset: &'d Dataset,
+    options: ScheduleOptions,
+    frame: WorldFrame,
+    tiles: BTreeMap<u64, (SampleRect, Scheduler<FileSource>)>,
+    frames: u64,
+    /// What the tiles read, of schedulers already dropped.
+    dropped_reads: ReadStats,
+}
+
+impl<'d> DatasetScheduler<'d> {
+    /// A scheduler over `dataset` (`options.spacing_m` overrides the dataset's spacing).
+    pub fn new(dataset: &'d Dataset, options: ScheduleOptions) -> Result<Self> {
+        let frame = dataset.frame(options.spacing_m)?;
+        Ok(DatasetScheduler {
+            dataset,
+            options: ScheduleOptions {
+                spacing_m: Some([frame.dx, frame.dy]),
+                ..options
+            },
+            frame,
+            tiles: BTreeMap::new(),
+            frames: 0,
+            dropped_reads: ReadStats::default(),
+        })
+    }
+
+    /// The tiles within `radius` metres of the eye (by their rectangles).
+    fn near(&self, eye: DVec3, radius: f64) -> Result<Vec<Tile>> {
+        if radius <= 0.0 {
+            return Ok(Vec::new());
+        }
+        let grid = self.dataset.grid();
+        let span = |v: f64, step: f64, max: u64| -> (u64, u64) {
+            let lo = ((v - radius) / step).floor().max(0.0);
+            let hi = ((v + radius) / step).ceil().max(0.0);
+            ((lo as u64).min(max), (hi as u64).min(max))
+        };
+        let (c0, c1) = span(eye.x, self.frame.dx, grid.col1);
+        let (r0, r1) = span(eye.y, self.frame.dy, grid.row1);
+        if eye.x + radius < 0.0 || eye.y + radius < 0.0 {
+            return Ok(Vec::new());
+        }
+        self.dataset.tiles_meeting(&SampleRect {
+            col0: c0,
+            row0: r0,
+            col1: c1,
+            row1: r1,
+        })
+    }
+
+    /// What the tiles' files have read since they were opened, schedulers dropped included.
+    pub fn read_stats(&self) -> ReadStats {
+        self.tiles.values().fold(self.dropped_reads, |a, (_, s)| {
+            a.plus(&s.store().read_stats())
+        })
+    }
+
+    /// Moves to `camera`: every tile the frustum or a radius meets takes its frame.
+    pub fn frame(&mut self, camera: &Camera) -> Result<DatasetFrame> {
+        let started = Instant::now();
+        let mut wanted: BTreeMap<u64, Tile> = BTreeMap::new();
+        for t in self.dataset.scene_tiles(camera, None, &self.frame)? {
+            wanted.insert(t.index, t);
+        }
+        let radius = self.options.memory_radius.max(if self.options.prefetch {
+            self.options.cache_radius
+        } else {
+            0.0
+        });
+        for t in self.near(camera.eye, radius)? {
+            wanted.insert(t.index, t);
+        }
+        let mut stats = FrameStats::default();
+        let mut dropped = 0;
+        let gone: Vec<u64> = self
+            .tiles
+            .keys()
+            .filter(|k| !wanted.contains_key(k))
+            .copied()
+            .collect();
+        for k in gone {
+            if let Some((_, s)) = self.tiles.remove(&k) {
+                s.wait_prefetch();
+                stats.evicted += s.resident().count() as u64;
+                self.dropped_reads = self.dropped_reads.plus(&s.store().read_stats());
+                dropped += 1;
+            }
+        }
+        let choose_ns = started.elapsed().as_nanos() as u64;
+        for (k, t) in &wanted {
+            if !self.tiles.contains_key(k) {
+                let store = self.dataset.open_tile(t)?;
+                self.tiles
+                    .insert(*k, (t.rect(), Scheduler::new(store, self.options)?));
+            }
+        }
+        let mut tiles = 0;
+        for (r, s) in self.tiles.values_mut() {
+            let shift = DVec3::new(
+                r.col0 as f64 * self.frame.dx,
+                r.row0 as f64 * self.frame.dy,
+                0.0,
+            );
+            let local = Camera {
+                eye: camera.eye - shift,
+                target: camera.target - shift,
+                ..*camera
+            };
+            let f = s.frame(&local)?;
+            let x = f.stats;
+            stats.visible += x.visible;
+            stats.loaded += x.loaded;
+            stats.loaded_triangles += x.loaded_triangles;
+            stats.loaded_bytes += x.loaded_bytes;
+            stats.prefetch_hits += x.prefetch_hits;
+            stats.evicted += x.evicted;
+            stats.resident += x.resident;
+            stats.resident_bytes += x.resident_bytes;
+            stats.schedule_ns += x.schedule_ns;
+            stats.load_ns += x.load_ns;
+            stats.max_screen_error = stats.max_screen_error.max(x.max_screen_error);
+            tiles += 1;
+        }
+        stats.schedule_ns += choose_ns;
+        let index = self.frames;
+        self.frames += 1;
+        Ok(DatasetFrame {
+            index,
+            stats,
+            tiles,
+            tiles_dropped: dropped,
+        })
+    }
+
+    /// Waits for every tile's prefetch thread.
+    pub fn wait_prefetch(&self) {
+        for (_, s) in self.tiles.values() {
+            s.wait_prefetch();
+        }
+    }
+}
+
+/// The tiles' schedulers share the dataset's tile cache: a tile dropped and met again is
+/// scheduled anew but not opened again while it stays among the dataset's open tiles.
+impl std::fmt::Debug for DatasetScheduler<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("DatasetScheduler")
+            .field("tiles", &self.tiles.keys().collect::<Vec<_>>())
+            .field("frames", &self.frames)
+            .finish_non_exhaustive()
+    }
+}
