@@ -559,10 +559,17 @@ fn damage_to_the_manifest_or_a_tile_is_reported_located() {
     assert!(verify().valid);
     let manifest = ds_dir.join("MANIFEST");
     let original = std::fs::read(&manifest).unwrap();
-    // A flipped bit in the tile page (page 2) and in the head (page 3).
+    // A flipped bit in the tile page (page 2) and in the head (after the adjacency area).
+    let state =
+        fmrh::dataset::manifest::ManifestState::read(&fmrh::store::Bytes(&original[..])).unwrap();
+    let head = state.record.head_offset.get() as usize;
+    assert!(
+        state.record.adjacency_len.get() > 0,
+        "the two tiles' border has tables"
+    );
     for (at, expect) in [
         (2 * 4096 + 20, Invariant::ManifestPages),
-        (3 * 4096 + 300, Invariant::ManifestPages),
+        (head + 300, Invariant::ManifestPages),
     ] {
         let mut bytes = original.clone();
         bytes[at] ^= 0x10;
@@ -670,4 +677,151 @@ fn frames_across_tiles_load_what_each_scene_needs_and_keep_the_rest() {
         previous = Some(now);
     }
     assert!(dropped > 0, "the path leaves some tile behind");
+}
+
+/// The pairs of two edge lists that share a positive length inside `first ..= last`, by
+/// brute force.
+fn brute_pairs(
+    a: &[(u32, u64, u64)],
+    b: &[(u32, u64, u64)],
+    first: u64,
+    last: u64,
+) -> Vec<(u32, u32)> {
+    let mut out = Vec::new();
+    for &(na, a0, a1) in a {
+        for &(nb, b0, b1) in b {
+            if a0.max(b0).max(first) < a1.min(b1).min(last) {
+                out.push((na, nb));
+            }
+        }
+    }
+    out
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 12, ..ProptestConfig::default() })]
+
+    #[test]
+    fn adjacent_cluster_tables_are_every_pair_of_edge_nodes_that_meet(
+        w in 20u32..80,
+        h in 20u32..80,
+        seed in any::<u64>(),
+        character in fields::character(),
+    ) {
+        use fmrh::dataset::adjacency::{TileEdges, EAST};
+        let field = fields::make(w, h, character, 0.02, seed);
+        let mut rng = Rng::new(seed);
+        let rects = tiles::split(&field, &cuts(u64::from(w), 2, &mut rng), &cuts(u64::from(h), 1, &mut rng), &[]);
+        let dir = tempfile::tempdir().unwrap();
+        let ds = Dataset::open(&tiles::build(dir.path(), &field, &rects, &tiles::options(None))).unwrap();
+        let all = ds.tiles().unwrap();
+        let mut stored_borders = 0;
+        for t in &all {
+            let mine = TileEdges::read(&ds.open_tile(t).unwrap(), &t.record).unwrap();
+            for b in ds.borders(t).unwrap() {
+                stored_borders += 1;
+                let r = t.rect();
+                let n = all
+                    .iter()
+                    .find(|u| u.rect().col0 as i64 - r.col0 as i64 == b.dcol && u.rect().row0 as i64 - r.row0 as i64 == b.drow)
+                    .expect("the neighbour a border names exists");
+                let theirs = TileEdges::read(&ds.open_tile(n).unwrap(), &n.record).unwrap();
+                let origin = if b.side == EAST { r.row0 } else { r.col0 };
+                let (e_mine, e_theirs) = if b.side == EAST { (1, 3) } else { (2, 0) };
+                prop_assert!(!b.tables.is_empty());
+                for (ci, cj, pairs) in &b.tables {
+                    let expect = brute_pairs(
+                        &mine.lists[usize::from(*ci)][e_mine],
+                        &theirs.lists[usize::from(*cj)][e_theirs],
+                        origin + b.first,
+                        origin + b.last,
+                    );
+                    prop_assert_eq!(pairs, &expect);
+                    prop_assert!(!pairs.is_empty(), "clusters {} and {} meet nowhere along the border", ci, cj);
+                }
+            }
+        }
+        // Every shared edge of positive length is stored once.
+        let tilings = fmrh::dataset::placement::check_tiling(&rects).unwrap();
+        let long = tilings.iter().filter(|(_, _, o)| o.col1 - o.col0 + o.row1 - o.row0 > 0).count();
+        prop_assert_eq!(stored_borders, long);
+    }
+}
+
+#[test]
+fn tables_that_are_not_the_merge_are_reported() {
+    use fmrh::dataset::manifest::{write_state, Contents, ManifestState};
+    let field = fields::make(49, 25, Character::Hills, 0.0, 4);
+    let dir = tempfile::tempdir().unwrap();
+    let rects = tiles::split(&field, &[24], &[], &[]);
+    let ds_dir = tiles::build(dir.path(), &field, &rects, &tiles::options(None));
+    let verify = || {
+        fmrh::dataset::verify(
+            &ds_dir,
+            fmrh::store::VerifyMode::Fast,
+            &fmrh::progress::Silent,
+        )
+        .unwrap()
+    };
+    assert!(verify().valid);
+    // Rewrite the manifest with one pair dropped from the west tile's tables: checksums
+    // right, content wrong.
+    let ds = Dataset::open(&ds_dir).unwrap();
+    let all = ds.tiles().unwrap();
+    let west = all.iter().find(|t| t.rect().col0 == 0).unwrap();
+    let mut borders = ds.borders(west).unwrap();
+    assert_eq!(borders.len(), 1);
+    borders[0].tables[0].2.pop();
+    let src = fmrh::store::FileSource::open(&ds_dir.join("MANIFEST")).unwrap();
+    let state = ManifestState::read(&src).unwrap();
+    let mut adjacency = std::collections::HashMap::new();
+    for t in &all {
+        let blob = if t.index == west.index {
+            fmrh::dataset::adjacency::encode(&borders)
+        } else {
+            state.adjacency(&src, &t.record).unwrap()
+        };
+        if !blob.is_empty() {
+            adjacency.insert(t.name().to_string(), blob);
+        }
+    }
+    let contents = Contents {
+        tiles: all.iter().map(|t| t.record).collect(),
+        spacing_m: state.record.spacing_m(),
+        georeference: state.georeference(),
+        seam: state.record.seam,
+        adjacency,
+    };
+    let io = fmrh::store::io::FileIo::open(&ds_dir.join("MANIFEST")).unwrap();
+    write_state(&io, Some((state.slot, &state.record)), &contents).unwrap();
+    drop(io);
+    assert_eq!(failed(&verify()), vec![Invariant::AdjacentClusters]);
+    // A flipped bit in the tables: their CRC.
+    let bytes = std::fs::read(ds_dir.join("MANIFEST")).unwrap();
+    let state = ManifestState::read(&fmrh::store::Bytes(&bytes[..])).unwrap();
+    let area = state.record.adjacency_area();
+    let mut bad = bytes.clone();
+    bad[area.start as usize + 40] ^= 1;
+    std::fs::write(ds_dir.join("MANIFEST"), &bad).unwrap();
+    assert_eq!(failed(&verify()), vec![Invariant::AdjacentClusters]);
+}
+
+#[test]
+fn a_change_to_one_tile_brings_its_western_and_northern_neighbours_tables_up_to_date() {
+    // A 2 x 2 dataset; the patch lies inside the south-east tile only, changing its cuts
+    // along its west and north edges, whose tables its west and north neighbours store.
+    let field = fields::make(65, 65, Character::Hills, 0.0, 12);
+    let dir = tempfile::tempdir().unwrap();
+    let rects = tiles::split(&field, &[32], &[32], &[]);
+    let ds_dir = tiles::build(dir.path(), &field, &rects, &tiles::options(None));
+    let patch = fields::make(20, 20, Character::Spikes, 0.0, 3);
+    let r = fmrh::dataset::replace(&fmrh::dataset::Dir(ds_dir.clone()), 34, 34, &patch).unwrap();
+    assert_eq!(r.tiles.len(), 1);
+    let report = fmrh::dataset::verify(
+        &ds_dir,
+        fmrh::store::VerifyMode::Fast,
+        &fmrh::progress::Silent,
+    )
+    .unwrap();
+    assert!(report.valid, "{:?}", failed(&report));
 }

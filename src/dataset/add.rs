@@ -258,7 +258,20 @@ pub fn add(
             ],
             ..g
         });
-        publish::<Dir>(&manifest, &state, updated, georeference, open, commits)
+        let new_index = updated.len() - 1;
+        let store = Store::open(&path)?;
+        let edges = std::sync::Arc::new(super::adjacency::TileEdges::read(&store, &record)?);
+        publish::<Dir>(
+            &files,
+            &manifest,
+            &state,
+            &src,
+            updated,
+            georeference,
+            open,
+            commits,
+            [(new_index, edges)].into_iter().collect(),
+        )
     })();
     match outcome {
         Ok(c) => Ok((c, record, shift)),

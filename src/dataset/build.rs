@@ -9,13 +9,16 @@
 //!    anything is written, naming both tiles and the first differing sample.
 //! 3. **Build:** each tile is read again, its shared edges set to the settled samples, built
 //!    into a container in a temporary directory, and pinned at its first state.
-//! 4. **Publish:** the manifest is written and synced, and the temporary directory renamed to
+//! 4. **Stitch:** each tile's adjacent-cluster tables with its east and south neighbours
+//!    are computed from their edge lists ([`super::adjacency`]).
+//! 5. **Publish:** the manifest is written and synced, and the temporary directory renamed to
 //!    the dataset's name: the dataset appears complete or not at all.
 
 use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 
+use super::adjacency::{tables_of, TileEdges};
 use super::manifest::{write_state, Contents, MANIFEST_NAME};
 use super::placement::{check_tiling, place_by_georeference, rect, PlacementError};
 use super::seams::{settle, Placed, SeamPolicy};
@@ -401,7 +404,28 @@ pub fn build(
             seam_samples_changed: changed,
         });
     }
-    // 4. Publish.
+    // 4. The adjacent-cluster tables, from each tile's edge lists and its east and south
+    // neighbours'.
+    on_tile("stitching", 0, n, &inputs[0].path);
+    let mut cache: std::collections::HashMap<usize, std::sync::Arc<TileEdges>> =
+        std::collections::HashMap::new();
+    let mut edges = |k: usize| -> Result<std::sync::Arc<TileEdges>> {
+        if let Some(e) = cache.get(&k) {
+            return Ok(e.clone());
+        }
+        let store = Store::open(&tmp.path().join(records[k].name()))?;
+        let e = std::sync::Arc::new(TileEdges::read(&store, &records[k])?);
+        cache.insert(k, e.clone());
+        Ok(e)
+    };
+    let mut adjacency = std::collections::HashMap::new();
+    for (k, record) in records.iter().enumerate() {
+        let blob = tables_of(k, &rects, &mut edges)?;
+        if !blob.is_empty() {
+            adjacency.insert(record.name().to_string(), blob);
+        }
+    }
+    // 5. Publish.
     let manifest = tmp.path().join(MANIFEST_NAME);
     std::fs::File::create(&manifest).map_err(|e| Error::io(&manifest, e))?;
     {
@@ -414,6 +438,7 @@ pub fn build(
                 spacing_m: spacing,
                 georeference,
                 seam: seam_byte(options.seam),
+                adjacency,
             },
         )?;
     }

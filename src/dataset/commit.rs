@@ -13,6 +13,7 @@ use std::sync::Arc;
 
 use serde::Serialize;
 
+use super::adjacency::{tables_of, TileEdges};
 use super::manifest::{write_state, Contents, ManifestState, MANIFEST_NAME};
 use crate::error::{Error, Result};
 use crate::format::commit::Slot;
@@ -205,12 +206,15 @@ pub fn replace<F: Files>(
     }
     let (open, commits, updated) = commit_tiles(files, &all, &changes)?;
     publish::<F>(
+        files,
         &manifest,
         &state,
+        &src,
         updated,
         state.georeference(),
         open,
         commits,
+        std::collections::HashMap::new(),
     )
 }
 
@@ -285,27 +289,122 @@ pub(crate) fn commit_tiles<F: Files>(
     }
 }
 
-/// Publishes `records` as the state after `state` (§4 steps 2 and 3), then closes the tiles
-/// committed for it; abandons them if the manifest commit fails.
+/// The adjacent-cluster tables of the state `records` describe: recomputed for every tile
+/// whose state changed (`changed`, by index into `records`) and every tile with a border to
+/// one (a tile stores its east and south borders), carried over from `state` for the rest.
+/// `edges` gives the edges of a changed tile; any other tile is opened at its pin.
+fn tables_after<F: Files>(
+    files: &F,
+    state: &ManifestState,
+    src: &dyn crate::store::Source,
+    records: &[TileRecord],
+    changed: &std::collections::BTreeSet<usize>,
+    edges: &mut dyn FnMut(usize) -> Option<Result<Arc<TileEdges>>>,
+) -> Result<std::collections::HashMap<String, Vec<u8>>> {
+    let rects: Vec<_> = records.iter().map(TileRecord::rect).collect();
+    // A tile stores its east and south borders: the tiles west and north of a changed one
+    // (sharing or abutting its edge) store borders with it.
+    let mut affected = changed.clone();
+    for (k, r) in rects.iter().enumerate() {
+        let west_or_north = |c: &crate::model::SampleRect| {
+            (r.col1 == c.col0 || r.col1 + 1 == c.col0) && r.row0.max(c.row0) < r.row1.min(c.row1)
+                || (r.row1 == c.row0 || r.row1 + 1 == c.row0)
+                    && r.col0.max(c.col0) < r.col1.min(c.col1)
+        };
+        if changed.iter().any(|&c| west_or_north(&rects[c])) {
+            affected.insert(k);
+        }
+    }
+    let mut by_name = std::collections::HashMap::new();
+    let mut out = std::collections::HashMap::new();
+    for p in 0..state.head.pages.len() {
+        for t in state.page(src, p)?.iter() {
+            by_name.insert(t.name().to_string(), *t);
+        }
+    }
+    let mut cache: std::collections::HashMap<usize, Arc<TileEdges>> =
+        std::collections::HashMap::new();
+    let mut edges_of = |k: usize| -> Result<Arc<TileEdges>> {
+        if let Some(e) = cache.get(&k) {
+            return Ok(Arc::clone(e));
+        }
+        let e = match edges(k) {
+            Some(e) => e?,
+            None => {
+                let t = &records[k];
+                let io = Arc::new(files.open(t.name())?);
+                let len = io.len().map_err(|e| Error::io(io.name(), e))?;
+                let store = crate::store::open::open_at(
+                    IoSource::new(Arc::new(io), len),
+                    crate::store::open::Walk::Lean,
+                    Some(t.pin()),
+                )?;
+                Arc::new(TileEdges::read(&store, t)?)
+            }
+        };
+        cache.insert(k, Arc::clone(&e));
+        Ok(e)
+    };
+    for (k, t) in records.iter().enumerate() {
+        let blob = if affected.contains(&k) {
+            tables_of(k, &rects, &mut edges_of)?
+        } else {
+            match by_name.get(t.name()) {
+                Some(old) => state.adjacency(src, old)?,
+                None => tables_of(k, &rects, &mut edges_of)?,
+            }
+        };
+        if !blob.is_empty() {
+            out.insert(t.name().to_string(), blob);
+        }
+    }
+    Ok(out)
+}
+
+/// Publishes `records` as the state after `state` (§4 steps 2 and 3), its adjacent-cluster
+/// tables brought up to date, then closes the tiles committed for it; abandons them if
+/// anything fails first. `extra` gives the edges of tiles new to the dataset (by index).
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn publish<F: Files>(
+    files: &F,
     manifest: &Arc<F::File>,
     state: &ManifestState,
+    src: &dyn crate::store::Source,
     records: Vec<TileRecord>,
     georeference: Option<crate::heightfield::Georeference>,
     open: Committed<F>,
     tiles: Vec<TileCommit>,
+    extra: std::collections::HashMap<usize, Arc<TileEdges>>,
 ) -> Result<DatasetCommit> {
-    let contents = Contents {
-        tiles: records,
-        spacing_m: state.record.spacing_m(),
-        georeference,
-        seam: match state.record.seam {
-            SEAM_FIRST => SEAM_FIRST,
-            SEAM_MEAN => SEAM_MEAN,
-            _ => SEAM_STRICT,
-        },
-    };
-    match write_state(&**manifest, Some((state.slot, &state.record)), &contents) {
+    let outcome = (|| -> Result<(u8, crate::format::manifest::ManifestRecord)> {
+        let mut changed: std::collections::BTreeSet<usize> =
+            tiles.iter().map(|t| t.index as usize).collect();
+        changed.extend(extra.keys().copied());
+        let mut edges = |k: usize| -> Option<Result<Arc<TileEdges>>> {
+            if let Some(e) = extra.get(&k) {
+                return Some(Ok(Arc::clone(e)));
+            }
+            let at = tiles.iter().position(|t| t.index as usize == k)?;
+            Some((|| {
+                let snap = open[at].read()?;
+                Ok(Arc::new(TileEdges::read(&snap, &records[k])?))
+            })())
+        };
+        let adjacency = tables_after(files, state, src, &records, &changed, &mut edges)?;
+        let contents = Contents {
+            tiles: records.clone(),
+            spacing_m: state.record.spacing_m(),
+            georeference,
+            seam: match state.record.seam {
+                SEAM_FIRST => SEAM_FIRST,
+                SEAM_MEAN => SEAM_MEAN,
+                _ => SEAM_STRICT,
+            },
+            adjacency,
+        };
+        write_state(&**manifest, Some((state.slot, &state.record)), &contents)
+    })();
+    match outcome {
         Ok((_, record)) => {
             // The dataset is at its new state: the tiles may now close cleanly (a clean copy
             // of a new state matches its pin).

@@ -11,7 +11,8 @@ use crate::error::{Error, Result};
 use crate::format::manifest::{
     choose, decode_tile_page, head_len_for, Head, HeadFixed, ManifestRecord, ManifestSlot,
     NoManifest, PageEntry, TileRecord, CRS_LEN, HEAD_FIXED_LEN, HEAD_HAS_GEOREFERENCE, HEAD_MAGIC,
-    MANIFEST_MAJOR, MANIFEST_PAGE, MANIFEST_RECORD_LEN, MAX_TILES, TILES_PER_PAGE,
+    MANIFEST_MAJOR, MANIFEST_PAGE, MANIFEST_RECORD_LEN, MAX_ADJACENCY_LEN, MAX_TILES,
+    TILES_PER_PAGE,
 };
 use crate::format::{crc32, Invariant, Violation};
 use crate::heightfield::Georeference;
@@ -174,6 +175,24 @@ impl ManifestState {
         Ok(self.pages[i].get_or_init(|| Arc::new(records)).clone())
     }
 
+    /// The adjacent-cluster tables of `tile` (a record of this state), read and checked;
+    /// empty when it has none.
+    pub fn adjacency<S: Source + ?Sized>(&self, src: &S, tile: &TileRecord) -> Result<Vec<u8>> {
+        let len = u64::from(tile.adjacency_len.get());
+        if len == 0 {
+            return Ok(Vec::new());
+        }
+        read_checked(
+            src,
+            self.record.txn_id.get(),
+            self.record.adjacency_area().start + tile.adjacency_offset.get(),
+            len,
+            tile.adjacency_crc.get(),
+            Invariant::AdjacentClusters,
+            &format!("adjacent-cluster tables of {}", tile.name()),
+        )
+    }
+
     /// Tile pages read so far.
     pub fn pages_read(&self) -> usize {
         self.pages.iter().filter(|p| p.get().is_some()).count()
@@ -201,6 +220,9 @@ pub struct Contents {
     pub georeference: Option<Georeference>,
     /// The seam policy (`SEAM_*`).
     pub seam: u8,
+    /// Each tile's adjacent-cluster tables (`format-spec/dataset.md` §3.5), by file name;
+    /// a tile with none has no entry.
+    pub adjacency: std::collections::HashMap<String, Vec<u8>>,
 }
 
 /// The order of tiles in a manifest: the Hilbert key of their first sample on a 2^32 grid,
@@ -236,9 +258,38 @@ pub fn write_state(
     let columns = tiles.iter().map(|t| t.rect().col1 + 1).max().unwrap_or(0);
     let rows = tiles.iter().map(|t| t.rect().row1 + 1).max().unwrap_or(0);
     let page = u64::from(MANIFEST_PAGE);
+    // The adjacency area: each tile's tables back to back, 8-byte aligned, in tile order.
+    let mut area = Vec::new();
+    for t in &mut tiles {
+        let blob = contents.adjacency.get(t.name()).filter(|b| !b.is_empty());
+        let (at, len, crc) = match blob {
+            Some(b) => {
+                area.resize(area.len().next_multiple_of(8), 0);
+                let at = area.len() as u64;
+                area.extend_from_slice(b);
+                (at, b.len(), crc32(b))
+            }
+            None => (0, 0, 0),
+        };
+        t.adjacency_offset = at.into();
+        t.adjacency_len = u32::try_from(len)
+            .map_err(|_| Error::TooLarge {
+                what: "adjacent-cluster tables".into(),
+                detail: format!("{len} bytes for tile {}", t.name()),
+            })?
+            .into();
+        t.adjacency_crc = crc.into();
+    }
+    let area_len = (area.len() as u64).next_multiple_of(page);
+    if area_len > MAX_ADJACENCY_LEN {
+        return Err(Error::TooLarge {
+            what: "adjacent-cluster tables".into(),
+            detail: format!("{area_len} bytes; a manifest holds at most {MAX_ADJACENCY_LEN}"),
+        });
+    }
     let page_count = count.div_ceil(TILES_PER_PAGE as u64);
     let head_len = head_len_for(page_count);
-    let body_len = page_count * page + head_len;
+    let body_len = page_count * page + area_len + head_len;
     let start = match active {
         None => 2 * page,
         Some((_, r)) => {
@@ -318,7 +369,11 @@ pub fn write_state(
     let head_bytes = head.encode();
     debug_assert_eq!(head_bytes.len() as u64, head_len);
     debug_assert_eq!(HEAD_FIXED_LEN, 256);
-    let head_offset = start + page_count * page;
+    if !area.is_empty() {
+        io.write_at(start + page_count * page, &area)
+            .map_err(|e| Error::io(&name, e))?;
+    }
+    let head_offset = start + page_count * page + area_len;
     io.write_at(head_offset, &head_bytes)
         .map_err(|e| Error::io(&name, e))?;
     io.sync().map_err(|e| Error::io(&name, e))?;
@@ -327,6 +382,7 @@ pub fn write_state(
         txn,
         head_offset + head_len,
         (head_offset, head_len as u32, crc32(&head_bytes)),
+        area_len,
         count,
         columns,
         rows,

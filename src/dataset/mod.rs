@@ -12,6 +12,7 @@
 //! [`mod@verify`] (the validator).
 
 pub mod add;
+pub mod adjacency;
 pub mod build;
 pub mod commit;
 pub mod fly;

@@ -182,6 +182,24 @@ impl Dataset {
         Ok(Tile { index, record })
     }
 
+    /// The adjacent-cluster tables `tile` stores: its borders with the tiles east and south of
+    /// it (`format-spec/dataset.md` §3.5), read and checked the first time.
+    pub fn borders(&self, tile: &Tile) -> Result<Vec<super::adjacency::Border>> {
+        let bytes = self.state.adjacency(&self.src, &tile.record)?;
+        super::adjacency::decode(&bytes).map_err(|detail| {
+            crate::format::Violation::new(
+                crate::format::Invariant::AdjacentClusters,
+                format!(
+                    "adjacent-cluster tables of tile {} ({})",
+                    tile.index,
+                    tile.name()
+                ),
+                detail,
+            )
+            .in_file(self.src.name())
+        })
+    }
+
     /// Every tile, in manifest order (reads every tile page).
     pub fn tiles(&self) -> Result<Vec<Tile>> {
         let mut out = Vec::with_capacity(usize::try_from(self.tile_count()).unwrap_or(0));

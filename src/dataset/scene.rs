@@ -313,7 +313,12 @@ fn set_border_neighbours(blocks: &mut [DatasetBlock], geometry: &[(u8, u32, Samp
             let bi = blocks[i];
             let (fi, bsi, _) = geometry[i];
             let mut levels: Option<NeighbourLevels> = None;
+            // The shared line first; the next line (abutting tiles) only when nothing shares it,
+            // so that a tile between two others is the neighbour, not the one beyond it.
             for &l in &across {
+                if levels.is_some() {
+                    break;
+                }
                 let Some(others) = edges.get(&(opposite, l)) else {
                     continue;
                 };

@@ -6,6 +6,7 @@
 
 use serde::Serialize;
 
+use super::adjacency::{borders_of, tables_of, TileEdges};
 use super::manifest::{read_slots, MANIFEST_NAME};
 use super::placement::check_tiling;
 use super::reader::{Dataset, Tile};
@@ -280,6 +281,51 @@ pub fn verify(
         }
     }
     checks.pass(Invariant::TilePins);
+    // D-5: every tile's tables, decoded, and equal to their recomputation from the pinned
+    // states' edge lists (when every tile they need opened).
+    let mut edges: Vec<Option<std::sync::Arc<TileEdges>>> = Vec::with_capacity(tiles.len());
+    for (t, store) in tiles.iter().zip(&open) {
+        edges.push(match store {
+            Some(s) => checks
+                .absorb("", TileEdges::read(s, &t.record))?
+                .map(std::sync::Arc::new),
+            None => None,
+        });
+    }
+    for (k, t) in tiles.iter().enumerate() {
+        let at = format!("tile {} ({})", t.index, t.name());
+        let Some(stored) = checks.absorb("", dataset.borders(t))? else {
+            continue;
+        };
+        let mut lookup = |j: usize| -> crate::error::Result<std::sync::Arc<TileEdges>> {
+            edges[j]
+                .clone()
+                .ok_or_else(|| Error::Internal("a tile that did not open".into()))
+        };
+        let needed = borders_of(&rects[k], &rects);
+        if edges[k].is_none() || needed.iter().any(|b| edges[b.0].is_none()) {
+            continue;
+        }
+        let expect = super::adjacency::decode(&tables_of(k, &rects, &mut lookup)?)
+            .map_err(Error::Internal)?;
+        if stored != expect {
+            let first = stored
+                .iter()
+                .zip(&expect)
+                .position(|(a, b)| a != b)
+                .unwrap_or(stored.len().min(expect.len()));
+            checks.fail(
+                Invariant::AdjacentClusters,
+                format!(
+                    "{at}: {} borders stored, {} expected; border {first} differs from the \
+                     merge of the edge lists",
+                    stored.len(),
+                    expect.len()
+                ),
+            );
+        }
+    }
+    checks.pass(Invariant::AdjacentClusters);
     report.stray_files = stray_files(dir, &tiles);
     report.valid = checks.0.iter().all(|c| c.status == CheckStatus::Passed);
     report.checks = checks.0;

@@ -58,6 +58,9 @@ pub enum Invariant {
     /// D-4: every tile file holds its pinned state, of the size and heights its record says,
     /// and neighbours agree on their shared edges.
     TilePins,
+    /// D-5: each tile's adjacent-cluster tables are the merges of its and its east and
+    /// south neighbours' edge lists.
+    AdjacentClusters,
 }
 
 impl Invariant {
@@ -82,11 +85,12 @@ impl Invariant {
     ];
 
     /// The invariants of a dataset's manifest (`format-spec/dataset.md` §6), in id order.
-    pub const DATASET: [Invariant; 4] = [
+    pub const DATASET: [Invariant; 5] = [
         Invariant::ManifestRecord,
         Invariant::ManifestPages,
         Invariant::TileRecords,
         Invariant::TilePins,
+        Invariant::AdjacentClusters,
     ];
 
     /// Its number in the spec: 1 for I-1; the dataset invariants follow, from 17 for D-1.
@@ -97,9 +101,9 @@ impl Invariant {
 
     /// `I-1`, `I-2`, ...
     pub fn id(self) -> &'static str {
-        const IDS: [&str; 20] = [
+        const IDS: [&str; 21] = [
             "I-1", "I-2", "I-3", "I-4", "I-5", "I-6", "I-7", "I-8", "I-9", "I-10", "I-11", "I-12",
-            "I-13", "I-14", "I-15", "I-16", "D-1", "D-2", "D-3", "D-4",
+            "I-13", "I-14", "I-15", "I-16", "D-1", "D-2", "D-3", "D-4", "D-5",
         ];
         IDS[self as usize]
     }
@@ -127,6 +131,7 @@ impl Invariant {
             Invariant::ManifestPages => "manifest pages",
             Invariant::TileRecords => "tile records",
             Invariant::TilePins => "tile pins",
+            Invariant::AdjacentClusters => "adjacent-cluster tables",
         }
     }
 }

@@ -59,6 +59,9 @@ pub const TILES_PER_PAGE: usize = 32;
 /// The most tiles a manifest holds: its head is then 2 MiB.
 pub const MAX_TILES: u64 = 1 << 20;
 
+/// The most bytes of adjacent-cluster tables a manifest holds (4 GiB).
+pub const MAX_ADJACENCY_LEN: u64 = 1 << 32;
+
 /// Bytes of a tile's file name, zero-padded.
 pub const TILE_NAME_LEN: usize = 56;
 
@@ -113,8 +116,11 @@ pub struct ManifestRecord {
     pub seam: u8,
     /// Zero.
     pub reserved0: [u8; 7],
+    /// Bytes of the adjacency area between the tile pages and the head: a multiple of the
+    /// page size.
+    pub adjacency_len: U64,
     /// Zero.
-    pub reserved: [u8; 156],
+    pub reserved: [u8; 148],
     /// CRC-32 of bytes `0..252`.
     pub crc: U32,
 }
@@ -146,6 +152,7 @@ impl ManifestRecord {
         txn_id: u64,
         file_length: u64,
         head: (u64, u32, u32),
+        adjacency_len: u64,
         tile_count: u64,
         columns: u64,
         rows: u64,
@@ -170,7 +177,8 @@ impl ManifestRecord {
             spacing_y: sy.into(),
             seam,
             reserved0: [0; 7],
-            reserved: [0; 156],
+            adjacency_len: adjacency_len.into(),
+            reserved: [0; 148],
             crc: 0.into(),
         };
         r.crc = crc32(&r.as_bytes()[..MANIFEST_CRC_SPAN]).into();
@@ -183,11 +191,21 @@ impl ManifestRecord {
         (x > 0.0 && y > 0.0).then_some([x, y])
     }
 
-    /// The byte range of the body: the tile pages, then the head.
+    /// The byte range of the body: the tile pages, the adjacency area, then the head.
     pub fn body(&self) -> std::ops::Range<u64> {
-        let pages = self.tile_count.get().div_ceil(TILES_PER_PAGE as u64);
-        let start = self.head_offset.get() - pages * u64::from(MANIFEST_PAGE);
+        let start = self.head_offset.get() - self.adjacency_len.get() - self.pages_len();
         start..self.head_offset.get() + u64::from(self.head_len.get())
+    }
+
+    /// Bytes of the tile pages.
+    fn pages_len(&self) -> u64 {
+        self.tile_count.get().div_ceil(TILES_PER_PAGE as u64) * u64::from(MANIFEST_PAGE)
+    }
+
+    /// The byte range of the adjacency area.
+    pub fn adjacency_area(&self) -> std::ops::Range<u64> {
+        let end = self.head_offset.get();
+        end - self.adjacency_len.get()..end
     }
 
     /// Classifies the bytes of slot `index` (the whole record, or fewer when the file ends).
@@ -248,9 +266,16 @@ impl ManifestRecord {
         let head = self.head_offset.get();
         let head_len = u64::from(self.head_len.get());
         let pages = tiles.div_ceil(TILES_PER_PAGE as u64);
-        if !head.is_multiple_of(page) || head < 2 * page + pages * page {
+        let adjacency = self.adjacency_len.get();
+        if !adjacency.is_multiple_of(page) || adjacency > MAX_ADJACENCY_LEN {
             return Err(format!(
-                "head offset {head}: not a page boundary after the slots and {pages} tile pages"
+                "adjacency area of {adjacency} bytes: not whole pages, or more than {MAX_ADJACENCY_LEN}"
+            ));
+        }
+        if !head.is_multiple_of(page) || head < 2 * page + pages * page + adjacency {
+            return Err(format!(
+                "head offset {head}: not a page boundary after the slots, {pages} tile pages and \
+                 {adjacency} bytes of adjacency tables"
             ));
         }
         if head_len != head_len_for(pages) {
@@ -605,8 +630,15 @@ pub struct TileRecord {
     pub min_height: F32,
     /// The greatest height.
     pub max_height: F32,
-    /// Zero (reserved for the adjacent-cluster tables).
-    pub reserved: [u8; 24],
+    /// Byte offset of the tile's adjacent-cluster tables in the adjacency area (0 with a
+    /// length of 0: none).
+    pub adjacency_offset: U64,
+    /// Their bytes.
+    pub adjacency_len: U32,
+    /// Their CRC-32.
+    pub adjacency_crc: U32,
+    /// Zero.
+    pub reserved: [u8; 8],
     /// The tile's file name in the dataset's directory, UTF-8, zero-padded.
     pub name: [u8; TILE_NAME_LEN],
 }
@@ -646,7 +678,10 @@ impl TileRecord {
             flags: 0.into(),
             min_height: heights.0.into(),
             max_height: heights.1.into(),
-            reserved: [0; 24],
+            adjacency_offset: 0.into(),
+            adjacency_len: 0.into(),
+            adjacency_crc: 0.into(),
+            reserved: [0; 8],
             name: n,
         }
     }
@@ -679,12 +714,14 @@ impl TileRecord {
         }
     }
 
-    /// Checks the record's own fields against the dataset grid (`columns × rows`).
+    /// Checks the record's own fields against the dataset grid (`columns × rows`) and an
+    /// adjacency area of `adjacency_len` bytes.
     pub fn check(
         &self,
         index: u64,
         columns: u64,
         rows: u64,
+        adjacency_len: u64,
         known_minor: bool,
     ) -> Result<(), Violation> {
         let bad = |detail: String| {
@@ -729,6 +766,16 @@ impl TileRecord {
         if !(lo.is_finite() && hi.is_finite() && lo <= hi || empty) {
             return Err(bad(format!("height range {lo} .. {hi}")));
         }
+        let (at, len) = (
+            self.adjacency_offset.get(),
+            u64::from(self.adjacency_len.get()),
+        );
+        if (len == 0 && at != 0) || at.checked_add(len).is_none_or(|end| end > adjacency_len) {
+            return Err(bad(format!(
+                "adjacent-cluster tables of {len} bytes at {at}: outside the {adjacency_len}-byte \
+                 adjacency area"
+            )));
+        }
         if known_minor && (self.flags.get() != 0 || !is_zero(&self.reserved)) {
             return Err(bad("reserved bytes not zero".into()));
         }
@@ -755,6 +802,7 @@ pub fn decode_tile_page(
             index,
             record.columns.get(),
             record.rows.get(),
+            record.adjacency_len.get(),
             knows_minor(record.minor.get()),
         )?;
         lo = lo.min(t.min_height.get());
