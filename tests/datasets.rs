@@ -825,3 +825,82 @@ fn a_change_to_one_tile_brings_its_western_and_northern_neighbours_tables_up_to_
     .unwrap();
     assert!(report.valid, "{:?}", failed(&report));
 }
+
+#[test]
+fn replacing_a_whole_tile_is_one_commit_and_an_older_reader_is_told() {
+    let field = fields::make(49, 25, Character::Hills, 0.0, 6);
+    let dir = tempfile::tempdir().unwrap();
+    let rects = tiles::split(&field, &[24], &[], &[]);
+    let ds_dir = tiles::build(dir.path(), &field, &rects, &tiles::options(None));
+    let before = Dataset::open(&ds_dir).unwrap();
+    // A new east tile: other heights, but the shared column 24 as it was.
+    let east = SampleRect {
+        col0: 24,
+        row0: 0,
+        col1: 48,
+        row1: 24,
+    };
+    let mut new_field = field.samples().to_vec();
+    for row in 0..25u64 {
+        for col in 25..49u64 {
+            new_field[(row * 49 + col) as usize] = (col * 3 + row) as f32;
+        }
+    }
+    let new_field = fmrh::Heightfield::new(49, 25, new_field).unwrap();
+    let path = tiles::write_f32(dir.path(), "east-v2", &tiles::crop(&new_field, &east), 10.0);
+    // Not at a tile's place and size: refused.
+    let err = fmrh::dataset::replace_tile(
+        &ds_dir,
+        &path,
+        Some((23, 0)),
+        &tiles::options(None),
+        &fmrh::progress::Silent,
+    )
+    .unwrap_err();
+    assert!(err.to_string().contains("no tile lies"), "{err}");
+    let (commit, record, _) = fmrh::dataset::replace_tile(
+        &ds_dir,
+        &path,
+        Some((24, 0)),
+        &tiles::options(None),
+        &fmrh::progress::Silent,
+    )
+    .unwrap();
+    assert_eq!(commit.txn_id, 2);
+    assert_eq!(record.name(), "east-v2.fmrh");
+    let after = Dataset::open(&ds_dir).unwrap();
+    assert!(same_bits(
+        after.read_window(after.grid()).unwrap().samples(),
+        new_field.samples()
+    ));
+    let report = fmrh::dataset::verify(
+        &ds_dir,
+        fmrh::store::VerifyMode::Full,
+        &fmrh::progress::Silent,
+    )
+    .unwrap();
+    assert!(
+        report.valid && report.stray_files.is_empty(),
+        "{:?} {:?}",
+        failed(&report),
+        report.stray_files
+    );
+    // The reader of the state before: the west tile still reads, the east one is superseded.
+    let old_east = before
+        .tiles()
+        .unwrap()
+        .into_iter()
+        .find(|t| t.rect().col0 == 24)
+        .unwrap();
+    assert!(matches!(
+        before.open_tile(&old_east),
+        Err(fmrh::Error::Superseded { .. })
+    ));
+    let old_west = before
+        .tiles()
+        .unwrap()
+        .into_iter()
+        .find(|t| t.rect().col0 == 0)
+        .unwrap();
+    before.open_tile(&old_west).unwrap();
+}

@@ -20,9 +20,10 @@ pub enum DatasetCommand {
     /// geotransforms, sidecars). Neighbours may share one edge row or column, which must
     /// agree sample for sample unless --seam says how to settle it.
     Build(BuildArgs),
-    /// Add a tile to a dataset (expansion): placed by --at or by its georeference, its
-    /// shared edges settled with its neighbours (the dataset's --seam policy unless given),
-    /// written complete, then added by one manifest commit.
+    /// Add a tile to a dataset (expansion), or with --replace replace one (a whole file):
+    /// placed by --at or by its georeference, its shared edges settled with its neighbours
+    /// (the dataset's --seam policy unless given), written complete, then published by one
+    /// manifest commit.
     Add(AddArgs),
 }
 
@@ -40,6 +41,10 @@ pub struct AddArgs {
     /// built with).
     #[arg(long)]
     seam: Option<SeamPolicy>,
+    /// Replace the tile of the same place and size with this one (a whole file), instead of
+    /// adding a tile where none is.
+    #[arg(long)]
+    replace: bool,
     #[command(flatten)]
     tile_options: TileOptions,
     /// Print the report as JSON.
@@ -254,8 +259,13 @@ fn add(args: &AddArgs) -> Result<ExitCode, Error> {
         None => dataset::add::recorded_policy(&dataset::Dataset::open(&args.dir)?),
     };
     let options = args.tile_options.options(seam)?;
+    let run = if args.replace {
+        dataset::replace_tile
+    } else {
+        dataset::add
+    };
     let (commit, record, shift) =
-        dataset::add(&args.dir, &args.tile, at, &options, &fmrh::progress::Silent)?;
+        run(&args.dir, &args.tile, at, &options, &fmrh::progress::Silent)?;
     let r = record.rect();
     if args.json {
         #[derive(serde::Serialize)]
@@ -280,8 +290,13 @@ fn add(args: &AddArgs) -> Result<ExitCode, Error> {
         })?;
     } else {
         println!(
-            "added {} to {} as {}: columns {}..={}, rows {}..={} (manifest txn {}; {} neighbours \
+            "{} {} to {} as {}: columns {}..={}, rows {}..={} (manifest txn {}; {} neighbours \
              changed to settle shared edges)",
+            if args.replace {
+                "replaced a tile with"
+            } else {
+                "added"
+            },
             args.tile.display(),
             args.dir.display(),
             record.name(),

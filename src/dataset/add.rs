@@ -73,6 +73,32 @@ pub fn add(
     options: &DatasetOptions,
     progress: &dyn Progress,
 ) -> Result<(DatasetCommit, TileRecord, (u64, u64))> {
+    add_or_replace(dir, input, at, options, progress, false)
+}
+
+/// Replaces the tile at the place and size of the DEM `input` (at `at`, or by its
+/// georeference) with a new file built from it: a whole tile, in one dataset commit. Its
+/// shared edges are settled with its neighbours as [`add`] does. The old file is removed
+/// once the manifest no longer names it; a reader that opened the dataset before and opens
+/// that tile after is told its state was superseded.
+pub fn replace_tile(
+    dir: &Path,
+    input: &Path,
+    at: Option<(u64, u64)>,
+    options: &DatasetOptions,
+    progress: &dyn Progress,
+) -> Result<(DatasetCommit, TileRecord, (u64, u64))> {
+    add_or_replace(dir, input, at, options, progress, true)
+}
+
+fn add_or_replace(
+    dir: &Path,
+    input: &Path,
+    at: Option<(u64, u64)>,
+    options: &DatasetOptions,
+    progress: &dyn Progress,
+    replace: bool,
+) -> Result<(DatasetCommit, TileRecord, (u64, u64))> {
     let files = Dir(dir.to_path_buf());
     let manifest = Arc::new(files.open(MANIFEST_NAME)?);
     let (state, src) = read_manifest(&manifest)?;
@@ -108,6 +134,25 @@ pub fn add(
         })
         .collect();
     let new_rect = rect(col0, row0, hf.width(), hf.height());
+    // Replacing: the tile of the same place and size leaves the dataset in this commit.
+    let (all, replaced): (Vec<TileRecord>, Option<TileRecord>) = if replace {
+        let Some(at) = all.iter().position(|t| t.rect() == new_rect) else {
+            return Err(Error::InvalidArgument(format!(
+                "{}: no tile lies at columns {}..={}, rows {}..={} to replace (a replacement \
+                 has the place and size of the tile it replaces)",
+                input.display(),
+                new_rect.col0,
+                new_rect.col1,
+                new_rect.row0,
+                new_rect.row1
+            )));
+        };
+        let mut rest = all;
+        let old = rest.remove(at);
+        (rest, Some(old))
+    } else {
+        (all, None)
+    };
     let mut rects: Vec<SampleRect> = all.iter().map(TileRecord::rect).collect();
     rects.push(new_rect);
     let n = all.len();
@@ -274,7 +319,15 @@ pub fn add(
         )
     })();
     match outcome {
-        Ok(c) => Ok((c, record, shift)),
+        Ok(c) => {
+            // No state the manifest now holds names the replaced file (the slot of the state
+            // before still does, until the next commit: readers of it are told "superseded").
+            if let Some(old) = replaced {
+                let _ = std::fs::remove_file(dir.join(old.name()));
+                let _ = sync_dir(dir);
+            }
+            Ok((c, record, shift))
+        }
         Err(e) => {
             // Not named by any manifest state: nothing refers to it.
             let _ = std::fs::remove_file(&path);

@@ -7,9 +7,10 @@
 //! (whether neighbours agree on a shared edge, and how a policy settles them), [`manifest`]
 //! (the manifest's commit slots, head and tile pages, read and written), [`reader`] (a
 //! dataset opened: its tiles, each container at its pinned state, windows across them),
-//! [`mod@scene`] (scenes across tiles), [`fly`] (frames across tiles), [`build`] (tiles in, a dataset out, one tile in
-//! memory at a time), [`add`] (one more tile), [`commit`] (a change to several tiles, atomic across the files) and
-//! [`mod@verify`] (the validator).
+//! [`mod@scene`] (scenes across tiles), [`fly`] (frames across tiles), [`adjacency`] (the
+//! adjacent-cluster tables), [`mod@build`] (tiles in, a dataset out, one tile in memory at a
+//! time), [`mod@add`] (one more tile, or a whole tile replaced), [`commit`] (a change to
+//! several tiles, atomic across the files) and [`mod@verify`] (the validator).
 
 pub mod add;
 pub mod adjacency;
@@ -23,7 +24,7 @@ pub mod scene;
 pub mod seams;
 pub mod verify;
 
-pub use add::add;
+pub use add::{add, replace_tile};
 pub use build::{build, BuiltTile, DatasetOptions, DatasetSummary, TileInput};
 pub use commit::{recover, replace, DatasetCommit, DatasetRecovery, Dir, Files, TileCommit};
 pub use fly::{DatasetFrame, DatasetScheduler};

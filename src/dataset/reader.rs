@@ -256,6 +256,8 @@ impl Dataset {
         let store = match Store::open_pinned(&path, tile.pin()) {
             Ok(s) => s,
             Err(e @ Error::Corrupt { .. }) => return Err(self.moved_on(e)),
+            // A tile replaced by a newer dataset state has its file removed.
+            Err(e @ Error::Io { .. }) if !path.exists() => return Err(self.moved_on(e)),
             Err(e) => return Err(e),
         };
         let d = store.domain();

@@ -3,7 +3,10 @@
 //!
 //! Given either file, the reader finds the other. It first tries the sidecar's `f32_file`, then
 //! the same name with the other extension. The `.f32` length must be exactly
-//! `width · height · 4`, checked before reading. `spacing_m` and `units` are taken when present.
+//! `width · height · 4`, checked before reading. `spacing_m` and `units` are taken when present,
+//! and so is a `georeference` object of the form `fmrh extract` writes (`crs`, `origin`: the
+//! centre of sample (0, 0), `step`); a `georeference` of any other shape (the prose of
+//! `../shared/data`'s sidecars) is ignored, so those tiles are placed by a layout.
 
 use std::fs::File;
 use std::io::Read;
@@ -25,6 +28,15 @@ struct Sidecar {
     f32_file: Option<String>,
     spacing_m: Option<[f64; 2]>,
     units: Option<String>,
+    georeference: Option<serde_json::Value>,
+}
+
+/// The georeference of a sidecar, when it is the machine-readable form.
+#[derive(Deserialize)]
+struct SidecarGeoreference {
+    crs: Option<String>,
+    origin: [f64; 2],
+    step: [f64; 2],
 }
 
 fn with_extension(path: &Path, ext: &str) -> PathBuf {
@@ -89,9 +101,18 @@ pub fn read(path: &Path) -> Result<Heightfield> {
                 .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])),
         );
     }
+    let georeference = sidecar
+        .georeference
+        .and_then(|v| serde_json::from_value::<SidecarGeoreference>(v).ok())
+        .map(|g| crate::heightfield::Georeference {
+            crs: g.crs,
+            origin: g.origin,
+            step: g.step,
+        });
     let metadata = Metadata {
         spacing_m: sidecar.spacing_m,
         units: sidecar.units,
+        georeference,
         ..Metadata::default()
     };
     finish(
