@@ -297,3 +297,55 @@ fn adding_the_western_neighbour_moves_the_grid_and_settles_the_edge() {
         );
     }
 }
+
+#[test]
+fn bad_dataset_input_gets_a_clear_error_and_exit_2() {
+    let dir = tempfile::tempdir().unwrap();
+    let plain = dir.path().to_str().unwrap();
+    for args in [
+        vec!["info", plain],
+        vec!["verify", plain],
+        vec!["extract", plain, "-o", "/dev/null"],
+        vec!["recover", plain],
+    ] {
+        let r = fmrh(&args);
+        assert_eq!(r.status.code(), Some(2), "{args:?}");
+        assert!(
+            String::from_utf8_lossy(&r.stderr).contains("without a MANIFEST"),
+            "{args:?}"
+        );
+    }
+    // A layout line that is not path,col0,row0 is named; an existing output is refused.
+    let layout = dir.path().join("layout.csv");
+    std::fs::write(
+        &layout,
+        "# tiles\nN43E006.hgt.gz,0,0\nN43E007.hgt.gz,-1200,0\n",
+    )
+    .unwrap();
+    let out = dir.path().join("ds");
+    let r = fmrh(&[
+        "dataset",
+        "build",
+        "-q",
+        "--layout",
+        layout.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(r.status.code(), Some(2));
+    assert!(
+        String::from_utf8_lossy(&r.stderr).contains("layout line 3"),
+        "{}",
+        String::from_utf8_lossy(&r.stderr)
+    );
+    let r = fmrh(&[
+        "dataset",
+        "build",
+        "-q",
+        "-o",
+        plain,
+        tiles()[0].to_str().unwrap(),
+    ]);
+    assert_eq!(r.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&r.stderr).contains("exists"));
+}

@@ -14,8 +14,8 @@ use glam::DVec3;
 use proptest::prelude::*;
 
 use common::fields::{self, Character, Rng};
-use common::tiles;
-use fmrh::dataset::{Dataset, DatasetScene, SeamPolicy};
+use common::tiles::{self, camera, check_scene, cuts};
+use fmrh::dataset::{Dataset, SeamPolicy};
 use fmrh::format::Invariant;
 use fmrh::model::SampleRect;
 use fmrh::scene::{Camera, Mode, SceneOptions};
@@ -23,142 +23,6 @@ use fmrh::store::CheckStatus;
 
 fn same_bits(a: &[f32], b: &[f32]) -> bool {
     common::first_difference(a, b).is_none()
-}
-
-/// How many scene blocks cover each cell (unit square between samples) of `window`.
-fn cell_counts(scene: &DatasetScene, window: &SampleRect) -> Vec<u32> {
-    let (w, h) = (window.col1 - window.col0, window.row1 - window.row0);
-    let mut counts = vec![0u32; (w * h) as usize];
-    for b in &scene.blocks {
-        let r = b.block.rect();
-        let (c0, c1) = (r.col0.max(window.col0), r.col1.min(window.col1));
-        let (r0, r1) = (r.row0.max(window.row0), r.row1.min(window.row1));
-        for row in r0..r1 {
-            for col in c0..c1 {
-                counts[((row - window.row0) * w + col - window.col0) as usize] += 1;
-            }
-        }
-    }
-    counts
-}
-
-/// Whether cell `(col, row)` lies in some tile.
-fn in_a_tile(rects: &[SampleRect], col: u64, row: u64) -> bool {
-    rects
-        .iter()
-        .any(|r| col >= r.col0 && col < r.col1 && row >= r.row0 && row < r.row1)
-}
-
-/// Checks `scene` of `camera` over the tiles `rects` of `field` (10 m spacing): within
-/// tau (the screen error recomputed here, in the dataset's frame) or the uniform bound; a
-/// window's cells each covered once where a tile lies, no cell twice; and, without a
-/// window, every sample the frustum sees inside some block.
-fn check_scene(
-    scene: &DatasetScene,
-    field: &fmrh::Heightfield,
-    rects: &[SampleRect],
-    camera: &Camera,
-    mode: Mode,
-    tau: f64,
-    window: Option<SampleRect>,
-) {
-    let view = camera.view().unwrap();
-    let world = |col: u64, row: u64, z: f64| DVec3::new(col as f64 * 10.0, row as f64 * 10.0, z);
-    for b in &scene.blocks {
-        let r = b.block.rect();
-        let bx = fmrh::scene::Aabb {
-            min: world(r.col0, r.row0, f64::from(b.block.min_height)),
-            max: world(r.col1, r.row1, f64::from(b.block.max_height)),
-        };
-        let px = view.screen_error(b.block.error, bx.distance(view.eye));
-        match mode {
-            Mode::View => assert!(
-                px <= tau * (1.0 + 1e-9) || b.block.error == 0.0,
-                "block {r:?} of tile {} is {px} px > tau {tau}",
-                b.tile,
-            ),
-            Mode::Uniform => {
-                let allowed = scene
-                    .stats
-                    .allowed_error
-                    .expect("uniform scenes state their bound");
-                assert!(
-                    b.block.error <= allowed.max(scene.stats.threshold.unwrap_or(0.0)) + 1e-9,
-                    "block error {} above the bound {allowed}",
-                    b.block.error
-                );
-            }
-        }
-    }
-    let grid = SampleRect {
-        col0: 0,
-        row0: 0,
-        col1: rects.iter().map(|r| r.col1).max().unwrap(),
-        row1: rects.iter().map(|r| r.row1).max().unwrap(),
-    };
-    let area = window.unwrap_or(grid);
-    let counts = cell_counts(scene, &area);
-    let w = area.col1 - area.col0;
-    for (i, &c) in counts.iter().enumerate() {
-        let (col, row) = (
-            area.col0 + i as u64 % w.max(1),
-            area.row0 + i as u64 / w.max(1),
-        );
-        assert!(c <= 1, "cell ({col}, {row}) is covered {c} times");
-        if window.is_some() {
-            let expect = u32::from(in_a_tile(rects, col, row));
-            assert_eq!(
-                c, expect,
-                "cell ({col}, {row}) covered {c} times, expected {expect}"
-            );
-        }
-    }
-    if window.is_none() {
-        let w = u64::from(field.width());
-        for row in 0..u64::from(field.height()) {
-            for col in 0..w {
-                let z = field.samples()[(row * w + col) as usize];
-                if z.is_nan() || !rects.iter().any(|r| r.contains(col, row)) {
-                    continue;
-                }
-                let p = world(col, row, f64::from(z));
-                if view
-                    .planes
-                    .iter()
-                    .any(|pl| pl.normal.dot(p) + pl.offset < 0.0)
-                {
-                    continue;
-                }
-                assert!(
-                    scene
-                        .blocks
-                        .iter()
-                        .any(|b| b.block.rect().contains(col, row)),
-                    "visible sample ({col}, {row}) lies in no block"
-                );
-            }
-        }
-    }
-}
-
-fn camera(rng: &mut Rng, w: f64, h: f64) -> Camera {
-    let eye = DVec3::new(
-        (rng.unit() * 2.0 - 0.5) * w * 10.0,
-        (rng.unit() * 2.0 - 0.5) * h * 10.0,
-        20.0 + rng.unit() * 1500.0,
-    );
-    let target = DVec3::new(rng.unit() * w * 10.0, rng.unit() * h * 10.0, 0.0);
-    let mut c = Camera::looking_at(eye, target);
-    c.viewport = [640, 480];
-    c
-}
-
-/// A cut strategy: `k` distinct interior cut lines of `0..n`.
-fn cuts(n: u64, k: usize, rng: &mut Rng) -> Vec<u64> {
-    let mut c: Vec<u64> = (0..k).map(|_| 1 + rng.next_u64() % (n - 2)).collect();
-    c.sort_unstable();
-    c.dedup();
-    c
 }
 
 proptest! {
@@ -903,4 +767,50 @@ fn replacing_a_whole_tile_is_one_commit_and_an_older_reader_is_told() {
         .find(|t| t.rect().col0 == 0)
         .unwrap();
     before.open_tile(&old_west).unwrap();
+}
+
+#[test]
+fn prefetch_works_across_tiles() {
+    // A 3 x 3 dataset of 2 km; the camera slides east looking north, so each frame sees new
+    // blocks at its east edge, and the tiles east of the view join by the cache radius.
+    let field = fields::make(200, 200, Character::Hills, 0.0, 22);
+    let dir = tempfile::tempdir().unwrap();
+    let rects = tiles::split(&field, &[66, 133], &[66, 133], &[]);
+    let ds = Dataset::open(&tiles::build(
+        dir.path(),
+        &field,
+        &rects,
+        &tiles::options(None),
+    ))
+    .unwrap();
+    let options = fmrh::scene::ScheduleOptions {
+        prefetch: true,
+        cache_radius: 800.0,
+        ..fmrh::scene::ScheduleOptions::new(1.0)
+    };
+    let mut s = fmrh::dataset::DatasetScheduler::new(&ds, options).unwrap();
+    let (mut hits, mut loaded) = (0, 0);
+    for i in 0..30 {
+        let eye = DVec3::new(100.0 + 60.0 * f64::from(i), -100.0, 200.0);
+        let cam = Camera::looking_at(eye, eye + DVec3::new(0.0, 700.0, -200.0));
+        let f = s.frame(&cam).unwrap();
+        // Prefetch changes where bytes come from, never which blocks a frame holds.
+        assert_eq!(
+            f.stats.visible,
+            ds.scene(&cam, &SceneOptions::new(1.0), None)
+                .unwrap()
+                .blocks
+                .len() as u64
+        );
+        assert!(f.stats.prefetch_hits <= f.stats.loaded);
+        if i > 0 {
+            hits += f.stats.prefetch_hits;
+            loaded += f.stats.loaded;
+        }
+        s.wait_prefetch();
+    }
+    assert!(
+        hits * 4 >= loaded,
+        "the tiles' prefetchers warmed {hits} of the {loaded} blocks later frames loaded"
+    );
 }

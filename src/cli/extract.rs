@@ -27,7 +27,7 @@ pub struct ExtractArgs {
 
 /// Runs `fmrh extract`.
 pub fn run(args: &ExtractArgs) -> Result<ExitCode, Error> {
-    if fmrh::dataset::is_dataset(&args.file) {
+    if super::is_dataset(&args.file)? {
         let ds = fmrh::dataset::Dataset::open(&args.file)?;
         let window = match &args.window {
             Some(text) => super::parse_window(text)?,

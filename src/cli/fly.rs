@@ -71,7 +71,7 @@ pub fn run(args: &FlyArgs) -> Result<ExitCode, Error> {
         ..Camera::looking_at(glam::DVec3::ZERO, glam::DVec3::X)
     };
     let cameras = path::parse(&text, &template)?;
-    if fmrh::dataset::is_dataset(&args.file) {
+    if super::is_dataset(&args.file)? {
         return replay_dataset(args, &cameras);
     }
     if args.view.mmap && fmrh::store::lock::SUPPORTED {

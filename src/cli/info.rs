@@ -341,7 +341,7 @@ fn run_dataset(args: &InfoArgs) -> Result<ExitCode, Error> {
 
 /// Runs `fmrh info`.
 pub fn run(args: &InfoArgs) -> Result<ExitCode, Error> {
-    if fmrh::dataset::is_dataset(&args.file) {
+    if super::is_dataset(&args.file)? {
         return run_dataset(args);
     }
     let store = super::open(&args.file)?;

@@ -129,6 +129,21 @@ pub fn open(path: &Path) -> Result<Store<FileSource>, Error> {
     Store::open(path)
 }
 
+/// Whether `path` names a dataset (a directory with a MANIFEST) rather than a container; a
+/// directory without one is an error, not a file to open.
+pub fn is_dataset(path: &Path) -> Result<bool, Error> {
+    if !path.is_dir() {
+        return Ok(false);
+    }
+    if fmrh::dataset::is_dataset(path) {
+        return Ok(true);
+    }
+    Err(Error::input(
+        path,
+        "a directory without a MANIFEST: not an fmrh dataset (nor a container file)",
+    ))
+}
+
 /// Parses `a,b,c,d` into four integers.
 pub fn parse_quad(text: &str, what: &str) -> Result<[u64; 4], Error> {
     let parts: Vec<&str> = text.split(',').map(str::trim).collect();

@@ -21,7 +21,7 @@ pub struct RecoverArgs {
 
 /// Runs `fmrh recover`.
 pub fn run(args: &RecoverArgs) -> Result<ExitCode, Error> {
-    if fmrh::dataset::is_dataset(&args.file) {
+    if super::is_dataset(&args.file)? {
         let r = fmrh::dataset::recover(&fmrh::dataset::Dir(args.file.clone()))?;
         if args.json {
             super::print_json(&r)?;

@@ -64,7 +64,7 @@ fn parse_at(text: &str) -> Result<[u64; 2], Error> {
 pub fn run(args: &ReplaceArgs) -> Result<ExitCode, Error> {
     let [col0, row0] = parse_at(&args.at)?;
     let patch = ingest::load(&args.patch, &args.ingest.options())?;
-    if fmrh::dataset::is_dataset(&args.file) {
+    if super::is_dataset(&args.file)? {
         let started = Instant::now();
         let r = fmrh::dataset::replace(&fmrh::dataset::Dir(args.file.clone()), col0, row0, &patch)?;
         let ms = started.elapsed().as_secs_f64() * 1e3;

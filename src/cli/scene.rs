@@ -35,7 +35,7 @@ pub struct ViewArgs {
     /// Map the file instead of reading it page by page: much faster scheduling. The state
     /// read is registered (Linux), so fmrh writers in other processes leave its pages alone;
     /// where readers cannot register, this falls back to page reads. Other tools must not
-    /// modify the file meanwhile.
+    /// modify the file meanwhile. A dataset's tiles are always read page by page.
     #[arg(long)]
     pub mmap: bool,
     /// Ground distance between samples in metres, DX or DX,DY (east, south), where cameras
@@ -188,7 +188,7 @@ pub fn run(args: &SceneArgs) -> Result<ExitCode, Error> {
         .as_deref()
         .map(|p| super::sidecar::F32Output::new(p, args.force))
         .transpose()?;
-    if fmrh::dataset::is_dataset(&args.file) {
+    if super::is_dataset(&args.file)? {
         return run_dataset(args, camera, options, output);
     }
     if args.view.mmap && fmrh::store::lock::SUPPORTED {

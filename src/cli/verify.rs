@@ -29,7 +29,7 @@ const EXIT_BUSY: u8 = 75;
 /// Runs `fmrh verify`: exit 0 valid, 1 invalid, 2 unusable, 75 busy (a writer was
 /// committing: run again).
 pub fn run(args: &VerifyArgs) -> Result<ExitCode, Error> {
-    if fmrh::dataset::is_dataset(&args.file) {
+    if super::is_dataset(&args.file)? {
         return run_dataset(args);
     }
     let path = &args.file;
