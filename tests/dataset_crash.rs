@@ -181,8 +181,7 @@ fn shows(c: &Case, dir: &Path) -> Option<bool> {
 }
 
 fn valid(dir: &Path) -> bool {
-    let r =
-        fmrh::dataset::verify(dir, fmrh::store::VerifyMode::Fast, &fmrh::progress::Silent).unwrap();
+    let r = tiles::verify(dir, fmrh::store::VerifyMode::Fast);
     if !r.valid {
         eprintln!("{}", serde_json::to_string_pretty(&r).unwrap());
     }

@@ -15,7 +15,7 @@ use proptest::prelude::*;
 
 use common::fields::{self, Character, Rng};
 use common::tiles::{self, camera, check_scene, cuts};
-use fmrh::dataset::{Dataset, SeamPolicy};
+use fmrh::dataset::{Dataset, DatasetScene, SeamPolicy};
 use fmrh::format::Invariant;
 use fmrh::model::SampleRect;
 use fmrh::scene::{Camera, Mode, SceneOptions};
@@ -64,7 +64,7 @@ proptest! {
         check_scene(&scene, &field, &rects, &cam, mode, tau, Some(win));
         let frustum = ds.scene(&cam, &SceneOptions { window: None, ..options }, None).unwrap();
         check_scene(&frustum, &field, &rects, &cam, mode, tau, None);
-        prop_assert!(fmrh::dataset::verify(&ds_dir, fmrh::store::VerifyMode::Full, &fmrh::progress::Silent).unwrap().valid);
+        prop_assert!(tiles::verify(&ds_dir, fmrh::store::VerifyMode::Full).valid);
     }
 }
 
@@ -180,15 +180,7 @@ fn holes_read_as_voids_and_stay_uncovered() {
         )
         .unwrap();
     check_scene(&scene, &field, &rects, &cam, Mode::View, 2.0, Some(window));
-    assert!(
-        fmrh::dataset::verify(
-            &ds_dir,
-            fmrh::store::VerifyMode::Fast,
-            &fmrh::progress::Silent
-        )
-        .unwrap()
-        .valid
-    );
+    assert!(tiles::verify(&ds_dir, fmrh::store::VerifyMode::Fast).valid);
 }
 
 #[test]
@@ -255,18 +247,7 @@ fn opening_reads_the_manifest_and_a_scene_opens_only_the_tiles_it_meets() {
         col1: 30,
         row1: 30,
     };
-    let scene = ds
-        .scene(
-            &cam,
-            &SceneOptions {
-                tau: 1.0,
-                mode: Mode::View,
-                window: Some(window),
-                gap: 4,
-            },
-            None,
-        )
-        .unwrap();
+    let scene = window_scene(&ds, &cam, window);
     assert_eq!(scene.tiles.len(), 1);
     assert_eq!(ds.tiles_opened(), 1);
     // Across the corner of four tiles.
@@ -276,21 +257,21 @@ fn opening_reads_the_manifest_and_a_scene_opens_only_the_tiles_it_meets() {
         col1: 40,
         row1: 40,
     };
-    let scene = ds
-        .scene(
-            &cam,
-            &SceneOptions {
-                tau: 1.0,
-                mode: Mode::View,
-                window: Some(window),
-                gap: 4,
-            },
-            None,
-        )
-        .unwrap();
+    let scene = window_scene(&ds, &cam, window);
     assert_eq!(scene.tiles.len(), 4);
     assert_eq!(ds.tiles_opened(), 4);
     check_scene(&scene, &field, &rects, &cam, Mode::View, 1.0, Some(window));
+}
+
+/// The view scene at tau 1 of `window`.
+fn window_scene(ds: &Dataset, cam: &Camera, window: SampleRect) -> DatasetScene {
+    let options = SceneOptions {
+        tau: 1.0,
+        mode: Mode::View,
+        window: Some(window),
+        gap: 4,
+    };
+    ds.scene(cam, &options, None).unwrap()
 }
 
 /// Two tiles whose shared column disagrees at row 5 (and is void at row 9 in the second).
@@ -389,11 +370,7 @@ fn seam_policies_settle_the_shared_edge_in_both_tiles() {
                 );
             }
         }
-        assert!(
-            fmrh::dataset::verify(&out, fmrh::store::VerifyMode::Full, &fmrh::progress::Silent)
-                .unwrap()
-                .valid
-        );
+        assert!(tiles::verify(&out, fmrh::store::VerifyMode::Full).valid);
     }
 }
 
@@ -412,14 +389,7 @@ fn damage_to_the_manifest_or_a_tile_is_reported_located() {
     let dir = tempfile::tempdir().unwrap();
     let rects = tiles::split(&field, &[16], &[], &[]);
     let ds_dir = tiles::build(dir.path(), &field, &rects, &tiles::options(None));
-    let verify = || {
-        fmrh::dataset::verify(
-            &ds_dir,
-            fmrh::store::VerifyMode::Fast,
-            &fmrh::progress::Silent,
-        )
-        .unwrap()
-    };
+    let verify = || tiles::verify(&ds_dir, fmrh::store::VerifyMode::Fast);
     assert!(verify().valid);
     let manifest = ds_dir.join("MANIFEST");
     let original = std::fs::read(&manifest).unwrap();
@@ -619,14 +589,7 @@ fn tables_that_are_not_the_merge_are_reported() {
     let dir = tempfile::tempdir().unwrap();
     let rects = tiles::split(&field, &[24], &[], &[]);
     let ds_dir = tiles::build(dir.path(), &field, &rects, &tiles::options(None));
-    let verify = || {
-        fmrh::dataset::verify(
-            &ds_dir,
-            fmrh::store::VerifyMode::Fast,
-            &fmrh::progress::Silent,
-        )
-        .unwrap()
-    };
+    let verify = || tiles::verify(&ds_dir, fmrh::store::VerifyMode::Fast);
     assert!(verify().valid);
     // Rewrite the manifest with one pair dropped from the west tile's tables: checksums
     // right, content wrong.
@@ -681,12 +644,7 @@ fn a_change_to_one_tile_brings_its_western_and_northern_neighbours_tables_up_to_
     let patch = fields::make(20, 20, Character::Spikes, 0.0, 3);
     let r = fmrh::dataset::replace(&fmrh::dataset::Dir(ds_dir.clone()), 34, 34, &patch).unwrap();
     assert_eq!(r.tiles.len(), 1);
-    let report = fmrh::dataset::verify(
-        &ds_dir,
-        fmrh::store::VerifyMode::Fast,
-        &fmrh::progress::Silent,
-    )
-    .unwrap();
+    let report = tiles::verify(&ds_dir, fmrh::store::VerifyMode::Fast);
     assert!(report.valid, "{:?}", failed(&report));
 }
 
@@ -737,12 +695,7 @@ fn replacing_a_whole_tile_is_one_commit_and_an_older_reader_is_told() {
         after.read_window(after.grid()).unwrap().samples(),
         new_field.samples()
     ));
-    let report = fmrh::dataset::verify(
-        &ds_dir,
-        fmrh::store::VerifyMode::Full,
-        &fmrh::progress::Silent,
-    )
-    .unwrap();
+    let report = tiles::verify(&ds_dir, fmrh::store::VerifyMode::Full);
     assert!(
         report.valid && report.stray_files.is_empty(),
         "{:?} {:?}",

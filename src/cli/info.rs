@@ -207,6 +207,8 @@ struct DatasetInfo {
     txn_id: u64,
     commit_slot: u8,
     manifest_bytes: u64,
+    /// Bytes of the adjacent-cluster tables in the manifest's state.
+    adjacency_bytes: u64,
     /// What opening the dataset read: the manifest's slots and head.
     open_reads: u64,
     open_bytes: u64,
@@ -265,6 +267,7 @@ fn run_dataset(args: &InfoArgs) -> Result<ExitCode, Error> {
         txn_id: ds.txn_id(),
         commit_slot: ds.state().slot,
         manifest_bytes,
+        adjacency_bytes: record.adjacency_len.get(),
         open_reads: open.metadata_reads,
         open_bytes: open.metadata_bytes,
         columns: grid.col1 + 1,
@@ -312,8 +315,9 @@ fn run_dataset(args: &InfoArgs) -> Result<ExitCode, Error> {
     }
     println!("  seams       {}", info.seam);
     println!(
-        "  manifest    {} bytes; opening read {} bytes in {} reads",
-        info.manifest_bytes, info.open_bytes, info.open_reads
+        "  manifest    {} bytes ({} of adjacent-cluster tables); opening read {} bytes in {} \
+         reads",
+        info.manifest_bytes, info.adjacency_bytes, info.open_bytes, info.open_reads
     );
     const SHOWN: usize = 20;
     for t in info.tiles.iter().take(SHOWN) {

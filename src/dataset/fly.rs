@@ -136,16 +136,7 @@ impl<'d> DatasetScheduler<'d> {
         }
         let mut tiles = 0;
         for (r, s) in self.tiles.values_mut() {
-            let shift = DVec3::new(
-                r.col0 as f64 * self.frame.dx,
-                r.row0 as f64 * self.frame.dy,
-                0.0,
-            );
-            let local = Camera {
-                eye: camera.eye - shift,
-                target: camera.target - shift,
-                ..*camera
-            };
+            let local = super::scene::in_tile(camera, r, &self.frame);
             let f = s.frame(&local)?;
             let x = f.stats;
             stats.visible += x.visible;

@@ -192,12 +192,7 @@ impl Dataset {
             let store = self.open_tile(tile)?;
             let before = store.read_stats();
             let terrain = Terrain::with_spacing(&store, Some([frame.dx, frame.dy]))?;
-            let shift = DVec3::new(r.col0 as f64 * frame.dx, r.row0 as f64 * frame.dy, 0.0);
-            let local_camera = Camera {
-                eye: camera.eye - shift,
-                target: camera.target - shift,
-                ..*camera
-            };
+            let local_camera = in_tile(camera, &r, &frame);
             let tile_options = SceneOptions {
                 window: local_window,
                 ..*options
@@ -258,6 +253,21 @@ impl Dataset {
             stats,
             tiles: parts,
         })
+    }
+}
+
+/// `camera` (in the dataset's world frame) as the tile whose samples are `tile` sees it in
+/// its own frame: moved back by the tile's offset.
+pub fn in_tile(camera: &Camera, tile: &SampleRect, frame: &WorldFrame) -> Camera {
+    let shift = DVec3::new(
+        tile.col0 as f64 * frame.dx,
+        tile.row0 as f64 * frame.dy,
+        0.0,
+    );
+    Camera {
+        eye: camera.eye - shift,
+        target: camera.target - shift,
+        ..*camera
     }
 }
 

@@ -74,6 +74,11 @@ pub fn split(field: &Heightfield, cols: &[u64], rows: &[u64], holes: &[usize]) -
     out
 }
 
+/// The dataset validator's report on `dir`, in `mode`.
+pub fn verify(dir: &Path, mode: fmrh::store::VerifyMode) -> fmrh::dataset::DatasetReport {
+    fmrh::dataset::verify(dir, mode, &fmrh::progress::Silent).unwrap()
+}
+
 /// Options for small test datasets: blocks of 9, `thresholds` (or the ladder), 1 KiB pages.
 pub fn options(thresholds: Option<Vec<f64>>) -> DatasetOptions {
     DatasetOptions {
