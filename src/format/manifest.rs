@@ -850,3 +850,174 @@ pub fn decode_tile_page(
     }
     Ok(out)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn record(txn: u64) -> ManifestRecord {
+        let head = 3 * u64::from(MANIFEST_PAGE);
+        ManifestRecord::new(
+            txn,
+            head + 320,
+            (head, 320, 0),
+            0,
+            1,
+            10,
+            10,
+            None,
+            SEAM_STRICT,
+        )
+    }
+
+    #[test]
+    fn slots_classify_as_empty_valid_foreign_or_invalid() {
+        let r = record(3);
+        assert!(matches!(
+            ManifestRecord::classify(r.as_bytes(), 0),
+            ManifestSlot::Valid(_)
+        ));
+        assert_eq!(ManifestRecord::classify(&[0; 256], 0), ManifestSlot::Empty);
+        assert_eq!(ManifestRecord::classify(&[0; 10], 1), ManifestSlot::Empty);
+        // Torn: the CRC no longer matches.
+        let mut torn = r.as_bytes().to_vec();
+        torn[20] ^= 1;
+        assert!(matches!(
+            ManifestRecord::classify(&torn, 0),
+            ManifestSlot::Invalid(_)
+        ));
+        // A sealed record of another major.
+        let mut other = r;
+        other.major = 2.into();
+        other.crc = crc32(&other.as_bytes()[..MANIFEST_CRC_SPAN]).into();
+        assert_eq!(
+            ManifestRecord::classify(other.as_bytes(), 0),
+            ManifestSlot::Foreign {
+                major: 2,
+                txn_id: 3
+            }
+        );
+        // Sealed, but a field out of range: a head before the tile pages it needs.
+        let mut bad = ManifestRecord::new(4, 1 << 20, (8192, 320, 0), 0, 40, 10, 10, None, 0);
+        assert!(matches!(
+            ManifestRecord::classify(bad.as_bytes(), 0),
+            ManifestSlot::Invalid(_)
+        ));
+        bad = ManifestRecord::new(
+            4,
+            1 << 20,
+            (3 * 4096, 320, 0),
+            0,
+            1,
+            10,
+            10,
+            Some([1.0, f64::NAN]),
+            0,
+        );
+        assert!(matches!(
+            ManifestRecord::classify(bad.as_bytes(), 0),
+            ManifestSlot::Invalid(_)
+        ));
+    }
+
+    #[test]
+    fn the_newest_valid_record_wins_unless_a_newer_major_supersedes_it() {
+        let (a, b) = (record(3), record(4));
+        let slots = [ManifestSlot::Valid(a), ManifestSlot::Valid(b)];
+        assert_eq!(choose(&slots).map(|(s, r)| (s, r.txn_id.get())), Ok((1, 4)));
+        let slots = [
+            ManifestSlot::Valid(b),
+            ManifestSlot::Foreign {
+                major: 2,
+                txn_id: 9,
+            },
+        ];
+        assert_eq!(choose(&slots), Err(NoManifest::Unsupported(2)));
+        let slots = [
+            ManifestSlot::Valid(b),
+            ManifestSlot::Foreign {
+                major: 2,
+                txn_id: 1,
+            },
+        ];
+        assert_eq!(choose(&slots).map(|(s, _)| s), Ok(0));
+        assert_eq!(
+            choose(&[ManifestSlot::Empty, ManifestSlot::Empty]),
+            Err(NoManifest::NotAManifest)
+        );
+        let torn = ManifestSlot::Invalid(Violation::new(
+            Invariant::ManifestRecord,
+            "slot 0",
+            "CRC mismatch",
+        ));
+        assert!(matches!(
+            choose(&[torn, ManifestSlot::Empty]),
+            Err(NoManifest::Corrupt(_))
+        ));
+    }
+
+    #[test]
+    fn tile_records_are_checked_against_the_grid_and_the_area() {
+        let rect = SampleRect {
+            col0: 2,
+            row0: 3,
+            col1: 11,
+            row1: 7,
+        };
+        let pin = StatePin {
+            pages_txn: 1,
+            state_crc: 7,
+        };
+        let t = TileRecord::new("a.fmrh", rect, pin, (0.0, 1.0));
+        assert_eq!((t.rect(), t.name(), t.pin()), (rect, "a.fmrh", pin));
+        assert!(t.check(0, 12, 8, 0, true).is_ok());
+        assert!(
+            t.check(0, 11, 8, 0, true).is_err(),
+            "past the grid's last column"
+        );
+        let mut r = t;
+        r.adjacency_offset = 8.into();
+        r.adjacency_len = 16.into();
+        assert!(r.check(0, 12, 8, 4096, true).is_ok());
+        assert!(r.check(0, 12, 8, 20, true).is_err(), "tables past the area");
+        r.adjacency_len = 0.into();
+        assert!(
+            r.check(0, 12, 8, 4096, true).is_err(),
+            "an offset without a length"
+        );
+        let mut r = t;
+        r.min_height = 5.0.into();
+        assert!(r.check(0, 12, 8, 0, true).is_err(), "min above max");
+        r.min_height = f32::INFINITY.into();
+        r.max_height = f32::NEG_INFINITY.into();
+        assert!(
+            r.check(0, 12, 8, 0, true).is_ok(),
+            "an all-void tile's empty range"
+        );
+        for name in ["", ".a.fmrh", "a.tif", "a/b.fmrh", "../a.fmrh", "é.fmrh"] {
+            assert!(!tile_name_is_valid(name), "{name:?}");
+        }
+        assert!(tile_name_is_valid("N43E006-2.fmrh"));
+        assert!(!tile_name_is_valid(&format!("{}.fmrh", "a".repeat(52))));
+    }
+
+    #[test]
+    fn a_pin_names_the_state_not_the_slot() {
+        use crate::format::{CommitRecord, StateRoots, COMMIT_RECOVERY_NEEDED};
+        let r = CommitRecord::new(4096, 5, 1 << 20, 0, StateRoots::default());
+        let pin = StatePin::of(&r);
+        // A mark or a clean close: another txn id and flags, the same state.
+        assert!(pin.matches(&r.copy_as(9, COMMIT_RECOVERY_NEEDED)));
+        // Another state: other roots, or pages another transaction wrote.
+        let mut roots = StateRoots::default();
+        roots.node_table.records = 3.into();
+        assert!(!pin.matches(&CommitRecord::new(4096, 5, 1 << 20, 0, roots)));
+        assert!(!pin.matches(&CommitRecord::new(
+            4096,
+            6,
+            1 << 20,
+            0,
+            StateRoots::default()
+        )));
+    }
+}
