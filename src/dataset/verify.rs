@@ -14,10 +14,8 @@ use crate::error::{Error, Result};
 use crate::format::manifest::ManifestSlot;
 use crate::format::Invariant;
 use crate::model::SampleRect;
+use crate::store::verify::Checks;
 use crate::store::{verify_pinned, CheckReport, CheckStatus, FileSource, VerifyMode};
-
-/// At most this many messages are kept per check.
-const MAX_MESSAGES: usize = 20;
 
 /// One tile's result.
 #[derive(Clone, Debug, Serialize)]
@@ -54,69 +52,23 @@ pub struct DatasetReport {
     pub stray_files: Vec<String>,
 }
 
-struct Checks(Vec<CheckReport>);
-
-impl Checks {
-    fn new() -> Checks {
-        Checks(
-            Invariant::DATASET
-                .iter()
-                .map(|&id| CheckReport {
-                    id,
-                    name: id.name(),
-                    status: CheckStatus::Skipped,
-                    failure_count: 0,
-                    failures: Vec::new(),
-                })
-                .collect(),
-        )
-    }
-
-    fn get(&mut self, id: Invariant) -> &mut CheckReport {
-        let i = Invariant::DATASET
-            .iter()
-            .position(|&d| d == id)
-            .unwrap_or(0);
-        &mut self.0[i]
-    }
-
-    fn pass(&mut self, id: Invariant) {
-        let r = self.get(id);
-        if r.status == CheckStatus::Skipped {
-            r.status = CheckStatus::Passed;
+/// A corruption of a dataset invariant becomes its failure; of a container invariant (a
+/// tile's), a D-4 failure located at `what`; anything else stops the check.
+fn absorb<T>(checks: &mut Checks, what: &str, result: Result<T>) -> Result<Option<T>> {
+    match result {
+        Err(Error::Corrupt {
+            invariant,
+            location,
+            detail,
+            ..
+        }) if !checks.knows(invariant) => {
+            checks.fail(
+                Invariant::TilePins,
+                format!("{what}{invariant} at {location}: {detail}"),
+            );
+            Ok(None)
         }
-    }
-
-    fn fail(&mut self, id: Invariant, message: String) {
-        let r = self.get(id);
-        r.status = CheckStatus::Failed;
-        r.failure_count += 1;
-        if r.failures.len() < MAX_MESSAGES {
-            r.failures.push(message);
-        }
-    }
-
-    /// A corruption of a dataset invariant becomes its failure; of a container invariant,
-    /// a D-4 failure of `what`; anything else stops the check.
-    fn absorb<T>(&mut self, what: &str, result: Result<T>) -> Result<Option<T>> {
-        match result {
-            Ok(v) => Ok(Some(v)),
-            Err(Error::Corrupt {
-                invariant,
-                location,
-                detail,
-                ..
-            }) => {
-                let id = if Invariant::DATASET.contains(&invariant) {
-                    invariant
-                } else {
-                    Invariant::TilePins
-                };
-                self.fail(id, format!("{what}{invariant} at {location}: {detail}"));
-                Ok(None)
-            }
-            Err(e) => Err(e),
-        }
+        other => checks.absorb(other),
     }
 }
 
@@ -127,7 +79,7 @@ pub fn verify(
     mode: VerifyMode,
     progress: &dyn crate::progress::Progress,
 ) -> Result<DatasetReport> {
-    let mut checks = Checks::new();
+    let mut checks = Checks::of(&Invariant::DATASET);
     let path = dir.join(MANIFEST_NAME);
     let mut report = DatasetReport {
         mode,
@@ -141,10 +93,10 @@ pub fn verify(
     // D-1 and D-2: the state a reader takes, and its head. The other slot must be empty,
     // an older valid record, or (after a crash while it was written) torn: a torn inactive
     // slot is what a crash leaves, and the next commit overwrites it.
-    let dataset = match checks.absorb("", Dataset::open(dir))? {
+    let dataset = match absorb(&mut checks, "", Dataset::open(dir))? {
         Some(d) => d,
         None => {
-            report.checks = checks.0;
+            report.checks = checks.into_reports();
             return Ok(report);
         }
     };
@@ -169,8 +121,8 @@ pub fn verify(
     }
     checks.pass(Invariant::ManifestPages);
     // Every tile page (D-2), then the records as a whole (D-3).
-    let Some(tiles) = checks.absorb("", dataset.tiles())? else {
-        report.checks = checks.0;
+    let Some(tiles) = absorb(&mut checks, "", dataset.tiles())? else {
+        report.checks = checks.into_reports();
         return Ok(report);
     };
     check_records(&dataset, &tiles, &mut checks);
@@ -188,7 +140,11 @@ pub fn verify(
             failures: Vec::new(),
         };
         let opened = match FileSource::open(&file) {
-            Ok(src) => checks.absorb(&at, verify_pinned(src, tile.pin(), mode, progress))?,
+            Ok(src) => absorb(
+                &mut checks,
+                &at,
+                verify_pinned(src, tile.pin(), mode, progress),
+            )?,
             Err(e) => {
                 checks.fail(
                     Invariant::TilePins,
@@ -215,7 +171,7 @@ pub fn verify(
             }
         }
         let store = if tr.valid {
-            checks.absorb(&at, dataset.open_tile(tile))?
+            absorb(&mut checks, &at, dataset.open_tile(tile))?
         } else {
             None
         };
@@ -236,7 +192,7 @@ pub fn verify(
                     }
                 }
                 Err(e) => {
-                    checks.absorb::<()>(&at, Err(e))?;
+                    absorb::<()>(&mut checks, &at, Err(e))?;
                 }
             }
         }
@@ -256,8 +212,8 @@ pub fn verify(
                 col1: o.col1 - t.rect().col0,
                 row1: o.row1 - t.rect().row0,
             };
-            let va = checks.absorb("", sa.read_window(local(&tiles[a])))?;
-            let vb = checks.absorb("", sb.read_window(local(&tiles[b])))?;
+            let va = absorb(&mut checks, "", sa.read_window(local(&tiles[a])))?;
+            let vb = absorb(&mut checks, "", sb.read_window(local(&tiles[b])))?;
             if let (Some(va), Some(vb)) = (va, vb) {
                 let w = o.col1 - o.col0 + 1;
                 if let Some(i) =
@@ -286,15 +242,15 @@ pub fn verify(
     let mut edges: Vec<Option<std::sync::Arc<TileEdges>>> = Vec::with_capacity(tiles.len());
     for (t, store) in tiles.iter().zip(&open) {
         edges.push(match store {
-            Some(s) => checks
-                .absorb("", TileEdges::read(s, &t.record))?
-                .map(std::sync::Arc::new),
+            Some(s) => {
+                absorb(&mut checks, "", TileEdges::read(s, &t.record))?.map(std::sync::Arc::new)
+            }
             None => None,
         });
     }
     for (k, t) in tiles.iter().enumerate() {
         let at = format!("tile {} ({})", t.index, t.name());
-        let Some(stored) = checks.absorb("", dataset.borders(t))? else {
+        let Some(stored) = absorb(&mut checks, "", dataset.borders(t))? else {
             continue;
         };
         let mut lookup = |j: usize| -> crate::error::Result<std::sync::Arc<TileEdges>> {
@@ -327,8 +283,11 @@ pub fn verify(
     }
     checks.pass(Invariant::AdjacentClusters);
     report.stray_files = stray_files(dir, &tiles);
-    report.valid = checks.0.iter().all(|c| c.status == CheckStatus::Passed);
-    report.checks = checks.0;
+    report.checks = checks.into_reports();
+    report.valid = report
+        .checks
+        .iter()
+        .all(|c| c.status == CheckStatus::Passed);
     Ok(report)
 }
 

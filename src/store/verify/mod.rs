@@ -94,15 +94,20 @@ pub struct VerifyReport {
     pub checks: Vec<CheckReport>,
 }
 
-/// The reports being filled in, one per invariant.
-pub(super) struct Checks {
+/// The reports being filled in, one per invariant (a container's, or a dataset's).
+pub(crate) struct Checks {
     reports: Vec<CheckReport>,
 }
 
 impl Checks {
     fn new() -> Checks {
+        Checks::of(&Invariant::ALL)
+    }
+
+    /// One report per invariant of `ids`, each skipped until checked.
+    pub(crate) fn of(ids: &[Invariant]) -> Checks {
         Checks {
-            reports: Invariant::ALL
+            reports: ids
                 .iter()
                 .map(|&id| CheckReport {
                     id,
@@ -115,13 +120,36 @@ impl Checks {
         }
     }
 
+    /// Whether `id` is one of the invariants these checks report.
+    pub(crate) fn knows(&self, id: Invariant) -> bool {
+        self.reports.iter().any(|r| r.id == id)
+    }
+
     fn report(&mut self, id: Invariant) -> &mut CheckReport {
-        // `reports` holds one entry per invariant, in id order.
-        &mut self.reports[usize::from(id.number()) - 1]
+        let at = match self.reports.iter().position(|r| r.id == id) {
+            Some(at) => at,
+            // Never lose a finding: an invariant outside the list gets a report of its own.
+            None => {
+                self.reports.push(CheckReport {
+                    id,
+                    name: id.name(),
+                    status: CheckStatus::Skipped,
+                    failure_count: 0,
+                    failures: Vec::new(),
+                });
+                self.reports.len() - 1
+            }
+        };
+        &mut self.reports[at]
+    }
+
+    /// The reports, in the order of the list they were made from.
+    pub(crate) fn into_reports(self) -> Vec<CheckReport> {
+        self.reports
     }
 
     /// Marks `id` passed, unless it already failed.
-    pub fn pass(&mut self, id: Invariant) {
+    pub(crate) fn pass(&mut self, id: Invariant) {
         let r = self.report(id);
         if r.status == CheckStatus::Skipped {
             r.status = CheckStatus::Passed;
@@ -129,7 +157,7 @@ impl Checks {
     }
 
     /// Records a failure of `id`.
-    pub fn fail(&mut self, id: Invariant, message: String) {
+    pub(crate) fn fail(&mut self, id: Invariant, message: String) {
         let r = self.report(id);
         r.status = CheckStatus::Failed;
         r.failure_count += 1;
@@ -174,13 +202,13 @@ impl Checks {
     }
 
     /// Whether any check has failed so far.
-    pub fn any_failed(&self) -> bool {
+    pub(crate) fn any_failed(&self) -> bool {
         self.reports.iter().any(|r| r.status == CheckStatus::Failed)
     }
 
     /// Takes `result` in: a corruption becomes a failure of its invariant (`Ok(None)`);
     /// any other error (I/O, a bug) stops the verification.
-    pub fn absorb<T>(&mut self, result: Result<T>) -> Result<Option<T>> {
+    pub(crate) fn absorb<T>(&mut self, result: Result<T>) -> Result<Option<T>> {
         match result {
             Ok(v) => Ok(Some(v)),
             // A dataset's invariant (a tile's pin) is the dataset validator's to report.
@@ -189,7 +217,7 @@ impl Checks {
                 location,
                 detail,
                 ..
-            }) if Invariant::ALL.contains(&invariant) => {
+            }) if self.knows(invariant) => {
                 self.fail(invariant, format!("{location}: {detail}"));
                 Ok(None)
             }
