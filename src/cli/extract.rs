@@ -38,7 +38,20 @@ pub fn run(args: &ExtractArgs) -> Result<ExitCode, Error> {
         out.write_dataset(&hf, window, &args.file, ds.txn_id())?;
         return Ok(ExitCode::SUCCESS);
     }
-    let store = super::open(&args.file)?;
+    if let Some(url) = super::url_of(&args.file) {
+        #[cfg(feature = "remote")]
+        return extract(args, &fmrh::Store::open_url(url)?);
+        #[cfg(not(feature = "remote"))]
+        return Err(super::no_remote(url));
+    }
+    extract(args, &super::open(&args.file)?)
+}
+
+/// Extracts from `store`.
+fn extract<S: fmrh::store::Source>(
+    args: &ExtractArgs,
+    store: &fmrh::Store<S>,
+) -> Result<ExitCode, Error> {
     let data = store.domain().data_rect();
     let window = match &args.window {
         Some(text) => super::parse_window(text)?,
@@ -50,6 +63,6 @@ pub fn run(args: &ExtractArgs) -> Result<ExitCode, Error> {
     } else {
         store.read_window_with_progress(window, &super::progress::Bar::new())?
     };
-    out.write(&hf, window, "fmrh extract", &args.file, &store)?;
+    out.write(&hf, window, "fmrh extract", &args.file, store)?;
     Ok(ExitCode::SUCCESS)
 }

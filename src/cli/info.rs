@@ -348,7 +348,20 @@ pub fn run(args: &InfoArgs) -> Result<ExitCode, Error> {
     if super::is_dataset(&args.file)? {
         return run_dataset(args);
     }
-    let store = super::open(&args.file)?;
+    if let Some(url) = super::url_of(&args.file) {
+        #[cfg(feature = "remote")]
+        return report(args, &fmrh::Store::open_url(url)?);
+        #[cfg(not(feature = "remote"))]
+        return Err(super::no_remote(url));
+    }
+    report(args, &super::open(&args.file)?)
+}
+
+/// Reports on `store`.
+fn report<S: fmrh::store::Source>(
+    args: &InfoArgs,
+    store: &fmrh::Store<S>,
+) -> Result<ExitCode, Error> {
     let h = store.header();
     let d = h.domain;
     let nodes = store.nodes()?;

@@ -129,6 +129,20 @@ pub fn open(path: &Path) -> Result<Store<FileSource>, Error> {
     Store::open(path)
 }
 
+/// The URL `path` names, when it is one (`http://`, `https://`): a remote container.
+pub fn url_of(path: &Path) -> Option<&str> {
+    path.to_str()
+        .filter(|t| t.starts_with("http://") || t.starts_with("https://"))
+}
+
+/// The error for a URL in a build without the `remote` feature.
+#[cfg(not(feature = "remote"))]
+pub fn no_remote(url: &str) -> Error {
+    Error::InvalidArgument(format!(
+        "{url}: this fmrh was built without the `remote` feature (HTTP range reads)"
+    ))
+}
+
 /// Whether `path` names a dataset (a directory with a MANIFEST) rather than a container; a
 /// directory without one is an error, not a file to open.
 pub fn is_dataset(path: &Path) -> Result<bool, Error> {

@@ -191,6 +191,12 @@ pub fn run(args: &SceneArgs) -> Result<ExitCode, Error> {
     if super::is_dataset(&args.file)? {
         return run_dataset(args, camera, options, output);
     }
+    if let Some(url) = super::url_of(&args.file) {
+        #[cfg(feature = "remote")]
+        return run_on(args, &fmrh::Store::open_url(url)?, camera, options, output);
+        #[cfg(not(feature = "remote"))]
+        return Err(super::no_remote(url));
+    }
     if args.view.mmap && fmrh::store::lock::SUPPORTED {
         // SAFETY: the --mmap contract, stated in its help: the state is registered, so fmrh
         // writers leave its pages alone, and no other tool modifies the file meanwhile.

@@ -33,8 +33,19 @@ pub fn run(args: &VerifyArgs) -> Result<ExitCode, Error> {
         return run_dataset(args);
     }
     let path = &args.file;
+    if let Some(url) = super::url_of(path) {
+        #[cfg(feature = "remote")]
+        return check(args, fmrh::store::remote::HttpSource::open(url)?);
+        #[cfg(not(feature = "remote"))]
+        return Err(super::no_remote(url));
+    }
     let file = File::open(path).map_err(|e| Error::input(path, e.to_string()))?;
-    let src = FileSource::new(file, path)?;
+    check(args, FileSource::new(file, path)?)
+}
+
+/// Verifies the container `src` holds and reports.
+fn check<S: fmrh::store::Source>(args: &VerifyArgs, src: S) -> Result<ExitCode, Error> {
+    let path = &args.file;
     let mode = if args.full {
         VerifyMode::Full
     } else {

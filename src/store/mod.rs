@@ -60,6 +60,8 @@ pub mod lock;
 pub(crate) mod open;
 pub mod pagecache;
 mod read;
+#[cfg(feature = "remote")]
+pub mod remote;
 pub mod source;
 pub mod txn;
 pub mod verify;
@@ -161,6 +163,16 @@ impl Store<FileSource> {
     /// when neither commit slot publishes that state.
     pub fn open_pinned(path: &Path, pin: crate::format::manifest::StatePin) -> Result<Self> {
         open::open_at(FileSource::open(path)?, open::Walk::Lean, Some(pin))
+    }
+}
+
+#[cfg(feature = "remote")]
+impl Store<remote::HttpSource> {
+    /// Opens the container at `url` (`http://` or `https://`) with range requests, pinned to
+    /// the object's version (`docs/remote-design.md`): a change on the server is an error,
+    /// never a mix of versions.
+    pub fn open_url(url: &str) -> Result<Self> {
+        Store::from_source(remote::HttpSource::open(url)?)
     }
 }
 
