@@ -54,6 +54,9 @@ struct Report {
     /// What opening read, and what the whole path read after it (index and node pages once
     /// each through the page cache, payloads in coalesced runs; prefetch included).
     reads: Reads,
+    /// A remote container: what the whole path asked its server for, opening included.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    requests: Option<fmrh::store::RequestStats>,
 }
 
 #[derive(Serialize)]
@@ -73,6 +76,12 @@ pub fn run(args: &FlyArgs) -> Result<ExitCode, Error> {
     let cameras = path::parse(&text, &template)?;
     if super::is_dataset(&args.file)? {
         return replay_dataset(args, &cameras);
+    }
+    if let Some(url) = super::url_of(&args.file) {
+        #[cfg(feature = "remote")]
+        return replay(args, Arc::new(Store::open_url(url)?), &cameras);
+        #[cfg(not(feature = "remote"))]
+        return Err(super::no_remote(url));
     }
     if args.view.mmap && fmrh::store::lock::SUPPORTED {
         // SAFETY: the --mmap contract, stated in its help: the state is registered, so fmrh
@@ -120,6 +129,7 @@ fn replay<S: fmrh::store::Source + 'static>(
             open,
             path: counted.read_stats(),
         },
+        requests: counted.source().request_stats(),
     };
     if args.json {
         super::print_json(&report)?;
@@ -166,6 +176,7 @@ fn replay_dataset(args: &FlyArgs, cameras: &[Camera]) -> Result<ExitCode, Error>
             open: ds.open_reads(),
             path: scheduler.read_stats().plus(&ds.manifest_reads()),
         },
+        requests: ds.request_stats(),
     };
     if args.json {
         super::print_json(&report)?;
@@ -236,4 +247,10 @@ read: open {} calls, {} bytes; the path {} calls, {} metadata bytes, {} payload 
         p.metadata_bytes,
         p.payload_bytes
     );
+    if let Some(q) = &r.requests {
+        println!(
+            "requests: {} requests, {} bytes, {} rounds ({} retries), opening included",
+            q.requests, q.bytes, q.rounds, q.retries
+        );
+    }
 }

@@ -218,8 +218,9 @@ struct DatasetInfo {
     spacing_m: Option<[f64; 2]>,
     georeference: Option<GeoInfo>,
     seam: &'static str,
-    /// The manifest and every tile file, as the file system says.
-    total_bytes: u64,
+    /// The manifest and every tile file, as the file system says; `None` for a remote
+    /// dataset, whose tiles' sizes would cost a request each.
+    total_bytes: Option<u64>,
     tiles: Vec<TileInfo>,
 }
 
@@ -243,9 +244,7 @@ fn run_dataset(args: &InfoArgs) -> Result<ExitCode, Error> {
     let tiles = ds.tiles()?;
     let record = ds.state().record;
     let grid = ds.grid();
-    let manifest_bytes = std::fs::metadata(args.file.join(fmrh::dataset::manifest::MANIFEST_NAME))
-        .map_err(|e| Error::io(&args.file, e))?
-        .len();
+    let manifest_bytes = ds.manifest_len();
     let tiles: Vec<TileInfo> = tiles
         .iter()
         .map(|t| TileInfo {
@@ -282,7 +281,11 @@ fn run_dataset(args: &InfoArgs) -> Result<ExitCode, Error> {
             SEAM_MEAN => "mean",
             _ => "strict",
         },
-        total_bytes: manifest_bytes + tiles.iter().filter_map(|t| t.file_bytes).sum::<u64>(),
+        total_bytes: tiles
+            .iter()
+            .map(|t| t.file_bytes)
+            .sum::<Option<u64>>()
+            .map(|t| t + manifest_bytes),
         tiles,
     };
     if args.json {
@@ -290,12 +293,13 @@ fn run_dataset(args: &InfoArgs) -> Result<ExitCode, Error> {
         return Ok(ExitCode::SUCCESS);
     }
     println!(
-        "{}: fmrh dataset (manifest {}), txn {}, {} tiles, {} bytes in all",
+        "{}: fmrh dataset (manifest {}), txn {}, {} tiles, {}",
         args.file.display(),
         info.manifest_version,
         info.txn_id,
         info.tile_count,
         info.total_bytes
+            .map_or("remote".to_string(), |b| format!("{b} bytes in all"))
     );
     println!("  grid        {} x {} samples", info.columns, info.rows);
     match info.spacing_m {

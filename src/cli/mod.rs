@@ -129,10 +129,11 @@ pub fn open(path: &Path) -> Result<Store<FileSource>, Error> {
     Store::open(path)
 }
 
-/// The URL `path` names, when it is one (`http://`, `https://`): a remote container.
+/// The URL `path` names, when it is one (`http://`, `https://`, `s3://`): a remote
+/// container or dataset.
 pub fn url_of(path: &Path) -> Option<&str> {
     path.to_str()
-        .filter(|t| t.starts_with("http://") || t.starts_with("https://"))
+        .filter(|t| t.starts_with("http://") || t.starts_with("https://") || t.starts_with("s3://"))
 }
 
 /// The error for a URL in a build without the `remote` feature.
@@ -146,6 +147,10 @@ pub fn no_remote(url: &str) -> Error {
 /// Whether `path` names a dataset (a directory with a MANIFEST) rather than a container; a
 /// directory without one is an error, not a file to open.
 pub fn is_dataset(path: &Path) -> Result<bool, Error> {
+    if url_of(path).is_some() {
+        // A URL names a dataset when it ends with `/` or `/MANIFEST`.
+        return Ok(fmrh::dataset::is_dataset(path));
+    }
     if !path.is_dir() {
         return Ok(false);
     }

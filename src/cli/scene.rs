@@ -10,7 +10,7 @@ use fmrh::model::SampleRect;
 use fmrh::scene::{
     load_blocks, reconstruct, Camera, Mode, Scene, SceneOptions, Terrain, DEFAULT_GAP, PAYLOAD_GAP,
 };
-use fmrh::store::ReadStats;
+use fmrh::store::{ReadStats, RequestStats};
 use fmrh::Error;
 
 /// The camera options `scene` and `fly` share.
@@ -166,6 +166,22 @@ struct Report<'a> {
     uncovered_samples: Option<u64>,
     /// What was read, by phase.
     reads: Reads,
+    /// A remote container: the request plan, by phase.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    requests: Option<RequestPlan>,
+}
+
+/// What a remote container's scene asked its server for, by phase (`docs/remote-design.md`).
+#[derive(Serialize)]
+struct RequestPlan {
+    /// Opening: the prefix and the suffix, one round.
+    open: RequestStats,
+    /// Scheduling: the metadata area (index, node and block pages).
+    schedule: RequestStats,
+    /// Loading the blocks: their payloads, in batches.
+    load: Option<RequestStats>,
+    /// Scheduling and loading: what the scene cost after opening.
+    scene: RequestStats,
 }
 
 /// Runs `fmrh scene`.
@@ -215,9 +231,11 @@ fn run_on<S: fmrh::store::Source>(
     output: Option<super::sidecar::F32Output>,
 ) -> Result<ExitCode, Error> {
     let before = store.read_stats();
+    let asked = store.source().request_stats();
     let terrain = Terrain::with_spacing(store, args.view.spacing(store, &args.file)?)?;
     let scene = terrain.scene(&camera, &options)?;
     let scheduled = store.read_stats();
+    let asked_scheduled = store.source().request_stats();
     let mut uncovered = None;
     if args.load && output.is_none() {
         load_blocks(store, &scene.blocks, PAYLOAD_GAP)?;
@@ -239,6 +257,15 @@ fn run_on<S: fmrh::store::Source>(
         schedule: scheduled.since(&before),
         load: (args.load || output.is_some()).then(|| store.read_stats().since(&scheduled)),
     };
+    let requests = match (asked, asked_scheduled, store.source().request_stats()) {
+        (Some(open), Some(scheduled), Some(end)) => Some(RequestPlan {
+            open,
+            schedule: scheduled.since(&open),
+            load: (args.load || output.is_some()).then(|| end.since(&scheduled)),
+            scene: end.since(&open),
+        }),
+        _ => None,
+    };
     if args.json {
         super::print_json(&Report {
             mode: scene.mode,
@@ -249,11 +276,30 @@ fn run_on<S: fmrh::store::Source>(
             stats: &scene.stats,
             uncovered_samples: uncovered,
             reads,
+            requests,
         })?;
     } else {
         print_text(&scene, uncovered, &reads);
+        if let Some(plan) = &requests {
+            print_plan(plan);
+        }
     }
     Ok(ExitCode::SUCCESS)
+}
+
+fn print_plan(plan: &RequestPlan) {
+    let r = |what: &str, s: &RequestStats| {
+        println!(
+            "  requests    {what}: {} requests, {} bytes, {} rounds ({} retries)",
+            s.requests, s.bytes, s.rounds, s.retries
+        );
+    };
+    r("open", &plan.open);
+    r("schedule", &plan.schedule);
+    if let Some(l) = &plan.load {
+        r("load", l);
+    }
+    r("scene", &plan.scene);
 }
 
 fn print_text(scene: &Scene, uncovered: Option<u64>, reads: &Reads) {
@@ -346,6 +392,18 @@ struct DatasetReport<'a> {
     uncovered_samples: Option<u64>,
     tiles: &'a [fmrh::dataset::TilePart],
     reads: DatasetReads,
+    /// A remote dataset: the request plan (tiles in parallel, see `Dataset::request_stats`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    requests: Option<DatasetRequests>,
+}
+
+/// What a remote dataset's scene asked its servers for.
+#[derive(Serialize)]
+struct DatasetRequests {
+    /// Opening the dataset: the manifest's prefix and suffix.
+    open: RequestStats,
+    /// The scene after opening: tile pages, the tiles' opening, metadata and payloads.
+    scene: RequestStats,
 }
 
 /// What a dataset scene read.
@@ -372,6 +430,7 @@ fn run_dataset(
     output: Option<super::sidecar::F32Output>,
 ) -> Result<ExitCode, Error> {
     let ds = fmrh::dataset::Dataset::open(&args.file)?;
+    let asked = ds.request_stats();
     let spacing = args
         .view
         .spacing
@@ -430,6 +489,12 @@ fn run_dataset(
             uncovered_samples: uncovered,
             tiles: &scene.tiles,
             reads,
+            requests: asked
+                .zip(ds.request_stats())
+                .map(|(open, end)| DatasetRequests {
+                    open,
+                    scene: end.since(&open),
+                }),
         })?;
         return Ok(ExitCode::SUCCESS);
     }

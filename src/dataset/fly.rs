@@ -19,7 +19,7 @@ use super::reader::{Dataset, Tile};
 use crate::error::Result;
 use crate::model::SampleRect;
 use crate::scene::{Camera, FrameStats, ScheduleOptions, Scheduler, WorldFrame};
-use crate::store::{FileSource, ReadStats};
+use crate::store::{AnySource, ReadStats};
 
 /// One frame over a dataset.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -41,7 +41,7 @@ pub struct DatasetScheduler<'d> {
     dataset: &'d Dataset,
     options: ScheduleOptions,
     frame: WorldFrame,
-    tiles: BTreeMap<u64, (SampleRect, Scheduler<FileSource>)>,
+    tiles: BTreeMap<u64, (SampleRect, Scheduler<AnySource>)>,
     frames: u64,
     /// What the tiles read, of schedulers already dropped.
     dropped_reads: ReadStats,

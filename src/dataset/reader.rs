@@ -11,10 +11,14 @@ use crate::error::{Error, Result};
 use crate::format::manifest::{StatePin, TileRecord};
 use crate::heightfield::{Georeference, Heightfield, Metadata};
 use crate::model::SampleRect;
-use crate::store::{Counted, FileSource, ReadStats, Source, Store};
+use crate::store::{is_url, AnySource, Counted, ReadStats, Source, Store};
 
 /// Tile containers a dataset keeps open at once; the least recently used is closed first.
 pub const OPEN_TILES: usize = 64;
+
+/// Tiles a remote dataset works on at once (opening, scheduling, loading), each over its
+/// own connections, so that their network rounds overlap. Local tiles go one at a time.
+pub const TILE_WORKERS: usize = 64;
 
 /// One tile as the manifest records it, with its index in the manifest's order.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -45,21 +49,50 @@ impl Tile {
 /// A dataset opened for reading.
 pub struct Dataset {
     dir: PathBuf,
-    src: Counted<FileSource>,
+    src: Counted<AnySource>,
     state: ManifestState,
     open_reads: ReadStats,
-    tiles: Mutex<Vec<(u64, Arc<Store<FileSource>>)>>,
+    tiles: Mutex<Vec<(u64, Arc<Store<AnySource>>)>>,
     tiles_opened: std::sync::atomic::AtomicU64,
 }
 
-/// Whether `path` is a dataset: a directory holding a `MANIFEST`.
+/// Whether `path` is a dataset: a directory holding a `MANIFEST`, or a URL that ends with
+/// `/` or `/MANIFEST` (a remote dataset: its tiles lie beside the manifest).
 pub fn is_dataset(path: &Path) -> bool {
-    path.is_dir() && path.join(MANIFEST_NAME).is_file()
+    match path.to_str().filter(|t| is_url(t)) {
+        Some(url) => url.ends_with('/') || url.ends_with(&format!("/{MANIFEST_NAME}")),
+        None => path.is_dir() && path.join(MANIFEST_NAME).is_file(),
+    }
+}
+
+/// The directory part of a dataset URL: without `/MANIFEST` or the trailing `/`.
+fn dataset_base(url: &str) -> &str {
+    let url = url.strip_suffix(MANIFEST_NAME).unwrap_or(url);
+    url.trim_end_matches('/')
 }
 
 impl Dataset {
-    /// Opens the dataset in directory `dir`: reads its manifest's slots and head.
+    /// Opens the dataset in directory `dir`: reads its manifest's slots and head. `dir` may
+    /// be a URL (`http://`, `https://`, `s3://`, with the `remote` feature): the manifest is
+    /// `DIR/MANIFEST` and each tile `DIR/NAME`, read with range requests; the manifest pins
+    /// each tile's state, so a tile replaced on the server fails its pin.
     pub fn open(dir: &Path) -> Result<Dataset> {
+        if let Some(url) = dir.to_str().filter(|t| is_url(t)) {
+            let base = dataset_base(url);
+            let src = Counted::new(AnySource::open(Path::new(&format!(
+                "{base}/{MANIFEST_NAME}"
+            )))?);
+            let state = ManifestState::read(&src)?;
+            let open_reads = src.stats();
+            return Ok(Dataset {
+                dir: PathBuf::from(base),
+                src,
+                state,
+                open_reads,
+                tiles: Mutex::new(Vec::new()),
+                tiles_opened: 0.into(),
+            });
+        }
         if !dir.is_dir() {
             return Err(Error::input(
                 dir,
@@ -73,7 +106,7 @@ impl Dataset {
                 "no MANIFEST in this directory: not an fmrh dataset",
             ));
         }
-        let src = Counted::new(FileSource::open(&path)?);
+        let src = Counted::new(AnySource::open(&path)?);
         let state = ManifestState::read(&src)?;
         let open_reads = src.stats();
         Ok(Dataset {
@@ -87,8 +120,13 @@ impl Dataset {
     }
 
     /// The manifest, as this dataset reads it.
-    pub(crate) fn manifest_source(&self) -> &Counted<FileSource> {
+    pub(crate) fn manifest_source(&self) -> &Counted<AnySource> {
         &self.src
+    }
+
+    /// Bytes in the manifest file.
+    pub fn manifest_len(&self) -> u64 {
+        self.src.len()
     }
 
     /// The directory.
@@ -215,14 +253,82 @@ impl Dataset {
         Ok(out)
     }
 
-    /// The path of a tile's file.
+    /// The path of a tile's file (its URL, for a remote dataset).
     pub fn tile_path(&self, tile: &Tile) -> PathBuf {
-        self.dir.join(tile.name())
+        match self.dir.to_str().filter(|t| is_url(t)) {
+            Some(base) => PathBuf::from(format!("{base}/{}", tile.name())),
+            None => self.dir.join(tile.name()),
+        }
+    }
+
+    /// Whether the dataset is read from a URL.
+    pub fn is_remote(&self) -> bool {
+        self.src.inner().is_remote()
+    }
+
+    /// What the dataset has asked its servers for, when it is remote: the manifest's
+    /// requests and those of every tile opened so far (tiles closed since are not counted).
+    /// Tiles work [`TILE_WORKERS`] at a time, so the rounds are the manifest's plus, for
+    /// each wave of that many tiles, the most any tile took: a bound on the critical path.
+    pub fn request_stats(&self) -> Option<crate::store::RequestStats> {
+        let manifest = self.src.request_stats()?;
+        let mut sum = crate::store::RequestStats::default();
+        let mut slowest = 0;
+        let mut count = 0;
+        if let Ok(open) = self.tiles.lock() {
+            for (_, store) in open.iter() {
+                if let Some(r) = store.source().request_stats() {
+                    sum = sum.plus(&r);
+                    slowest = slowest.max(r.rounds);
+                    count += 1;
+                }
+            }
+        }
+        sum.rounds = slowest * (count as u64).div_ceil(TILE_WORKERS as u64);
+        Some(manifest.plus(&sum))
+    }
+
+    /// `job` for each of `tiles`, in order: one after another when the dataset is local,
+    /// [`TILE_WORKERS`] at a time when it is remote.
+    pub(crate) fn for_tiles<T: Send>(
+        &self,
+        tiles: &[Tile],
+        job: impl Fn(&Tile) -> Result<T> + Sync,
+    ) -> Result<Vec<T>> {
+        if !self.is_remote() || tiles.len() < 2 {
+            return tiles.iter().map(job).collect();
+        }
+        let next = std::sync::atomic::AtomicUsize::new(0);
+        let results: Vec<Mutex<Option<Result<T>>>> =
+            tiles.iter().map(|_| Mutex::new(None)).collect();
+        let work = || loop {
+            let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            let Some(tile) = tiles.get(k) else { break };
+            let done = job(tile);
+            if let Ok(mut slot) = results[k].lock() {
+                *slot = Some(done);
+            }
+        };
+        std::thread::scope(|s| {
+            for _ in 1..TILE_WORKERS.min(tiles.len()) {
+                s.spawn(work);
+            }
+            work();
+        });
+        results
+            .into_iter()
+            .map(|r| {
+                r.into_inner()
+                    .ok()
+                    .flatten()
+                    .unwrap_or_else(|| Err(Error::Internal("a tile job did not run".into())))
+            })
+            .collect()
     }
 
     /// The tile's container at its pinned state, opened on first use and kept among the
     /// [`OPEN_TILES`] most recently used.
-    pub fn open_tile(&self, tile: &Tile) -> Result<Arc<Store<FileSource>>> {
+    pub fn open_tile(&self, tile: &Tile) -> Result<Arc<Store<AnySource>>> {
         let mut open = self
             .tiles
             .lock()
@@ -251,13 +357,16 @@ impl Dataset {
     /// Opens a tile's container at its pinned state, checking that it is the size its
     /// record says. A tile whose file no longer holds the pinned state was superseded when
     /// the manifest has moved on since this dataset was opened, and is corrupt otherwise.
-    pub fn open_tile_uncached(&self, tile: &Tile) -> Result<Store<FileSource>> {
+    pub fn open_tile_uncached(&self, tile: &Tile) -> Result<Store<AnySource>> {
         let path = self.tile_path(tile);
-        let store = match Store::open_pinned(&path, tile.pin()) {
+        let opened = AnySource::open_tile(&path, true)
+            .and_then(|src| Store::open_pinned_source(src, tile.pin()));
+        let remote = self.is_remote();
+        let store = match opened {
             Ok(s) => s,
             Err(e @ Error::Corrupt { .. }) => return Err(self.moved_on(e)),
             // A tile replaced by a newer dataset state has its file removed.
-            Err(e @ Error::Io { .. }) if !path.exists() => return Err(self.moved_on(e)),
+            Err(e @ Error::Io { .. }) if !remote && !path.exists() => return Err(self.moved_on(e)),
             Err(e) => return Err(e),
         };
         let d = store.domain();
@@ -282,6 +391,8 @@ impl Dataset {
     /// `e`, or `Superseded` when a newer dataset state has been published since this one.
     fn moved_on(&self, e: Error) -> Error {
         match super::manifest::latest_txn(&self.src) {
+            // A remote manifest replaced on the server: the reader's version is gone.
+            Err(changed @ Error::Io { .. }) if self.is_remote() => changed,
             Ok(Some(latest)) if latest > self.txn_id() => Error::Superseded {
                 path: self.dir.clone(),
                 txn: self.txn_id(),

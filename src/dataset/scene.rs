@@ -175,7 +175,9 @@ impl Dataset {
         let mut parts = Vec::new();
         let mut stats = SceneStats::default();
         let mut finest = Vec::new();
-        for tile in &tiles {
+        // Each tile's scene: one after another from local files; from a remote dataset, up
+        // to [`TILE_WORKERS`] tiles at once, so that their rounds overlap.
+        let per_tile = self.for_tiles(&tiles, |tile| {
             let r = tile.rect();
             let local_window = match options.window {
                 Some(w) => match w.intersect(&r) {
@@ -185,7 +187,7 @@ impl Dataset {
                         col1: p.col1 - r.col0,
                         row1: p.row1 - r.row0,
                     }),
-                    None => continue,
+                    None => return Ok(None),
                 },
                 None => None,
             };
@@ -198,6 +200,14 @@ impl Dataset {
                 ..*options
             };
             let scene = terrain.scene_with(&local_camera, &tile_options, p_min)?;
+            let reads = store.read_stats().since(&before);
+            Ok(Some((store, scene, reads)))
+        })?;
+        for (tile, done) in tiles.iter().zip(per_tile) {
+            let Some((store, scene, reads)) = done else {
+                continue;
+            };
+            let r = tile.rect();
             let s = &scene.stats;
             stats.blocks += s.blocks;
             stats.samples += s.samples;
@@ -220,7 +230,7 @@ impl Dataset {
                 window: scene.window.map(|w| shifted(&w, &r)),
                 blocks: scene.blocks.len() as u64,
                 cluster: s.cluster,
-                reads: store.read_stats().since(&before),
+                reads,
             });
             let fl = store.domain().finest_level();
             for b in scene.blocks {
@@ -422,16 +432,21 @@ impl Dataset {
     /// Reads and decodes every block of `scene`, tile by tile (each tile's payloads in
     /// coalesced runs), as a renderer would. Returns what that read from the tiles.
     pub fn load(&self, scene: &DatasetScene) -> Result<ReadStats> {
-        let mut total = ReadStats::default();
-        for part in &scene.tiles {
-            let tile = self.tile(part.tile)?;
-            let store = self.open_tile(&tile)?;
+        let tiles = scene
+            .tiles
+            .iter()
+            .map(|part| self.tile(part.tile))
+            .collect::<Result<Vec<_>>>()?;
+        let reads = self.for_tiles(&tiles, |tile| {
+            let store = self.open_tile(tile)?;
             let before = store.read_stats();
-            let s = scene.tile_scene(part.tile, &tile.rect());
+            let s = scene.tile_scene(tile.index, &tile.rect());
             crate::scene::load_blocks(&store, &s.blocks, crate::scene::PAYLOAD_GAP)?;
-            total = total.plus(&store.read_stats().since(&before));
-        }
-        Ok(total)
+            Ok(store.read_stats().since(&before))
+        })?;
+        Ok(reads
+            .iter()
+            .fold(ReadStats::default(), |total, r| total.plus(r)))
     }
 
     /// Samples `window` (dataset samples) from `scene`'s blocks, tile by tile: the surface

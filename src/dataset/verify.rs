@@ -15,7 +15,7 @@ use crate::format::manifest::ManifestSlot;
 use crate::format::Invariant;
 use crate::model::SampleRect;
 use crate::store::verify::Checks;
-use crate::store::{verify_pinned, CheckReport, CheckStatus, FileSource, VerifyMode};
+use crate::store::{verify_pinned, AnySource, CheckReport, CheckStatus, VerifyMode};
 
 /// One tile's result.
 #[derive(Clone, Debug, Serialize)]
@@ -80,7 +80,6 @@ pub fn verify(
     progress: &dyn crate::progress::Progress,
 ) -> Result<DatasetReport> {
     let mut checks = Checks::of(&Invariant::DATASET);
-    let path = dir.join(MANIFEST_NAME);
     let mut report = DatasetReport {
         mode,
         valid: false,
@@ -101,8 +100,7 @@ pub fn verify(
         }
     };
     checks.pass(Invariant::ManifestRecord);
-    let src = FileSource::open(&path)?;
-    let slots = read_slots(&src)?;
+    let slots = read_slots(dataset.manifest_source())?;
     let txn = dataset.txn_id();
     report.txn_id = Some(txn);
     report.tiles = dataset.tile_count();
@@ -127,7 +125,7 @@ pub fn verify(
     };
     check_records(&dataset, &tiles, &mut checks);
     // D-4: every tile at its pin.
-    let mut open: Vec<Option<std::sync::Arc<crate::store::Store<FileSource>>>> =
+    let mut open: Vec<Option<std::sync::Arc<crate::store::Store<AnySource>>>> =
         Vec::with_capacity(tiles.len());
     for tile in &tiles {
         let at = format!("tile {} ({}): ", tile.index, tile.name());
@@ -139,12 +137,20 @@ pub fn verify(
             valid: false,
             failures: Vec::new(),
         };
-        let opened = match FileSource::open(&file) {
+        let opened = match AnySource::open_tile(&file, true) {
             Ok(src) => absorb(
                 &mut checks,
                 &at,
                 verify_pinned(src, tile.pin(), mode, progress),
             )?,
+            // A network failure is not the dataset's fault: an error, not a finding.
+            Err(e @ Error::Io { .. })
+                if dataset.is_remote()
+                    && !matches!(&e, Error::Io { source, .. }
+                        if source.kind() == std::io::ErrorKind::NotFound) =>
+            {
+                return Err(e)
+            }
             Err(e) => {
                 checks.fail(
                     Invariant::TilePins,

@@ -76,7 +76,7 @@ use serde::Serialize;
 pub use crate::format::{ClusterInfo, FreePage, PayloadRef, ScanEntry, StoredBlock, StoredNode};
 pub use pagecache::ReadStats;
 pub use read::{Block, Children, CodeScan, Grid, HilbertScan, Layout, ParentGrid, ANCESTOR_CACHE};
-pub use source::{Bytes, Counted, FileSource, MmapSource, Source};
+pub use source::{is_url, AnySource, Bytes, Counted, FileSource, MmapSource, RequestStats, Source};
 pub use txn::{CommitSummary, Container, Recovery, Snapshot, WriteTxn};
 pub use verify::{
     verify, verify_pinned, verify_with_progress, CheckReport, CheckStatus, VerifyMode, VerifyReport,
@@ -163,6 +163,14 @@ impl Store<FileSource> {
     /// when neither commit slot publishes that state.
     pub fn open_pinned(path: &Path, pin: crate::format::manifest::StatePin) -> Result<Self> {
         open::open_at(FileSource::open(path)?, open::Walk::Lean, Some(pin))
+    }
+}
+
+impl<S: Source> Store<S> {
+    /// Opens the container `src` holds at the state `pin` names (see
+    /// [`Store::open_pinned`]).
+    pub fn open_pinned_source(src: S, pin: crate::format::manifest::StatePin) -> Result<Self> {
+        open::open_at(src, open::Walk::Lean, Some(pin))
     }
 }
 

@@ -278,7 +278,12 @@ pub(crate) fn open_at<S: Source>(src: S, walk: Walk, pin: Option<StatePin>) -> R
     let mut attempts = 0;
     loop {
         match open_once(&src, walk, pin) {
-            Ok(opened) => return Ok(opened.into_store(src)),
+            Ok(opened) => {
+                if let Some(area) = opened.metadata_area.clone() {
+                    src.advise_metadata(area);
+                }
+                return Ok(opened.into_store(src));
+            }
             Err(Error::Superseded { .. }) if attempts + 1 < OPEN_ATTEMPTS => attempts += 1,
             Err(e) => return Err(e),
         }
@@ -297,6 +302,10 @@ struct Opened {
     metadata_pages: Option<PageSet>,
     registered: bool,
     open_reads: ReadStats,
+    /// Where the state's table pages lie, as the fresh layout puts them (format §2): from
+    /// the dataset header's first page to the end of the file, or the bundle's stored run
+    /// when the header is in the metadata bundle (the tables are too).
+    metadata_area: Option<std::ops::Range<u64>>,
 }
 
 impl Opened {
@@ -417,5 +426,17 @@ fn open_once<S: Source>(src: &S, walk: Walk, pin: Option<StatePin>) -> Result<Op
         metadata_pages: (walk == Walk::Full).then_some(seen),
         registered,
         open_reads: counted.stats(),
+        metadata_area: {
+            let first = commit.roots.dataset_header.first_page.get();
+            let bundle = &commit.bundle;
+            if first >= crate::format::bundle::BUNDLE_FIRST_PAGE {
+                // A bundled state: its tables are frames of the bundle's stored run.
+                let start = bundle.offset.get();
+                Some(start..start.saturating_add(u64::from(bundle.stored_len.get())))
+            } else {
+                Some(first.saturating_mul(u64::from(page_size))..commit.file_length.get())
+            }
+            .filter(|area| !area.is_empty())
+        },
     })
 }

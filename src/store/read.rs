@@ -351,10 +351,11 @@ impl<S: Source> Store<S> {
         }
         let mut order: Vec<usize> = (0..refs.len()).collect();
         order.sort_by_key(|&i| (refs[i].offset, refs[i].len));
-        let mut out: Vec<Option<Cow<'_, [u8]>>> = vec![None; refs.len()];
+        // The runs: payloads whose starts lie within `gap` of the run's end so far, as
+        // (first index into `order`, end index, start byte, bytes).
+        let mut runs: Vec<(usize, usize, u64, usize)> = Vec::new();
         let mut k = 0;
         while k < order.len() {
-            // One run: payloads whose starts lie within `gap` of the run's end so far.
             let first = &refs[order[k]];
             let (start, mut end) = (first.offset, first.end());
             let mut last = k + 1;
@@ -370,8 +371,21 @@ impl<S: Source> Store<S> {
                 what: format!("payloads at byte {start}"),
                 detail: format!("{} bytes do not fit in memory", end - start),
             })?;
-            let run = source::read(&self.src, start, span)?;
+            runs.push((k, last, start, span));
+            k = last;
+        }
+        // One batch: a remote source fetches the runs together (one round).
+        let ranges: Vec<(u64, usize)> = runs.iter().map(|r| (r.2, r.3)).collect();
+        let bytes = source::read_many(&self.src, &ranges)?;
+        if bytes.len() != runs.len() {
+            return Err(Error::Internal("a batch read gave the wrong count".into()));
+        }
+        let mut out: Vec<Option<Cow<'_, [u8]>>> = vec![None; refs.len()];
+        for (&(k, last, start, span), run) in runs.iter().zip(bytes) {
             self.cache.counters.payload(span);
+            if run.len() != span {
+                return Err(Error::Internal("a batch read gave a short run".into()));
+            }
             for &i in &order[k..last] {
                 let r = &refs[i];
                 let from = usize::try_from(r.offset - start).unwrap_or(usize::MAX);
@@ -384,7 +398,6 @@ impl<S: Source> Store<S> {
                     Cow::Owned(_) => Cow::Owned(piece.to_vec()),
                 });
             }
-            k = last;
         }
         out.into_iter()
             .map(|p| p.ok_or_else(|| Error::Internal("a payload was not read".into())))

@@ -58,6 +58,30 @@ pub trait Source: Send + Sync {
     fn writer_present(&self) -> io::Result<Option<bool>> {
         Ok(None)
     }
+
+    /// Several ranges at once, each as [`Source::read_at`] would give it, in the order
+    /// asked. A source where a read costs a round trip (a remote object) fetches them
+    /// together, in parallel; the default reads them in turn.
+    fn read_many(&self, ranges: &[(u64, usize)]) -> io::Result<Vec<Cow<'_, [u8]>>> {
+        ranges
+            .iter()
+            .map(|&(offset, len)| self.read_at(offset, len))
+            .collect()
+    }
+
+    /// A hint from the store after opening: bytes `area` hold the state's metadata pages
+    /// (the tables that lookups read a page at a time). A source where each read costs a
+    /// round trip may fetch the area whole on the first read inside it. The default ignores
+    /// it.
+    fn advise_metadata(&self, area: std::ops::Range<u64>) {
+        let _ = area;
+    }
+
+    /// What a remote source has asked its server for (requests, bytes, rounds); `None` for
+    /// a local one.
+    fn request_stats(&self) -> Option<RequestStats> {
+        None
+    }
 }
 
 /// A borrowed source reads what it borrows (the validator opens a store on a source it keeps).
@@ -90,6 +114,54 @@ impl<S: Source + ?Sized> Source for &S {
 
     fn writer_present(&self) -> io::Result<Option<bool>> {
         (**self).writer_present()
+    }
+
+    fn read_many(&self, ranges: &[(u64, usize)]) -> io::Result<Vec<Cow<'_, [u8]>>> {
+        (**self).read_many(ranges)
+    }
+
+    fn advise_metadata(&self, area: std::ops::Range<u64>) {
+        (**self).advise_metadata(area)
+    }
+
+    fn request_stats(&self) -> Option<RequestStats> {
+        (**self).request_stats()
+    }
+}
+
+/// What a remote source has asked its server for ([`Source::request_stats`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct RequestStats {
+    /// Range requests sent (retries included).
+    pub requests: u64,
+    /// Body bytes received.
+    pub bytes: u64,
+    /// Sequential waits for the network: a batch of `n` requests over `c` connections counts
+    /// `ceil(n / c)`.
+    pub rounds: u64,
+    /// Requests that were retries.
+    pub retries: u64,
+}
+
+impl RequestStats {
+    /// What was asked between `earlier` and `self`.
+    pub fn since(&self, earlier: &RequestStats) -> RequestStats {
+        RequestStats {
+            requests: self.requests.saturating_sub(earlier.requests),
+            bytes: self.bytes.saturating_sub(earlier.bytes),
+            rounds: self.rounds.saturating_sub(earlier.rounds),
+            retries: self.retries.saturating_sub(earlier.retries),
+        }
+    }
+
+    /// Both together.
+    pub fn plus(&self, other: &RequestStats) -> RequestStats {
+        RequestStats {
+            requests: self.requests + other.requests,
+            bytes: self.bytes + other.bytes,
+            rounds: self.rounds + other.rounds,
+            retries: self.retries + other.retries,
+        }
     }
 }
 
@@ -349,6 +421,22 @@ impl<S: Source> Source for Counted<S> {
     fn writer_present(&self) -> io::Result<Option<bool>> {
         self.inner.writer_present()
     }
+
+    fn read_many(&self, ranges: &[(u64, usize)]) -> io::Result<Vec<Cow<'_, [u8]>>> {
+        use std::sync::atomic::Ordering::Relaxed;
+        self.calls.fetch_add(ranges.len() as u64, Relaxed);
+        let bytes: u64 = ranges.iter().map(|&(_, len)| len as u64).sum();
+        self.bytes.fetch_add(bytes, Relaxed);
+        self.inner.read_many(ranges)
+    }
+
+    fn advise_metadata(&self, area: std::ops::Range<u64>) {
+        self.inner.advise_metadata(area)
+    }
+
+    fn request_stats(&self) -> Option<RequestStats> {
+        self.inner.request_stats()
+    }
 }
 
 /// The error of a failed read of `len` bytes at `offset` from the file at `path`. A read
@@ -365,6 +453,17 @@ pub(crate) fn read_error(path: &Path, offset: u64, len: usize, e: io::Error) -> 
     } else {
         Error::io(path, e)
     }
+}
+
+/// Reads several ranges of `src` at once ([`Source::read_many`]), as a store error.
+pub(crate) fn read_many<'a, S: Source + ?Sized>(
+    src: &'a S,
+    ranges: &[(u64, usize)],
+) -> Result<Vec<Cow<'a, [u8]>>> {
+    src.read_many(ranges).map_err(|e| {
+        let (offset, len) = ranges.first().copied().unwrap_or((0, 0));
+        read_error(src.name(), offset, len, e)
+    })
 }
 
 /// Reads `len` bytes at `offset` of `src`, as a store error (see [`read_error`]).
@@ -392,4 +491,120 @@ pub(crate) fn read_exact_at(file: &File, mut buf: &mut [u8], mut offset: u64) ->
         }
     }
     Ok(())
+}
+
+/// A file or, with the `remote` feature, a remote object: whichever its name says
+/// ([`AnySource::open`]). A dataset reads its manifest and its tiles through it, so one
+/// dataset reader serves a directory and a URL alike.
+#[derive(Debug)]
+pub enum AnySource {
+    /// A local file, read with positioned reads.
+    File(FileSource),
+    /// An object read with HTTP range requests (`http://`, `https://`, `s3://`).
+    #[cfg(feature = "remote")]
+    Remote(Box<super::remote::HttpSource>),
+}
+
+impl AnySource {
+    /// Opens `location`: a URL (`http://`, `https://`, `s3://`) as a remote object, anything
+    /// else as a file path.
+    pub fn open(location: &Path) -> Result<AnySource> {
+        AnySource::open_tile(location, false)
+    }
+
+    /// As [`AnySource::open`]; a remote `tile` of a dataset fetches a large metadata area
+    /// in chunks (`RemoteOptions::for_tiles`, feature `remote`).
+    pub fn open_tile(location: &Path, tile: bool) -> Result<AnySource> {
+        if let Some(url) = location.to_str().filter(|t| is_url(t)) {
+            #[cfg(feature = "remote")]
+            {
+                use super::remote::{HttpSource, RemoteOptions};
+                let options = if tile {
+                    RemoteOptions::for_tiles()
+                } else {
+                    RemoteOptions::default()
+                };
+                return Ok(AnySource::Remote(Box::new(HttpSource::open_with(
+                    url, options,
+                )?)));
+            }
+            #[cfg(not(feature = "remote"))]
+            {
+                let _ = tile;
+                return Err(Error::unsupported(
+                    location,
+                    format!("{url}: this fmrh was built without the `remote` feature"),
+                ));
+            }
+        }
+        Ok(AnySource::File(FileSource::open(location)?))
+    }
+
+    /// Whether it is a remote object.
+    pub fn is_remote(&self) -> bool {
+        !matches!(self, AnySource::File(_))
+    }
+}
+
+/// Whether `text` names a remote object: `http://`, `https://` or `s3://`.
+pub fn is_url(text: &str) -> bool {
+    text.starts_with("http://") || text.starts_with("https://") || text.starts_with("s3://")
+}
+
+macro_rules! any_source {
+    ($self:ident, $s:ident => $e:expr) => {
+        match $self {
+            AnySource::File(file) => {
+                let $s: &dyn Source = file;
+                $e
+            }
+            #[cfg(feature = "remote")]
+            AnySource::Remote(remote) => {
+                let $s: &dyn Source = &**remote;
+                $e
+            }
+        }
+    };
+}
+
+impl Source for AnySource {
+    fn len(&self) -> u64 {
+        any_source!(self, s => s.len())
+    }
+
+    fn read_at(&self, offset: u64, len: usize) -> io::Result<Cow<'_, [u8]>> {
+        any_source!(self, s => s.read_at(offset, len))
+    }
+
+    fn stable(&self) -> bool {
+        any_source!(self, s => s.stable())
+    }
+
+    fn name(&self) -> &Path {
+        any_source!(self, s => s.name())
+    }
+
+    fn register_reader(&self, txn: u64) -> io::Result<bool> {
+        any_source!(self, s => s.register_reader(txn))
+    }
+
+    fn refresh_len(&self) -> io::Result<u64> {
+        any_source!(self, s => s.refresh_len())
+    }
+
+    fn writer_present(&self) -> io::Result<Option<bool>> {
+        any_source!(self, s => s.writer_present())
+    }
+
+    fn read_many(&self, ranges: &[(u64, usize)]) -> io::Result<Vec<Cow<'_, [u8]>>> {
+        any_source!(self, s => s.read_many(ranges))
+    }
+
+    fn advise_metadata(&self, area: std::ops::Range<u64>) {
+        any_source!(self, s => s.advise_metadata(area))
+    }
+
+    fn request_stats(&self) -> Option<RequestStats> {
+        any_source!(self, s => s.request_stats())
+    }
 }

@@ -91,6 +91,8 @@ pub fn bytes_of(
 pub mod bundle;
 pub mod fields;
 pub mod oracle;
+pub mod origin;
+pub mod servers;
 pub mod tiles;
 pub mod txn;
 pub mod txn_driver;
