@@ -157,6 +157,28 @@ fn a_scene_loads_in_multi_range_requests_or_one_range_a_request_with_the_same_by
 }
 
 #[test]
+fn a_large_metadata_area_comes_in_chunks_held_within_a_bound() {
+    let bytes = container(true);
+    let local = Store::from_bytes(bytes.clone()).unwrap();
+    let want = local.read_window(local.domain().data_rect()).unwrap();
+    let origin = Origin::start();
+    let url = origin.put("/t.fmrh", bytes, "v1");
+    let options = RemoteOptions {
+        metadata_limit: 0,
+        metadata_chunk: 16 << 10,
+        held_limit: 48 << 10,
+        ..RemoteOptions::default()
+    };
+    let store = Store::from_source(HttpSource::open_with(&url, options).unwrap()).unwrap();
+    for _ in 0..2 {
+        let got = store.read_window(store.domain().data_rect()).unwrap();
+        assert!(common::first_difference(got.samples(), want.samples()).is_none());
+        let held = store.source().held_bytes();
+        assert!(held <= (48 << 10) + (16 << 10), "{held} bytes held");
+    }
+}
+
+#[test]
 fn each_fault_is_retried_and_the_bytes_are_right() {
     let bytes = container(true);
     let local = Store::from_bytes(bytes.clone()).unwrap();

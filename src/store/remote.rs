@@ -82,6 +82,9 @@ pub struct RemoteOptions {
     /// A larger area is fetched in aligned chunks of this many bytes, each on the first
     /// read inside it.
     pub metadata_chunk: u64,
+    /// Chunks are held in memory up to this many bytes in all; the oldest are dropped
+    /// first (and fetched again if read again).
+    pub held_limit: u64,
     /// Gaps of at most this many bytes between the ranges of a batch are read (and dropped)
     /// rather than cost another request (when the server takes one range a request).
     pub merge_gap: u64,
@@ -116,6 +119,7 @@ impl Default for RemoteOptions {
             connections: 8,
             metadata_limit: 2 << 20,
             metadata_chunk: 64 << 10,
+            held_limit: 64 << 20,
             merge_gap: 16 << 10,
             multi_range: true,
             tries: 4,
@@ -209,6 +213,8 @@ pub struct HttpSource {
     etag: Option<String>,
     /// Ranges held in memory: the prefix, the suffix, the metadata area.
     held: RwLock<Vec<(u64, Arc<[u8]>)>>,
+    /// How many of `held` opening read (kept whatever the bound).
+    opened_ranges: usize,
     area: Mutex<Area>,
     /// Whether batches still go as multi-range requests.
     multi_range: AtomicBool,
@@ -342,6 +348,7 @@ impl HttpSource {
             len: 0,
             etag: None,
             held: RwLock::new(Vec::new()),
+            opened_ranges: 0,
             area: Mutex::new(Area::None),
             multi_range: AtomicBool::new(false),
             requests: 0.into(),
@@ -375,6 +382,7 @@ impl HttpSource {
             .chain(last.parts)
             .map(|(at, bytes)| (at, bytes.into()))
             .collect();
+        source.opened_ranges = held.len();
         source.held = RwLock::new(held);
         let s3 = matches!(source.target, Target::S3 { .. });
         source.multi_range = AtomicBool::new(source.options.multi_range && !s3);
@@ -682,12 +690,31 @@ impl HttpSource {
             .map_err(|_| failed("metadata area too large".into()))?;
         self.rounds.fetch_add(1, Ordering::Relaxed);
         let bytes = self.fetch_range(fetch.start, len)?;
-        self.held
+        let mut held = self
+            .held
             .write()
-            .map_err(|_| failed("the held ranges were poisoned".into()))?
-            .push((fetch.start, bytes.into()));
+            .map_err(|_| failed("the held ranges were poisoned".into()))?;
+        held.push((fetch.start, bytes.into()));
+        // Bounded: the oldest chunks go first (a later read fetches them again); the
+        // ranges opening read, and a whole area, stay.
+        let mut total: u64 = held.iter().map(|(_, b)| b.len() as u64).sum();
+        while total > self.options.held_limit && !whole {
+            let Some(i) = (self.opened_ranges..held.len().saturating_sub(1)).next() else {
+                break;
+            };
+            total -= held.remove(i).1.len() as u64;
+        }
+        drop(held);
         drop(area);
         Ok(())
+    }
+
+    /// Bytes held in memory: the ranges opening read and the metadata fetched since.
+    pub fn held_bytes(&self) -> u64 {
+        self.held
+            .read()
+            .map(|h| h.iter().map(|(_, b)| b.len() as u64).sum())
+            .unwrap_or(0)
     }
 
     fn check_range(&self, offset: u64, len: usize) -> io::Result<u64> {
