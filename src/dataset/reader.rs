@@ -298,31 +298,9 @@ impl Dataset {
         if !self.is_remote() || tiles.len() < 2 {
             return tiles.iter().map(job).collect();
         }
-        let next = std::sync::atomic::AtomicUsize::new(0);
-        let results: Vec<Mutex<Option<Result<T>>>> =
-            tiles.iter().map(|_| Mutex::new(None)).collect();
-        let work = || loop {
-            let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-            let Some(tile) = tiles.get(k) else { break };
-            let done = job(tile);
-            if let Ok(mut slot) = results[k].lock() {
-                *slot = Some(done);
-            }
-        };
-        std::thread::scope(|s| {
-            for _ in 1..TILE_WORKERS.min(tiles.len()) {
-                s.spawn(work);
-            }
-            work();
-        });
-        results
+        crate::store::workers::run_bounded(tiles, TILE_WORKERS, job)
+            .ok_or_else(|| Error::Internal("a tile job did not run".into()))?
             .into_iter()
-            .map(|r| {
-                r.into_inner()
-                    .ok()
-                    .flatten()
-                    .unwrap_or_else(|| Err(Error::Internal("a tile job did not run".into())))
-            })
             .collect()
     }
 

@@ -66,6 +66,7 @@ pub mod source;
 pub mod txn;
 pub mod verify;
 mod window;
+pub(crate) mod workers;
 pub mod write;
 
 use std::fs::File;

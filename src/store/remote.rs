@@ -41,7 +41,7 @@ use std::borrow::Cow;
 use std::io;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, RwLock};
 use std::time::Duration;
 
@@ -611,32 +611,8 @@ impl HttpSource {
         let connections = self.options.connections.max(1);
         self.rounds
             .fetch_add(jobs.len().div_ceil(connections) as u64, Ordering::Relaxed);
-        let next = AtomicUsize::new(0);
-        let results: Vec<Mutex<Option<io::Result<T>>>> =
-            jobs.iter().map(|_| Mutex::new(None)).collect();
-        let work = || loop {
-            let k = next.fetch_add(1, Ordering::Relaxed);
-            let Some(j) = jobs.get(k) else { break };
-            let got = job(j);
-            if let Ok(mut slot) = results[k].lock() {
-                *slot = Some(got);
-            }
-        };
-        std::thread::scope(|s| {
-            for _ in 1..connections.min(jobs.len()) {
-                s.spawn(work);
-            }
-            work();
-        });
-        results
-            .into_iter()
-            .map(|r| {
-                r.into_inner()
-                    .ok()
-                    .flatten()
-                    .unwrap_or_else(|| Err(failed("a request was not made".into())))
-            })
-            .collect()
+        super::workers::run_bounded(jobs, connections, job)
+            .unwrap_or_else(|| vec![Err(failed("a request was not made".into()))])
     }
 
     /// The held bytes covering `offset .. end`, if any.
