@@ -132,8 +132,7 @@ pub fn open(path: &Path) -> Result<Store<FileSource>, Error> {
 /// The URL `path` names, when it is one (`http://`, `https://`, `s3://`): a remote
 /// container or dataset.
 pub fn url_of(path: &Path) -> Option<&str> {
-    path.to_str()
-        .filter(|t| t.starts_with("http://") || t.starts_with("https://") || t.starts_with("s3://"))
+    path.to_str().filter(|t| fmrh::store::is_url(t))
 }
 
 /// The error for a URL in a build without the `remote` feature.

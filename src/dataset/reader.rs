@@ -77,40 +77,36 @@ impl Dataset {
     /// `DIR/MANIFEST` and each tile `DIR/NAME`, read with range requests; the manifest pins
     /// each tile's state, so a tile replaced on the server fails its pin.
     pub fn open(dir: &Path) -> Result<Dataset> {
-        if let Some(url) = dir.to_str().filter(|t| is_url(t)) {
-            let base = dataset_base(url);
-            let src = Counted::new(AnySource::open(Path::new(&format!(
-                "{base}/{MANIFEST_NAME}"
-            )))?);
-            let state = ManifestState::read(&src)?;
-            let open_reads = src.stats();
-            return Ok(Dataset {
-                dir: PathBuf::from(base),
-                src,
-                state,
-                open_reads,
-                tiles: Mutex::new(Vec::new()),
-                tiles_opened: 0.into(),
-            });
-        }
-        if !dir.is_dir() {
-            return Err(Error::input(
-                dir,
-                "not a directory (a dataset is a directory with a MANIFEST)",
-            ));
-        }
-        let path = dir.join(MANIFEST_NAME);
-        if !path.is_file() {
-            return Err(Error::input(
-                dir,
-                "no MANIFEST in this directory: not an fmrh dataset",
-            ));
-        }
+        let (dir, path) = match dir.to_str().filter(|t| is_url(t)) {
+            Some(url) => {
+                let base = dataset_base(url);
+                (
+                    PathBuf::from(base),
+                    PathBuf::from(format!("{base}/{MANIFEST_NAME}")),
+                )
+            }
+            None => {
+                if !dir.is_dir() {
+                    return Err(Error::input(
+                        dir,
+                        "not a directory (a dataset is a directory with a MANIFEST)",
+                    ));
+                }
+                let path = dir.join(MANIFEST_NAME);
+                if !path.is_file() {
+                    return Err(Error::input(
+                        dir,
+                        "no MANIFEST in this directory: not an fmrh dataset",
+                    ));
+                }
+                (dir.to_path_buf(), path)
+            }
+        };
         let src = Counted::new(AnySource::open(&path)?);
         let state = ManifestState::read(&src)?;
         let open_reads = src.stats();
         Ok(Dataset {
-            dir: dir.to_path_buf(),
+            dir,
             src,
             state,
             open_reads,
