@@ -19,7 +19,8 @@
 //!
 //! `cargo bench --bench remote` (needs nginx, gdal-bin and python3-gdal; the large DEMs
 //! need `../shared/data`). With `/tmp/fmrh-scale/mosaic` (made by `bash
-//! benches/dataset/run.sh`), the 64-tile mosaic dataset is read by URL as well.
+//! benches/dataset/run.sh`), the 64-tile mosaic dataset is read by URL as well; `cargo bench
+//! --bench remote -- mosaic` reads it alone.
 
 #[path = "common/cog.rs"]
 mod cog;
@@ -227,9 +228,11 @@ fn mosaic(served: &Path, proxy: &DelayProxy) {
 }
 
 fn main() {
+    // `cargo bench --bench remote -- mosaic` runs the mosaic section alone.
+    let only_mosaic = std::env::args().skip(1).any(|a| a == "mosaic");
     let served = tempfile::tempdir().expect("temp dir");
     let mut cases = Vec::new();
-    for dem in dems::dems() {
+    for dem in dems::dems().into_iter().filter(|_| !only_mosaic) {
         let Some(cog) = make_cog(served.path(), dem.name, &dem.source) else {
             continue;
         };
@@ -238,6 +241,10 @@ fn main() {
     }
     let nginx = servers::Nginx::start(served.path());
     let proxy = DelayProxy::start(nginx.port);
+    if only_mosaic {
+        mosaic(served.path(), &proxy);
+        return;
+    }
     println!("| DEM | camera | latency | fmrh open req / KB / rounds | fmrh scene req / KB / rounds | fmrh px | fmrh ms | COG req | COG KB | COG px | COG ms | fmrh/COG bytes |");
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
     for (dem, cog, path) in &cases {

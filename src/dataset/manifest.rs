@@ -155,6 +155,25 @@ impl ManifestState {
         })
     }
 
+    /// Fetches tile pages `pages` not read yet together, ahead of [`ManifestState::page`]
+    /// reading them, on a source where each read costs a round trip (a remote manifest):
+    /// one round for all, not one each. Nothing on a local source.
+    pub fn fetch_pages<S: Source + ?Sized>(&self, src: &S, pages: &[usize]) -> Result<()> {
+        if !src.prefetches() {
+            return Ok(());
+        }
+        let ranges: Vec<(u64, usize)> = pages
+            .iter()
+            .filter(|&&i| self.pages.get(i).is_some_and(|p| p.get().is_none()))
+            .filter_map(|&i| self.head.pages.get(i))
+            .map(|e| (e.offset.get(), e.length.get() as usize))
+            .collect();
+        if ranges.is_empty() {
+            return Ok(());
+        }
+        src.prefetch(&ranges).map_err(|e| Error::io(src.name(), e))
+    }
+
     /// The records of tile page `i`, read and checked the first time they are asked for.
     pub fn page<S: Source + ?Sized>(&self, src: &S, i: usize) -> Result<Arc<Vec<TileRecord>>> {
         if let Some(p) = self.pages[i].get() {

@@ -185,7 +185,9 @@ impl Dataset {
     /// whose bounds meet it.
     pub fn tiles_meeting(&self, rect: &SampleRect) -> Result<Vec<Tile>> {
         let mut out = Vec::new();
-        for p in pages_meeting(&self.state.head, rect) {
+        let pages = pages_meeting(&self.state.head, rect);
+        self.state.fetch_pages(&self.src, &pages)?;
+        for p in pages {
             let first = u64::from(self.state.head.pages[p].first_tile.get());
             for (i, t) in self.state.page(&self.src, p)?.iter().enumerate() {
                 if t.rect().intersect(rect).is_some() {
@@ -237,7 +239,9 @@ impl Dataset {
     /// Every tile, in manifest order (reads every tile page).
     pub fn tiles(&self) -> Result<Vec<Tile>> {
         let mut out = Vec::with_capacity(usize::try_from(self.tile_count()).unwrap_or(0));
-        for p in 0..self.state.head.pages.len() {
+        let pages: Vec<usize> = (0..self.state.head.pages.len()).collect();
+        self.state.fetch_pages(&self.src, &pages)?;
+        for p in pages {
             let first = u64::from(self.state.head.pages[p].first_tile.get());
             for (i, t) in self.state.page(&self.src, p)?.iter().enumerate() {
                 out.push(Tile {
@@ -333,7 +337,7 @@ impl Dataset {
     /// the manifest has moved on since this dataset was opened, and is corrupt otherwise.
     pub fn open_tile_uncached(&self, tile: &Tile) -> Result<Store<AnySource>> {
         let path = self.tile_path(tile);
-        let opened = AnySource::open_tile(&path, true)
+        let opened = AnySource::open_tile(&path, Some(self.manifest_source().inner()))
             .and_then(|src| Store::open_pinned_source(src, tile.pin()));
         let remote = self.is_remote();
         let store = match opened {

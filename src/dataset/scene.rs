@@ -105,11 +105,20 @@ impl Dataset {
             None => {
                 let head = &self.state().head;
                 let mut out = Vec::new();
-                for (p, e) in head.pages.iter().enumerate() {
-                    let b = rect_box(frame, &e.rect(), e.min_height.get(), e.max_height.get());
-                    if !view.intersects(&b) {
-                        continue;
-                    }
+                let seen: Vec<usize> = (0..head.pages.len())
+                    .filter(|&p| {
+                        let e = &head.pages[p];
+                        view.intersects(&rect_box(
+                            frame,
+                            &e.rect(),
+                            e.min_height.get(),
+                            e.max_height.get(),
+                        ))
+                    })
+                    .collect();
+                self.state().fetch_pages(self.manifest_source(), &seen)?;
+                for p in seen {
+                    let e = &head.pages[p];
                     let first = u64::from(e.first_tile.get());
                     for (i, t) in self
                         .state()

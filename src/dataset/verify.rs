@@ -137,7 +137,7 @@ pub fn verify(
             valid: false,
             failures: Vec::new(),
         };
-        let opened = match AnySource::open_tile(&file, true) {
+        let opened = match AnySource::open_tile(&file, Some(dataset.manifest_source().inner())) {
             Ok(src) => absorb(
                 &mut checks,
                 &at,

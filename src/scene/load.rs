@@ -15,7 +15,7 @@ use rayon::prelude::*;
 
 use crate::error::Result;
 use crate::format::{StoredBlock, StoredNode};
-use crate::store::{ParentGrid, Source, Store};
+use crate::store::{Ahead, ParentGrid, Source, Store};
 
 use super::SceneBlock;
 
@@ -84,47 +84,99 @@ pub fn load_blocks_reusing<S: Source>(
 ) -> Result<Vec<LoadedBlock>> {
     let finest = store.domain().finest_level();
     let b = store.domain().block_size();
+    // On a source that reads ahead (a remote object), each step below names its lookups
+    // first, so that they cost a round together rather than one each.
+    let ahead = store.prefetches();
+    if ahead {
+        // The blocks' nodes (a scene just read them: usually at hand already), then the
+        // block records and the ancestors the payloads are coded against, together.
+        let mut a = Ahead::new();
+        for i in blocks.iter().filter_map(|b| b.node) {
+            a.nodes(i, i);
+        }
+        store.fetch_ahead(&a)?;
+        let mut a = Ahead::new();
+        for block in blocks {
+            if block.level == finest {
+                a.block(block.x, block.y);
+            }
+            if let Some(i) = block.node {
+                let node = store.node(i)?;
+                if block.level == finest || node.grid_against_parent {
+                    a.ancestors(&node, finest);
+                }
+            }
+        }
+        store.fetch_ahead(&a)?;
+    }
     // Block records and grid nodes, and the node each block's payload is coded against.
     let mut records = Vec::with_capacity(blocks.len());
     let mut nodes = Vec::with_capacity(blocks.len());
-    let mut needs: Vec<Option<(u32, StoredNode)>> = Vec::with_capacity(blocks.len());
     for block in blocks {
         if block.level == finest {
-            let info = store.stored_block(block.x, block.y)?;
-            needs.push(store.against_node(block.x, block.y, &info)?);
-            records.push(Some(info));
+            records.push(Some(store.stored_block(block.x, block.y)?));
             nodes.push(None);
         } else {
             let index = block.node.ok_or_else(|| {
                 crate::Error::Internal("a block above the finest level without a node".into())
             })?;
-            let node = store.node(index)?;
-            needs.push(store.grid_against_node(&node)?);
             records.push(None);
-            nodes.push(Some(node));
+            nodes.push(Some(store.node(index)?));
         }
     }
+    if ahead {
+        // The grids coded against that the guesses above missed (a physical block below a
+        // pruned leaf names its own).
+        let mut a = Ahead::new();
+        for i in records.iter().flatten().filter_map(|r| r.against) {
+            a.nodes(i, i);
+        }
+        store.fetch_ahead(&a)?;
+    }
+    let mut needs: Vec<Option<(u32, StoredNode)>> = Vec::with_capacity(blocks.len());
+    for ((block, record), node) in blocks.iter().zip(&records).zip(&nodes) {
+        needs.push(match (record, node) {
+            (Some(info), _) => store.against_node(block.x, block.y, info)?,
+            (None, Some(node)) => store.grid_against_node(node)?,
+            (None, None) => None,
+        });
+    }
     // The ancestors to decode first: the grids the blocks need, then the grids those need,
-    // up to grids coded alone or held by the caller (which need nothing more).
+    // up to grids coded alone or held by the caller (which need nothing more). A level at a
+    // time, each level's parents fetched ahead together.
     let mut grids: HashMap<u32, Arc<ParentGrid>> = HashMap::new();
     let mut to_read: BTreeMap<u32, StoredNode> = BTreeMap::new();
-    let mut next: Vec<(u32, StoredNode)> = needs.iter().flatten().copied().collect();
-    while let Some((index, node)) = next.pop() {
-        if grids.contains_key(&index) || to_read.contains_key(&index) {
-            continue;
+    let mut wave: Vec<(u32, StoredNode)> = needs.iter().flatten().copied().collect();
+    while !wave.is_empty() {
+        let mut up = Vec::new();
+        for (index, node) in wave {
+            if grids.contains_key(&index) || to_read.contains_key(&index) {
+                continue;
+            }
+            let have = held(index, &node)
+                .and_then(|h| ParentGrid::from_expanded(store, index, &node, &h))
+                .map(Arc::new)
+                .or_else(|| store.cached_parent_grid(index, &node));
+            if let Some(grid) = have {
+                grids.insert(index, grid);
+                continue;
+            }
+            if node.grid_against_parent {
+                up.push(node);
+            }
+            to_read.insert(index, node);
         }
-        let have = held(index, &node)
-            .and_then(|h| ParentGrid::from_expanded(store, index, &node, &h))
-            .map(Arc::new)
-            .or_else(|| store.cached_parent_grid(index, &node));
-        if let Some(grid) = have {
-            grids.insert(index, grid);
-            continue;
+        if ahead {
+            let mut a = Ahead::new();
+            for i in up.iter().filter_map(|n| n.parent) {
+                a.nodes(i, i);
+            }
+            store.fetch_ahead(&a)?;
         }
-        if let Some(up) = store.grid_against_node(&node)? {
-            next.push(up);
+        wave = Vec::with_capacity(up.len());
+        for node in &up {
+            wave.extend(store.grid_against_node(node)?);
         }
-        to_read.insert(index, node);
     }
     let ancestors: Vec<(u32, StoredNode)> = to_read.into_iter().collect();
     let refs: Vec<_> = blocks

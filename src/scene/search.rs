@@ -8,7 +8,7 @@ use super::result::{SceneBlock, SceneStats};
 use super::terrain::Terrain;
 use crate::error::Result;
 use crate::format::StoredNode;
-use crate::store::Source;
+use crate::store::{Ahead, Source};
 
 /// The working state of one selection.
 pub(super) struct Search<'t, 's, S: Source> {
@@ -50,33 +50,83 @@ impl<S: Source> Search<'_, '_, S> {
         Ok(())
     }
 
-    /// Runs the range scan of `run` in `cluster`, calling `visit` with every node whose keys
-    /// meet the region (not merely the run's gaps), each once.
+    /// The nodes of `cluster` whose keys meet each of `runs` (not merely a run's gaps), each
+    /// with the index of the run it meets, by a range scan per run. On a source that reads
+    /// ahead (a remote object) every run's index pages are fetched together, then every
+    /// entry's node: a round per tree level, not per page.
     pub fn scan(
         &mut self,
         cluster: usize,
-        run: &KeyRun,
-        mut visit: impl FnMut(&mut Self, u32, StoredNode) -> Result<()>,
-    ) -> Result<()> {
+        runs: &[KeyRun],
+    ) -> Result<Vec<(u32, StoredNode, usize)>> {
+        let store = self.terrain.store;
         let finest = self.terrain.domain().finest_level();
-        let mut scan = self
-            .terrain
-            .store
-            .scan_hilbert(cluster, run.scan.lo..=run.scan.hi)?;
-        self.stats.ranges += 1;
+        let ahead = store.prefetches();
+        if ahead {
+            let mut a = Ahead::new();
+            for run in runs {
+                a.scan(cluster, run.scan.lo, run.scan.hi);
+            }
+            store.fetch_ahead(&a)?;
+        }
         let mut entries = Vec::new();
-        for e in scan.by_ref() {
-            let e = e?;
-            if run.meets(&KeyRange::of_node(e.key, e.level, finest)) {
-                entries.push(e);
+        for (r, run) in runs.iter().enumerate() {
+            let mut scan = store.scan_hilbert(cluster, run.scan.lo..=run.scan.hi)?;
+            self.stats.ranges += 1;
+            for e in scan.by_ref() {
+                let e = e?;
+                if run.meets(&KeyRange::of_node(e.key, e.level, finest)) {
+                    entries.push((e, r));
+                }
+            }
+            self.stats.index_pages += u64::from(scan.pages_read());
+        }
+        if ahead {
+            let mut a = Ahead::new();
+            for (e, _) in &entries {
+                a.nodes(e.node, e.node);
+            }
+            store.fetch_ahead(&a)?;
+        }
+        let mut out = Vec::with_capacity(entries.len());
+        for (e, r) in entries {
+            self.stats.node_reads += 1;
+            out.push((e.node, store.node_of(cluster, &e)?, r));
+        }
+        Ok(out)
+    }
+
+    /// Fetches ahead the children of each of `parents` (node index and node) on a source
+    /// that reads ahead: a parent's whole subtree when it is small, else where its children
+    /// lie if its subtree is complete (a node's children follow it in pre-order, each after
+    /// the subtrees of those before it). A guess that misses costs a round, never an answer.
+    pub fn fetch_children(&self, parents: &[(u32, StoredNode)]) -> Result<()> {
+        let store = self.terrain.store;
+        if parents.is_empty() || !store.prefetches() {
+            return Ok(());
+        }
+        let mut a = Ahead::new();
+        for &(i, ref n) in parents {
+            let below = n.subtree_len.saturating_sub(1);
+            if below == 0 {
+                continue;
+            }
+            // Saturating: the lengths come from the file, and a lookup checks what they name.
+            let first = i.saturating_add(1);
+            if below <= SMALL_SUBTREE {
+                a.nodes(first, i.saturating_add(below));
+            } else {
+                let child = below / 4;
+                for k in 0..4 {
+                    let at = first.saturating_add(k * child);
+                    a.nodes(at, at);
+                }
             }
         }
-        self.stats.index_pages += u64::from(scan.pages_read());
-        for e in entries {
-            self.stats.node_reads += 1;
-            let n = self.terrain.store.node_of(cluster, &e)?;
-            visit(self, e.node, n)?;
-        }
-        Ok(())
+        store.fetch_ahead(&a)
     }
 }
+
+/// Nodes below a parent fetched ahead whole when refining it (about three pages of node
+/// records at 4 KiB).
+const SMALL_SUBTREE: u32 = 128;

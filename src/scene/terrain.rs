@@ -20,7 +20,7 @@ use super::stitch;
 use crate::error::{Error, Result};
 use crate::format::StoredNode;
 use crate::model::{Domain, SampleRect};
-use crate::store::{Source, Store};
+use crate::store::{Ahead, Source, Store};
 
 /// A store seen as terrain in the world frame: what every scene over it shares.
 pub struct Terrain<'s, S: Source> {
@@ -47,6 +47,8 @@ impl<'s, S: Source> Terrain<'s, S> {
     /// As [`Terrain::new`], with the ground spacing `[east, south]` in metres given by the
     /// caller instead of the store when `spacing_m` is `Some`.
     pub fn with_spacing(store: &'s Store<S>, spacing_m: Option<[f64; 2]>) -> Result<Self> {
+        // On a remote source, the root's page alone (not a chunk around it).
+        store.fetch_ahead(Ahead::new().nodes(0, 0))?;
         let root = store.node(0)?;
         Ok(Terrain {
             store,

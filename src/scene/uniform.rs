@@ -32,15 +32,17 @@ impl<S: Source> Search<'_, '_, S> {
         self.stats.threshold = Some(cluster.map_or(storage, |c| thresholds[c]));
         let keys: Vec<KeyRange> = quadrants.iter().map(|q| q.keys(&d)).collect();
         let (zmin, zmax) = self.terrain.height_range();
-        for run in ranges::merge(&keys, gap) {
-            match cluster {
-                Some(c) => self.scan(c, &run, |s, i, n| {
-                    s.emit(i, &n);
-                    Ok(())
-                })?,
-                None => {
+        let runs = ranges::merge(&keys, gap);
+        match cluster {
+            Some(c) => {
+                for (i, n, _) in self.scan(c, &runs)? {
+                    self.emit(i, &n);
+                }
+            }
+            None => {
+                for run in &runs {
                     for q in quadrants.iter().filter(|q| run.meets(&q.keys(&d))) {
-                        self.emit_physical(q, &run, zmin, zmax)?;
+                        self.emit_physical(q, run, zmin, zmax)?;
                     }
                 }
             }

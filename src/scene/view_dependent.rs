@@ -42,51 +42,66 @@ impl<S: Source> Search<'_, '_, S> {
         let first = thresholds.partition_point(|&t| t < need);
         let seed = (first < thresholds.len()).then_some(first);
         let keys: Vec<KeyRange> = quadrants.iter().map(|q| q.keys(&d)).collect();
-        for run in ranges::merge(&keys, gap) {
-            match seed {
-                Some(c) => self.scan(c, &run, |s, i, n| s.refine(i, n, &run))?,
-                None => {
-                    let root = self.terrain.root();
-                    self.refine(0, root, &run)?;
-                }
+        let runs = ranges::merge(&keys, gap);
+        let start = match seed {
+            Some(c) => self.scan(c, &runs)?,
+            None => {
+                let root = self.terrain.root();
+                (0..runs.len()).map(|r| (0, root, r)).collect()
             }
-        }
-        Ok(())
+        };
+        self.refine(start, &runs)
     }
 
-    /// Emits the V nodes at or below node `index` that meet `run`.
-    fn refine(&mut self, index: u32, n: StoredNode, run: &KeyRun) -> Result<()> {
+    /// Emits the V nodes at or below each of `start` (node index, node, and the run of
+    /// `runs` it meets) that meet its run. Level by level: on a source that reads ahead,
+    /// the children of every node refined at one level are fetched together.
+    fn refine(&mut self, start: Vec<(u32, StoredNode, usize)>, runs: &[KeyRun]) -> Result<()> {
         let finest = self.terrain.domain().finest_level();
-        let mut stack = vec![(index, n)];
-        while let Some((i, n)) = stack.pop() {
-            let distance = self.terrain.node_box(&n).distance(self.view.eye);
-            // A node as exact as storage allows is kept even when it misses `tau`: nothing
-            // below it is better (a file with a precision, model §4).
-            if self.view.screen_error(n.monotone_error, distance) <= self.tau
-                || n.level >= finest
-                || (n.monotone_error <= self.terrain.storage_error() && n.monotone_error > 0.0)
-            {
-                let block = self.terrain.node_block_at(self.view, i, &n, distance);
-                self.out.push(block);
-                continue;
+        let ahead = self.terrain.store().prefetches();
+        let mut wave = start;
+        while !wave.is_empty() {
+            let mut split = Vec::new();
+            for (i, n, r) in wave {
+                let distance = self.terrain.node_box(&n).distance(self.view.eye);
+                // A node as exact as storage allows is kept even when it misses `tau`:
+                // nothing below it is better (a file with a precision, model §4).
+                if self.view.screen_error(n.monotone_error, distance) <= self.tau
+                    || n.level >= finest
+                    || (n.monotone_error <= self.terrain.storage_error() && n.monotone_error > 0.0)
+                {
+                    let block = self.terrain.node_block_at(self.view, i, &n, distance);
+                    self.out.push(block);
+                    continue;
+                }
+                if n.subtree_len <= 1 {
+                    // A pruned leaf that misses the tolerance: its physical blocks are exact.
+                    let q = Quadrant {
+                        level: n.level,
+                        x: n.x,
+                        y: n.y,
+                    };
+                    self.emit_physical(&q, &runs[r], n.min_height, n.max_height)?;
+                    continue;
+                }
+                split.push((i, n, r));
             }
-            if n.subtree_len <= 1 {
-                // A pruned leaf that misses the tolerance: its physical blocks are exact.
-                let q = Quadrant {
-                    level: n.level,
-                    x: n.x,
-                    y: n.y,
-                };
-                self.emit_physical(&q, run, n.min_height, n.max_height)?;
-                continue;
+            if ahead {
+                let parents: Vec<(u32, StoredNode)> =
+                    split.iter().map(|&(i, n, _)| (i, n)).collect();
+                self.fetch_children(&parents)?;
             }
-            for child in self.terrain.store().children(i, &n) {
-                let (c, child) = child?;
-                self.stats.node_reads += 1;
-                if run.meets(&KeyRange::of_node(child.key, child.level, finest)) {
-                    stack.push((c, child));
+            let mut next = Vec::new();
+            for (i, n, r) in split {
+                for child in self.terrain.store().children(i, &n) {
+                    let (c, child) = child?;
+                    self.stats.node_reads += 1;
+                    if runs[r].meets(&KeyRange::of_node(child.key, child.level, finest)) {
+                        next.push((c, child, r));
+                    }
                 }
             }
+            wave = next;
         }
         Ok(())
     }

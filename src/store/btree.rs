@@ -211,6 +211,24 @@ impl<'a, S: Source + ?Sized> Pages<'a, S> {
         }
     }
 
+    /// Asks the source to fetch `pages` ahead of reading them ([`Source::prefetch`]):
+    /// pages of the metadata bundle and pages outside the file are left out (they are
+    /// already in memory, or a read reports them).
+    pub fn prefetch(&self, pages: &[u64]) -> Result<()> {
+        let size = u64::from(self.page_size);
+        let ranges: Vec<(u64, usize)> = pages
+            .iter()
+            .filter(|&&p| p >= 2 && p < self.page_count && !bundle::is_bundle_page(p))
+            .map(|&p| (p * size, self.page_size as usize))
+            .collect();
+        if ranges.is_empty() {
+            return Ok(());
+        }
+        self.src
+            .prefetch(&ranges)
+            .map_err(|e| source::read_error(self.src.name(), ranges[0].0, ranges[0].1, e))
+    }
+
     /// `bytes` (page `page`, checked when first read) if it is a `tag` page.
     #[inline]
     fn tagged(&self, page: u64, tag: [u8; 4], bytes: PageBytes<'a>) -> Result<PageBytes<'a>> {
@@ -456,6 +474,9 @@ pub(crate) struct Cursor<'a> {
     remaining: u64,
     /// Pages read so far, the descent included.
     pub pages_read: u32,
+    /// In a keyed tree, the cursor ends rather than go down to a child whose records all
+    /// have keys above this ([`Cursor::stop_above`]).
+    stop_above: Option<u64>,
 }
 
 /// How a descent picks a child: by key or by ordinal.
@@ -499,6 +520,110 @@ fn descend(page: &TreePage<'_>, seek: Seek) -> (usize, u64, u64) {
     (idx, e.child.get(), e.first_ordinal.get())
 }
 
+/// Records of a tree wanted by a [`prefetch`]: an inclusive span of keys or of ordinals.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Span {
+    /// The records a scan from key `.0` up to key `.1` reads ([`Seek::Key`] semantics: from
+    /// the last record at or below `.0`).
+    Keys(u64, u64),
+    /// Records with ordinals `.0 ..= .1`.
+    Ordinals(u64, u64),
+}
+
+impl Span {
+    fn bounds(self) -> (u64, u64) {
+        match self {
+            Span::Keys(a, b) | Span::Ordinals(a, b) => (a, b),
+        }
+    }
+
+    fn with_bounds(self, a: u64, b: u64) -> Span {
+        match self {
+            Span::Keys(..) => Span::Keys(a, b),
+            Span::Ordinals(..) => Span::Ordinals(a, b),
+        }
+    }
+
+    fn seek(self, at: u64) -> Seek {
+        match self {
+            Span::Keys(..) => Seek::Key(at),
+            Span::Ordinals(..) => Seek::Ordinal(at),
+        }
+    }
+}
+
+/// Fetches ahead, level by level, the pages that lookups of `wants` (each a tree and the
+/// spans of it wanted) will read: every tree's root in one [`Pages::prefetch`], then the
+/// children of those pages that the spans reach, down to the leaves (which are fetched,
+/// not read). So `k` trees of depth `d` cost `d` rounds on a remote source, not one per
+/// page. The branch pages are read (and checked) on the way; nothing is returned, since
+/// the lookups that follow read the pages as always, and a page this skipped is simply
+/// read then. Spans over keys assume a keyed tree.
+pub(crate) fn prefetch<S: Source + ?Sized>(
+    pages: &Pages<'_, S>,
+    wants: &[(TreeRef, TreeSpec, Vec<Span>)],
+) -> Result<()> {
+    // Pages at the current level: (page, its tree, the spans clipped to what it covers,
+    // levels left below it).
+    struct At {
+        page: u64,
+        spec: TreeSpec,
+        spans: Vec<Span>,
+        below: u16,
+    }
+    let mut level: Vec<At> = wants
+        .iter()
+        .filter(|(tree, _, spans)| tree.records.get() > 0 && !spans.is_empty())
+        .map(|(tree, spec, spans)| At {
+            page: tree.root_page.get(),
+            spec: *spec,
+            spans: spans.clone(),
+            below: tree.depth.get().min(MAX_TREE_DEPTH).saturating_sub(1),
+        })
+        .collect();
+    while !level.is_empty() {
+        let mut numbers: Vec<u64> = level.iter().map(|a| a.page).collect();
+        numbers.sort_unstable();
+        numbers.dedup();
+        pages.prefetch(&numbers)?;
+        let mut next = Vec::new();
+        for at in level.into_iter().filter(|a| a.below > 0) {
+            let bytes = pages.get(at.page, at.spec.tag)?;
+            let page = TreePage::new(&bytes);
+            check_level(pages, at.spec, at.page, &page, at.below)?;
+            let n = page.branches().max(1);
+            // Each child with the spans that reach it, clipped to its own first entry and
+            // the next child's.
+            let mut children: Vec<(usize, Vec<Span>)> = Vec::new();
+            for span in &at.spans {
+                let (a, b) = span.bounds();
+                let (first, _, _) = descend(&page, span.seek(a));
+                let (last, _, _) = descend(&page, span.seek(b));
+                for i in first..=last.min(n - 1) {
+                    let e = page.branch(i);
+                    let lo = match span {
+                        Span::Keys(..) => e.first_key.get(),
+                        Span::Ordinals(..) => e.first_ordinal.get(),
+                    };
+                    let clipped = span.with_bounds(a.max(lo).min(b), b);
+                    match children.iter_mut().find(|(c, _)| *c == i) {
+                        Some((_, spans)) => spans.push(clipped),
+                        None => children.push((i, vec![clipped])),
+                    }
+                }
+            }
+            next.extend(children.into_iter().map(|(i, spans)| At {
+                page: page.branch(i).child.get(),
+                spec: at.spec,
+                spans,
+                below: at.below - 1,
+            }));
+        }
+        level = next;
+    }
+    Ok(())
+}
+
 /// A cursor on the record `seek` picks in `tree`. For [`Seek::Ordinal`] beyond the end, the
 /// cursor yields nothing.
 pub(crate) fn seek<'a, S: Source + ?Sized>(
@@ -513,6 +638,7 @@ pub(crate) fn seek<'a, S: Source + ?Sized>(
         spec,
         remaining: records,
         pages_read: 0,
+        stop_above: None,
     };
     if records == 0 {
         return Ok(cursor);
@@ -608,6 +734,15 @@ pub(crate) fn get_ordinal<S: Source + ?Sized, R: FromBytes>(
 }
 
 impl<'a> Cursor<'a> {
+    /// Ends the cursor before it goes down to a child whose records all have keys above
+    /// `key` (the child's branch entry says so), in a keyed tree: a range scan up to `key`
+    /// then never reads the page after its last record only to find it past the range.
+    pub fn stop_above(&mut self, key: u64) {
+        if self.spec.keyed {
+            self.stop_above = Some(key);
+        }
+    }
+
     /// The record under the cursor, then advances. `None` at the end.
     pub fn next_record<S: Source + ?Sized, R: FromBytes>(
         &mut self,
@@ -647,7 +782,12 @@ impl<'a> Cursor<'a> {
                 *idx += 1;
                 let page = TreePage::new(bytes);
                 if *idx < page.count() {
-                    break (page.branch(*idx).child.get(), page.level());
+                    let e = page.branch(*idx);
+                    if self.stop_above.is_some_and(|k| e.first_key.get() > k) {
+                        self.remaining = 0;
+                        return Ok(None);
+                    }
+                    break (e.child.get(), page.level());
                 }
                 self.path.pop();
             };

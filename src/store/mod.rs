@@ -53,6 +53,7 @@
 // Values read from a file are converted with checks, never truncated by `as`.
 #![warn(clippy::cast_possible_truncation)]
 
+mod ahead;
 pub(crate) mod btree;
 mod bundled;
 pub mod io;
@@ -75,6 +76,7 @@ use std::path::Path;
 use serde::Serialize;
 
 pub use crate::format::{ClusterInfo, FreePage, PayloadRef, ScanEntry, StoredBlock, StoredNode};
+pub use ahead::Ahead;
 pub use pagecache::ReadStats;
 pub use read::{Block, Children, CodeScan, Grid, HilbertScan, Layout, ParentGrid, ANCESTOR_CACHE};
 pub use source::{is_url, AnySource, Bytes, Counted, FileSource, MmapSource, RequestStats, Source};
@@ -287,6 +289,13 @@ impl<S: Source> Store<S> {
     /// (`format-spec/dataset.md` §4).
     pub fn pin(&self) -> crate::format::manifest::StatePin {
         crate::format::manifest::StatePin::of(&self.commit)
+    }
+
+    /// Page levels of the node table and of the block table (1: a root leaf). A lookup
+    /// reads this many pages; on a remote source, reading ahead costs this many rounds.
+    pub fn table_depths(&self) -> (u16, u16) {
+        let roots = &self.commit.roots;
+        (roots.node_table.depth.get(), roots.block_table.depth.get())
     }
 
     /// The transaction id of the state this store reads.

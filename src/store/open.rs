@@ -29,7 +29,7 @@ use super::pagecache::{PageCache, ReadStats, DEFAULT_CACHED_PAGES};
 use super::source::{Counted, Source};
 use super::Store;
 use crate::error::{Error, Result};
-use crate::format::blob::{blob_page_content, check_blob_ref};
+use crate::format::blob::{self, blob_page_content, check_blob_ref};
 use crate::format::commit::{self, NoState, Slot};
 use crate::format::dataset::MAX_DATASET_HEADER_LEN;
 use crate::format::directory::{self, MAX_DIRECTORY_LEN};
@@ -152,6 +152,10 @@ fn read_blob<S: Source + ?Sized>(
 /// unregistered reader, reused a page) while it chose. Each round takes microseconds and a
 /// commit at least one `fsync`, so this is never reached unless commits never stop.
 const OPEN_ATTEMPTS: u32 = 100;
+
+/// Pages of the dataset header and of the cluster directory fetched ahead at open from a
+/// remote source, each (their references are not checked yet: this bounds a damaged one).
+const MAX_AHEAD_PAGES: u64 = 16;
 
 /// The txn id of the state a reader would open from `src` now, if any.
 pub(crate) fn latest_txn<S: Source + ?Sized>(src: &S) -> Result<Option<u64>> {
@@ -364,6 +368,20 @@ fn open_once<S: Source>(src: &S, walk: Walk, pin: Option<StatePin>) -> Result<Op
     };
     let bundle_pages = bundle.as_ref().map_or(0, |b| b.page_count(page_size));
     let mut seen = PageSet::with_bundle(page_count, bundle_pages);
+    if src.prefetches() {
+        // One round for what opening reads next and scenes and loads read first: the
+        // header's and the directory's pages, and the roots of the node and block tables
+        // (a remote source).
+        let roots = &commit.roots;
+        let mut ahead = Vec::new();
+        for blob in [&roots.dataset_header, &roots.cluster_directory] {
+            let count = blob::blob_pages(blob.length.get(), page_size).min(MAX_AHEAD_PAGES);
+            ahead.extend((0..count).map(|i| blob.first_page.get().saturating_add(i)));
+        }
+        ahead.push(roots.node_table.root_page.get());
+        ahead.push(roots.block_table.root_page.get());
+        pages.prefetch(&ahead)?;
+    }
     let header_bytes = read_blob(
         &pages,
         &commit.roots.dataset_header,

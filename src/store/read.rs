@@ -260,7 +260,7 @@ impl<S: Source> Store<S> {
         }
     }
 
-    fn block_ordinal(&self, x: u32, y: u32) -> Result<u64> {
+    pub(crate) fn block_ordinal(&self, x: u32, y: u32) -> Result<u64> {
         let d = self.domain();
         let (cols, rows) = d.nodes_across(d.finest_level());
         if x >= cols || y >= rows {
@@ -764,7 +764,8 @@ impl<S: Source> Store<S> {
     ) -> Result<HilbertScan<'_, S>> {
         let c = *self.cluster(cluster)?;
         let pages = self.pages();
-        let cursor = btree::seek(&pages, c.index(), tables::INDEX, Seek::Key(*range.start()))?;
+        let mut cursor = btree::seek(&pages, c.index(), tables::INDEX, Seek::Key(*range.start()))?;
+        cursor.stop_above(*range.end());
         Ok(HilbertScan {
             pages,
             cursor,

@@ -6,13 +6,18 @@
 //! sequential *rounds* as it can:
 //!
 //! * **Open, one round:** the object's first [`PREFIX_LEN`] bytes (both commit slots at the
-//!   default page size) and its last [`SUFFIX_LEN`] (where a fresh build puts its metadata
-//!   bundle, format §2), as two requests in parallel. Reads inside them cost nothing more.
-//!   The answers also tell the object's length and its ETag.
-//! * **Metadata, one round:** after opening, the store advises where its table pages lie
-//!   ([`Source::advise_metadata`]); the first read inside that area fetches it whole when it
-//!   is at most [`RemoteOptions::metadata_limit`] bytes, and every index, node and block
-//!   page is then served from memory. A larger area is read a page at a time.
+//!   default page size) and its last [`RemoteOptions::suffix_len`] ([`SUFFIX_LEN`]: where a
+//!   fresh build puts its metadata bundle, format §2), as one multi-range request where the
+//!   server answers those (nginx does), else as two requests in parallel (S3). Reads inside
+//!   them cost nothing more. The answers also tell the object's length and its ETag.
+//! * **Metadata, a round per tree level at most:** after opening, the store advises where
+//!   its table pages lie ([`Source::advise_metadata`]); the first read inside that area
+//!   fetches it whole when it is at most [`RemoteOptions::metadata_limit`] bytes, and every
+//!   index, node and block page is then served from memory. In a larger area (a dataset's
+//!   large tiles) a scene names its lookups ahead ([`Source::prefetch`]: the index spans it
+//!   scans, the nodes it reads, the children it refines, the records and ancestors it
+//!   loads), and the source fetches the pages each level of the trees needs in one round;
+//!   a read nothing named fetches its aligned [`RemoteOptions::metadata_chunk`].
 //! * **Payloads, one round per batch:** [`Source::read_many`] closes gaps of at most
 //!   [`RemoteOptions::merge_gap`] bytes between the ranges asked for (a scene's payloads lie
 //!   in Hilbert order, so they cluster), then fetches the requests over
@@ -77,13 +82,17 @@ pub use super::source::is_url;
 pub struct RemoteOptions {
     /// Requests in flight at once within a batch.
     pub connections: usize,
+    /// Bytes asked for at the end of the object at open ([`SUFFIX_LEN`] by default): a
+    /// metadata bundle within them opens in the same round, a larger one costs a second.
+    pub suffix_len: u64,
     /// A metadata area of at most this many bytes is fetched whole on its first read.
     pub metadata_limit: u64,
     /// A larger area is fetched in aligned chunks of this many bytes, each on the first
     /// read inside it.
     pub metadata_chunk: u64,
-    /// Chunks are held in memory up to this many bytes in all; the oldest are dropped
-    /// first (and fetched again if read again).
+    /// Chunks and pages fetched ahead are held in memory up to this many bytes in all; the
+    /// oldest are dropped first (and fetched again if read again). A batch fetched together
+    /// is kept whole while it is the newest, even past the bound.
     pub held_limit: u64,
     /// Gaps of at most this many bytes between the ranges of a batch are read (and dropped)
     /// rather than cost another request (when the server takes one range a request).
@@ -92,6 +101,11 @@ pub struct RemoteOptions {
     /// `multipart/byteranges`) when the server serves them; S3 does not, so `s3://` never
     /// does. A server that answers otherwise is asked one range a request from then on.
     pub multi_range: bool,
+    /// Fetch ahead the pages that a reader names before its lookups
+    /// ([`Source::prefetch`]): one round per tree level for a scene's index, node and
+    /// block lookups. Off, each page a lookup reaches first outside what is held costs a
+    /// round of its own (or fetches its chunk).
+    pub read_ahead: bool,
     /// Tries per request: the first and the retries.
     pub tries: u32,
     /// The wait before the first retry; it doubles with each.
@@ -117,11 +131,13 @@ impl Default for RemoteOptions {
     fn default() -> Self {
         RemoteOptions {
             connections: 8,
+            suffix_len: SUFFIX_LEN,
             metadata_limit: 2 << 20,
             metadata_chunk: 64 << 10,
             held_limit: 64 << 20,
             merge_gap: 16 << 10,
             multi_range: true,
+            read_ahead: true,
             tries: 4,
             backoff: Duration::from_millis(100),
             timeout: Duration::from_secs(60),
@@ -237,6 +253,9 @@ impl std::fmt::Debug for HttpSource {
 /// Parts of an answer: where each starts, and its bytes.
 type Parts = Vec<(u64, Vec<u8>)>;
 
+/// Requests of a batch: each one's byte range, and the indices of the spans it serves.
+type Requests = Vec<(Range<u64>, Vec<usize>)>;
+
 /// One answer to a range request.
 struct Answer {
     /// Its parts: where each starts, and its bytes (one part unless `multipart/byteranges`).
@@ -323,14 +342,25 @@ fn content_range(value: &str) -> Option<(u64, u64, u64)> {
     ))
 }
 
+/// Whether `parts` (each a start and its bytes) hold every byte of `from .. to`.
+fn covers(parts: &[(u64, Vec<u8>)], from: u64, to: u64) -> bool {
+    from >= to
+        || parts
+            .iter()
+            .any(|(at, b)| *at <= from && at.saturating_add(b.len() as u64) >= to)
+}
+
 impl HttpSource {
     /// Opens `url` (`http://`, `https://` or `s3://`) with the default options.
     pub fn open(url: &str) -> Result<HttpSource> {
         HttpSource::open_with(url, RemoteOptions::default())
     }
 
-    /// Opens `url`: one round of two requests, its first [`PREFIX_LEN`] bytes and its last
-    /// [`SUFFIX_LEN`], and pins its ETag.
+    /// Opens `url`: one round, its first [`PREFIX_LEN`] bytes and its last
+    /// [`RemoteOptions::suffix_len`], and pins its ETag. Both come in one multi-range
+    /// request where the server answers one (nginx does), else as two requests in parallel
+    /// (S3); a server that sends the whole object to the multi-range request is asked the
+    /// two ranges in a second round.
     pub fn open_with(url: &str, options: RemoteOptions) -> Result<HttpSource> {
         let agent: ureq::Agent = ureq::Agent::config_builder()
             .http_status_as_error(false)
@@ -356,36 +386,79 @@ impl HttpSource {
             rounds: 0.into(),
             retries: 0.into(),
         };
-        source.rounds.fetch_add(1, Ordering::Relaxed);
-        let prefix = format!("bytes=0-{}", PREFIX_LEN - 1);
-        let suffix = format!("bytes=-{SUFFIX_LEN}");
-        let (first, last) = std::thread::scope(|s| {
-            let last = s.spawn(|| source.fetch(&suffix, SUFFIX_LEN, false));
-            let first = source.fetch(&prefix, PREFIX_LEN, false);
-            (first, last.join())
-        });
+        let s3 = matches!(source.target, Target::S3 { .. });
+        let multi_range = source.options.multi_range && !s3;
+        let suffix_len = source.options.suffix_len.max(1);
         let io = |e| Error::io(Path::new(url), e);
-        let first = first.map_err(io)?;
-        let last = last
-            .map_err(|_| Error::Internal("a request thread panicked".into()))?
-            .map_err(io)?;
-        if first.total != last.total || first.etag != last.etag {
+        source.rounds.fetch_add(1, Ordering::Relaxed);
+        // One request for both ends where the server answers multi-range requests.
+        let mut opened = None;
+        if multi_range {
+            let both = format!("bytes=0-{},-{suffix_len}", PREFIX_LEN - 1);
+            match source.fetch(&both, PREFIX_LEN + suffix_len + 1024, false) {
+                Ok(a) => opened = Some(a),
+                // The server sent the whole object (it ignores ranges, or declines these:
+                // nginx does when they overlap, in an object shorter than both): one range
+                // a request, in a second round.
+                Err(e) if e.kind() == io::ErrorKind::Unsupported => {
+                    source.rounds.fetch_add(1, Ordering::Relaxed);
+                }
+                Err(e) => return Err(io(e)),
+            }
+        }
+        let (answers, multi_range) = match opened {
+            Some(a) => {
+                let head = covers(&a.parts, 0, PREFIX_LEN.min(a.total));
+                let tail = covers(&a.parts, a.total.saturating_sub(suffix_len), a.total);
+                if head && tail {
+                    (vec![a], true)
+                } else {
+                    // A server that answered one range of the two: the other in a second
+                    // round, and one range a request from now on.
+                    source.rounds.fetch_add(1, Ordering::Relaxed);
+                    let (range, want) = if head {
+                        (format!("bytes=-{suffix_len}"), suffix_len)
+                    } else {
+                        (format!("bytes=0-{}", PREFIX_LEN - 1), PREFIX_LEN)
+                    };
+                    let other = source.fetch(&range, want, false).map_err(io)?;
+                    (vec![a, other], false)
+                }
+            }
+            None => {
+                let prefix = format!("bytes=0-{}", PREFIX_LEN - 1);
+                let suffix = format!("bytes=-{suffix_len}");
+                let (first, last) = std::thread::scope(|s| {
+                    let last = s.spawn(|| source.fetch(&suffix, suffix_len, false));
+                    let first = source.fetch(&prefix, PREFIX_LEN, false);
+                    (first, last.join())
+                });
+                let first = first.map_err(io)?;
+                let last = last
+                    .map_err(|_| Error::Internal("a request thread panicked".into()))?
+                    .map_err(io)?;
+                (vec![first, last], multi_range)
+            }
+        };
+        let first = &answers[0];
+        if answers
+            .iter()
+            .any(|a| a.total != first.total || a.etag != first.etag)
+        {
             return Err(io(failed(format!(
                 "{url}: the object changed while it was being opened; open it again"
             ))));
         }
         source.len = first.total;
-        source.etag = first.etag;
-        let held: Vec<(u64, Arc<[u8]>)> = first
-            .parts
+        source.etag = first.etag.clone();
+        let held: Vec<(u64, Arc<[u8]>)> = answers
             .into_iter()
-            .chain(last.parts)
+            .flat_map(|a| a.parts)
             .map(|(at, bytes)| (at, bytes.into()))
             .collect();
         source.opened_ranges = held.len();
         source.held = RwLock::new(held);
-        let s3 = matches!(source.target, Target::S3 { .. });
-        source.multi_range = AtomicBool::new(source.options.multi_range && !s3);
+        source.multi_range = AtomicBool::new(multi_range);
         Ok(source)
     }
 
@@ -633,6 +706,15 @@ impl HttpSource {
         Ok(None)
     }
 
+    /// Whether `offset .. end` lies in the advised metadata area, not yet fetched, and
+    /// small enough to fetch whole.
+    fn area_fetches_whole(&self, offset: u64, end: u64) -> bool {
+        self.area.lock().is_ok_and(|a| {
+            matches!(&*a, Area::Advised(r) if offset >= r.start && end <= r.end
+                && r.end - r.start <= self.options.metadata_limit)
+        })
+    }
+
     /// Fetches the advised metadata area if `offset .. end` lies in it and it is small
     /// enough: one round, then held.
     fn fetch_area(&self, offset: u64, end: u64) -> io::Result<()> {
@@ -666,23 +748,85 @@ impl HttpSource {
             .map_err(|_| failed("metadata area too large".into()))?;
         self.rounds.fetch_add(1, Ordering::Relaxed);
         let bytes = self.fetch_range(fetch.start, len)?;
+        self.hold(vec![(fetch.start, bytes)], whole)?;
+        drop(area);
+        Ok(())
+    }
+
+    /// Holds `pieces` (where each starts, its bytes). Bounded by
+    /// [`RemoteOptions::held_limit`]: the oldest pieces go first (a later read fetches them
+    /// again), never the ranges opening read, nor these when `keep` (a whole area).
+    fn hold(&self, pieces: Vec<(u64, Vec<u8>)>, keep: bool) -> io::Result<()> {
         let mut held = self
             .held
             .write()
             .map_err(|_| failed("the held ranges were poisoned".into()))?;
-        held.push((fetch.start, bytes.into()));
-        // Bounded: the oldest chunks go first (a later read fetches them again); the
-        // ranges opening read, and a whole area, stay.
+        let fresh = pieces.len();
+        held.extend(pieces.into_iter().map(|(at, b)| (at, Arc::from(b))));
         let mut total: u64 = held.iter().map(|(_, b)| b.len() as u64).sum();
-        while total > self.options.held_limit && !whole {
-            let Some(i) = (self.opened_ranges..held.len().saturating_sub(1)).next() else {
+        while total > self.options.held_limit && !keep {
+            // The oldest piece that is neither opening's nor one of these.
+            let Some(i) = (self.opened_ranges..held.len().saturating_sub(fresh)).next() else {
                 break;
             };
             total -= held.remove(i).1.len() as u64;
         }
-        drop(held);
-        drop(area);
         Ok(())
+    }
+
+    /// `spans` (sorted by start) fetched in one round where the server allows: as
+    /// multi-range requests of up to [`MAX_PARTS`] ranges each, else merged across gaps of
+    /// [`RemoteOptions::merge_gap`] bytes, one range a request; either way over
+    /// [`RemoteOptions::connections`] connections at once. Returns each request's byte range
+    /// with the indices of the spans it serves, and its bytes.
+    fn fetch_spans(&self, spans: &[(u64, u64)]) -> io::Result<(Requests, Vec<Vec<u8>>)> {
+        let mut fetched = None;
+        if self.multi_range.load(Ordering::Relaxed) && spans.len() > 1 {
+            // Gaps smaller than a part's own headers cost nothing to read.
+            let requests = merge(spans, MULTI_RANGE_GAP);
+            let groups: Vec<&[(Range<u64>, Vec<usize>)]> = requests.chunks(MAX_PARTS).collect();
+            let answers = self.parallel(&groups, |group| {
+                let ranges: Vec<Range<u64>> = group.iter().map(|(r, _)| r.clone()).collect();
+                self.fetch_ranges(&ranges)
+            });
+            let mut bodies = Vec::with_capacity(requests.len());
+            let mut unsupported = false;
+            for answer in answers {
+                match answer {
+                    Ok(b) => bodies.extend(b),
+                    Err(e) if e.kind() == io::ErrorKind::Unsupported => unsupported = true,
+                    Err(e) => return Err(e),
+                }
+            }
+            if unsupported {
+                // One range a request from now on.
+                self.multi_range.store(false, Ordering::Relaxed);
+            } else {
+                fetched = Some((requests, bodies));
+            }
+        }
+        let (requests, bodies) = match fetched {
+            Some(f) => f,
+            None => {
+                let requests = merge(spans, self.options.merge_gap);
+                let bodies = self
+                    .parallel(&requests, |(range, _)| {
+                        let len = usize::try_from(range.end - range.start).unwrap_or(usize::MAX);
+                        self.fetch_range(range.start, len)
+                    })
+                    .into_iter()
+                    .collect::<io::Result<Vec<_>>>()?;
+                (requests, bodies)
+            }
+        };
+        Ok((requests, bodies))
+    }
+
+    /// Whether batches still go as multi-range requests: the options allow it, the target
+    /// is not S3, and the server has answered every one so far. A dataset opens its tiles
+    /// with what its manifest's source learned.
+    pub fn multi_range(&self) -> bool {
+        self.multi_range.load(Ordering::Relaxed)
     }
 
     /// Bytes held in memory: the ranges opening read and the metadata fetched since.
@@ -763,45 +907,7 @@ impl Source for HttpSource {
         }
         wanted.sort_unstable();
         let spans: Vec<(u64, u64)> = wanted.iter().map(|&(a, b, _)| (a, b)).collect();
-        let mut fetched = None;
-        if self.multi_range.load(Ordering::Relaxed) && spans.len() > 1 {
-            // Gaps smaller than a part's own headers cost nothing to read.
-            let requests = merge(&spans, MULTI_RANGE_GAP);
-            let groups: Vec<&[(Range<u64>, Vec<usize>)]> = requests.chunks(MAX_PARTS).collect();
-            let answers = self.parallel(&groups, |group| {
-                let ranges: Vec<Range<u64>> = group.iter().map(|(r, _)| r.clone()).collect();
-                self.fetch_ranges(&ranges)
-            });
-            let mut bodies = Vec::with_capacity(requests.len());
-            let mut unsupported = false;
-            for answer in answers {
-                match answer {
-                    Ok(b) => bodies.extend(b),
-                    Err(e) if e.kind() == io::ErrorKind::Unsupported => unsupported = true,
-                    Err(e) => return Err(e),
-                }
-            }
-            if unsupported {
-                // One range a request from now on.
-                self.multi_range.store(false, Ordering::Relaxed);
-            } else {
-                fetched = Some((requests, bodies));
-            }
-        }
-        let (requests, bodies) = match fetched {
-            Some(f) => f,
-            None => {
-                let requests = merge(&spans, self.options.merge_gap);
-                let bodies = self
-                    .parallel(&requests, |(range, _)| {
-                        let len = usize::try_from(range.end - range.start).unwrap_or(usize::MAX);
-                        self.fetch_range(range.start, len)
-                    })
-                    .into_iter()
-                    .collect::<io::Result<Vec<_>>>()?;
-                (requests, bodies)
-            }
-        };
+        let (requests, bodies) = self.fetch_spans(&spans)?;
         for ((range, members), body) in requests.iter().zip(bodies) {
             for &m in members {
                 let (offset, end, i) = wanted[m];
@@ -839,6 +945,41 @@ impl Source for HttpSource {
         if let Ok(mut a) = self.area.lock() {
             *a = Area::Advised(area.start..end);
         }
+    }
+
+    fn prefetches(&self) -> bool {
+        self.options.read_ahead
+    }
+
+    /// The ranges not already held, in one round (as [`Source::read_many`] batches), then
+    /// held. A range inside an advised metadata area small enough to fetch whole fetches
+    /// the area instead (one round as well, and every later page is then at hand).
+    fn prefetch(&self, ranges: &[(u64, usize)]) -> io::Result<()> {
+        let mut wanted: Vec<(u64, u64)> = Vec::new();
+        for &(offset, len) in ranges {
+            let end = self.check_range(offset, len)?;
+            if len == 0 || self.held(offset, end)?.is_some() {
+                continue;
+            }
+            if self.area_fetches_whole(offset, end) {
+                self.fetch_area(offset, end)?;
+                if self.held(offset, end)?.is_some() {
+                    continue;
+                }
+            }
+            wanted.push((offset, end));
+        }
+        if wanted.is_empty() {
+            return Ok(());
+        }
+        wanted.sort_unstable();
+        let (requests, bodies) = self.fetch_spans(&wanted)?;
+        let pieces = requests
+            .into_iter()
+            .zip(bodies)
+            .map(|((range, _), body)| (range.start, body))
+            .collect();
+        self.hold(pieces, false)
     }
 }
 

@@ -82,6 +82,23 @@ pub trait Source: Send + Sync {
     fn request_stats(&self) -> Option<RequestStats> {
         None
     }
+
+    /// Whether [`Source::prefetch`] is worth planning for: true where each read costs a
+    /// round trip (a remote object), so that a reader which knows the pages it will read
+    /// next asks for them together. False (the default) where a read is a memory access:
+    /// planning would only cost time.
+    fn prefetches(&self) -> bool {
+        false
+    }
+
+    /// A hint that `ranges` will be read soon: a source where each read costs a round trip
+    /// fetches those it does not hold in one round and holds them for the reads that follow.
+    /// It changes no answer: a read outside what was fetched is served as before. The
+    /// default ignores it.
+    fn prefetch(&self, ranges: &[(u64, usize)]) -> io::Result<()> {
+        let _ = ranges;
+        Ok(())
+    }
 }
 
 /// A borrowed source reads what it borrows (the validator opens a store on a source it keeps).
@@ -126,6 +143,14 @@ impl<S: Source + ?Sized> Source for &S {
 
     fn request_stats(&self) -> Option<RequestStats> {
         (**self).request_stats()
+    }
+
+    fn prefetches(&self) -> bool {
+        (**self).prefetches()
+    }
+
+    fn prefetch(&self, ranges: &[(u64, usize)]) -> io::Result<()> {
+        (**self).prefetch(ranges)
     }
 }
 
@@ -437,6 +462,14 @@ impl<S: Source> Source for Counted<S> {
     fn request_stats(&self) -> Option<RequestStats> {
         self.inner.request_stats()
     }
+
+    fn prefetches(&self) -> bool {
+        self.inner.prefetches()
+    }
+
+    fn prefetch(&self, ranges: &[(u64, usize)]) -> io::Result<()> {
+        self.inner.prefetch(ranges)
+    }
 }
 
 /// The error of a failed read of `len` bytes at `offset` from the file at `path`. A read
@@ -509,20 +542,25 @@ impl AnySource {
     /// Opens `location`: a URL (`http://`, `https://`, `s3://`) as a remote object, anything
     /// else as a file path.
     pub fn open(location: &Path) -> Result<AnySource> {
-        AnySource::open_tile(location, false)
+        AnySource::open_tile(location, None)
     }
 
-    /// As [`AnySource::open`]; a remote `tile` of a dataset fetches a large metadata area
-    /// in chunks (`RemoteOptions::for_tiles`, feature `remote`).
-    pub fn open_tile(location: &Path, tile: bool) -> Result<AnySource> {
+    /// As [`AnySource::open`], for a tile of the dataset whose manifest `manifest` reads
+    /// (`None`: not a tile). A remote tile fetches a large metadata area in chunks
+    /// (`RemoteOptions::for_tiles`, feature `remote`), and asks for ranges the way the
+    /// manifest's server was found to answer them (one request for many, or one each).
+    pub fn open_tile(location: &Path, manifest: Option<&AnySource>) -> Result<AnySource> {
         if let Some(url) = location.to_str().filter(|t| is_url(t)) {
             #[cfg(feature = "remote")]
             {
                 use super::remote::{HttpSource, RemoteOptions};
-                let options = if tile {
-                    RemoteOptions::for_tiles()
-                } else {
-                    RemoteOptions::default()
+                let options = match manifest {
+                    Some(AnySource::Remote(m)) => RemoteOptions {
+                        multi_range: m.multi_range(),
+                        ..RemoteOptions::for_tiles()
+                    },
+                    Some(_) => RemoteOptions::for_tiles(),
+                    None => RemoteOptions::default(),
                 };
                 return Ok(AnySource::Remote(Box::new(HttpSource::open_with(
                     url, options,
@@ -530,7 +568,7 @@ impl AnySource {
             }
             #[cfg(not(feature = "remote"))]
             {
-                let _ = tile;
+                let _ = manifest;
                 return Err(Error::unsupported(
                     location,
                     format!("{url}: this fmrh was built without the `remote` feature"),
@@ -606,5 +644,13 @@ impl Source for AnySource {
 
     fn request_stats(&self) -> Option<RequestStats> {
         any_source!(self, s => s.request_stats())
+    }
+
+    fn prefetches(&self) -> bool {
+        any_source!(self, s => s.prefetches())
+    }
+
+    fn prefetch(&self, ranges: &[(u64, usize)]) -> io::Result<()> {
+        any_source!(self, s => s.prefetch(ranges))
     }
 }
