@@ -75,7 +75,7 @@
 //! # Ok(()) }
 //! ```
 //!
-//! Underneath: [`ingest`] reads DEMs, [`model`] builds the FMRH and its clusters,
+//! Underneath: [`ingest`] reads DEMs, [`export`] writes them as GeoTIFF, [`model`] builds the FMRH and its clusters,
 //! [`mod@format`] is every byte of the file format, [`store`] reads, writes and verifies files,
 //! [`scene`] selects blocks for cameras, and [`curve`] knows Hilbert and Morton keys and
 //! nothing of terrain. Errors say whose fault they are ([`Error`]).
@@ -85,6 +85,7 @@ pub mod crs;
 pub mod curve;
 pub mod dataset;
 pub mod error;
+pub mod export;
 pub mod format;
 pub mod heightfield;
 pub mod ingest;

@@ -1,5 +1,6 @@
 //! `fmrh extract`: full-resolution samples out of a container, bit for bit as stored, in the
-//! `.f32` + `.json` form of `../shared/data` (so `fmrh build` reads them back).
+//! `.f32` + `.json` form of `../shared/data` (so `fmrh build` reads them back) or as a
+//! GeoTIFF.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -14,9 +15,13 @@ pub struct ExtractArgs {
     /// The window, inclusive sample coordinates `c0,r0,c1,r1` (default: the whole dataset).
     #[arg(long)]
     window: Option<String>,
-    /// The `.f32` to write; its `.json` sidecar goes beside it.
+    /// The file to write: a `.f32` (its `.json` sidecar goes beside it), or a GeoTIFF
+    /// (`.tif`, `.tiff`, or --format tif). `-`: standard output.
     #[arg(short, long)]
     output: PathBuf,
+    /// The output's format (default: from its name; `.f32` otherwise).
+    #[arg(long, value_enum)]
+    format: Option<super::sidecar::RasterFormat>,
     /// Replace existing output files.
     #[arg(long)]
     force: bool,
@@ -33,7 +38,7 @@ pub fn run(args: &ExtractArgs) -> Result<ExitCode, Error> {
             Some(text) => super::parse_window(text)?,
             None => ds.grid(),
         };
-        let out = super::sidecar::F32Output::new(&args.output, args.force)?;
+        let out = super::sidecar::RasterOutput::new(&args.output, args.format, args.force)?;
         let hf = ds.read_window(window)?;
         out.write_dataset(&hf, window, &args.file, ds.txn_id())?;
         return Ok(ExitCode::SUCCESS);
@@ -57,7 +62,7 @@ fn extract<S: fmrh::store::Source>(
         Some(text) => super::parse_window(text)?,
         None => data,
     };
-    let out = super::sidecar::F32Output::new(&args.output, args.force)?;
+    let out = super::sidecar::RasterOutput::new(&args.output, args.format, args.force)?;
     let hf = if args.quiet {
         store.read_window(window)?
     } else {

@@ -126,9 +126,13 @@ pub struct SceneArgs {
     /// frustum sees).
     #[arg(long)]
     window: Option<String>,
-    /// Write the window at full resolution as the scene's blocks draw it (.f32 + .json).
+    /// Write the window at full resolution as the scene's blocks draw it (.f32 + .json, or
+    /// a GeoTIFF when the name ends in .tif or with --format tif).
     #[arg(long)]
     reconstruct: Option<PathBuf>,
+    /// The --reconstruct file's format (default: from its name).
+    #[arg(long, value_enum, requires = "reconstruct")]
+    format: Option<super::sidecar::RasterFormat>,
     /// Replace existing --reconstruct files.
     #[arg(long)]
     force: bool,
@@ -202,7 +206,7 @@ pub fn run(args: &SceneArgs) -> Result<ExitCode, Error> {
     let output = args
         .reconstruct
         .as_deref()
-        .map(|p| super::sidecar::F32Output::new(p, args.force))
+        .map(|p| super::sidecar::RasterOutput::new(p, args.format, args.force))
         .transpose()?;
     if super::is_dataset(&args.file)? {
         return run_dataset(args, camera, options, output);
@@ -228,7 +232,7 @@ fn run_on<S: fmrh::store::Source>(
     store: &fmrh::Store<S>,
     camera: Camera,
     options: SceneOptions,
-    output: Option<super::sidecar::F32Output>,
+    output: Option<super::sidecar::RasterOutput>,
 ) -> Result<ExitCode, Error> {
     let before = store.read_stats();
     let asked = store.source().request_stats();
@@ -427,7 +431,7 @@ fn run_dataset(
     args: &SceneArgs,
     camera: Camera,
     options: SceneOptions,
-    output: Option<super::sidecar::F32Output>,
+    output: Option<super::sidecar::RasterOutput>,
 ) -> Result<ExitCode, Error> {
     let ds = fmrh::dataset::Dataset::open(&args.file)?;
     let asked = ds.request_stats();

@@ -1,5 +1,6 @@
-//! The `.f32` + `.json` output of `extract` and `scene --reconstruct`: the form of
-//! `../shared/data`, so `fmrh build` reads it back and anyone can diff it against a source.
+//! The raster output of `extract` and `scene --reconstruct`: `.f32` + `.json`, the form of
+//! `../shared/data`, so `fmrh build` reads it back and anyone can diff it against a source;
+//! or a GeoTIFF (`fmrh::export::geotiff`) that GIS tools open as they are.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -51,22 +52,58 @@ struct Source {
     storage_precision: Option<f64>,
 }
 
-/// Where a `.f32` and its sidecar go, checked before any work is done.
-pub struct F32Output {
+/// The raster formats `extract` and `scene --reconstruct` write.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum RasterFormat {
+    /// Raw little-endian f32 with a `.json` sidecar (what `../shared/data` holds).
+    F32,
+    /// A GeoTIFF: f32, DEFLATE, the georeference and CRS as GeoTIFF tags, voids as NaN.
+    Tif,
+}
+
+impl RasterFormat {
+    /// The format an output name implies: `.tif` and `.tiff` are GeoTIFFs.
+    fn of(output: &Path) -> RasterFormat {
+        let ext = output
+            .extension()
+            .map(|e| e.to_string_lossy().to_ascii_lowercase());
+        match ext.as_deref() {
+            Some("tif" | "tiff") => RasterFormat::Tif,
+            _ => RasterFormat::F32,
+        }
+    }
+}
+
+/// Where a raster goes (a `.f32` and its sidecar, or a GeoTIFF), checked before any work is
+/// done.
+pub struct RasterOutput {
     f32_path: PathBuf,
     json_path: PathBuf,
+    format: RasterFormat,
     force: bool,
 }
 
-impl F32Output {
-    /// Refuses a `.json` output name, and existing files unless `force`. `-` is standard
-    /// output: the raw samples only (a sidecar has nowhere to go; its size line goes to
-    /// standard error).
-    pub fn new(output: &Path, force: bool) -> Result<F32Output, Error> {
-        if output == Path::new("-") {
-            return Ok(F32Output {
+impl RasterOutput {
+    /// `format`, or the one the name implies. Refuses a `.json` output name, and existing
+    /// files unless `force`. `-` is standard output: the raw samples only (a sidecar has
+    /// nowhere to go; its size line goes to standard error), or the whole GeoTIFF.
+    pub fn new(
+        output: &Path,
+        format: Option<RasterFormat>,
+        force: bool,
+    ) -> Result<RasterOutput, Error> {
+        let format = format.unwrap_or_else(|| RasterFormat::of(output));
+        if output == Path::new("-") || format == RasterFormat::Tif {
+            if output != Path::new("-") && !force && output.exists() {
+                return Err(Error::InvalidArgument(format!(
+                    "{} exists; pass --force to replace it",
+                    output.display()
+                )));
+            }
+            return Ok(RasterOutput {
                 f32_path: output.to_path_buf(),
                 json_path: PathBuf::new(),
+                format,
                 force,
             });
         }
@@ -84,9 +121,10 @@ impl F32Output {
                 )));
             }
         }
-        Ok(F32Output {
+        Ok(RasterOutput {
             f32_path: output.to_path_buf(),
             json_path,
+            format,
             force,
         })
     }
@@ -141,6 +179,9 @@ impl F32Output {
         window: SampleRect,
         source: Source,
     ) -> Result<(), Error> {
+        if self.format == RasterFormat::Tif {
+            return self.write_tif(hf);
+        }
         let samples = hf.samples();
         let (mut min, mut max, mut sum, mut valid) = (f32::INFINITY, f32::NEG_INFINITY, 0f64, 0u64);
         for &v in samples {
@@ -209,6 +250,46 @@ impl F32Output {
             samples.len() as u64 - valid,
             self.f32_path.display(),
             self.json_path.display()
+        );
+        Ok(())
+    }
+
+    /// Writes `hf` as a GeoTIFF, atomically (or to standard output).
+    fn write_tif(&self, hf: &Heightfield) -> Result<(), Error> {
+        let mut bytes = std::io::Cursor::new(Vec::new());
+        let written = fmrh::export::geotiff::write(hf, &mut bytes)?;
+        let bytes = bytes.into_inner();
+        let path = &self.f32_path;
+        if path == Path::new("-") {
+            let mut out = std::io::stdout().lock();
+            out.write_all(&bytes)
+                .and_then(|()| out.flush())
+                .map_err(|e| Error::io("<stdout>", e))?;
+        } else {
+            write_atomically(path, self.force, |w| {
+                w.write_all(&bytes).map_err(|e| Error::io(path, e))
+            })?;
+        }
+        if let Some(name) = &written.crs_kept {
+            eprintln!(
+                "fmrh: the CRS {name:?} is not an EPSG code; the GeoTIFF carries it as its \
+                 citation only, beside the geotransform"
+            );
+        }
+        eprintln!(
+            "fmrh: wrote {} x {} samples ({} void) to {} as a GeoTIFF{}",
+            hf.width(),
+            hf.height(),
+            written.voids,
+            if path == Path::new("-") {
+                "standard output".to_string()
+            } else {
+                path.display().to_string()
+            },
+            written
+                .epsg
+                .map(|c| format!(" (EPSG:{c})"))
+                .unwrap_or_default()
         );
         Ok(())
     }
