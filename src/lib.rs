@@ -75,10 +75,11 @@
 //! # Ok(()) }
 //! ```
 //!
-//! Underneath: [`ingest`] reads DEMs, [`export`] writes them as GeoTIFF, [`model`] builds the FMRH and its clusters,
-//! [`mod@format`] is every byte of the file format, [`store`] reads, writes and verifies files,
-//! [`scene`] selects blocks for cameras, and [`curve`] knows Hilbert and Morton keys and
-//! nothing of terrain. Errors say whose fault they are ([`Error`]).
+//! Underneath: [`ingest`] reads DEMs, [`export`] writes them as GeoTIFF, [`model`] builds
+//! the FMRH and its clusters, [`mod@format`] is every byte of the file format, [`store`]
+//! reads, writes and verifies files, [`scene`] selects blocks for cameras, [`render`] draws
+//! them, and [`curve`] knows Hilbert and Morton keys and nothing of terrain. Errors say whose
+//! fault they are ([`Error`]).
 
 pub mod codec;
 pub mod crs;
@@ -91,6 +92,7 @@ pub mod heightfield;
 pub mod ingest;
 pub mod model;
 pub mod progress;
+pub mod render;
 pub mod scene;
 pub mod store;
 

@@ -68,6 +68,10 @@ enum Command {
     /// Algorithm 3). --memory-radius keeps blocks that left the view; --prefetch with
     /// --cache-radius warms the blocks of the extrapolated next camera on a second thread.
     Fly(cli::fly::FlyArgs),
+    /// Draw a scene as a PNG, on the CPU: the surface its blocks draw through the camera,
+    /// hillshaded, tinted by each block's level and outlined; or, with --top, an overhead
+    /// map of the blocks the camera selected with its view drawn on the ground.
+    Render(cli::render::RenderArgs),
     /// Replace full-resolution samples, atomically: new blocks, errors, clusters, one commit.
     ///
     /// Reads PATCH in any format `build` reads and writes its samples at --at COL,ROW (the
@@ -110,7 +114,10 @@ impl Command {
             Command::Replace(a) => a.json,
             Command::Recover(a) => a.json,
             Command::Dataset(c) => c.json(),
-            Command::Extract(_) | Command::Completions { .. } | Command::Man => false,
+            Command::Extract(_)
+            | Command::Render(_)
+            | Command::Completions { .. }
+            | Command::Man => false,
         }
     }
 }
@@ -142,6 +149,7 @@ fn main() -> ExitCode {
         Command::Scan(args) => cli::scan::run(args),
         Command::Scene(args) => cli::scene::run(args),
         Command::Fly(args) => cli::fly::run(args),
+        Command::Render(args) => cli::render::run(args),
         Command::Replace(args) => cli::replace::run(args),
         Command::Recover(args) => cli::recover::run(args),
         Command::Dataset(command) => cli::dataset::run(command),

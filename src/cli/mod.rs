@@ -9,6 +9,7 @@ pub mod fly;
 pub mod info;
 pub mod progress;
 pub mod recover;
+pub mod render;
 pub mod replace;
 pub mod scan;
 pub mod scene;

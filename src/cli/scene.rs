@@ -93,6 +93,13 @@ impl ViewArgs {
     }
 
     /// The scene options (without a window).
+    /// [`ViewArgs::options`] restricted to `window` (the `--window` text), if given.
+    pub fn options_in(&self, window: Option<&str>) -> Result<SceneOptions, Error> {
+        let mut options = self.options();
+        options.window = window.map(super::parse_window).transpose()?;
+        Ok(options)
+    }
+
     pub fn options(&self) -> SceneOptions {
         SceneOptions {
             tau: self.tau,
@@ -106,11 +113,9 @@ impl ViewArgs {
     }
 }
 
-#[derive(clap::Args)]
-pub struct SceneArgs {
-    /// The container, or a dataset's directory (the camera is then in the dataset's world
-    /// frame, the window in dataset samples).
-    file: PathBuf,
+/// Where the camera is and where it looks, in the world frame.
+#[derive(clap::Args, Clone)]
+pub struct CameraArgs {
     /// Eye position x,y,z in metres (x = col * dx east, y = row * dy south, z height).
     #[arg(long, allow_hyphen_values = true)]
     eye: String,
@@ -120,6 +125,28 @@ pub struct SceneArgs {
     /// Up direction on screen, x,y,z.
     #[arg(long, default_value = "0,0,1", allow_hyphen_values = true)]
     up: String,
+}
+
+impl CameraArgs {
+    /// The camera, with `view`'s field of view and viewport.
+    pub fn camera(&self, view: &ViewArgs) -> Result<Camera, Error> {
+        Ok(Camera {
+            eye: super::parse_vec3(&self.eye, "--eye")?,
+            target: super::parse_vec3(&self.target, "--target")?,
+            up: super::parse_vec3(&self.up, "--up")?,
+            fov_y_deg: view.fov,
+            viewport: view.viewport()?,
+        })
+    }
+}
+
+#[derive(clap::Args)]
+pub struct SceneArgs {
+    /// The container, or a dataset's directory (the camera is then in the dataset's world
+    /// frame, the window in dataset samples).
+    file: PathBuf,
+    #[command(flatten)]
+    camera: CameraArgs,
     #[command(flatten)]
     view: ViewArgs,
     /// Restrict the scene to this window, inclusive samples c0,r0,c1,r1 (default: what the
@@ -190,19 +217,8 @@ struct RequestPlan {
 
 /// Runs `fmrh scene`.
 pub fn run(args: &SceneArgs) -> Result<ExitCode, Error> {
-    let camera = Camera {
-        eye: super::parse_vec3(&args.eye, "--eye")?,
-        target: super::parse_vec3(&args.target, "--target")?,
-        up: super::parse_vec3(&args.up, "--up")?,
-        fov_y_deg: args.view.fov,
-        viewport: args.view.viewport()?,
-    };
-    let mut options = args.view.options();
-    options.window = args
-        .window
-        .as_deref()
-        .map(super::parse_window)
-        .transpose()?;
+    let camera = args.camera.camera(&args.view)?;
+    let options = args.view.options_in(args.window.as_deref())?;
     let output = args
         .reconstruct
         .as_deref()

@@ -130,6 +130,8 @@ impl Camera {
         Ok(View {
             eye: self.eye,
             forward,
+            right,
+            up: screen_up,
             lambda: f64::from(h) / (2.0 * tan_y),
             planes,
             rays,
@@ -220,6 +222,10 @@ pub struct View {
     pub eye: DVec3,
     /// Unit view direction.
     pub forward: DVec3,
+    /// Unit direction of the screen's right, perpendicular to `forward`.
+    pub right: DVec3,
+    /// Unit direction of the screen's up, perpendicular to `forward` and `right`.
+    pub up: DVec3,
     /// Pixels covered by one metre at one metre: `S / (2 · tan(fov_y / 2))`.
     pub lambda: f64,
     /// The four side planes.

@@ -1,0 +1,129 @@
+//! `fmrh render`: a picture of a scene, drawn on the CPU (`fmrh::render`): the surface its
+//! blocks draw through the camera, or from overhead (`--top`) with the camera's view on the
+//! ground. The README's pictures are made with it.
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use fmrh::render::{perspective, top, Surface};
+use fmrh::scene::{reconstruct, Terrain, WorldFrame};
+use fmrh::store::write_atomically;
+use fmrh::Error;
+
+#[derive(clap::Args)]
+pub struct RenderArgs {
+    /// The container (a path or an http(s):// or s3:// URL).
+    file: PathBuf,
+    #[command(flatten)]
+    camera: super::scene::CameraArgs,
+    #[command(flatten)]
+    view: super::scene::ViewArgs,
+    /// Draw only this window, inclusive samples c0,r0,c1,r1 (default: what the frustum
+    /// sees; with --top, the whole terrain).
+    #[arg(long)]
+    window: Option<String>,
+    /// An overhead map instead: the blocks the camera selected, tinted by level, and its
+    /// view drawn on the ground.
+    #[arg(long)]
+    top: bool,
+    /// The overhead map's longer side in pixels (the perspective picture is the
+    /// viewport's size).
+    #[arg(long, default_value_t = 1024)]
+    size: u32,
+    /// The PNG to write (`-`: standard output).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Replace an existing output.
+    #[arg(long)]
+    force: bool,
+}
+
+/// Runs `fmrh render`.
+pub fn run(args: &RenderArgs) -> Result<ExitCode, Error> {
+    if args.output != std::path::Path::new("-") && !args.force && args.output.exists() {
+        return Err(Error::InvalidArgument(format!(
+            "{} exists; pass --force to replace it",
+            args.output.display()
+        )));
+    }
+    if let Some(url) = super::url_of(&args.file) {
+        #[cfg(feature = "remote")]
+        return render(args, &fmrh::Store::open_url(url)?);
+        #[cfg(not(feature = "remote"))]
+        return Err(super::no_remote(url));
+    }
+    render(args, &super::open(&args.file)?)
+}
+
+fn render<S: fmrh::store::Source>(
+    args: &RenderArgs,
+    store: &fmrh::Store<S>,
+) -> Result<ExitCode, Error> {
+    let camera = args.camera.camera(&args.view)?;
+    let options = args.view.options_in(args.window.as_deref())?;
+    let spacing = args.view.spacing(store, &args.file)?;
+    let terrain = Terrain::with_spacing(store, spacing)?;
+    let scene = terrain.scene(&camera, &options)?;
+    // The overhead map shows the whole terrain (what the scene left out stays blank), so
+    // that the camera's view is seen in its place; a picture through the camera needs
+    // only what it sees.
+    let window = match (args.top, options.window, scene.window) {
+        (_, Some(w), _) => w,
+        (true, None, _) => store.domain().data_rect(),
+        (false, None, Some(w)) => w,
+        (false, None, None) => {
+            return Err(Error::InvalidArgument(
+                "the camera sees no terrain: there is nothing to draw (give --window)".into(),
+            ))
+        }
+    };
+    let rec = reconstruct(store, &scene, window)?;
+    let surface = Surface {
+        window,
+        heights: &rec.values,
+        blocks: &scene.blocks,
+        frame: WorldFrame::new(spacing.or(store.header().metadata.spacing_m)),
+    };
+    let image = if args.top {
+        top(&surface, &camera, args.size)?
+    } else {
+        perspective(&surface, &camera)?
+    };
+    let mut png = Vec::new();
+    image.write_png(&mut png)?;
+    if args.output == std::path::Path::new("-") {
+        let mut out = std::io::stdout().lock();
+        out.write_all(&png)
+            .and_then(|()| out.flush())
+            .map_err(|e| Error::io("<stdout>", e))?;
+    } else {
+        write_atomically(&args.output, args.force, |w| {
+            w.write_all(&png).map_err(|e| Error::io(&args.output, e))
+        })?;
+    }
+    eprintln!(
+        "fmrh: drew {} blocks (levels {}) as a {}x{} picture{}",
+        scene.blocks.len(),
+        levels(&scene.blocks),
+        image.width,
+        image.height,
+        if args.output == std::path::Path::new("-") {
+            String::new()
+        } else {
+            format!(" in {}", args.output.display())
+        }
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `a-b`: the coarsest and finest levels among `blocks`.
+fn levels(blocks: &[fmrh::scene::SceneBlock]) -> String {
+    let lo = blocks.iter().map(|b| b.level).min();
+    let hi = blocks.iter().map(|b| b.level).max();
+    match (lo, hi) {
+        (Some(a), Some(b)) if a == b => a.to_string(),
+        (Some(a), Some(b)) => format!("{a}-{b}"),
+        _ => "none".into(),
+    }
+}
