@@ -333,4 +333,13 @@ fn a_scene_reconstructed_as_a_geotiff_is_the_f32_reconstruction() {
     );
     same_georeference(ga, gb);
     assert_eq!(gb.crs.as_deref(), Some("EPSG:32610"));
+    // The window starts at column 1: the source's georeference moved one step east.
+    let source = load(&src, &IngestOptions::default()).unwrap();
+    let g = source.metadata.georeference.unwrap();
+    let moved = Georeference {
+        crs: g.crs.clone(),
+        origin: [g.origin[0] + g.step[0], g.origin[1]],
+        step: g.step,
+    };
+    same_georeference(&moved, gb);
 }

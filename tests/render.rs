@@ -253,3 +253,66 @@ fn the_cli_draws_both_pictures_and_keeps_an_existing_file() {
         assert_eq!(std::fs::read(&path).unwrap(), before);
     }
 }
+
+/// A dataset is drawn across its tiles: seen whole from high above, its overhead map has no
+/// sample left undrawn and shows the eye; its view through the camera has the viewport's
+/// size.
+#[test]
+fn the_cli_draws_a_dataset_across_its_tiles() {
+    let dir = tempfile::tempdir().unwrap();
+    let field = common::fields::make(257, 257, common::fields::Character::Hills, 0.0, 21);
+    let rects = common::tiles::split(&field, &[0, 128, 256], &[0, 128, 256], &[]);
+    let ds = common::tiles::build(dir.path(), &field, &rects, &common::tiles::options(None));
+    // 2,560 m a side, 10 m a sample; the eye above its centre, high.
+    let camera = [
+        "--eye",
+        "1280,1300,9000",
+        "--target",
+        "1280,1280,0",
+        "--tau",
+        "4",
+        "--viewport",
+        "200x150",
+    ];
+    let top = dir.path().join("top.png");
+    let mut args = vec!["render", ds.to_str().unwrap()];
+    args.extend(camera);
+    args.extend(["--top", "--size", "257", "-o", top.to_str().unwrap()]);
+    let out = common::fmrh(&args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&top).unwrap()));
+    let mut reader = decoder.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    assert_eq!((info.width, info.height), (257, 257));
+    let pixel = |x: u32, y: u32| {
+        let i = ((y * info.width + x) * 3) as usize;
+        [buf[i], buf[i + 1], buf[i + 2]]
+    };
+    for y in 0..info.height {
+        for x in 0..info.width {
+            let [r, g, b] = pixel(x, y);
+            assert_ne!([r, g, b], [235, 235, 235], "({x}, {y}) undrawn");
+            // Drawn by a block: tinted by its level, never the grey of no block.
+            assert!(!(r == g && g == b), "({x}, {y}) grey: no block drew it");
+        }
+    }
+    assert_eq!(pixel(128, 130), FRUSTUM_COLOUR);
+    let view = dir.path().join("view.png");
+    let mut args = vec!["render", ds.to_str().unwrap()];
+    args.extend(camera);
+    args.extend(["-o", view.to_str().unwrap()]);
+    let out = common::fmrh(&args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&view).unwrap()));
+    let reader = decoder.read_info().unwrap();
+    assert_eq!((reader.info().width, reader.info().height), (200, 150));
+}

@@ -6,21 +6,22 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
+use fmrh::model::SampleRect;
 use fmrh::render::{perspective, top, Surface};
-use fmrh::scene::{reconstruct, Terrain, WorldFrame};
+use fmrh::scene::{reconstruct, Camera, SceneBlock, Terrain, WorldFrame};
 use fmrh::store::write_atomically;
 use fmrh::Error;
 
 #[derive(clap::Args)]
 pub struct RenderArgs {
-    /// The container (a path or an http(s):// or s3:// URL).
+    /// The container or a dataset's directory (a path or an http(s):// or s3:// URL).
     file: PathBuf,
     #[command(flatten)]
     camera: super::scene::CameraArgs,
     #[command(flatten)]
     view: super::scene::ViewArgs,
     /// Draw only this window, inclusive samples c0,r0,c1,r1 (default: what the frustum
-    /// sees; with --top, the whole terrain).
+    /// sees; with --top, the whole terrain up to 64 Mi samples).
     #[arg(long)]
     window: Option<String>,
     /// An overhead map instead: the blocks the camera selected, tinted by level, and its
@@ -39,6 +40,10 @@ pub struct RenderArgs {
     force: bool,
 }
 
+/// An overhead map of the whole terrain is drawn when it has at most this many samples;
+/// a larger one (a big dataset) is drawn over what the camera sees.
+const WHOLE_MAP_SAMPLES: u64 = 1 << 26;
+
 /// Runs `fmrh render`.
 pub fn run(args: &RenderArgs) -> Result<ExitCode, Error> {
     if args.output != std::path::Path::new("-") && !args.force && args.output.exists() {
@@ -47,6 +52,9 @@ pub fn run(args: &RenderArgs) -> Result<ExitCode, Error> {
             args.output.display()
         )));
     }
+    if super::is_dataset(&args.file)? {
+        return render_dataset(args);
+    }
     if let Some(url) = super::url_of(&args.file) {
         #[cfg(feature = "remote")]
         return render(args, &fmrh::Store::open_url(url)?);
@@ -54,6 +62,26 @@ pub fn run(args: &RenderArgs) -> Result<ExitCode, Error> {
         return Err(super::no_remote(url));
     }
     render(args, &super::open(&args.file)?)
+}
+
+/// The window to draw: `--window`; else, overhead, the whole terrain (`all`) when it is
+/// not too large, so that the camera's view is seen in its place (what the scene left out
+/// stays blank); else what the camera sees.
+fn window_to_draw(
+    args: &RenderArgs,
+    given: Option<SampleRect>,
+    seen: Option<SampleRect>,
+    all: SampleRect,
+) -> Result<SampleRect, Error> {
+    let samples = (all.col1 - all.col0 + 1) * (all.row1 - all.row0 + 1);
+    match (given, args.top && samples <= WHOLE_MAP_SAMPLES, seen) {
+        (Some(w), _, _) => Ok(w),
+        (None, true, _) => Ok(all),
+        (None, false, Some(w)) => Ok(w),
+        (None, false, None) => Err(Error::InvalidArgument(
+            "the camera sees no terrain: there is nothing to draw (give --window)".into(),
+        )),
+    }
 }
 
 fn render<S: fmrh::store::Source>(
@@ -65,19 +93,12 @@ fn render<S: fmrh::store::Source>(
     let spacing = args.view.spacing(store, &args.file)?;
     let terrain = Terrain::with_spacing(store, spacing)?;
     let scene = terrain.scene(&camera, &options)?;
-    // The overhead map shows the whole terrain (what the scene left out stays blank), so
-    // that the camera's view is seen in its place; a picture through the camera needs
-    // only what it sees.
-    let window = match (args.top, options.window, scene.window) {
-        (_, Some(w), _) => w,
-        (true, None, _) => store.domain().data_rect(),
-        (false, None, Some(w)) => w,
-        (false, None, None) => {
-            return Err(Error::InvalidArgument(
-                "the camera sees no terrain: there is nothing to draw (give --window)".into(),
-            ))
-        }
-    };
+    let window = window_to_draw(
+        args,
+        options.window,
+        scene.window,
+        store.domain().data_rect(),
+    )?;
     let rec = reconstruct(store, &scene, window)?;
     let surface = Surface {
         window,
@@ -85,10 +106,34 @@ fn render<S: fmrh::store::Source>(
         blocks: &scene.blocks,
         frame: WorldFrame::new(spacing.or(store.header().metadata.spacing_m)),
     };
+    draw(args, &camera, &surface)
+}
+
+/// A dataset's scene, across its tiles, in the dataset's world frame.
+fn render_dataset(args: &RenderArgs) -> Result<ExitCode, Error> {
+    let camera = args.camera.camera(&args.view)?;
+    let options = args.view.options_in(args.window.as_deref())?;
+    let ds = fmrh::dataset::Dataset::open(&args.file)?;
+    let spacing = args.view.given_spacing()?;
+    let scene = ds.scene(&camera, &options, spacing)?;
+    let window = window_to_draw(args, options.window, scene.window, ds.grid())?;
+    let rec = ds.reconstruct(&scene, window)?;
+    let blocks: Vec<SceneBlock> = scene.blocks.iter().map(|b| b.block).collect();
+    let surface = Surface {
+        window,
+        heights: &rec.values,
+        blocks: &blocks,
+        frame: WorldFrame::new(spacing.or(ds.spacing_m())),
+    };
+    draw(args, &camera, &surface)
+}
+
+/// Draws `surface` as `args` asks and writes the PNG.
+fn draw(args: &RenderArgs, camera: &Camera, surface: &Surface<'_>) -> Result<ExitCode, Error> {
     let image = if args.top {
-        top(&surface, &camera, args.size)?
+        top(surface, camera, args.size)?
     } else {
-        perspective(&surface, &camera)?
+        perspective(surface, camera)?
     };
     let mut png = Vec::new();
     image.write_png(&mut png)?;
@@ -104,8 +149,8 @@ fn render<S: fmrh::store::Source>(
     }
     eprintln!(
         "fmrh: drew {} blocks (levels {}) as a {}x{} picture{}",
-        scene.blocks.len(),
-        levels(&scene.blocks),
+        surface.blocks.len(),
+        levels(surface.blocks),
         image.width,
         image.height,
         if args.output == std::path::Path::new("-") {
@@ -118,7 +163,7 @@ fn render<S: fmrh::store::Source>(
 }
 
 /// `a-b`: the coarsest and finest levels among `blocks`.
-fn levels(blocks: &[fmrh::scene::SceneBlock]) -> String {
+fn levels(blocks: &[SceneBlock]) -> String {
     let lo = blocks.iter().map(|b| b.level).min();
     let hi = blocks.iter().map(|b| b.level).max();
     match (lo, hi) {

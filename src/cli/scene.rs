@@ -93,6 +93,14 @@ impl ViewArgs {
     }
 
     /// The scene options (without a window).
+    /// The spacing `--spacing` gives, if any (a dataset knows its own otherwise).
+    pub fn given_spacing(&self) -> Result<Option<[f64; 2]>, Error> {
+        self.spacing
+            .as_deref()
+            .map(super::build::parse_spacing)
+            .transpose()
+    }
+
     /// [`ViewArgs::options`] restricted to `window` (the `--window` text), if given.
     pub fn options_in(&self, window: Option<&str>) -> Result<SceneOptions, Error> {
         let mut options = self.options();
@@ -451,12 +459,7 @@ fn run_dataset(
 ) -> Result<ExitCode, Error> {
     let ds = fmrh::dataset::Dataset::open(&args.file)?;
     let asked = ds.request_stats();
-    let spacing = args
-        .view
-        .spacing
-        .as_deref()
-        .map(super::build::parse_spacing)
-        .transpose()?;
+    let spacing = args.view.given_spacing()?;
     let scene = ds.scene(&camera, &options, spacing)?;
     let schedule = scene
         .tiles
