@@ -12,7 +12,7 @@
 
 mod common;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use fmrh::export::geotiff;
 use fmrh::heightfield::{Georeference, Heightfield, Metadata};
@@ -26,6 +26,33 @@ fn round_trip(hf: &Heightfield, dir: &Path) -> (geotiff::Written, Heightfield) {
     let written = geotiff::write(hf, std::io::BufWriter::new(file)).unwrap();
     let back = load(&path, &IngestOptions::default()).unwrap();
     (written, back)
+}
+
+/// The committed georeferencing fixture `name` (made by GDAL).
+fn fixture(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures/georef")
+        .join(name)
+}
+
+/// Builds `src` into `dir/NAME.fmrh` (blocks of 9 samples) with the CLI.
+fn built(src: &Path, dir: &Path) -> PathBuf {
+    let name = src.file_name().unwrap().to_string_lossy();
+    let container = dir.join(format!("{name}.fmrh"));
+    let out = common::fmrh(&[
+        "build",
+        src.to_str().unwrap(),
+        "-o",
+        container.to_str().unwrap(),
+        "--block-size",
+        "9",
+    ]);
+    assert!(
+        out.status.success(),
+        "{name}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    container
 }
 
 fn same_samples(a: &Heightfield, b: &Heightfield) {
@@ -131,7 +158,6 @@ proptest! {
 #[test]
 fn extracts_of_the_georeferencing_fixtures_read_back_as_their_sources() {
     let dir = tempfile::tempdir().unwrap();
-    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/georef");
     let mut checked = 0;
     for name in [
         "geographic.tif",
@@ -141,22 +167,9 @@ fn extracts_of_the_georeferencing_fixtures_read_back_as_their_sources() {
         "south_up.tif",
         "no_crs.tif",
     ] {
-        let src = fixtures.join(name);
+        let src = fixture(name);
         let source = load(&src, &IngestOptions::default()).unwrap();
-        let container = dir.path().join(format!("{name}.fmrh"));
-        let out = common::fmrh(&[
-            "build",
-            src.to_str().unwrap(),
-            "-o",
-            container.to_str().unwrap(),
-            "--block-size",
-            "9",
-        ]);
-        assert!(
-            out.status.success(),
-            "{name}: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        let container = built(&src, dir.path());
         // Whole.
         let tif = dir.path().join(format!("{name}.out.tif"));
         let out = common::fmrh(&[
@@ -237,17 +250,8 @@ fn extracts_of_the_georeferencing_fixtures_read_back_as_their_sources() {
 #[test]
 fn extract_to_a_geotiff_refuses_to_overwrite_and_bad_formats() {
     let dir = tempfile::tempdir().unwrap();
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/georef/utm.tif");
-    let container = dir.path().join("u.fmrh");
-    let out = common::fmrh(&[
-        "build",
-        src.to_str().unwrap(),
-        "-o",
-        container.to_str().unwrap(),
-        "--block-size",
-        "9",
-    ]);
-    assert!(out.status.success());
+    let src = fixture("utm.tif");
+    let container = built(&src, dir.path());
     let tif = dir.path().join("u.tif");
     std::fs::write(&tif, b"keep me").unwrap();
     let out = common::fmrh(&[
@@ -288,17 +292,8 @@ fn extract_to_a_geotiff_refuses_to_overwrite_and_bad_formats() {
 #[test]
 fn a_scene_reconstructed_as_a_geotiff_is_the_f32_reconstruction() {
     let dir = tempfile::tempdir().unwrap();
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/georef/utm.tif");
-    let container = dir.path().join("u.fmrh");
-    let out = common::fmrh(&[
-        "build",
-        src.to_str().unwrap(),
-        "-o",
-        container.to_str().unwrap(),
-        "--block-size",
-        "9",
-    ]);
-    assert!(out.status.success());
+    let src = fixture("utm.tif");
+    let container = built(&src, dir.path());
     let scene = |output: &Path| {
         let out = common::fmrh(&[
             "scene",

@@ -690,6 +690,21 @@ impl HttpSource {
 
     /// The held bytes covering `offset .. end`, if any.
     fn held(&self, offset: u64, end: u64) -> io::Result<Option<Vec<u8>>> {
+        self.with_held(offset, end, <[u8]>::to_vec)
+    }
+
+    /// Whether the bytes `offset .. end` are held (nothing copied).
+    fn holds(&self, offset: u64, end: u64) -> io::Result<bool> {
+        Ok(self.with_held(offset, end, |_| ())?.is_some())
+    }
+
+    /// `f` of the held bytes covering `offset .. end`, if any.
+    fn with_held<T>(
+        &self,
+        offset: u64,
+        end: u64,
+        f: impl FnOnce(&[u8]) -> T,
+    ) -> io::Result<Option<T>> {
         let held = self
             .held
             .read()
@@ -699,7 +714,7 @@ impl HttpSource {
                 let from = usize::try_from(offset - at).unwrap_or(usize::MAX);
                 let to = usize::try_from(end - at).unwrap_or(usize::MAX);
                 if let Some(b) = bytes.get(from..to) {
-                    return Ok(Some(b.to_vec()));
+                    return Ok(Some(f(b)));
                 }
             }
         }
@@ -958,12 +973,12 @@ impl Source for HttpSource {
         let mut wanted: Vec<(u64, u64)> = Vec::new();
         for &(offset, len) in ranges {
             let end = self.check_range(offset, len)?;
-            if len == 0 || self.held(offset, end)?.is_some() {
+            if len == 0 || self.holds(offset, end)? {
                 continue;
             }
             if self.area_fetches_whole(offset, end) {
                 self.fetch_area(offset, end)?;
-                if self.held(offset, end)?.is_some() {
+                if self.holds(offset, end)? {
                     continue;
                 }
             }
