@@ -11,6 +11,8 @@
 //! large-data suite, which has GDAL).
 
 mod common;
+#[path = "common/georef.rs"]
+mod georef;
 
 use std::path::{Path, PathBuf};
 
@@ -159,14 +161,7 @@ proptest! {
 fn extracts_of_the_georeferencing_fixtures_read_back_as_their_sources() {
     let dir = tempfile::tempdir().unwrap();
     let mut checked = 0;
-    for name in [
-        "geographic.tif",
-        "utm.tif",
-        "us_feet.tif",
-        "intl_feet.tif",
-        "south_up.tif",
-        "no_crs.tif",
-    ] {
+    for name in georef::GEOTIFFS {
         let src = fixture(name);
         let source = load(&src, &IngestOptions::default()).unwrap();
         let container = built(&src, dir.path());
@@ -243,7 +238,7 @@ fn extracts_of_the_georeferencing_fixtures_read_back_as_their_sources() {
         same_georeference(&moved, b);
         checked += 1;
     }
-    assert_eq!(checked, 6);
+    assert_eq!(checked, georef::GEOTIFFS.len());
 }
 
 /// An existing output is kept unless --force, and a bad --format is refused.

@@ -162,14 +162,7 @@ fn extracts_as_geotiff_are_what_gdal_says_of_their_sources() {
         .arg(georef::committed().join("make.sh"))
         .arg(dir.path()));
     let fmrh_bin = env!("CARGO_BIN_EXE_fmrh");
-    for name in [
-        "geographic.tif",
-        "utm.tif",
-        "us_feet.tif",
-        "intl_feet.tif",
-        "south_up.tif",
-        "no_crs.tif",
-    ] {
+    for name in georef::GEOTIFFS {
         let src = dir.path().join(name);
         let container = dir.path().join(format!("{name}.fmrh"));
         let tif = dir.path().join(format!("{name}.out.tif"));

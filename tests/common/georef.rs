@@ -3,10 +3,23 @@
 //! ground spacing in metres within 0.1 %, and the georeference of the north-west sample after
 //! fmrh turns the grid north-up.
 
+#![allow(dead_code)]
+
 use std::path::Path;
 
 use fmrh::heightfield::Heightfield;
 use fmrh::ingest::{load, IngestOptions};
+
+/// The fixtures that are GeoTIFFs with a north-up or south-up geotransform (not rotated):
+/// what `fmrh extract` writes back as GeoTIFFs in the tests.
+pub const GEOTIFFS: [&str; 6] = [
+    "geographic.tif",
+    "utm.tif",
+    "us_feet.tif",
+    "intl_feet.tif",
+    "south_up.tif",
+    "no_crs.tif",
+];
 
 /// The committed fixtures.
 pub fn committed() -> std::path::PathBuf {
