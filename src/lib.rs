@@ -75,10 +75,11 @@
 //! # Ok(()) }
 //! ```
 //!
-//! Underneath: [`ingest`] reads DEMs, [`export`] writes them as GeoTIFF, [`model`] builds
-//! the FMRH and its clusters, [`mod@format`] is every byte of the file format, [`store`]
-//! reads, writes and verifies files, [`scene`] selects blocks for cameras, [`render`] draws
-//! them, and [`curve`] knows Hilbert and Morton keys and nothing of terrain. Errors say whose
+//! Underneath: [`ingest`] reads DEMs, [`export`] writes them as GeoTIFF and meshes as glTF,
+//! [`model`] builds the FMRH and its clusters, [`mod@format`] is every byte of the file
+//! format, [`store`] reads, writes and verifies files, [`scene`] selects blocks for cameras,
+//! [`mesh`] turns them into crack-free triangles, [`render`] draws them, and [`curve`] knows
+//! Hilbert and Morton keys and nothing of terrain. Errors say whose
 //! fault they are ([`Error`]).
 
 pub mod codec;
@@ -90,6 +91,7 @@ pub mod export;
 pub mod format;
 pub mod heightfield;
 pub mod ingest;
+pub mod mesh;
 pub mod model;
 pub mod progress;
 pub mod render;

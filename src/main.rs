@@ -72,6 +72,13 @@ enum Command {
     /// hillshaded, tinted by each block's level and outlined; or, with --top, an overhead
     /// map of the blocks the camera selected with its view drawn on the ground.
     Render(cli::render::RenderArgs),
+    /// Mesh a scene as one glTF 2.0 binary (.glb): a node per block, crack-free.
+    ///
+    /// By default a block meeting a coarser one takes the coarser one's vertices along the
+    /// shared edge (no crack, no T-junction); --cracks skirts hangs curtains instead. Each
+    /// node's extras give the block's level, error, key and footprint; the scene's extras
+    /// give the origin and the axes (X east, Y up, Z south, metres).
+    Mesh(cli::mesh::MeshArgs),
     /// Replace full-resolution samples, atomically: new blocks, errors, clusters, one commit.
     ///
     /// Reads PATCH in any format `build` reads and writes its samples at --at COL,ROW (the
@@ -116,6 +123,7 @@ impl Command {
             Command::Dataset(c) => c.json(),
             Command::Extract(_)
             | Command::Render(_)
+            | Command::Mesh(_)
             | Command::Completions { .. }
             | Command::Man => false,
         }
@@ -150,6 +158,7 @@ fn main() -> ExitCode {
         Command::Scene(args) => cli::scene::run(args),
         Command::Fly(args) => cli::fly::run(args),
         Command::Render(args) => cli::render::run(args),
+        Command::Mesh(args) => cli::mesh::run(args),
         Command::Replace(args) => cli::replace::run(args),
         Command::Recover(args) => cli::recover::run(args),
         Command::Dataset(command) => cli::dataset::run(command),

@@ -7,6 +7,7 @@ pub mod dataset;
 pub mod extract;
 pub mod fly;
 pub mod info;
+pub mod mesh;
 pub mod progress;
 pub mod recover;
 pub mod render;
@@ -142,6 +143,33 @@ pub fn no_remote(url: &str) -> Error {
     Error::InvalidArgument(format!(
         "{url}: this fmrh was built without the `remote` feature (HTTP range reads)"
     ))
+}
+
+/// Refuses an existing `output` unless `force` (`-`, standard output, always goes).
+pub fn check_output(output: &Path, force: bool) -> Result<(), Error> {
+    if output != Path::new("-") && !force && output.exists() {
+        return Err(Error::InvalidArgument(format!(
+            "{} exists; pass --force to replace it",
+            output.display()
+        )));
+    }
+    Ok(())
+}
+
+/// Writes `bytes` to `output`: standard output for `-`, else atomically (an existing file
+/// stays whole until the new one replaces it, and only with `force`).
+pub fn write_output(output: &Path, force: bool, bytes: &[u8]) -> Result<(), Error> {
+    use std::io::Write;
+    if output == Path::new("-") {
+        let mut out = std::io::stdout().lock();
+        return out
+            .write_all(bytes)
+            .and_then(|()| out.flush())
+            .map_err(|e| Error::io("<stdout>", e));
+    }
+    fmrh::store::write_atomically(output, force, |w| {
+        w.write_all(bytes).map_err(|e| Error::io(output, e))
+    })
 }
 
 /// Whether `path` names a dataset (a directory with a MANIFEST) rather than a container; a

@@ -2,14 +2,12 @@
 //! blocks draw through the camera, or from overhead (`--top`) with the camera's view on the
 //! ground. The README's pictures are made with it.
 
-use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
 use fmrh::model::SampleRect;
 use fmrh::render::{perspective, top, Surface};
 use fmrh::scene::{reconstruct, Camera, SceneBlock, Terrain, WorldFrame};
-use fmrh::store::write_atomically;
 use fmrh::Error;
 
 #[derive(clap::Args)]
@@ -46,12 +44,7 @@ const WHOLE_MAP_SAMPLES: u64 = 1 << 26;
 
 /// Runs `fmrh render`.
 pub fn run(args: &RenderArgs) -> Result<ExitCode, Error> {
-    if args.output != std::path::Path::new("-") && !args.force && args.output.exists() {
-        return Err(Error::InvalidArgument(format!(
-            "{} exists; pass --force to replace it",
-            args.output.display()
-        )));
-    }
+    super::check_output(&args.output, args.force)?;
     if super::is_dataset(&args.file)? {
         return render_dataset(args);
     }
@@ -137,16 +130,7 @@ fn draw(args: &RenderArgs, camera: &Camera, surface: &Surface<'_>) -> Result<Exi
     };
     let mut png = Vec::new();
     image.write_png(&mut png)?;
-    if args.output == std::path::Path::new("-") {
-        let mut out = std::io::stdout().lock();
-        out.write_all(&png)
-            .and_then(|()| out.flush())
-            .map_err(|e| Error::io("<stdout>", e))?;
-    } else {
-        write_atomically(&args.output, args.force, |w| {
-            w.write_all(&png).map_err(|e| Error::io(&args.output, e))
-        })?;
-    }
+    super::write_output(&args.output, args.force, &png)?;
     eprintln!(
         "fmrh: drew {} blocks (levels {}) as a {}x{} picture{}",
         surface.blocks.len(),

@@ -94,12 +94,7 @@ impl RasterOutput {
     ) -> Result<RasterOutput, Error> {
         let format = format.unwrap_or_else(|| RasterFormat::of(output));
         if output == Path::new("-") || format == RasterFormat::Tif {
-            if output != Path::new("-") && !force && output.exists() {
-                return Err(Error::InvalidArgument(format!(
-                    "{} exists; pass --force to replace it",
-                    output.display()
-                )));
-            }
+            super::check_output(output, force)?;
             return Ok(RasterOutput {
                 f32_path: output.to_path_buf(),
                 json_path: PathBuf::new(),
@@ -114,12 +109,7 @@ impl RasterOutput {
         }
         let json_path = output.with_extension("json");
         for p in [output, &json_path] {
-            if !force && p.exists() {
-                return Err(Error::InvalidArgument(format!(
-                    "{} exists; pass --force to replace it",
-                    p.display()
-                )));
-            }
+            super::check_output(p, force)?;
         }
         Ok(RasterOutput {
             f32_path: output.to_path_buf(),

@@ -458,6 +458,37 @@ impl Dataset {
             .fold(ReadStats::default(), |total, r| total.plus(r)))
     }
 
+    /// Every block of `scene`, read and decoded (tile by tile, each tile's payloads in
+    /// coalesced runs), in the scene's order, with the sample stride of each block's grid
+    /// (its tile's).
+    pub fn load_blocks(
+        &self,
+        scene: &DatasetScene,
+    ) -> Result<Vec<(crate::scene::LoadedBlock, u64)>> {
+        let mut out: Vec<Option<(crate::scene::LoadedBlock, u64)>> = vec![None; scene.blocks.len()];
+        for part in &scene.tiles {
+            let tile = self.tile(part.tile)?;
+            let store = self.open_tile(&tile)?;
+            let d = *store.domain();
+            let s = scene.tile_scene(part.tile, &tile.rect());
+            let loaded = crate::scene::load_blocks(&store, &s.blocks, crate::scene::PAYLOAD_GAP)?;
+            let places = (0..scene.blocks.len()).filter(|&i| scene.blocks[i].tile == part.tile);
+            for ((i, l), b) in places.zip(loaded).zip(&s.blocks) {
+                out[i] = Some((l, d.stride(b.level)));
+            }
+        }
+        out.into_iter()
+            .enumerate()
+            .map(|(i, l)| {
+                l.ok_or_else(|| {
+                    Error::InvalidArgument(format!(
+                        "scene block {i} names a tile the scene did not meet"
+                    ))
+                })
+            })
+            .collect()
+    }
+
     /// Samples `window` (dataset samples) from `scene`'s blocks, tile by tile: the surface
     /// the scene draws. Samples no block owns (holes, or outside the scene) are NaN.
     pub fn reconstruct(

@@ -1,0 +1,224 @@
+//! Block meshes as one glTF 2.0 binary (`.glb`): one node and one mesh per block, for any
+//! glTF viewer or engine.
+//!
+//! **Axes.** glTF is right-handed with +Y up; fmrh's world frame has x east, y south and z
+//! up. A point `(x, y, z)` of the world frame is the glTF point `(x - ox, z, y - oy)`: X
+//! east, Y up, Z south, in metres from the origin `(ox, oy)` the caller chooses (the
+//! north-west corner of what it meshes, so that single-precision positions keep
+//! centimetres), heights as they are. The origin goes into the scene's `extras`.
+//!
+//! **Layout.** One buffer (the GLB's binary chunk) holds two buffer views: the vertex
+//! attributes of every block (positions then normals, three f32 each, block after block),
+//! and the triangle indices (u16 where a block has fewer than 65,535 vertices, else u32,
+//! each block's run padded to four bytes). Every block's mesh has one triangle primitive
+//! with `POSITION` (with the exact min and max glTF asks for) and `NORMAL`, and a material
+//! per level, in the level's hue ([`crate::render::level_colour`]). The node of a block
+//! carries the caller's `extras` (fmrh puts the level, error, key and footprint there).
+
+use serde_json::{json, Value};
+
+use crate::error::{Error, Result};
+use crate::mesh::BlockMesh;
+use crate::scene::WorldFrame;
+
+/// A block's mesh and what its node says of it.
+pub struct GltfBlock<'a> {
+    /// The mesh.
+    pub mesh: &'a BlockMesh,
+    /// The node's name.
+    pub name: String,
+    /// The block's level (its material).
+    pub level: u8,
+    /// The node's `extras`.
+    pub extras: Value,
+}
+
+const ARRAY_BUFFER: u32 = 34962;
+const ELEMENT_ARRAY_BUFFER: u32 = 34963;
+const FLOAT: u32 = 5126;
+const UNSIGNED_SHORT: u32 = 5123;
+const UNSIGNED_INT: u32 = 5125;
+const TRIANGLES: u32 = 4;
+/// `glTF` in ASCII, little-endian.
+const GLB_MAGIC: u32 = 0x4654_6C67;
+const CHUNK_JSON: u32 = 0x4E4F_534A;
+const CHUNK_BIN: u32 = 0x004E_4942;
+
+/// An sRGB channel as the linear value glTF's colour factors take.
+fn linear(c: u8) -> f64 {
+    let c = f64::from(c) / 255.0;
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// The GLB of `blocks` in `frame`, positions from `origin` (world metres, `[x, y]`), with
+/// `scene_extras` on the scene. Blocks without triangles are left out; there must be one
+/// with.
+pub fn glb(
+    blocks: &[GltfBlock<'_>],
+    frame: &WorldFrame,
+    origin: [f64; 2],
+    scene_extras: Value,
+) -> Result<Vec<u8>> {
+    let blocks: Vec<&GltfBlock<'_>> = blocks
+        .iter()
+        .filter(|b| !b.mesh.triangles.is_empty())
+        .collect();
+    if blocks.is_empty() {
+        return Err(Error::InvalidArgument(
+            "nothing to mesh: no block has an area".into(),
+        ));
+    }
+    let mut levels: Vec<u8> = blocks.iter().map(|b| b.level).collect();
+    levels.sort_unstable();
+    levels.dedup();
+    let materials: Vec<Value> = levels
+        .iter()
+        .map(|&l| {
+            let [r, g, b] = crate::render::level_colour(l);
+            json!({
+                "name": format!("level {l}"),
+                "pbrMetallicRoughness": {
+                    "baseColorFactor": [linear(r), linear(g), linear(b), 1.0],
+                    "metallicFactor": 0.0,
+                    "roughnessFactor": 1.0
+                }
+            })
+        })
+        .collect();
+
+    let mut attributes: Vec<u8> = Vec::new();
+    let mut indices: Vec<u8> = Vec::new();
+    let mut accessors = Vec::new();
+    let mut meshes = Vec::new();
+    let mut nodes = Vec::new();
+    for (k, b) in blocks.iter().enumerate() {
+        let m = b.mesh;
+        if m.normals.len() != m.vertices.len() {
+            return Err(Error::InvalidArgument(format!(
+                "block {}: {} normals for {} vertices",
+                m.block,
+                m.normals.len(),
+                m.vertices.len()
+            )));
+        }
+        let positions: Vec<[f32; 3]> = m
+            .vertices
+            .iter()
+            .map(|v| {
+                let p = frame.point(v.col as f64, v.row as f64, v.height);
+                [
+                    (p.x - origin[0]) as f32,
+                    p.z as f32,
+                    (p.y - origin[1]) as f32,
+                ]
+            })
+            .collect();
+        let mut min = [f32::INFINITY; 3];
+        let mut max = [f32::NEG_INFINITY; 3];
+        for p in &positions {
+            for a in 0..3 {
+                min[a] = min[a].min(p[a]);
+                max[a] = max[a].max(p[a]);
+            }
+        }
+        let position_offset = attributes.len();
+        for p in &positions {
+            for c in p {
+                attributes.extend_from_slice(&c.to_le_bytes());
+            }
+        }
+        let normal_offset = attributes.len();
+        for n in &m.normals {
+            let v = glam::Vec3::new(n[0] as f32, n[2] as f32, n[1] as f32);
+            let v = v.try_normalize().unwrap_or(glam::Vec3::Y);
+            for c in v.to_array() {
+                attributes.extend_from_slice(&c.to_le_bytes());
+            }
+        }
+        let wide = m.vertices.len() >= usize::from(u16::MAX);
+        let index_offset = indices.len();
+        for t in &m.triangles {
+            for &i in t {
+                if wide {
+                    indices.extend_from_slice(&i.to_le_bytes());
+                } else {
+                    indices.extend_from_slice(&(i as u16).to_le_bytes());
+                }
+            }
+        }
+        while !indices.len().is_multiple_of(4) {
+            indices.push(0);
+        }
+        let a = accessors.len();
+        accessors.push(json!({
+            "bufferView": 0, "byteOffset": position_offset, "componentType": FLOAT,
+            "count": positions.len(), "type": "VEC3", "min": min, "max": max
+        }));
+        accessors.push(json!({
+            "bufferView": 0, "byteOffset": normal_offset, "componentType": FLOAT,
+            "count": positions.len(), "type": "VEC3"
+        }));
+        accessors.push(json!({
+            "bufferView": 1, "byteOffset": index_offset,
+            "componentType": if wide { UNSIGNED_INT } else { UNSIGNED_SHORT },
+            "count": 3 * m.triangles.len(), "type": "SCALAR"
+        }));
+        let material = levels.partition_point(|&l| l < b.level);
+        meshes.push(json!({
+            "primitives": [{
+                "attributes": { "POSITION": a, "NORMAL": a + 1 },
+                "indices": a + 2,
+                "material": material,
+                "mode": TRIANGLES
+            }]
+        }));
+        nodes.push(json!({ "mesh": k, "name": b.name, "extras": b.extras }));
+    }
+    let bin_len = attributes.len() + indices.len();
+    let doc = json!({
+        "asset": {
+            "version": "2.0",
+            "generator": concat!("fmrh ", env!("CARGO_PKG_VERSION"))
+        },
+        "scene": 0,
+        "scenes": [{ "nodes": (0..nodes.len()).collect::<Vec<_>>(), "extras": scene_extras }],
+        "nodes": nodes,
+        "meshes": meshes,
+        "materials": materials,
+        "accessors": accessors,
+        "bufferViews": [
+            { "buffer": 0, "byteOffset": 0, "byteLength": attributes.len(), "byteStride": 12,
+              "target": ARRAY_BUFFER },
+            { "buffer": 0, "byteOffset": attributes.len(), "byteLength": indices.len(),
+              "target": ELEMENT_ARRAY_BUFFER }
+        ],
+        "buffers": [{ "byteLength": bin_len }]
+    });
+    let mut json =
+        serde_json::to_vec(&doc).map_err(|e| Error::InvalidArgument(format!("glTF JSON: {e}")))?;
+    while !json.len().is_multiple_of(4) {
+        json.push(b' ');
+    }
+    let total = 12 + 8 + json.len() + 8 + bin_len;
+    let total = u32::try_from(total).map_err(|_| {
+        Error::InvalidArgument(format!(
+            "the mesh needs {total} bytes, past a GLB's 4 GiB; mesh a smaller window"
+        ))
+    })?;
+    let mut out = Vec::with_capacity(total as usize);
+    out.extend_from_slice(&GLB_MAGIC.to_le_bytes());
+    out.extend_from_slice(&2u32.to_le_bytes());
+    out.extend_from_slice(&total.to_le_bytes());
+    out.extend_from_slice(&(json.len() as u32).to_le_bytes());
+    out.extend_from_slice(&CHUNK_JSON.to_le_bytes());
+    out.extend_from_slice(&json);
+    out.extend_from_slice(&(bin_len as u32).to_le_bytes());
+    out.extend_from_slice(&CHUNK_BIN.to_le_bytes());
+    out.extend_from_slice(&attributes);
+    out.extend_from_slice(&indices);
+    Ok(out)
+}

@@ -1,0 +1,20 @@
+// Validates glTF files with the Khronos glTF validator (npm `gltf-validator`) and prints, for
+// each file given, one JSON line: its path, the counts of errors, warnings, infos and hints,
+// and the first messages. Used by tests/mesh_real.rs; exits 2 when the validator cannot run.
+import fs from 'fs';
+import validator from 'gltf-validator';
+
+for (const path of process.argv.slice(2)) {
+  const bytes = new Uint8Array(fs.readFileSync(path));
+  const report = await validator.validateBytes(bytes, { maxIssues: 20 });
+  console.log(JSON.stringify({
+    path,
+    errors: report.issues.numErrors,
+    warnings: report.issues.numWarnings,
+    infos: report.issues.numInfos,
+    hints: report.issues.numHints,
+    messages: report.issues.messages.map((m) => `${m.code} ${m.pointer ?? ''}: ${m.message}`),
+    triangles: report.info.totalTriangleCount,
+    drawCalls: report.info.drawCallCount,
+  }));
+}
