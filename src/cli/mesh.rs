@@ -1,5 +1,7 @@
 //! `fmrh mesh`: a scene as triangles (`fmrh::mesh`), crack-free, written as one glTF 2.0
-//! binary (`fmrh::export::gltf`): one node per block, with its level, error and key.
+//! binary (`fmrh::export::gltf`): one node per block, with its level, error and key; or as
+//! a directory of Cesium quantized-mesh tiles and their `layer.json`
+//! (`fmrh::export::quantized_mesh`), one tile per block.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -7,8 +9,10 @@ use std::process::ExitCode;
 use serde_json::{json, Value};
 
 use fmrh::export::gltf::{glb, GltfBlock};
+use fmrh::export::quantized_mesh::{self, QuantizedTile};
 use fmrh::heightfield::Georeference;
 use fmrh::mesh::{build, BlockMesh, Cracks, GridBlock};
+use fmrh::model::SampleRect;
 use fmrh::scene::{load_blocks, LoadedBlock, SceneBlock, Terrain, WorldFrame, PAYLOAD_GAP};
 use fmrh::Error;
 
@@ -21,6 +25,16 @@ pub enum CracksArg {
     /// Every block keeps its own surface and hangs a curtain below edges that meet
     /// another block, as deep as both blocks' errors.
     Skirts,
+}
+
+/// What `fmrh mesh` writes, as `--format` names it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum MeshFormat {
+    /// One glTF 2.0 binary: a node and a mesh per block.
+    Glb,
+    /// A directory: `layer.json` and one quantized-mesh-1.0 tile per block, at
+    /// `LEVEL/X/Y.terrain` (y counted from the south).
+    QuantizedMesh,
 }
 
 #[derive(clap::Args)]
@@ -38,7 +52,10 @@ pub struct MeshArgs {
     /// How cracks between blocks of different levels are closed.
     #[arg(long, value_enum, default_value = "stitch")]
     cracks: CracksArg,
-    /// The .glb to write (`-`: standard output).
+    /// What to write.
+    #[arg(long, value_enum, default_value = "glb")]
+    format: MeshFormat,
+    /// The .glb to write (`-`: standard output), or the tile directory to create.
     #[arg(short, long)]
     output: PathBuf,
     /// Replace an existing output.
@@ -52,6 +69,8 @@ struct Part {
     tile: Option<u64>,
     loaded: LoadedBlock,
     stride: u64,
+    /// The node's whole footprint, padding included (its tile's rectangle).
+    footprint: SampleRect,
 }
 
 /// What the scene's `extras` say besides the blocks.
@@ -65,6 +84,15 @@ struct Context {
 /// Runs `fmrh mesh`.
 pub fn run(args: &MeshArgs) -> Result<ExitCode, Error> {
     super::check_output(&args.output, args.force)?;
+    if args.format == MeshFormat::QuantizedMesh
+        && (args.output == std::path::Path::new("-") || super::is_dataset(&args.file)?)
+    {
+        return Err(Error::InvalidArgument(
+            "quantized-mesh tiles are written to a directory (not `-`), from one container \
+             (a dataset's tiles would share tile addresses)"
+                .into(),
+        ));
+    }
     let camera = args.camera.camera(&args.view)?;
     let options = args.view.options_in(args.window.as_deref())?;
     let (parts, context) = if super::is_dataset(&args.file)? {
@@ -81,6 +109,7 @@ pub fn run(args: &MeshArgs) -> Result<ExitCode, Error> {
                 tile: Some(b.tile),
                 loaded,
                 stride,
+                footprint: b.block.rect(),
             })
             .collect();
         let context = Context {
@@ -121,16 +150,22 @@ pub fn run(args: &MeshArgs) -> Result<ExitCode, Error> {
         })
         .collect();
     let meshes = build(&grids, &context.frame, cracks)?;
-    let bytes = encode(&parts, &meshes, &context, cracks)?;
-    super::write_output(&args.output, args.force, &bytes)?;
     let triangles: usize = meshes.iter().map(|m| m.triangles.len()).sum();
     let stitched = meshes.iter().filter(|m| m.stitched.contains(&true)).count();
+    let bytes = match args.format {
+        MeshFormat::Glb => {
+            let bytes = encode(&parts, &meshes, &context, cracks)?;
+            super::write_output(&args.output, args.force, &bytes)?;
+            bytes.len() as u64
+        }
+        MeshFormat::QuantizedMesh => write_tiles(args, &parts, &meshes, &context)?,
+    };
     eprintln!(
         "fmrh: meshed {} blocks ({} stitched to a neighbour) as {} triangles, {} bytes{}",
         meshes.len(),
         stitched,
         triangles,
-        bytes.len(),
+        bytes,
         if args.output == std::path::Path::new("-") {
             String::new()
         } else {
@@ -138,6 +173,163 @@ pub fn run(args: &MeshArgs) -> Result<ExitCode, Error> {
         }
     );
     Ok(ExitCode::SUCCESS)
+}
+
+/// Writes one quantized-mesh tile per block and `layer.json` into a new directory beside
+/// `args.output`, then renames it into place (an existing directory is replaced only with
+/// --force). Returns the bytes of the tiles.
+fn write_tiles(
+    args: &MeshArgs,
+    parts: &[Part],
+    meshes: &[BlockMesh],
+    context: &Context,
+) -> Result<u64, Error> {
+    let out = &args.output;
+    let parent = match out.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let temp = tempfile::Builder::new()
+        .prefix(".fmrh-tiles-")
+        .tempdir_in(&parent)
+        .map_err(|e| Error::io(&parent, e))?;
+    let mut total = 0u64;
+    // Per level: the tiles written, as (x, y) with y counted from the south.
+    let mut levels: std::collections::BTreeMap<u8, Vec<(u32, u32)>> = Default::default();
+    for m in meshes {
+        let p = &parts[m.block];
+        let b = &p.block;
+        let y = (1u32 << b.level) - 1 - b.y;
+        let f = &p.footprint;
+        let tile = QuantizedTile {
+            mesh: m,
+            rect: [f.col0, f.row0, f.col1, f.row1],
+            metadata: json!({ "fmrh": block_extras(p, m) }),
+        };
+        let bytes = quantized_mesh::encode(&tile, &context.frame)?;
+        let dir = temp.path().join(b.level.to_string()).join(b.x.to_string());
+        std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+        let path = dir.join(format!("{y}.terrain"));
+        std::fs::write(&path, &bytes).map_err(|e| Error::io(&path, e))?;
+        total += bytes.len() as u64;
+        levels.entry(b.level).or_default().push((b.x, y));
+    }
+    let layer = layer_json(parts, meshes, context, &levels);
+    let path = temp.path().join("layer.json");
+    let text =
+        serde_json::to_vec_pretty(&layer).map_err(|e| Error::InvalidArgument(e.to_string()))?;
+    std::fs::write(&path, text).map_err(|e| Error::io(&path, e))?;
+    let kept = temp.keep();
+    if out.exists() {
+        if !args.force {
+            let _ = std::fs::remove_dir_all(&kept);
+            return super::check_output(out, false).map(|()| 0);
+        }
+        let old = parent.join(format!(".fmrh-tiles-old-{}", std::process::id()));
+        std::fs::rename(out, &old).map_err(|e| Error::io(out, e))?;
+        std::fs::rename(&kept, out).map_err(|e| Error::io(out, e))?;
+        let _ = std::fs::remove_dir_all(&old);
+    } else {
+        std::fs::rename(&kept, out).map_err(|e| Error::io(out, e))?;
+    }
+    Ok(total)
+}
+
+/// The tileset's `layer.json`: TileJSON as Cesium reads it, with the tiles available at
+/// each level, and an `fmrh` object saying what the tiles are.
+fn layer_json(
+    parts: &[Part],
+    meshes: &[BlockMesh],
+    context: &Context,
+    levels: &std::collections::BTreeMap<u8, Vec<(u32, u32)>>,
+) -> Value {
+    let available: Vec<Value> = (0..=levels.keys().max().copied().unwrap_or(0))
+        .map(|l| {
+            let mut tiles = levels.get(&l).cloned().unwrap_or_default();
+            tiles.sort_unstable_by_key(|&(x, y)| (y, x));
+            // Runs of neighbours along a row, as ranges.
+            let mut ranges: Vec<Value> = Vec::new();
+            let mut i = 0;
+            while i < tiles.len() {
+                let (x0, y) = tiles[i];
+                let mut x1 = x0;
+                while i + 1 < tiles.len() && tiles[i + 1] == (x1 + 1, y) {
+                    i += 1;
+                    x1 += 1;
+                }
+                ranges.push(json!({ "startX": x0, "startY": y, "endX": x1, "endY": y }));
+                i += 1;
+            }
+            Value::Array(ranges)
+        })
+        .collect();
+    let level_notes: Vec<Value> = levels
+        .iter()
+        .map(|(l, tiles)| {
+            let p = meshes
+                .iter()
+                .map(|m| &parts[m.block])
+                .find(|p| p.block.level == *l);
+            let side = p.map_or(0, |p| p.footprint.col1 - p.footprint.col0);
+            json!({
+                "level": l,
+                "tiles": tiles.len(),
+                "tile_side_samples": side,
+                "tile_side_m": [side as f64 * context.frame.dx, side as f64 * context.frame.dy],
+                "stride_samples": p.map_or(0, |p| p.stride),
+            })
+        })
+        .collect();
+    let mut origin = json!({ "sample": [0, 0], "world_m": [0.0, 0.0] });
+    if let Some(g) = &context.georeference {
+        origin["map"] = json!(g.origin);
+        origin["crs"] = g.crs.clone().map_or(Value::Null, Value::from);
+    }
+    json!({
+        "tilejson": "2.1.0",
+        "name": "fmrh scene",
+        "description": "One tile per block of an fmrh scene: tile LEVEL/X/Y is the fmrh node \
+            at that level, column X and row 2^LEVEL - 1 - Y (Y counted from the south). \
+            The tiles are fmrh's quadtree over the data's samples, not the global-geodetic \
+            grid, in a local frame (x east, y north, z up, metres from the data's \
+            north-west sample).",
+        "version": "1.0.0",
+        "format": "quantized-mesh-1.0",
+        "scheme": "tms",
+        "tiles": ["{z}/{x}/{y}.terrain?v={version}"],
+        "minzoom": levels.keys().min(),
+        "maxzoom": levels.keys().max(),
+        "extensions": ["octvertexnormals", "metadata"],
+        "available": available,
+        "fmrh": {
+            "tiling": "fmrh-nodes",
+            "frame": "local: x east, y north, z up, metres; the data's north-west sample at x = y = 0",
+            "origin": origin,
+            "spacing_m": [context.frame.dx, context.frame.dy],
+            "levels": level_notes,
+            "tau": context.tau,
+            "mode": context.mode,
+        }
+    })
+}
+
+/// What a block's node (glTF) or tile (quantized-mesh) says of it.
+fn block_extras(p: &Part, m: &BlockMesh) -> Value {
+    let b = &p.block;
+    let mut extras = json!({
+        "level": b.level,
+        "error": b.error,
+        "key": b.key,
+        "x": b.x,
+        "y": b.y,
+        "footprint": [b.col0, b.row0, b.col1, b.row1],
+        "synthetic": false,
+        "stitched": m.stitched,
+    });
+    if let Some(t) = p.tile {
+        extras["tile"] = json!(t);
+    }
+    extras
 }
 
 /// The scene of one container, its blocks read and decoded.
@@ -161,6 +353,7 @@ fn tile_parts<S: fmrh::store::Source>(
             tile: None,
             loaded,
             stride: d.stride(b.level),
+            footprint: d.footprint(b.level, b.x, b.y),
         })
         .collect();
     let metadata = &store.header().metadata;
@@ -195,19 +388,6 @@ fn encode(
         .map(|m| {
             let p = &parts[m.block];
             let b = &p.block;
-            let mut extras = json!({
-                "level": b.level,
-                "error": b.error,
-                "key": b.key,
-                "x": b.x,
-                "y": b.y,
-                "footprint": [b.col0, b.row0, b.col1, b.row1],
-                "synthetic": false,
-                "stitched": m.stitched,
-            });
-            if let Some(t) = p.tile {
-                extras["tile"] = json!(t);
-            }
             GltfBlock {
                 mesh: m,
                 name: match p.tile {
@@ -215,7 +395,7 @@ fn encode(
                     None => format!("level {} key {}", b.level, b.key),
                 },
                 level: b.level,
-                extras: json!({ "fmrh": extras }),
+                extras: json!({ "fmrh": block_extras(p, m) }),
             }
         })
         .collect();

@@ -1,6 +1,8 @@
-//! Heightfields and meshes out of fmrh in formats other tools read: GeoTIFF ([`geotiff`]) and
-//! glTF ([`gltf`]). The readers of rasters live in [`crate::ingest`]; nothing here knows of
-//! containers or scenes: a caller hands over samples and their georeference, or meshes.
+//! Heightfields and meshes out of fmrh in formats other tools read: GeoTIFF ([`geotiff`]),
+//! glTF ([`gltf`]) and Cesium's quantized-mesh ([`quantized_mesh`]). The readers of rasters
+//! live in [`crate::ingest`]; nothing here knows of containers or scenes: a caller hands
+//! over samples and their georeference, or meshes.
 
 pub mod geotiff;
 pub mod gltf;
+pub mod quantized_mesh;
