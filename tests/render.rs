@@ -1,13 +1,15 @@
 //! Pictures of scenes (`fmrh::render`, `fmrh render`) show what they claim: looking
 //! straight down at terrain that fills the view leaves no sky; looking away from it leaves
 //! nothing but sky; on an overhead map every block is drawn in its level's hue (blocks of one
-//! level alike on flat ground, of different levels apart), its edges dark, and the eye in
-//! the frustum's colour; the same scene gives the same bytes; the PNG holds the picture. The
+//! level alike on flat ground, of different levels apart), its edges dark, the eye in the
+//! frustum's colour, and a legend of each level's hue; the same scene gives the same bytes; the PNG holds the picture. The
 //! CLI writes both kinds and keeps an existing file without --force.
 
 mod common;
 
-use fmrh::render::{perspective, top, Image, Surface, FRUSTUM_COLOUR};
+use fmrh::render::{
+    perspective, top, Image, Surface, FRUSTUM_COLOUR, LEGEND_MARGIN, LEGEND_SWATCH,
+};
 use fmrh::scene::{reconstruct, Camera, SceneOptions, Terrain, WorldFrame};
 use fmrh::store::WriteOptions;
 use fmrh::Store;
@@ -171,6 +173,24 @@ fn an_overhead_map_tints_blocks_by_level_and_marks_the_eye() {
     assert_eq!(distinct.len(), colour_of_level.len(), "{colour_of_level:?}");
     // The eye, at (300 m, 300 m): sample 30, pixel 60.
     assert_eq!(image.pixel(60, 60), FRUSTUM_COLOUR);
+    // The legend, in the north-west corner: a swatch of each level's own hue, one under
+    // another, on white.
+    let (m, sw) = (LEGEND_MARGIN as u32, LEGEND_SWATCH as u32);
+    assert_eq!(image.pixel(m, m), [255, 255, 255]);
+    for (i, &l) in levels.iter().enumerate() {
+        let (x0, y0) = (m + 4, m + 4 + (sw + 4) * i as u32);
+        for y in y0..y0 + sw {
+            for x in x0..x0 + sw {
+                assert_eq!(
+                    image.pixel(x, y),
+                    fmrh::render::level_colour(l),
+                    "legend of level {l}"
+                );
+            }
+        }
+    }
+    let below = m + 4 + (sw + 4) * levels.len() as u32;
+    assert_eq!(image.pixel(m + 4 + sw, below + sw / 2), FRUSTUM_COLOUR);
 }
 
 #[test]
@@ -293,8 +313,17 @@ fn the_cli_draws_a_dataset_across_its_tiles() {
         let i = ((y * info.width + x) * 3) as usize;
         [buf[i], buf[i + 1], buf[i + 2]]
     };
+    // The legend's white panel, from its corner along its top row and left column.
+    let m = LEGEND_MARGIN as u32;
+    let white = [255, 255, 255];
+    assert_eq!(pixel(m, m), white, "the legend");
+    let lw = (m..info.width).take_while(|&x| pixel(x, m) == white).count() as u32;
+    let lh = (m..info.height).take_while(|&y| pixel(m, y) == white).count() as u32;
     for y in 0..info.height {
         for x in 0..info.width {
+            if (m..m + lw).contains(&x) && (m..m + lh).contains(&y) {
+                continue;
+            }
             let [r, g, b] = pixel(x, y);
             assert_ne!([r, g, b], [235, 235, 235], "({x}, {y}) undrawn");
             // Drawn by a block: tinted by its level, never the grey of no block.

@@ -6,6 +6,9 @@
 //! (a reconstruction) and the blocks themselves. Nothing here reads a file or chooses
 //! blocks; the caller schedules the scene and reconstructs it.
 //!
+//! The overhead map carries a legend in its north-west corner: each level's hue with its
+//! number, and the frustum's red.
+//!
 //! **Shading.** Each sample's normal comes from central differences of its neighbours in
 //! metres; the light comes from the north-west, 45° up (the cartographic convention), with a
 //! quarter of ambient light so that slopes facing away stay readable. Each level has a hue
@@ -455,7 +458,82 @@ pub fn top(surface: &Surface<'_>, camera: &Camera, side: u32) -> Result<Image> {
             }
         }
     }
+    let mut levels: Vec<u8> = surface.blocks.iter().map(|b| b.level).collect();
+    levels.sort_unstable();
+    levels.dedup();
+    legend(&mut image, &levels);
     Ok(image)
+}
+
+/// Digits 0 to 9, three pixels wide and five high, a row in the low three bits (MSB left).
+const DIGITS: [[u8; 5]; 10] = [
+    [7, 5, 5, 5, 7],
+    [2, 6, 2, 2, 7],
+    [7, 1, 7, 4, 7],
+    [7, 1, 7, 1, 7],
+    [5, 5, 7, 1, 1],
+    [7, 4, 7, 1, 7],
+    [7, 4, 7, 5, 7],
+    [7, 1, 1, 1, 1],
+    [7, 5, 7, 5, 7],
+    [7, 5, 7, 1, 7],
+];
+
+/// Pixels from the picture's corner to the legend's, and between its rows.
+pub const LEGEND_MARGIN: i64 = 4;
+/// A legend swatch's side, in pixels; rows are this plus 4 apart.
+pub const LEGEND_SWATCH: i64 = 12;
+
+/// The overhead map's legend, in its north-west corner on a white panel: a swatch of each
+/// level's hue with the level's number, then the frustum's colour. Left out of pictures too
+/// small to hold it.
+fn legend(image: &mut Image, levels: &[u8]) {
+    let row = LEGEND_SWATCH + 4;
+    let (w, h) = (LEGEND_SWATCH + 30, row * (levels.len() as i64 + 1) + 4);
+    if levels.is_empty()
+        || w + 2 * LEGEND_MARGIN > i64::from(image.width)
+        || h + 2 * LEGEND_MARGIN > i64::from(image.height)
+    {
+        return;
+    }
+    let fill = |image: &mut Image, x0: i64, y0: i64, dx: i64, dy: i64, c: [u8; 3]| {
+        for y in y0..y0 + dy {
+            for x in x0..x0 + dx {
+                image.set(x, y, c);
+            }
+        }
+    };
+    let (x0, y0) = (LEGEND_MARGIN, LEGEND_MARGIN);
+    fill(image, x0, y0, w, h, [255, 255, 255]);
+    let text = |image: &mut Image, x: i64, y: i64, n: u8| {
+        for (k, d) in n.to_string().bytes().enumerate() {
+            let glyph = DIGITS[usize::from(d - b'0')];
+            for (gy, bits) in glyph.iter().enumerate() {
+                for gx in 0..3 {
+                    if bits >> (2 - gx) & 1 == 1 {
+                        let (px, py) = (x + k as i64 * 8 + 2 * gx, y + 2 * gy as i64);
+                        fill(image, px, py, 2, 2, [40, 40, 40]);
+                    }
+                }
+            }
+        }
+    };
+    for (i, &l) in levels.iter().enumerate() {
+        let y = y0 + 4 + row * i as i64;
+        fill(
+            image,
+            x0 + 4,
+            y,
+            LEGEND_SWATCH,
+            LEGEND_SWATCH,
+            level_colour(l),
+        );
+        text(image, x0 + LEGEND_SWATCH + 10, y + 1, l);
+    }
+    // The frustum: a red line, with the eye's dot.
+    let y = y0 + 4 + row * levels.len() as i64 + LEGEND_SWATCH / 2;
+    fill(image, x0 + 4, y - 1, LEGEND_SWATCH + 20, 2, FRUSTUM_COLOUR);
+    fill(image, x0 + 4, y - 3, 6, 6, FRUSTUM_COLOUR);
 }
 
 /// A line from `a` to `b` (pixels), clipped to the picture.
