@@ -317,8 +317,12 @@ fn the_cli_draws_a_dataset_across_its_tiles() {
     let m = LEGEND_MARGIN as u32;
     let white = [255, 255, 255];
     assert_eq!(pixel(m, m), white, "the legend");
-    let lw = (m..info.width).take_while(|&x| pixel(x, m) == white).count() as u32;
-    let lh = (m..info.height).take_while(|&y| pixel(m, y) == white).count() as u32;
+    let lw = (m..info.width)
+        .take_while(|&x| pixel(x, m) == white)
+        .count() as u32;
+    let lh = (m..info.height)
+        .take_while(|&y| pixel(m, y) == white)
+        .count() as u32;
     for y in 0..info.height {
         for x in 0..info.width {
             if (m..m + lw).contains(&x) && (m..m + lh).contains(&y) {
