@@ -27,6 +27,9 @@ use fmrh::store::io::{Damage, SimDisk};
 use fmrh::store::{verify, Bytes, Container};
 use fmrh::{Heightfield, Store};
 use rayon::prelude::*;
+use std::collections::HashMap;
+use std::hash::{BuildHasher, RandomState};
+use std::sync::Mutex;
 
 type Txn = Vec<(u64, u64, Heightfield)>;
 
@@ -86,21 +89,67 @@ struct State {
     model: Described,
 }
 
-/// Opens `image`, checks it, and returns which state it holds.
-fn check(image: Vec<u8>, states: &[State], allowed: &[usize], what: &str) -> usize {
-    let disk = SimDisk::new(image);
-    let (c, _) = Container::open_io(disk.clone()).unwrap_or_else(|e| panic!("{what}: {e}"));
-    let report = verify(Bytes(disk.current()), fmrh::VerifyMode::Full).unwrap();
-    assert!(report.valid, "{what}: {report:#?}");
-    let s = c.read().unwrap();
-    let digest = samples_digest(&s);
-    let which = allowed
-        .iter()
-        .copied()
-        .find(|&k| states[k].digest == digest)
-        .unwrap_or_else(|| panic!("{what}: samples are none of the states {allowed:?}"));
-    assert!(described(&s) == states[which].model, "{what}: model");
-    which
+/// The states a crash may leave, and which distinct crash images were already checked.
+///
+/// Checking an image (open and recover it, `verify --full`, digest every sample, describe
+/// the model) is a deterministic function of its bytes, and many crash points and damage
+/// patterns leave the same bytes (a crash with nothing unsynced, say, gives one image
+/// under all six). So each distinct image is checked once: images are keyed by their
+/// length and two independently keyed 64-bit SipHashes of their bytes, and a repeat only
+/// asserts that the state its first check found is allowed where it occurs now.
+struct States {
+    list: Vec<State>,
+    hashers: (RandomState, RandomState),
+    checked: Mutex<HashMap<(usize, u64, u64), usize>>,
+}
+
+impl States {
+    fn new(list: Vec<State>) -> States {
+        States {
+            list,
+            hashers: (RandomState::new(), RandomState::new()),
+            checked: Mutex::new(HashMap::new()),
+        }
+    }
+
+    /// Opens `image`, checks it, and returns which state it holds (one of `allowed`).
+    fn check(&self, image: Vec<u8>, allowed: &[usize], what: &str) -> usize {
+        let id = (
+            image.len(),
+            self.hashers.0.hash_one(&image),
+            self.hashers.1.hash_one(&image),
+        );
+        let seen = self.checked.lock().unwrap().get(&id).copied();
+        let which = match seen {
+            Some(which) => which,
+            None => {
+                let which = self.check_afresh(image, allowed, what);
+                self.checked.lock().unwrap().insert(id, which);
+                which
+            }
+        };
+        assert!(
+            allowed.contains(&which),
+            "{what}: samples are state {which}, none of the states {allowed:?}"
+        );
+        which
+    }
+
+    fn check_afresh(&self, image: Vec<u8>, allowed: &[usize], what: &str) -> usize {
+        let disk = SimDisk::new(image);
+        let (c, _) = Container::open_io(disk.clone()).unwrap_or_else(|e| panic!("{what}: {e}"));
+        let report = verify(Bytes(disk.current()), fmrh::VerifyMode::Full).unwrap();
+        assert!(report.valid, "{what}: {report:#?}");
+        let s = c.read().unwrap();
+        let digest = samples_digest(&s);
+        let which = allowed
+            .iter()
+            .copied()
+            .find(|&k| self.list[k].digest == digest)
+            .unwrap_or_else(|| panic!("{what}: samples are none of the states {allowed:?}"));
+        assert!(described(&s) == self.list[which].model, "{what}: model");
+        which
+    }
 }
 
 /// The workload on the real DEM, run once without faults: the container's bytes, the
@@ -109,7 +158,7 @@ fn check(image: Vec<u8>, states: &[State], allowed: &[usize], what: &str) -> usi
 struct Workload {
     bytes: Vec<u8>,
     txns: Vec<Txn>,
-    states: Vec<State>,
+    states: States,
     ends: Vec<u64>,
     total: u64,
 }
@@ -176,7 +225,7 @@ fn prepare(paged: bool) -> Workload {
     Workload {
         bytes,
         txns,
-        states,
+        states: States::new(states),
         ends,
         total: probe.ops(),
     }
@@ -245,15 +294,10 @@ fn crash_anywhere(paged: bool) {
                         "{what}: recovery survived a crash at op {r}"
                     );
                     let image2 = again.crash_image(Damage::Random(at ^ (r << 32)));
-                    check(
-                        image2,
-                        &states,
-                        &allowed,
-                        &format!("{what}, recovery op {r}"),
-                    );
+                    states.check(image2, &allowed, &format!("{what}, recovery op {r}"));
                     recovery_crashes += 1;
                 }
-                let which = check(image.clone(), &states, &allowed, &what);
+                let which = states.check(image.clone(), &allowed, &what);
                 if which == committed {
                     old += 1;
                 } else {
@@ -368,9 +412,8 @@ fn io_errors(paged: bool) {
                 failed += 1;
                 let allowed: Vec<usize> = (committed..=(committed + 1).min(txns.len())).collect();
                 for damage in [Damage::KeepAll, Damage::DropAll, Damage::Random(n)] {
-                    check(
+                    states.check(
                         disk.crash_image(damage),
-                        &states,
                         &allowed,
                         &format!("{what}, then {damage:?}"),
                     );
