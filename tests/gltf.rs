@@ -244,3 +244,293 @@ fn mesh_refuses_what_it_cannot_do_and_keeps_what_exists() {
     assert!(!bad.status.success());
     assert!(!dir.path().join("x.glb").exists());
 }
+
+/// `--refine fractal`: `scene --json` and `mesh` name the same synthetic nodes, every one
+/// below a whole, void-free physical block, at the level, position and error the library
+/// gives (`fmrh::mesh::fractal::refine_block`); the GLB marks them and only them synthetic,
+/// and keeps the other blocks as stored. Without `--refine` the scene has no `fractal`
+/// object, and `--refine` with `--reconstruct` is refused.
+#[test]
+fn refine_fractal_marks_the_same_synthetic_nodes_in_scene_and_mesh() {
+    use fmrh::mesh::fractal;
+    let dir = tempfile::tempdir().unwrap();
+    let file = container(dir.path());
+    let (eye, target) = ("950,1650,140", "1000,800,0");
+    let camera = Camera::looking_at(
+        glam::DVec3::new(950.0, 1650.0, 140.0),
+        glam::DVec3::new(1000.0, 800.0, 0.0),
+    );
+    let tau = 1.0;
+    let f = file.to_str().unwrap();
+    let scene_args = ["scene", f, "--eye", eye, "--target", target, "--tau", "1"];
+    let run = common::fmrh(&[&scene_args[..], &["--json", "--refine", "fractal"]].concat());
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let report: Value = serde_json::from_slice(&run.stdout).unwrap();
+    let plain = common::fmrh(&[&scene_args[..], &["--json"]].concat());
+    assert!(plain.status.success());
+    let plain: Value = serde_json::from_slice(&plain.stdout).unwrap();
+    assert!(plain.get("fractal").is_none());
+    assert_eq!(plain["blocks"], report["blocks"]);
+
+    // The library's refinement of the same scene.
+    let store = fmrh::Store::open(&file).unwrap();
+    let scene = Terrain::new(&store)
+        .unwrap()
+        .scene(&camera, &SceneOptions::new(tau))
+        .unwrap();
+    let loaded = load_blocks(&store, &scene.blocks, PAYLOAD_GAP).unwrap();
+    let d = store.domain();
+    let frame = WorldFrame::new(Some([10.0, 10.0]));
+    let view = camera.view().unwrap();
+    let mut want = Vec::new();
+    let mut refined = 0;
+    for (b, l) in scene.blocks.iter().zip(&loaded) {
+        let grid = GridBlock {
+            rect: b.rect(),
+            stride: d.stride(b.level),
+            grid_width: l.width,
+            grid_height: l.height,
+            heights: &l.heights,
+            error: b.error,
+        };
+        let nodes = fractal::refine_block(b.key, &grid, &view, &frame, tau);
+        if nodes.is_empty() {
+            continue;
+        }
+        refined += 1;
+        assert!(l.heights.iter().all(|h| h.is_finite()));
+        for n in nodes {
+            // Every node is within the block and finer than the data.
+            let k = fractal::SCALE;
+            assert!(n.rect.col0 >= b.col0 * k && n.rect.col1 <= b.col1 * k);
+            assert!(n.rect.row0 >= b.row0 * k && n.rect.row1 <= b.row1 * k);
+            assert!((1..=fractal::MAX_DEPTH).contains(&n.depth));
+            want.push((b, n));
+        }
+    }
+    assert!(refined >= 2, "the camera refines {refined} blocks");
+    let depths: std::collections::BTreeSet<u8> = want.iter().map(|(_, n)| n.depth).collect();
+    assert!(depths.len() >= 2, "depths {depths:?}");
+
+    let fr = &report["fractal"];
+    assert_eq!(fr["scale"].as_u64(), Some(fractal::SCALE));
+    assert_eq!(fr["refined_blocks"].as_u64(), Some(refined));
+    let nodes = fr["nodes"].as_array().unwrap();
+    assert_eq!(nodes.len(), want.len());
+    let mut max_px = 0.0f64;
+    for (got, (b, n)) in nodes.iter().zip(&want) {
+        let k = fractal::SCALE as f64;
+        assert_eq!(got["synthetic"], true);
+        assert_eq!(got["physical"]["key"].as_u64(), Some(b.key));
+        assert_eq!(got["physical"]["level"].as_u64(), Some(u64::from(b.level)));
+        assert_eq!(got["depth"].as_u64(), Some(u64::from(n.depth)));
+        assert_eq!(got["level"].as_u64(), Some(u64::from(b.level + n.depth)));
+        assert_eq!(got["x"].as_u64(), Some(u64::from((b.x << n.depth) + n.x)));
+        assert_eq!(got["y"].as_u64(), Some(u64::from((b.y << n.depth) + n.y)));
+        let footprint: Vec<f64> = got["footprint"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        let r = &n.rect;
+        assert_eq!(
+            footprint,
+            [r.col0, r.row0, r.col1, r.row1].map(|v| v as f64 / k)
+        );
+        assert_eq!(got["error"].as_f64(), Some(n.error));
+        let px = n.screen_error(&view, &frame);
+        assert_eq!(got["screen_error"].as_f64(), Some(px));
+        // A node stops splitting at the tolerance, or at the last depth.
+        assert!(
+            px <= tau || n.depth == fractal::MAX_DEPTH,
+            "{px} px at depth {}",
+            n.depth
+        );
+        max_px = max_px.max(px);
+    }
+    assert_eq!(fr["max_screen_error"].as_f64(), Some(max_px));
+
+    // The mesh: the same nodes synthetic, the other blocks as stored.
+    let out = dir.path().join("fractal.glb");
+    let run = common::fmrh(&[
+        "mesh",
+        f,
+        "--eye",
+        eye,
+        "--target",
+        target,
+        "--tau",
+        "1",
+        "--refine",
+        "fractal",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let (json, _) = chunks(&std::fs::read(&out).unwrap());
+    assert_eq!(json["scenes"][0]["extras"]["fmrh"]["refine"], "fractal");
+    let gltf_nodes = json["nodes"].as_array().unwrap();
+    assert_eq!(
+        gltf_nodes.len(),
+        scene.blocks.len() - refined as usize + want.len()
+    );
+    let mut synthetic: Vec<(u64, u64, u64, u64)> = Vec::new();
+    let mut stored = 0;
+    for node in gltf_nodes {
+        let e = &node["extras"]["fmrh"];
+        let name = node["name"].as_str().unwrap();
+        if e["synthetic"] == true {
+            assert!(name.ends_with(" synthetic"), "{name}");
+            let depth = e["depth"].as_u64().unwrap();
+            assert_eq!(
+                e["level"].as_u64().unwrap(),
+                e["physical_level"].as_u64().unwrap() + depth
+            );
+            synthetic.push((
+                e["key"].as_u64().unwrap(),
+                e["level"].as_u64().unwrap(),
+                e["x"].as_u64().unwrap(),
+                e["y"].as_u64().unwrap(),
+            ));
+        } else {
+            assert_eq!(e["synthetic"], false);
+            assert!(e.get("depth").is_none() && !name.contains("synthetic"));
+            stored += 1;
+        }
+    }
+    assert_eq!(stored, scene.blocks.len() - refined as usize);
+    let mut from_scene: Vec<(u64, u64, u64, u64)> = nodes
+        .iter()
+        .map(|n| {
+            let u = |v: &Value| v.as_u64().unwrap();
+            (
+                u(&n["physical"]["key"]),
+                u(&n["level"]),
+                u(&n["x"]),
+                u(&n["y"]),
+            )
+        })
+        .collect();
+    synthetic.sort_unstable();
+    from_scene.sort_unstable();
+    assert_eq!(synthetic, from_scene);
+
+    // Synthetic detail has no place in a raster of samples.
+    let refused = common::fmrh(
+        &[
+            &scene_args[..],
+            &["--refine", "fractal", "--reconstruct"],
+            &[dir.path().join("r.f32").to_str().unwrap()],
+        ]
+        .concat(),
+    );
+    assert!(!refused.status.success());
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("cannot be used with"));
+    assert!(!dir.path().join("r.f32").exists());
+}
+
+/// `--refine fractal` on a dataset: the scene's synthetic nodes name their tile and
+/// physical block, lie inside it, and are the mesh's synthetic nodes, tile for tile.
+#[test]
+fn refine_fractal_on_a_dataset_names_each_nodes_tile() {
+    let dir = tempfile::tempdir().unwrap();
+    let field = common::fields::make(150, 120, common::fields::Character::Hills, 0.0, 5);
+    let rects = common::tiles::split(&field, &[37, 90], &[53], &[]);
+    let ds = common::tiles::build(dir.path(), &field, &rects, &common::tiles::options(None));
+    let d = ds.to_str().unwrap();
+    let (eye, target) = ("700,560,120", "700,480,0");
+    let scene_args = ["scene", d, "--eye", eye, "--target", target, "--tau", "1"];
+    let run = common::fmrh(&[&scene_args[..], &["--json", "--refine", "fractal"]].concat());
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let report: Value = serde_json::from_slice(&run.stdout).unwrap();
+    let nodes = report["fractal"]["nodes"].as_array().unwrap();
+    let blocks = report["blocks"].as_array().unwrap();
+    let u = |v: &Value| v.as_u64().unwrap();
+    let mut tiles = std::collections::BTreeSet::new();
+    for n in nodes {
+        let p = &n["physical"];
+        let block = blocks
+            .iter()
+            .find(|b| u(&b["tile"]) == u(&p["tile"]) && u(&b["key"]) == u(&p["key"]))
+            .unwrap_or_else(|| panic!("no scene block for {p}"));
+        assert_eq!(block["level"], p["level"]);
+        let f: Vec<f64> = n["footprint"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        let b = |k: &str| block[k].as_f64().unwrap();
+        assert!(f[0] >= b("col0") && f[2] <= b("col1") && f[0] < f[2], "{n}");
+        assert!(f[1] >= b("row0") && f[3] <= b("row1") && f[1] < f[3], "{n}");
+        tiles.insert(u(&p["tile"]));
+    }
+    assert!(tiles.len() >= 2, "synthetic nodes in tiles {tiles:?}");
+
+    let out = dir.path().join("ds.glb");
+    let run = common::fmrh(&[
+        "mesh",
+        d,
+        "--eye",
+        eye,
+        "--target",
+        target,
+        "--tau",
+        "1",
+        "--refine",
+        "fractal",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let (json, _) = chunks(&std::fs::read(&out).unwrap());
+    let mut from_mesh: Vec<(u64, u64, u64, u64, u64)> = json["nodes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|n| &n["extras"]["fmrh"])
+        .filter(|e| e["synthetic"] == true)
+        .map(|e| {
+            (
+                u(&e["tile"]),
+                u(&e["key"]),
+                u(&e["level"]),
+                u(&e["x"]),
+                u(&e["y"]),
+            )
+        })
+        .collect();
+    let mut from_scene: Vec<(u64, u64, u64, u64, u64)> = nodes
+        .iter()
+        .map(|n| {
+            let p = &n["physical"];
+            (
+                u(&p["tile"]),
+                u(&p["key"]),
+                u(&n["level"]),
+                u(&n["x"]),
+                u(&n["y"]),
+            )
+        })
+        .collect();
+    from_mesh.sort_unstable();
+    from_scene.sort_unstable();
+    assert_eq!(from_mesh, from_scene);
+}

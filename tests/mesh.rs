@@ -12,7 +12,7 @@
 
 mod common;
 
-use std::collections::HashMap;
+use std::collections::{BTreeSet, HashMap};
 
 use fmrh::mesh::{build, BlockMesh, Cracks, GridBlock};
 use fmrh::model::measure::surface;
@@ -514,4 +514,250 @@ fn dataset_meshes_are_conforming_across_tiles() {
     let strides: std::collections::BTreeSet<u64> = grids.iter().map(|g| g.stride).collect();
     assert!(stitched > 0, "strides {strides:?}, {} blocks", grids.len());
     check_skirts(&grids, &mesh(&grids, Cracks::Skirts));
+}
+
+mod fractal {
+    //! Detail past the data (`fmrh::mesh::fractal`): refinement is deterministic (the same
+    //! key gives the same heights, another key others), keeps every stored sample exactly,
+    //! stays within its declared errors (a depth's surface is within its error of every
+    //! deeper one), halves the error with each depth, and meshes without cracks beside real
+    //! blocks and between depths.
+
+    use super::*;
+    use fmrh::mesh::fractal::{self, Physical, Synthetic, MAX_DEPTH, SCALE};
+
+    fn block(seed: u64, b: u32) -> (Vec<f32>, SampleRect) {
+        let mut rng = Rng::new(seed);
+        let heights = (0..b * b).map(|_| (rng.unit() * 50.0) as f32).collect();
+        let side = u64::from(b - 1) * SCALE;
+        (heights, rect(3 * side, 5 * side, 4 * side, 6 * side))
+    }
+
+    /// Every node `depth` below the block (all of them split down to it).
+    fn at_depth(p: &Physical<'_>, a: f64, depth: u8) -> Vec<Synthetic> {
+        fractal::refine(p, a, &mut |d, _, _, _, _| d < depth)
+    }
+
+    /// The surface of the synthetic nodes at scaled point `(x, y)`.
+    fn surface_at(nodes: &[Synthetic], b: u32, x: u64, y: u64) -> f64 {
+        let n = nodes
+            .iter()
+            .find(|n| n.rect.col0 <= x && x <= n.rect.col1 && n.rect.row0 <= y && y <= n.rect.row1)
+            .unwrap();
+        Grid {
+            rect: n.rect,
+            stride: n.stride,
+            width: b,
+            height: b,
+            heights: n.heights.clone(),
+            error: n.error,
+        }
+        .surface(x, y)
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 24, ..ProptestConfig::default() })]
+
+        #[test]
+        fn refinement_is_deterministic_exact_on_the_data_and_within_its_errors(
+            seed in any::<u64>(),
+            key in any::<u64>(),
+            k in 0u8..MAX_DEPTH,
+            b in prop_oneof![Just(9u32), Just(17)],
+        ) {
+            let (heights, r) = block(seed, b);
+            let p = Physical { key, rect: r, side: b, heights: &heights };
+            let a = fractal::roughness(&heights, b as usize, b as usize);
+            prop_assert!(a > 0.0);
+            let deep = at_depth(&p, a, MAX_DEPTH);
+            prop_assert_eq!(deep.len(), 1 << (2 * MAX_DEPTH));
+            // Deterministic; another key, other heights.
+            prop_assert_eq!(&deep, &at_depth(&p, a, MAX_DEPTH));
+            let other = Physical { key: key ^ 1, ..p };
+            prop_assert_ne!(&deep, &at_depth(&other, a, MAX_DEPTH));
+            let peak = heights.iter().fold(0.0f64, |m, &h| m.max(f64::from(h).abs()));
+            let slack = fractal::declared_error(0.0, 0, peak);
+            let physical = Grid { rect: r, stride: SCALE, width: b, height: b, heights: heights.clone(), error: 0.0 };
+            for n in &deep {
+                prop_assert_eq!(n.error, fractal::declared_error(a, MAX_DEPTH, peak));
+                for j in 0..b as u64 {
+                    for i in 0..b as u64 {
+                        let (x, y) = (n.rect.col0 + i * n.stride, n.rect.row0 + j * n.stride);
+                        let h = n.heights[(j * u64::from(b) + i) as usize];
+                        // A stored sample keeps its height exactly.
+                        if (x - r.col0) % SCALE == 0 && (y - r.row0) % SCALE == 0 {
+                            let (c, rw) = ((x - r.col0) / SCALE, (y - r.row0) / SCALE);
+                            prop_assert_eq!(h, heights[(rw * u64::from(b) + c) as usize]);
+                        }
+                        // The physical block's edges stay straight between its samples, as
+                        // its real neighbours draw them (up to the rounding of each depth).
+                        if x == r.col0 || x == r.col1 || y == r.row0 || y == r.row1 {
+                            let edge = physical.surface(x, y);
+                            prop_assert!((f64::from(h) - edge).abs() <= slack, "edge point ({}, {})", x, y);
+                        }
+                    }
+                }
+            }
+            // Depth k's surface is within its declared error of the deepest one.
+            let coarse = if k == 0 {
+                vec![Synthetic {
+                    depth: 0, x: 0, y: 0, rect: r, stride: SCALE,
+                    heights: heights.clone(),
+                    error: fractal::declared_error(a, 0, peak),
+                }]
+            } else {
+                at_depth(&p, a, k)
+            };
+            let e_k = coarse[0].error;
+            for n in &deep {
+                for j in 0..b as u64 {
+                    for i in 0..b as u64 {
+                        let (x, y) = (n.rect.col0 + i * n.stride, n.rect.row0 + j * n.stride);
+                        let h = f64::from(n.heights[(j * u64::from(b) + i) as usize]);
+                        let s = surface_at(&coarse, b, x, y);
+                        prop_assert!((h - s).abs() <= e_k, "depth {}: {} from the deepest, past {}", k, (h - s).abs(), e_k);
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn each_depth_declares_half_the_error_of_the_one_above() {
+        let a = 3.0;
+        for d in 0..MAX_DEPTH {
+            let slack = fractal::declared_error(0.0, d, 100.0);
+            let (e, child) = (
+                fractal::declared_error(a, d, 100.0),
+                fractal::declared_error(a, d + 1, 100.0),
+            );
+            assert_eq!(child - slack, (e - slack) / 2.0);
+        }
+        assert_eq!(
+            fractal::roughness(&[7.0; 81], 9, 9),
+            0.0,
+            "flat ground has no detail to add"
+        );
+    }
+
+    /// A scene of Puget Sound 1k seen from close above: its physical blocks near the eye are
+    /// refined to several depths, and the stitched mesh of real and synthetic blocks is
+    /// conforming, with every stored sample within its block's error.
+    #[test]
+    fn refined_scenes_mesh_without_cracks_beside_real_blocks() {
+        let f = views::fixture(views::puget_1k(), &BuildOptions::default());
+        let terrain = Terrain::new(&f.store).unwrap();
+        let camera = fmrh::scene::Camera::looking_at(
+            glam::DVec3::new(80000.0, 92000.0, 1500.0),
+            glam::DVec3::new(80000.0, 88000.0, 0.0),
+        );
+        let view = camera.view().unwrap();
+        let scene = terrain.scene(&camera, &SceneOptions::new(1.0)).unwrap();
+        let frame = terrain.frame();
+        let mut grids = Vec::new();
+        let mut depths = BTreeSet::new();
+        for mut g in grids_of(&f.store, &scene) {
+            let s = |v: u64| v * SCALE;
+            g.rect = rect(
+                s(g.rect.col0),
+                s(g.rect.row0),
+                s(g.rect.col1),
+                s(g.rect.row1),
+            );
+            g.stride *= SCALE;
+            if g.stride == SCALE && g.width == 65 && g.height == 65 {
+                let a = fractal::roughness(&g.heights, 65, 65);
+                let key = (g.rect.col0 * 31) ^ g.rect.row0;
+                let p = Physical {
+                    key,
+                    rect: g.rect,
+                    side: 65,
+                    heights: &g.heights,
+                };
+                let nodes = fractal::refine_for_view(&p, a, &view, &frame, 1.0);
+                if !nodes.is_empty() {
+                    for n in nodes {
+                        depths.insert(n.depth);
+                        grids.push(Grid {
+                            rect: n.rect,
+                            stride: n.stride,
+                            width: 65,
+                            height: 65,
+                            heights: n.heights,
+                            error: g.error,
+                        });
+                    }
+                    continue;
+                }
+            }
+            grids.push(g);
+        }
+        assert!(depths.len() >= 2, "depths {depths:?}");
+        let blocks: Vec<GridBlock<'_>> = grids.iter().map(Grid::block).collect();
+        let scaled = WorldFrame {
+            dx: frame.dx / SCALE as f64,
+            dy: frame.dy / SCALE as f64,
+        };
+        let meshes = build(&blocks, &scaled, Cracks::Stitch).unwrap();
+        let source = source_of(&f.source);
+        let stitched = check_stitched(&grids, &meshes, &|x, y| {
+            (x % SCALE == 0 && y % SCALE == 0)
+                .then(|| source(x / SCALE, y / SCALE))
+                .flatten()
+        });
+        assert!(stitched > 0);
+    }
+
+    /// `refine_block` refines only a whole physical block with no void: the same samples
+    /// with one void, at a stride of 2, cut by the data's edge (narrower than tall), or
+    /// smaller than 9 × 9 are drawn as stored, and flat ground is never refined.
+    #[test]
+    fn only_whole_void_free_physical_blocks_are_refined() {
+        let b = 17u32;
+        let (heights, _) = block(7, b);
+        let camera = fmrh::scene::Camera::looking_at(
+            glam::DVec3::new(8.0, 30.0, 5.0),
+            glam::DVec3::new(8.0, 8.0, 0.0),
+        );
+        let view = camera.view().unwrap();
+        let frame = WorldFrame::new(Some([1.0, 1.0]));
+        let whole = rect(0, 0, 16, 16);
+        let refine = |rect: SampleRect, stride: u64, w: u32, h: u32, hs: &[f32]| {
+            let g = GridBlock {
+                rect,
+                stride,
+                grid_width: w,
+                grid_height: h,
+                heights: hs,
+                error: 0.0,
+            };
+            fractal::refine_block(99, &g, &view, &frame, 1.0)
+        };
+        let nodes = refine(whole, 1, b, b, &heights);
+        assert!(!nodes.is_empty(), "the whole block is refined");
+        for n in &nodes {
+            assert!(n.heights.iter().all(|h| h.is_finite()));
+        }
+        // At the north-west corner, which roughness does not read (no inner sample has it as
+        // a neighbour): only the void rule keeps the block as stored.
+        let mut void = heights.clone();
+        void[0] = f32::NAN;
+        assert!(refine(whole, 1, b, b, &void).is_empty(), "a void");
+        assert!(
+            refine(rect(0, 0, 32, 32), 2, b, b, &heights).is_empty(),
+            "stride 2"
+        );
+        let cut = &heights[..(b * (b - 1)) as usize];
+        assert!(
+            refine(rect(0, 0, 16, 15), 1, b, b - 1, cut).is_empty(),
+            "cut"
+        );
+        let small: Vec<f32> = heights[..64].to_vec();
+        assert!(
+            refine(rect(0, 0, 7, 7), 1, 8, 8, &small).is_empty(),
+            "8 x 8"
+        );
+        let flat = vec![42.0f32; heights.len()];
+        assert!(refine(whole, 1, b, b, &flat).is_empty(), "flat ground");
+    }
 }

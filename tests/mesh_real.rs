@@ -2,7 +2,8 @@
 //! the two neighbouring SRTM3 tiles, are valid glTF 2.0 to the Khronos glTF validator (npm
 //! `gltf-validator`, installed by `.ci/run` into `tests/js`): no error and no warning, both
 //! stitched and with skirts. Each mesh is of an oblique view over the whole DEM, so blocks of
-//! several levels meet. Large-data suite: it needs `../shared/data`, Node.js and the
+//! several levels meet; one more, of the bundled Puget Sound 1k seen from close above, is
+//! refined past the data by fractal nodes. Large-data suite: it needs `../shared/data`, Node.js and the
 //! validator, and fails (never skips) without them.
 
 mod common;
@@ -150,6 +151,40 @@ fn meshes_of_every_shared_dem_and_a_dataset_are_valid_gltf() {
     args.extend(view(&json));
     args.extend(["-o".into(), out.display().to_string()]);
     stitched.push(("N43E006+N43E007".into(), fmrh_ok(&args)));
+    files.push(out);
+
+    // Detail past the data: Puget Sound 1k (bundled) seen from 800 m, refined by fractal
+    // nodes and stitched to its stored blocks.
+    let ps = dir.path().join("ps1k.fmrh");
+    let png = Path::new(env!("CARGO_MANIFEST_DIR")).join("data/puget-sound-1k/ps_height_1k.png");
+    fmrh_ok(&[
+        "build".into(),
+        png.display().to_string(),
+        "--z-scale".into(),
+        "0.1".into(),
+        "--spacing".into(),
+        "160".into(),
+        "-o".into(),
+        ps.display().to_string(),
+    ]);
+    let out = dir.path().join("ps1k-fractal.glb");
+    let said = fmrh_ok(&[
+        "mesh".into(),
+        ps.display().to_string(),
+        "--eye".into(),
+        "80000,92000,800".into(),
+        "--target".into(),
+        "80000,88000,0".into(),
+        "--tau".into(),
+        "1".into(),
+        "--refine".into(),
+        "fractal".into(),
+        "-o".into(),
+        out.display().to_string(),
+    ]);
+    assert!(!said.contains(" 0 synthetic"), "{said}");
+    assert!(said.contains(" synthetic"), "{said}");
+    stitched.push(("ps1k fractal".into(), said));
     files.push(out);
 
     for (name, said) in &stitched {

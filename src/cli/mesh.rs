@@ -5,13 +5,14 @@
 
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::sync::Arc;
 
 use serde_json::{json, Value};
 
 use fmrh::export::gltf::{glb, GltfBlock};
 use fmrh::export::quantized_mesh::{self, QuantizedTile};
 use fmrh::heightfield::Georeference;
-use fmrh::mesh::{build, BlockMesh, Cracks, GridBlock};
+use fmrh::mesh::{build, fractal, BlockMesh, Cracks, GridBlock};
 use fmrh::model::SampleRect;
 use fmrh::scene::{load_blocks, LoadedBlock, SceneBlock, Terrain, WorldFrame, PAYLOAD_GAP};
 use fmrh::Error;
@@ -25,6 +26,14 @@ pub enum CracksArg {
     /// Every block keeps its own surface and hangs a curtain below edges that meet
     /// another block, as deep as both blocks' errors.
     Skirts,
+}
+
+/// Refinement past the data, as `--refine` names it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum RefineArg {
+    /// Seed 004's fractal nodes: noise seeded by the block's key, amplitude from its
+    /// roughness, each depth's error half the one above.
+    Fractal,
 }
 
 /// What `fmrh mesh` writes, as `--format` names it.
@@ -55,6 +64,10 @@ pub struct MeshArgs {
     /// What to write.
     #[arg(long, value_enum, default_value = "glb")]
     format: MeshFormat,
+    /// Refine past the data where the camera is closer than the data's detail: synthetic
+    /// nodes below the physical blocks, deterministic, marked synthetic in every output.
+    #[arg(long, value_enum)]
+    refine: Option<RefineArg>,
     /// The .glb to write (`-`: standard output), or the tile directory to create.
     #[arg(short, long)]
     output: PathBuf,
@@ -63,22 +76,129 @@ pub struct MeshArgs {
     force: bool,
 }
 
-/// A block of the scene to mesh, wherever it came from.
+/// A block to mesh, wherever it came from: a scene block, or a synthetic node below one.
+/// Rectangles and strides are in mesh units (`Context::units` a sample).
 struct Part {
+    /// The scene block (a synthetic node's physical block).
     block: SceneBlock,
     tile: Option<u64>,
-    loaded: LoadedBlock,
+    rect: SampleRect,
     stride: u64,
-    /// The node's whole footprint, padding included (its tile's rectangle).
+    width: u32,
+    height: u32,
+    heights: Arc<[f32]>,
+    /// The node's whole footprint, padding included (its quantized-mesh tile).
     footprint: SampleRect,
+    /// Depth, column and row below the physical block, and declared error.
+    synthetic: Option<(u8, u32, u32, f64)>,
+}
+
+impl Part {
+    fn of(
+        block: SceneBlock,
+        tile: Option<u64>,
+        loaded: LoadedBlock,
+        stride: u64,
+        footprint: SampleRect,
+    ) -> Part {
+        Part {
+            block,
+            tile,
+            rect: block.rect(),
+            stride,
+            width: loaded.width,
+            height: loaded.height,
+            heights: loaded.heights,
+            footprint,
+            synthetic: None,
+        }
+    }
+
+    /// Level, column and row in the quadtree (a synthetic node's below its block's).
+    fn node(&self) -> (u8, u32, u32) {
+        let b = &self.block;
+        match self.synthetic {
+            Some((d, x, y, _)) => (b.level + d, (b.x << d) + x, (b.y << d) + y),
+            None => (b.level, b.x, b.y),
+        }
+    }
+
+    fn error(&self) -> f64 {
+        self.synthetic.map_or(self.block.error, |s| s.3)
+    }
 }
 
 /// What the scene's `extras` say besides the blocks.
 struct Context {
+    /// The world frame of samples.
     frame: WorldFrame,
     georeference: Option<Georeference>,
     tau: f64,
     mode: fmrh::scene::Mode,
+    /// Mesh units a sample: 1, or `fractal::SCALE` when refined past the data.
+    units: u64,
+}
+
+impl Context {
+    /// The frame of mesh units.
+    fn mesh_frame(&self) -> WorldFrame {
+        let k = self.units as f64;
+        WorldFrame {
+            dx: self.frame.dx / k,
+            dy: self.frame.dy / k,
+        }
+    }
+}
+
+/// Replaces each physical block that the camera sees closer than its data's detail with
+/// synthetic nodes (`fmrh::mesh::fractal`), and puts every part in mesh units.
+fn refine_fractal(
+    parts: Vec<Part>,
+    camera: &fmrh::scene::Camera,
+    context: &mut Context,
+) -> Result<Vec<Part>, Error> {
+    let view = camera.view()?;
+    let k = fractal::SCALE;
+    context.units = k;
+    let scaled = |r: SampleRect| SampleRect {
+        col0: r.col0 * k,
+        row0: r.row0 * k,
+        col1: r.col1 * k,
+        row1: r.row1 * k,
+    };
+    let mut out = Vec::new();
+    for mut p in parts {
+        let grid = GridBlock {
+            rect: p.rect,
+            stride: p.stride,
+            grid_width: p.width,
+            grid_height: p.height,
+            heights: &p.heights,
+            error: p.block.error,
+        };
+        let nodes = fractal::refine_block(p.block.key, &grid, &view, &context.frame, context.tau);
+        p.rect = scaled(p.rect);
+        p.footprint = scaled(p.footprint);
+        p.stride *= k;
+        if nodes.is_empty() {
+            out.push(p);
+            continue;
+        }
+        for n in nodes {
+            out.push(Part {
+                block: p.block,
+                tile: p.tile,
+                rect: n.rect,
+                stride: n.stride,
+                width: p.width,
+                height: p.width,
+                heights: n.heights.into(),
+                footprint: n.rect,
+                synthetic: Some((n.depth, n.x, n.y, n.error)),
+            });
+        }
+    }
+    Ok(out)
 }
 
 /// Runs `fmrh mesh`.
@@ -95,7 +215,7 @@ pub fn run(args: &MeshArgs) -> Result<ExitCode, Error> {
     }
     let camera = args.camera.camera(&args.view)?;
     let options = args.view.options_in(args.window.as_deref())?;
-    let (parts, context) = if super::is_dataset(&args.file)? {
+    let (parts, mut context) = if super::is_dataset(&args.file)? {
         let ds = fmrh::dataset::Dataset::open(&args.file)?;
         let spacing = args.view.given_spacing()?;
         let scene = ds.scene(&camera, &options, spacing)?;
@@ -104,12 +224,8 @@ pub fn run(args: &MeshArgs) -> Result<ExitCode, Error> {
             .blocks
             .iter()
             .zip(loaded)
-            .map(|(b, (loaded, stride))| Part {
-                block: b.block,
-                tile: Some(b.tile),
-                loaded,
-                stride,
-                footprint: b.block.rect(),
+            .map(|(b, (loaded, stride))| {
+                Part::of(b.block, Some(b.tile), loaded, stride, b.block.rect())
             })
             .collect();
         let context = Context {
@@ -117,6 +233,7 @@ pub fn run(args: &MeshArgs) -> Result<ExitCode, Error> {
             georeference: ds.georeference(),
             tau: scene.tau,
             mode: scene.mode,
+            units: 1,
         };
         (parts, context)
     } else if let Some(url) = super::url_of(&args.file) {
@@ -138,20 +255,25 @@ pub fn run(args: &MeshArgs) -> Result<ExitCode, Error> {
         CracksArg::Stitch => Cracks::Stitch,
         CracksArg::Skirts => Cracks::Skirts,
     };
+    let parts = match args.refine {
+        Some(RefineArg::Fractal) => refine_fractal(parts, &camera, &mut context)?,
+        None => parts,
+    };
     let grids: Vec<GridBlock<'_>> = parts
         .iter()
         .map(|p| GridBlock {
-            rect: p.block.rect(),
+            rect: p.rect,
             stride: p.stride,
-            grid_width: p.loaded.width,
-            grid_height: p.loaded.height,
-            heights: &p.loaded.heights,
-            error: p.block.error,
+            grid_width: p.width,
+            grid_height: p.height,
+            heights: &p.heights,
+            error: p.error(),
         })
         .collect();
-    let meshes = build(&grids, &context.frame, cracks)?;
+    let meshes = build(&grids, &context.mesh_frame(), cracks)?;
     let triangles: usize = meshes.iter().map(|m| m.triangles.len()).sum();
     let stitched = meshes.iter().filter(|m| m.stitched.contains(&true)).count();
+    let synthetic = parts.iter().filter(|p| p.synthetic.is_some()).count();
     let bytes = match args.format {
         MeshFormat::Glb => {
             let bytes = encode(&parts, &meshes, &context, cracks)?;
@@ -161,9 +283,14 @@ pub fn run(args: &MeshArgs) -> Result<ExitCode, Error> {
         MeshFormat::QuantizedMesh => write_tiles(args, &parts, &meshes, &context)?,
     };
     eprintln!(
-        "fmrh: meshed {} blocks ({} stitched to a neighbour) as {} triangles, {} bytes{}",
+        "fmrh: meshed {} blocks ({} stitched to a neighbour{}) as {} triangles, {} bytes{}",
         meshes.len(),
         stitched,
+        if args.refine.is_some() {
+            format!(", {synthetic} synthetic")
+        } else {
+            String::new()
+        },
         triangles,
         bytes,
         if args.output == std::path::Path::new("-") {
@@ -198,21 +325,21 @@ fn write_tiles(
     let mut levels: std::collections::BTreeMap<u8, Vec<(u32, u32)>> = Default::default();
     for m in meshes {
         let p = &parts[m.block];
-        let b = &p.block;
-        let y = (1u32 << b.level) - 1 - b.y;
+        let (level, x, y) = p.node();
+        let y = (1u32 << level) - 1 - y;
         let f = &p.footprint;
         let tile = QuantizedTile {
             mesh: m,
             rect: [f.col0, f.row0, f.col1, f.row1],
-            metadata: json!({ "fmrh": block_extras(p, m) }),
+            metadata: json!({ "fmrh": block_extras(p, m, context.units) }),
         };
-        let bytes = quantized_mesh::encode(&tile, &context.frame)?;
-        let dir = temp.path().join(b.level.to_string()).join(b.x.to_string());
+        let bytes = quantized_mesh::encode(&tile, &context.mesh_frame())?;
+        let dir = temp.path().join(level.to_string()).join(x.to_string());
         std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
         let path = dir.join(format!("{y}.terrain"));
         std::fs::write(&path, &bytes).map_err(|e| Error::io(&path, e))?;
         total += bytes.len() as u64;
-        levels.entry(b.level).or_default().push((b.x, y));
+        levels.entry(level).or_default().push((x, y));
     }
     let layer = layer_json(parts, meshes, context, &levels);
     let path = temp.path().join("layer.json");
@@ -269,14 +396,17 @@ fn layer_json(
             let p = meshes
                 .iter()
                 .map(|m| &parts[m.block])
-                .find(|p| p.block.level == *l);
-            let side = p.map_or(0, |p| p.footprint.col1 - p.footprint.col0);
+                .find(|p| p.node().0 == *l);
+            let side = p.map_or(0.0, |p| {
+                (p.footprint.col1 - p.footprint.col0) as f64 / context.units as f64
+            });
             json!({
                 "level": l,
                 "tiles": tiles.len(),
                 "tile_side_samples": side,
-                "tile_side_m": [side as f64 * context.frame.dx, side as f64 * context.frame.dy],
-                "stride_samples": p.map_or(0, |p| p.stride),
+                "tile_side_m": [side * context.frame.dx, side * context.frame.dy],
+                "stride_samples": p.map_or(0.0, |p| p.stride as f64 / context.units as f64),
+                "synthetic": p.is_some_and(|p| p.synthetic.is_some()),
             })
         })
         .collect();
@@ -314,18 +444,26 @@ fn layer_json(
 }
 
 /// What a block's node (glTF) or tile (quantized-mesh) says of it.
-fn block_extras(p: &Part, m: &BlockMesh) -> Value {
+fn block_extras(p: &Part, m: &BlockMesh, units: u64) -> Value {
     let b = &p.block;
+    let (level, x, y) = p.node();
+    let k = units as f64;
+    let r = &p.rect;
     let mut extras = json!({
-        "level": b.level,
-        "error": b.error,
+        "level": level,
+        "error": p.error(),
         "key": b.key,
-        "x": b.x,
-        "y": b.y,
-        "footprint": [b.col0, b.row0, b.col1, b.row1],
-        "synthetic": false,
+        "x": x,
+        "y": y,
+        "footprint": [r.col0 as f64 / k, r.row0 as f64 / k, r.col1 as f64 / k, r.row1 as f64 / k],
+        "synthetic": p.synthetic.is_some(),
         "stitched": m.stitched,
     });
+    if let Some((depth, ..)) = p.synthetic {
+        // Generated below a physical block (its key and level), never stored.
+        extras["depth"] = json!(depth);
+        extras["physical_level"] = json!(b.level);
+    }
     if let Some(t) = p.tile {
         extras["tile"] = json!(t);
     }
@@ -348,12 +486,14 @@ fn tile_parts<S: fmrh::store::Source>(
         .blocks
         .iter()
         .zip(loaded)
-        .map(|(b, loaded)| Part {
-            block: *b,
-            tile: None,
-            loaded,
-            stride: d.stride(b.level),
-            footprint: d.footprint(b.level, b.x, b.y),
+        .map(|(b, loaded)| {
+            Part::of(
+                *b,
+                None,
+                loaded,
+                d.stride(b.level),
+                d.footprint(b.level, b.x, b.y),
+            )
         })
         .collect();
     let metadata = &store.header().metadata;
@@ -362,6 +502,7 @@ fn tile_parts<S: fmrh::store::Source>(
         georeference: metadata.georeference.clone(),
         tau: scene.tau,
         mode: scene.mode,
+        units: 1,
     };
     Ok((parts, context))
 }
@@ -374,9 +515,9 @@ fn encode(
     context: &Context,
     cracks: Cracks,
 ) -> Result<Vec<u8>, Error> {
-    let frame = &context.frame;
-    let col0 = meshes.iter().map(|m| parts[m.block].block.col0).min();
-    let row0 = meshes.iter().map(|m| parts[m.block].block.row0).min();
+    let frame = &context.mesh_frame();
+    let col0 = meshes.iter().map(|m| parts[m.block].rect.col0).min();
+    let row0 = meshes.iter().map(|m| parts[m.block].rect.row0).min();
     let (Some(col0), Some(row0)) = (col0, row0) else {
         return Err(Error::InvalidArgument(
             "nothing to mesh: no block has an area".into(),
@@ -387,34 +528,41 @@ fn encode(
         .iter()
         .map(|m| {
             let p = &parts[m.block];
-            let b = &p.block;
+            let (level, key) = (p.node().0, p.block.key);
+            let kind = if p.synthetic.is_some() {
+                " synthetic"
+            } else {
+                ""
+            };
             GltfBlock {
                 mesh: m,
                 name: match p.tile {
-                    Some(t) => format!("tile {t} level {} key {}", b.level, b.key),
-                    None => format!("level {} key {}", b.level, b.key),
+                    Some(t) => format!("tile {t} level {level} key {key}{kind}"),
+                    None => format!("level {level} key {key}{kind}"),
                 },
-                level: b.level,
-                extras: json!({ "fmrh": block_extras(p, m) }),
+                level,
+                extras: json!({ "fmrh": block_extras(p, m, context.units) }),
             }
         })
         .collect();
+    let (c, r) = (
+        col0 as f64 / context.units as f64,
+        row0 as f64 / context.units as f64,
+    );
     let mut origin_extras = json!({
-        "sample": [col0, row0],
+        "sample": [c, r],
         "world_m": origin,
     });
     if let Some(g) = &context.georeference {
-        origin_extras["map"] = json!([
-            g.origin[0] + col0 as f64 * g.step[0],
-            g.origin[1] + row0 as f64 * g.step[1]
-        ]);
+        origin_extras["map"] = json!([g.origin[0] + c * g.step[0], g.origin[1] + r * g.step[1]]);
         origin_extras["crs"] = g.crs.clone().map_or(Value::Null, Value::from);
     }
     let scene_extras = json!({
         "fmrh": {
             "axes": "X east, Y up (height), Z south, in metres; X and Z from the origin",
             "origin": origin_extras,
-            "spacing_m": [frame.dx, frame.dy],
+            "spacing_m": [context.frame.dx, context.frame.dy],
+            "refine": if context.units > 1 { "fractal" } else { "none" },
             "cracks": cracks,
             "tau": context.tau,
             "mode": context.mode,

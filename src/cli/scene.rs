@@ -6,9 +6,11 @@ use std::process::ExitCode;
 
 use serde::Serialize;
 
+use fmrh::mesh::{fractal, GridBlock};
 use fmrh::model::SampleRect;
 use fmrh::scene::{
-    load_blocks, reconstruct, Camera, Mode, Scene, SceneOptions, Terrain, DEFAULT_GAP, PAYLOAD_GAP,
+    load_blocks, reconstruct, Camera, LoadedBlock, Mode, Scene, SceneBlock, SceneOptions, Terrain,
+    WorldFrame, DEFAULT_GAP, PAYLOAD_GAP,
 };
 use fmrh::store::{ReadStats, RequestStats};
 use fmrh::Error;
@@ -175,6 +177,10 @@ pub struct SceneArgs {
     /// read), and report what that read.
     #[arg(long)]
     load: bool,
+    /// Refine past the data where the camera is closer than the data's detail, and report
+    /// the synthetic nodes (`fmrh mesh --refine` draws them). Reads the blocks' payloads.
+    #[arg(long, value_enum, conflicts_with = "reconstruct")]
+    refine: Option<super::mesh::RefineArg>,
     /// Print the scene as JSON.
     #[arg(long)]
     pub json: bool,
@@ -187,8 +193,153 @@ struct Reads {
     open: ReadStats,
     /// Scheduling: index and node pages (each read once, then cached).
     schedule: ReadStats,
-    /// Loading the blocks (--load or --reconstruct): their payloads.
+    /// Loading the blocks (--load, --reconstruct or --refine): their payloads.
     load: Option<ReadStats>,
+}
+
+/// `--refine fractal`: the synthetic nodes that replace the physical blocks the camera sees
+/// closer than their data's detail (`fmrh::mesh::fractal`). Generated, never stored.
+#[derive(Serialize)]
+struct FractalReport {
+    /// A synthetic grid's units a sample (`fractal::SCALE`).
+    scale: u64,
+    /// The most depths below a physical block.
+    max_depth: u8,
+    /// Physical blocks replaced by synthetic nodes.
+    refined_blocks: usize,
+    /// The largest declared error of a synthetic node, in pixels (0 without nodes).
+    max_screen_error: f64,
+    nodes: Vec<FractalNode>,
+}
+
+/// One synthetic node.
+#[derive(Serialize)]
+struct FractalNode {
+    /// Always true: the node is generated, never stored.
+    synthetic: bool,
+    /// The physical block it replaces part of.
+    physical: PhysicalRef,
+    /// Depth below it.
+    depth: u8,
+    /// Level, column and row in the quadtree, past the stored levels.
+    level: u8,
+    x: u32,
+    y: u32,
+    /// Footprint in samples (fractions of a sample), c0, r0, c1, r1.
+    footprint: [f64; 4],
+    /// Grid spacing in samples.
+    stride: f64,
+    /// Declared error `e_k`, metres.
+    error: f64,
+    /// It in pixels.
+    screen_error: f64,
+}
+
+/// A physical block, by tile (datasets), level, position and key.
+#[derive(Serialize)]
+struct PhysicalRef {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    tile: Option<u64>,
+    level: u8,
+    x: u32,
+    y: u32,
+    key: u64,
+}
+
+/// Refines each loaded block (`(block, tile, loaded, stride)`) for `camera` at `tau`.
+fn fractal_report(
+    blocks: &[(SceneBlock, Option<u64>, LoadedBlock, u64)],
+    camera: &Camera,
+    frame: &WorldFrame,
+    tau: f64,
+) -> Result<FractalReport, Error> {
+    let view = camera.view()?;
+    let k = fractal::SCALE as f64;
+    let mut report = FractalReport {
+        scale: fractal::SCALE,
+        max_depth: fractal::MAX_DEPTH,
+        refined_blocks: 0,
+        max_screen_error: 0.0,
+        nodes: Vec::new(),
+    };
+    for (b, tile, loaded, stride) in blocks {
+        let grid = GridBlock {
+            rect: b.rect(),
+            stride: *stride,
+            grid_width: loaded.width,
+            grid_height: loaded.height,
+            heights: &loaded.heights,
+            error: b.error,
+        };
+        let nodes = fractal::refine_block(b.key, &grid, &view, frame, tau);
+        if !nodes.is_empty() {
+            report.refined_blocks += 1;
+        }
+        for n in nodes {
+            let screen_error = n.screen_error(&view, frame);
+            report.max_screen_error = report.max_screen_error.max(screen_error);
+            let r = &n.rect;
+            report.nodes.push(FractalNode {
+                synthetic: true,
+                physical: PhysicalRef {
+                    tile: *tile,
+                    level: b.level,
+                    x: b.x,
+                    y: b.y,
+                    key: b.key,
+                },
+                depth: n.depth,
+                level: b.level + n.depth,
+                x: (b.x << n.depth) + n.x,
+                y: (b.y << n.depth) + n.y,
+                footprint: [
+                    r.col0 as f64 / k,
+                    r.row0 as f64 / k,
+                    r.col1 as f64 / k,
+                    r.row1 as f64 / k,
+                ],
+                stride: n.stride as f64 / k,
+                error: n.error,
+                screen_error,
+            });
+        }
+    }
+    Ok(report)
+}
+
+fn print_fractal(f: &FractalReport) {
+    println!(
+        "  fractal: {} blocks refined into {} synthetic nodes, max screen-space error {:.4} px",
+        f.refined_blocks,
+        f.nodes.len(),
+        f.max_screen_error
+    );
+    if f.nodes.is_empty() {
+        return;
+    }
+    println!(
+        "  {:>5} {:>6} {:>6} {:>5}  {:>31}  {:>12} {:>9}  below",
+        "level", "x", "y", "depth", "col0,row0..col1,row1", "error m", "px"
+    );
+    for n in &f.nodes {
+        let [c0, r0, c1, r1] = n.footprint;
+        let p = &n.physical;
+        println!(
+            "  {:>5} {:>6} {:>6} {:>5}  {:>31}  {:>12.4} {:>9.4}  {}level {} ({},{}) key {}",
+            n.level,
+            n.x,
+            n.y,
+            n.depth,
+            format!("{c0},{r0}..{c1},{r1}"),
+            n.error,
+            n.screen_error,
+            p.tile.map_or(String::new(), |t| format!("tile {t} ")),
+            p.level,
+            p.x,
+            p.y,
+            p.key
+        );
+    }
 }
 
 /// The JSON report.
@@ -205,6 +356,9 @@ struct Report<'a> {
     uncovered_samples: Option<u64>,
     /// What was read, by phase.
     reads: Reads,
+    /// --refine fractal: the synthetic nodes.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    fractal: Option<FractalReport>,
     /// A remote container: the request plan, by phase.
     #[serde(skip_serializing_if = "Option::is_none")]
     requests: Option<RequestPlan>,
@@ -260,12 +414,26 @@ fn run_on<S: fmrh::store::Source>(
 ) -> Result<ExitCode, Error> {
     let before = store.read_stats();
     let asked = store.source().request_stats();
-    let terrain = Terrain::with_spacing(store, args.view.spacing(store, &args.file)?)?;
+    let spacing = args.view.spacing(store, &args.file)?;
+    let terrain = Terrain::with_spacing(store, spacing)?;
     let scene = terrain.scene(&camera, &options)?;
     let scheduled = store.read_stats();
     let asked_scheduled = store.source().request_stats();
     let mut uncovered = None;
-    if args.load && output.is_none() {
+    let mut fractal = None;
+    if args.refine.is_some() {
+        // --refine conflicts with --reconstruct: these are the only loads.
+        let loaded = load_blocks(store, &scene.blocks, PAYLOAD_GAP)?;
+        let d = *store.domain();
+        let blocks: Vec<_> = scene
+            .blocks
+            .iter()
+            .zip(loaded)
+            .map(|(b, l)| (*b, None, l, d.stride(b.level)))
+            .collect();
+        let frame = WorldFrame::new(spacing.or(store.header().metadata.spacing_m));
+        fractal = Some(fractal_report(&blocks, &camera, &frame, scene.tau)?);
+    } else if args.load && output.is_none() {
         load_blocks(store, &scene.blocks, PAYLOAD_GAP)?;
     }
     if let Some(out) = &output {
@@ -283,13 +451,15 @@ fn run_on<S: fmrh::store::Source>(
     let reads = Reads {
         open: store.open_reads(),
         schedule: scheduled.since(&before),
-        load: (args.load || output.is_some()).then(|| store.read_stats().since(&scheduled)),
+        load: (args.load || output.is_some() || fractal.is_some())
+            .then(|| store.read_stats().since(&scheduled)),
     };
     let requests = match (asked, asked_scheduled, store.source().request_stats()) {
         (Some(open), Some(scheduled), Some(end)) => Some(RequestPlan {
             open,
             schedule: scheduled.since(&open),
-            load: (args.load || output.is_some()).then(|| end.since(&scheduled)),
+            load: (args.load || output.is_some() || fractal.is_some())
+                .then(|| end.since(&scheduled)),
             scene: end.since(&open),
         }),
         _ => None,
@@ -304,10 +474,14 @@ fn run_on<S: fmrh::store::Source>(
             stats: &scene.stats,
             uncovered_samples: uncovered,
             reads,
+            fractal,
             requests,
         })?;
     } else {
         print_text(&scene, uncovered, &reads);
+        if let Some(f) = &fractal {
+            print_fractal(f);
+        }
         if let Some(plan) = &requests {
             print_plan(plan);
         }
@@ -420,6 +594,9 @@ struct DatasetReport<'a> {
     uncovered_samples: Option<u64>,
     tiles: &'a [fmrh::dataset::TilePart],
     reads: DatasetReads,
+    /// --refine fractal: the synthetic nodes.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    fractal: Option<FractalReport>,
     /// A remote dataset: the request plan (tiles in parallel, see `Dataset::request_stats`).
     #[serde(skip_serializing_if = "Option::is_none")]
     requests: Option<DatasetRequests>,
@@ -445,7 +622,7 @@ struct DatasetReads {
     tiles_open: ReadStats,
     /// Scheduling, over all tiles: index and node pages.
     schedule: ReadStats,
-    /// Loading the blocks (--load or --reconstruct).
+    /// Loading the blocks (--load or --reconstruct; not --refine's own loads).
     load: Option<ReadStats>,
     /// Tile files opened.
     tiles_opened: u64,
@@ -474,6 +651,18 @@ fn run_dataset(
     let mut load = None;
     if args.load && output.is_none() {
         load = Some(ds.load(&scene)?);
+    }
+    let mut fractal = None;
+    if args.refine.is_some() {
+        let loaded = ds.load_blocks(&scene)?;
+        let blocks: Vec<_> = scene
+            .blocks
+            .iter()
+            .zip(loaded)
+            .map(|(b, (l, stride))| (b.block, Some(b.tile), l, stride))
+            .collect();
+        let frame = WorldFrame::new(spacing.or(ds.spacing_m()));
+        fractal = Some(fractal_report(&blocks, &camera, &frame, scene.tau)?);
     }
     if let Some(out) = &output {
         let window = scene.window.ok_or_else(|| {
@@ -512,6 +701,7 @@ fn run_dataset(
             uncovered_samples: uncovered,
             tiles: &scene.tiles,
             reads,
+            fractal,
             requests: asked
                 .zip(ds.request_stats())
                 .map(|(open, end)| DatasetRequests {
@@ -552,5 +742,8 @@ fn run_dataset(
         load: reads.load,
     };
     print_text(&as_scene, uncovered, &container_reads);
+    if let Some(f) = &fractal {
+        print_fractal(f);
+    }
     Ok(ExitCode::SUCCESS)
 }

@@ -39,6 +39,7 @@
 //! block's rectangle, stride and grid ([`GridBlock`]), from a scene of one file or a
 //! dataset's scene across tiles, in one sample frame.
 
+pub mod fractal;
 mod lines;
 mod triangulate;
 
