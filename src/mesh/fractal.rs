@@ -71,6 +71,15 @@ pub fn roughness(heights: &[f32], w: usize, h: usize) -> f64 {
     sum / ((w - 2) * (h - 2)) as f64
 }
 
+/// The lowest and highest of `heights`.
+fn height_range(heights: &[f32]) -> (f32, f32) {
+    heights
+        .iter()
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &v| {
+            (l.min(v), h.max(v))
+        })
+}
+
 /// splitmix64: a well-mixed 64-bit hash.
 fn mix(mut z: u64) -> u64 {
     z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
@@ -138,12 +147,7 @@ pub fn refine(
     let mut stack = vec![root];
     while let Some(node) = stack.pop() {
         let error = declared_error(a, node.depth, peak);
-        let (lo, hi) = node
-            .heights
-            .iter()
-            .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &v| {
-                (l.min(v), h.max(v))
-            });
+        let (lo, hi) = height_range(&node.heights);
         if a > 0.0 && node.depth < MAX_DEPTH && wants(node.depth, &node.rect, lo, hi, error) {
             for q in 0..4 {
                 stack.push(child(block, a, &node, q % 2, q / 2, b));
@@ -247,12 +251,7 @@ fn screen_error(
 impl Synthetic {
     /// Its declared error in pixels, seen by `view` (`frame`: the world frame of samples).
     pub fn screen_error(&self, view: &crate::scene::View, frame: &crate::scene::WorldFrame) -> f64 {
-        let (lo, hi) = self
-            .heights
-            .iter()
-            .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &v| {
-                (l.min(v), h.max(v))
-            });
+        let (lo, hi) = height_range(&self.heights);
         screen_error(&self.rect, lo, hi, self.error, view, frame)
     }
 }
