@@ -79,6 +79,15 @@ enum Command {
     /// node's extras give the block's level, error, key and footprint; the scene's extras
     /// give the origin and the axes (X east, Y up, Z south, metres).
     Mesh(cli::mesh::MeshArgs),
+    /// Serve containers and datasets over HTTP, with a WebGL page to fly over them.
+    ///
+    /// `/files/NAME` gives each file's bytes with range requests and an ETag (so `fmrh
+    /// scene http://HOST:PORT/files/NAME` reads it remotely; a dataset is
+    /// `/files/NAME/`); `/` is a viewer that asks for scenes as its camera moves, with a
+    /// tolerance slider and the scene's stats; `/api/scene` and `/api/mesh` answer a
+    /// camera given in the query (JSON, and a glTF binary). Read-only; answers this
+    /// machine only unless --bind says otherwise.
+    Serve(cli::serve::ServeArgs),
     /// Replace full-resolution samples, atomically: new blocks, errors, clusters, one commit.
     ///
     /// Reads PATCH in any format `build` reads and writes its samples at --at COL,ROW (the
@@ -124,6 +133,7 @@ impl Command {
             Command::Extract(_)
             | Command::Render(_)
             | Command::Mesh(_)
+            | Command::Serve(_)
             | Command::Completions { .. }
             | Command::Man => false,
         }
@@ -159,6 +169,7 @@ fn main() -> ExitCode {
         Command::Fly(args) => cli::fly::run(args),
         Command::Render(args) => cli::render::run(args),
         Command::Mesh(args) => cli::mesh::run(args),
+        Command::Serve(args) => cli::serve::run(args),
         Command::Replace(args) => cli::replace::run(args),
         Command::Recover(args) => cli::recover::run(args),
         Command::Dataset(command) => cli::dataset::run(command),

@@ -215,72 +215,29 @@ pub fn run(args: &MeshArgs) -> Result<ExitCode, Error> {
     }
     let camera = args.camera.camera(&args.view)?;
     let options = args.view.options_in(args.window.as_deref())?;
-    let (parts, mut context) = if super::is_dataset(&args.file)? {
-        let ds = fmrh::dataset::Dataset::open(&args.file)?;
-        let spacing = args.view.given_spacing()?;
-        let scene = ds.scene(&camera, &options, spacing)?;
-        let loaded = ds.load_blocks(&scene)?;
-        let parts = scene
-            .blocks
-            .iter()
-            .zip(loaded)
-            .map(|(b, (loaded, stride))| {
-                Part::of(b.block, Some(b.tile), loaded, stride, b.block.rect())
-            })
-            .collect();
-        let context = Context {
-            frame: WorldFrame::new(spacing.or(ds.spacing_m())),
-            georeference: ds.georeference(),
-            tau: scene.tau,
-            mode: scene.mode,
-            units: 1,
-        };
-        (parts, context)
-    } else if let Some(url) = super::url_of(&args.file) {
-        #[cfg(feature = "remote")]
-        {
-            tile_parts(args, &fmrh::Store::open_url(url)?, &camera, &options)?
-        }
-        #[cfg(not(feature = "remote"))]
-        return Err(super::no_remote(url));
-    } else {
-        tile_parts(args, &super::open(&args.file)?, &camera, &options)?
-    };
-    if parts.is_empty() {
-        return Err(Error::InvalidArgument(
-            "the camera sees no terrain: there is nothing to mesh (give --window)".into(),
-        ));
-    }
     let cracks = match args.cracks {
         CracksArg::Stitch => Cracks::Stitch,
         CracksArg::Skirts => Cracks::Skirts,
     };
-    let parts = match args.refine {
-        Some(RefineArg::Fractal) => refine_fractal(parts, &camera, &mut context)?,
-        None => parts,
-    };
-    let grids: Vec<GridBlock<'_>> = parts
-        .iter()
-        .map(|p| GridBlock {
-            rect: p.rect,
-            stride: p.stride,
-            grid_width: p.width,
-            grid_height: p.height,
-            heights: &p.heights,
-            error: p.error(),
-        })
-        .collect();
-    let meshes = build(&grids, &context.mesh_frame(), cracks)?;
-    let triangles: usize = meshes.iter().map(|m| m.triangles.len()).sum();
+    let meshed = mesh_scene(
+        &args.file,
+        &args.view,
+        &camera,
+        &options,
+        cracks,
+        args.refine,
+    )?;
+    let (parts, meshes, context) = (&meshed.parts, &meshed.meshes, &meshed.context);
+    let triangles = meshed.triangles();
     let stitched = meshes.iter().filter(|m| m.stitched.contains(&true)).count();
-    let synthetic = parts.iter().filter(|p| p.synthetic.is_some()).count();
+    let synthetic = meshed.synthetic();
     let bytes = match args.format {
         MeshFormat::Glb => {
-            let bytes = encode(&parts, &meshes, &context, cracks)?;
+            let bytes = meshed.glb()?;
             super::write_output(&args.output, args.force, &bytes)?;
             bytes.len() as u64
         }
-        MeshFormat::QuantizedMesh => write_tiles(args, &parts, &meshes, &context)?,
+        MeshFormat::QuantizedMesh => write_tiles(args, parts, meshes, context)?,
     };
     eprintln!(
         "fmrh: meshed {} blocks ({} stitched to a neighbour{}) as {} triangles, {} bytes{}",
@@ -300,6 +257,103 @@ pub fn run(args: &MeshArgs) -> Result<ExitCode, Error> {
         }
     );
     Ok(ExitCode::SUCCESS)
+}
+
+/// A scene meshed: its parts (blocks and synthetic nodes), their meshes, and what the
+/// extras say. `fmrh mesh` writes it; `fmrh serve` sends it to the viewer.
+pub struct Meshed {
+    parts: Vec<Part>,
+    meshes: Vec<BlockMesh>,
+    context: Context,
+    cracks: Cracks,
+}
+
+impl Meshed {
+    /// The scene as one glTF 2.0 binary.
+    pub fn glb(&self) -> Result<Vec<u8>, Error> {
+        encode(&self.parts, &self.meshes, &self.context, self.cracks)
+    }
+
+    /// Triangles of all the meshes.
+    pub fn triangles(&self) -> usize {
+        self.meshes.iter().map(|m| m.triangles.len()).sum()
+    }
+
+    /// Meshes of synthetic nodes.
+    pub fn synthetic(&self) -> usize {
+        self.parts.iter().filter(|p| p.synthetic.is_some()).count()
+    }
+}
+
+/// Meshes the scene `camera` sees of `file` (a container, a dataset, or a URL of either)
+/// with `options`, its cracks closed as `cracks` says, refined past the data as `refine`
+/// says. An error when the camera sees no terrain.
+pub fn mesh_scene(
+    file: &std::path::Path,
+    view: &super::scene::ViewArgs,
+    camera: &fmrh::scene::Camera,
+    options: &fmrh::scene::SceneOptions,
+    cracks: Cracks,
+    refine: Option<RefineArg>,
+) -> Result<Meshed, Error> {
+    let (parts, mut context) = if super::is_dataset(file)? {
+        let ds = fmrh::dataset::Dataset::open(file)?;
+        let spacing = view.given_spacing()?;
+        let scene = ds.scene(camera, options, spacing)?;
+        let loaded = ds.load_blocks(&scene)?;
+        let parts = scene
+            .blocks
+            .iter()
+            .zip(loaded)
+            .map(|(b, (loaded, stride))| {
+                Part::of(b.block, Some(b.tile), loaded, stride, b.block.rect())
+            })
+            .collect();
+        let context = Context {
+            frame: WorldFrame::new(spacing.or(ds.spacing_m())),
+            georeference: ds.georeference(),
+            tau: scene.tau,
+            mode: scene.mode,
+            units: 1,
+        };
+        (parts, context)
+    } else if let Some(url) = super::url_of(file) {
+        #[cfg(feature = "remote")]
+        {
+            tile_parts(file, view, &fmrh::Store::open_url(url)?, camera, options)?
+        }
+        #[cfg(not(feature = "remote"))]
+        return Err(super::no_remote(url));
+    } else {
+        tile_parts(file, view, &super::open(file)?, camera, options)?
+    };
+    if parts.is_empty() {
+        return Err(Error::InvalidArgument(
+            "the camera sees no terrain: there is nothing to mesh (give --window)".into(),
+        ));
+    }
+    let parts = match refine {
+        Some(RefineArg::Fractal) => refine_fractal(parts, camera, &mut context)?,
+        None => parts,
+    };
+    let grids: Vec<GridBlock<'_>> = parts
+        .iter()
+        .map(|p| GridBlock {
+            rect: p.rect,
+            stride: p.stride,
+            grid_width: p.width,
+            grid_height: p.height,
+            heights: &p.heights,
+            error: p.error(),
+        })
+        .collect();
+    let meshes = build(&grids, &context.mesh_frame(), cracks)?;
+    Ok(Meshed {
+        parts,
+        meshes,
+        context,
+        cracks,
+    })
 }
 
 /// Writes one quantized-mesh tile per block and `layer.json` into a new directory beside
@@ -472,12 +526,13 @@ fn block_extras(p: &Part, m: &BlockMesh, units: u64) -> Value {
 
 /// The scene of one container, its blocks read and decoded.
 fn tile_parts<S: fmrh::store::Source>(
-    args: &MeshArgs,
+    file: &std::path::Path,
+    view: &super::scene::ViewArgs,
     store: &fmrh::Store<S>,
     camera: &fmrh::scene::Camera,
     options: &fmrh::scene::SceneOptions,
 ) -> Result<(Vec<Part>, Context), Error> {
-    let spacing = args.view.spacing(store, &args.file)?;
+    let spacing = view.spacing(store, file)?;
     let terrain = Terrain::with_spacing(store, spacing)?;
     let scene = terrain.scene(camera, options)?;
     let loaded = load_blocks(store, &scene.blocks, PAYLOAD_GAP)?;

@@ -14,6 +14,7 @@ pub mod render;
 pub mod replace;
 pub mod scan;
 pub mod scene;
+pub mod serve;
 pub mod sidecar;
 pub mod verify;
 
