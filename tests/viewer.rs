@@ -4,7 +4,8 @@
 //! screenshot shows terrain (not a blank sky), every stat the page shows is the server's
 //! scene JSON for the page's own query, that JSON is what `fmrh scene` says for the same
 //! camera, the page asked again when its camera moved, and a looser tolerance drew no more
-//! blocks within it. Run by name (`.ci/run` installs Chromium and playwright-core); without
+//! blocks within it; and the same for a two-tile dataset, whose first view draws both
+//! tiles. Run by name (`.ci/run` installs Chromium and playwright-core); without
 //! them it fails saying what to install.
 
 mod common;
@@ -111,8 +112,9 @@ fn check_step(served: &Served, file: &Path, s: &Step) -> serde_json::Value {
     api
 }
 
-#[test]
-fn the_viewer_draws_terrain_and_shows_the_servers_scene() {
+/// Runs tests/js/viewer-check.mjs in Chromium on `url`, the screenshot to `shot`: the
+/// page's report of its three steps.
+fn browse(url: &str, shot: &Path) -> serde_json::Value {
     let js = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/js");
     assert!(
         js.join("node_modules/playwright-core").is_dir(),
@@ -124,6 +126,54 @@ fn the_viewer_draws_terrain_and_shows_the_servers_scene() {
         "Chromium is missing at {chromium}: `apt-get install chromium` (.ci/run does), or \
          set CHROMIUM"
     );
+    let run = Command::new("node")
+        .arg(js.join("viewer-check.mjs"))
+        .arg(url)
+        .arg(shot)
+        .env("CHROMIUM", &chromium)
+        .output()
+        .expect("node runs (Node.js is needed for the browser test)");
+    assert!(
+        run.status.success(),
+        "the browser check failed:\n{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let report: serde_json::Value = serde_json::from_slice(&run.stdout).expect("JSON");
+    assert!(
+        !report["renderer"].as_str().unwrap_or("").is_empty(),
+        "{report}"
+    );
+    report
+}
+
+/// The share of the view right of the panel that is not sky, and its distinct colours.
+fn terrain_in(shot: &Path) -> (f64, usize) {
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(shot).unwrap()));
+    let mut reader = decoder.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    assert_eq!((info.width, info.height), (960, 600));
+    let channels = info.color_type.samples();
+    let (mut terrain, mut total) = (0usize, 0usize);
+    let mut colours = std::collections::HashSet::new();
+    // Right of the panel (which covers x < 300).
+    for y in 0..info.height as usize {
+        for x in 300..info.width as usize {
+            let i = (y * info.width as usize + x) * channels;
+            let px = [buf[i], buf[i + 1], buf[i + 2]];
+            total += 1;
+            let sky = px.iter().zip(SKY).all(|(a, b)| a.abs_diff(b) <= 3);
+            if !sky {
+                terrain += 1;
+                colours.insert(px);
+            }
+        }
+    }
+    (terrain as f64 / total as f64, colours.len())
+}
+
+#[test]
+fn the_viewer_draws_terrain_and_shows_the_servers_scene() {
     let dir = tempfile::tempdir().unwrap();
     let file = dir.path().join("ps1k.fmrh");
     let png = common::bundled_dir().join("puget-sound-1k/ps_height_1k.png");
@@ -148,21 +198,7 @@ fn the_viewer_draws_terrain_and_shows_the_servers_scene() {
         "{}/#item=ps1k.fmrh&eye=60000,175000,9000&target=80000,90000,0&tau=1",
         served.base()
     );
-    let run = Command::new("node")
-        .arg(js.join("viewer-check.mjs"))
-        .arg(&url)
-        .arg(&shot)
-        .env("CHROMIUM", &chromium)
-        .output()
-        .expect("node runs (Node.js is needed for the browser test)");
-    assert!(
-        run.status.success(),
-        "the browser check failed:\n{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
-    let report: serde_json::Value = serde_json::from_slice(&run.stdout).expect("JSON");
-    let renderer = report["renderer"].as_str().unwrap_or("");
-    assert!(!renderer.is_empty(), "{report}");
+    let report = browse(&url, &shot);
 
     // Every step's stats are the server's, and the server's are the CLI's.
     let first = step(&report["first"]);
@@ -195,40 +231,76 @@ fn the_viewer_draws_terrain_and_shows_the_servers_scene() {
     // A looser tolerance is a coarser cut of the same tree for the same camera.
     assert!(api_tau4["blocks"].as_u64().unwrap() <= api_moved["blocks"].as_u64().unwrap());
 
-    // The screenshot: the page's size, and terrain in it, shaded (many colours).
-    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&shot).unwrap()));
-    let mut reader = decoder.read_info().unwrap();
-    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
-    let info = reader.next_frame(&mut buf).unwrap();
-    assert_eq!((info.width, info.height), (960, 600));
-    let channels = info.color_type.samples();
-    let (mut terrain, mut total) = (0usize, 0usize);
-    let mut colours = std::collections::HashSet::new();
-    // Right of the panel (which covers x < 300).
-    for y in 0..info.height as usize {
-        for x in 300..info.width as usize {
-            let i = (y * info.width as usize + x) * channels;
-            let px = [buf[i], buf[i + 1], buf[i + 2]];
-            total += 1;
-            let sky = px.iter().zip(SKY).all(|(a, b)| a.abs_diff(b) <= 3);
-            if !sky {
-                terrain += 1;
-                colours.insert(px);
-            }
-        }
-    }
-    let share = terrain as f64 / total as f64;
+    // The screenshot: terrain in it, shaded (many colours).
+    let (share, colours) = terrain_in(&shot);
     assert!(
         share > 0.5,
         "only {:.1} % of the view is terrain",
         share * 100.0
     );
-    assert!(
-        colours.len() > 100,
-        "{} colours: a flat, unshaded picture",
-        colours.len()
-    );
+    assert!(colours > 100, "{colours} colours: a flat, unshaded picture");
     if let Ok(keep) = std::env::var("FMRH_VIEWER_SCREENSHOT") {
         std::fs::copy(&shot, keep).unwrap();
     }
+}
+
+/// A dataset of two tiles (the bundled DEM twice, side by side), shaded by height: the page
+/// draws a scene across both tiles and shows the server's stats for it.
+#[test]
+fn the_viewer_flies_a_dataset_across_its_tiles() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::copy(
+        common::bundled_dir().join("puget-sound-1k/ps_height_1k.png"),
+        dir.path().join("a.png"),
+    )
+    .unwrap();
+    let layout = dir.path().join("layout.csv");
+    std::fs::write(&layout, "a.png,0,0\na.png,1024,0\n").unwrap();
+    let ds = dir.path().join("pair");
+    let out = fmrh(&[
+        "dataset",
+        "build",
+        "--layout",
+        layout.to_str().unwrap(),
+        "--seam",
+        "first",
+        "--z-scale",
+        "0.1",
+        "--spacing",
+        "160",
+        "-o",
+        ds.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let served = Served::start(&[&ds]);
+    let shot = dir.path().join("pair.png");
+    // No camera in the address: the page's own first view of the item.
+    let report = browse(
+        &format!("{}/#item=pair&colour=shaded", served.base()),
+        &shot,
+    );
+    for name in ["first", "moved", "tau4"] {
+        let s = step(&report[name]);
+        let api = check_step(&served, &ds, &s);
+        if name == "first" {
+            let tiles: std::collections::BTreeSet<u64> = api["list"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|b| b["tile"].as_u64().expect("a dataset block names its tile"))
+                .collect();
+            assert_eq!(tiles.len(), 2, "the first view sees both tiles: {tiles:?}");
+        }
+    }
+    let (share, colours) = terrain_in(&shot);
+    assert!(
+        share > 0.5,
+        "only {:.1} % of the view is terrain",
+        share * 100.0
+    );
+    assert!(colours > 100, "{colours} colours: a flat, unshaded picture");
 }
