@@ -10,7 +10,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::serve::Served;
+use common::serve::{puget, Served};
 use common::{fmrh, ok_json};
 
 const CAMERA: [&str; 6] = [
@@ -21,28 +21,6 @@ const CAMERA: [&str; 6] = [
     "--tau",
     "1",
 ];
-
-/// Puget Sound 1k (bundled) as a container in `dir`, as the README builds it.
-fn puget(dir: &Path) -> PathBuf {
-    let file = dir.join("ps1k.fmrh");
-    let png = common::bundled_dir().join("puget-sound-1k/ps_height_1k.png");
-    let out = fmrh(&[
-        "build",
-        png.to_str().unwrap(),
-        "--z-scale",
-        "0.1",
-        "--spacing",
-        "160",
-        "-o",
-        file.to_str().unwrap(),
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    file
-}
 
 /// A 2 x 2 tile dataset of synthetic hills, 10 m a sample, in `dir/ds`.
 fn dataset(dir: &Path) -> PathBuf {

@@ -13,7 +13,7 @@ mod common;
 use std::path::Path;
 use std::process::Command;
 
-use common::serve::Served;
+use common::serve::{puget, Served};
 use common::{fmrh, ok_json};
 
 /// What `fmrh::render`'s sky and the page's clear colour are not: terrain pixels.
@@ -146,6 +146,18 @@ fn browse(url: &str, shot: &Path) -> serde_json::Value {
     report
 }
 
+/// Asserts that the screenshot `shot` shows shaded terrain: most of the view right of the
+/// panel is not sky, in many colours.
+fn assert_terrain(shot: &Path) {
+    let (share, colours) = terrain_in(shot);
+    assert!(
+        share > 0.5,
+        "only {:.1} % of the view is terrain",
+        share * 100.0
+    );
+    assert!(colours > 100, "{colours} colours: a flat, unshaded picture");
+}
+
 /// The share of the view right of the panel that is not sky, and its distinct colours.
 fn terrain_in(shot: &Path) -> (f64, usize) {
     let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(shot).unwrap()));
@@ -175,23 +187,7 @@ fn terrain_in(shot: &Path) -> (f64, usize) {
 #[test]
 fn the_viewer_draws_terrain_and_shows_the_servers_scene() {
     let dir = tempfile::tempdir().unwrap();
-    let file = dir.path().join("ps1k.fmrh");
-    let png = common::bundled_dir().join("puget-sound-1k/ps_height_1k.png");
-    let out = fmrh(&[
-        "build",
-        png.to_str().unwrap(),
-        "--z-scale",
-        "0.1",
-        "--spacing",
-        "160",
-        "-o",
-        file.to_str().unwrap(),
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let file = puget(dir.path());
     let served = Served::start(&[&file]);
     let shot = dir.path().join("viewer.png");
     let url = format!(
@@ -232,13 +228,7 @@ fn the_viewer_draws_terrain_and_shows_the_servers_scene() {
     assert!(api_tau4["blocks"].as_u64().unwrap() <= api_moved["blocks"].as_u64().unwrap());
 
     // The screenshot: terrain in it, shaded (many colours).
-    let (share, colours) = terrain_in(&shot);
-    assert!(
-        share > 0.5,
-        "only {:.1} % of the view is terrain",
-        share * 100.0
-    );
-    assert!(colours > 100, "{colours} colours: a flat, unshaded picture");
+    assert_terrain(&shot);
     if let Ok(keep) = std::env::var("FMRH_VIEWER_SCREENSHOT") {
         std::fs::copy(&shot, keep).unwrap();
     }
@@ -296,11 +286,5 @@ fn the_viewer_flies_a_dataset_across_its_tiles() {
             assert_eq!(tiles.len(), 2, "the first view sees both tiles: {tiles:?}");
         }
     }
-    let (share, colours) = terrain_in(&shot);
-    assert!(
-        share > 0.5,
-        "only {:.1} % of the view is terrain",
-        share * 100.0
-    );
-    assert!(colours > 100, "{colours} colours: a flat, unshaded picture");
+    assert_terrain(&shot);
 }

@@ -9,6 +9,28 @@ use std::net::TcpStream;
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
 
+/// Puget Sound 1k (bundled) as a container `dir/ps1k.fmrh`, built as the README builds it.
+pub fn puget(dir: &Path) -> std::path::PathBuf {
+    let file = dir.join("ps1k.fmrh");
+    let png = super::bundled_dir().join("puget-sound-1k/ps_height_1k.png");
+    let out = super::fmrh(&[
+        "build",
+        png.to_str().unwrap(),
+        "--z-scale",
+        "0.1",
+        "--spacing",
+        "160",
+        "-o",
+        file.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    file
+}
+
 /// A running `fmrh serve`.
 pub struct Served {
     child: Child,
