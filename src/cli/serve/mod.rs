@@ -235,8 +235,7 @@ fn serve_file(path: &Path, request: &Request) -> Answer {
     };
     let len = meta.len();
     let etag = etag_of(&meta);
-    let get = |name: &str| request.header(name).map(str::to_string);
-    if let Some(wanted) = get("If-Match") {
+    if let Some(wanted) = request.header("If-Match") {
         let matches = wanted
             .split(',')
             .map(str::trim)
@@ -253,7 +252,7 @@ fn serve_file(path: &Path, request: &Request) -> Answer {
     let octets = |status: u16, body: Body| {
         Response::new(status, "application/octet-stream", body).with("Cache-Control", "no-cache")
     };
-    match ranges::parse(get("Range").as_deref(), len) {
+    match ranges::parse(request.header("Range"), len) {
         ranges::Asked::Whole => common(octets(200, Body::File(file, len))),
         ranges::Asked::Unsatisfiable => common(
             error(
