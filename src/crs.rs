@@ -218,6 +218,22 @@ impl Crs {
     }
 }
 
+impl Crs {
+    /// The CRS coordinates of each WGS 84 longitude and latitude in `points` (degrees): the
+    /// inverse of [`Crs::to_lon_lat_all`], with the same datum caveat. `None` if any point
+    /// has no answer (outside the projection's domain) or the CRS has no PROJ string.
+    pub fn from_lon_lat_all(&self, points: &[[f64; 2]]) -> Option<Vec<[f64; 2]>> {
+        match self.kind {
+            CrsKind::Geographic => Some(points.to_vec()),
+            CrsKind::Projected { .. } => {
+                let proj4 = self.proj4?;
+                forward(proj4, points).or_else(|| forward(&without_grid_shift(proj4), points))
+            }
+            CrsKind::Other => None,
+        }
+    }
+}
+
 impl CrsKind {
     /// Ground spacing in metres of steps of `step` units (see [`Crs::spacing`]).
     pub fn spacing(self, step: [f64; 2], centre_lat: f64) -> Option<[f64; 2]> {
@@ -242,6 +258,21 @@ fn inverse(proj4: &str, points: &[[f64; 2]]) -> Option<Vec<[f64; 2]>> {
             proj4rs::transform::transform(&from, &to, &mut p).ok()?;
             let (lon, lat) = (p.0.to_degrees(), p.1.to_degrees());
             (lon.is_finite() && lat.is_finite() && lat.abs() <= 90.0).then_some([lon, lat])
+        })
+        .collect()
+}
+
+/// The coordinates under the PROJ string `proj4` of each WGS 84 longitude and latitude of
+/// `points` (degrees).
+fn forward(proj4: &str, points: &[[f64; 2]]) -> Option<Vec<[f64; 2]>> {
+    let from = proj4rs::Proj::from_proj_string("+proj=longlat +datum=WGS84 +no_defs").ok()?;
+    let to = proj4rs::Proj::from_proj_string(proj4).ok()?;
+    points
+        .iter()
+        .map(|&[lon, lat]| {
+            let mut p = (lon.to_radians(), lat.to_radians(), 0.0);
+            proj4rs::transform::transform(&from, &to, &mut p).ok()?;
+            (p.0.is_finite() && p.1.is_finite()).then_some([p.0, p.1])
         })
         .collect()
 }
@@ -604,6 +635,37 @@ mod tests {
             let real = r#"PROJCS["x",GEOGCS["g",UNIT["degree",0.0174532925199433]],UNIT["Foot_US",0.3048006096012192],AUTHORITY["EPSG","2927"]]"#;
             let _ = Crs::from_wkt(&real[..cut.min(real.len())]);
         }
+    }
+
+    proptest::proptest! {
+        /// Projecting a longitude and latitude into a projected CRS and back gives the point
+        /// again (UTM 10N and Washington state plane in feet, near their zones), and a
+        /// geographic CRS leaves it as it is.
+        #[test]
+        fn forward_then_inverse_is_the_point(
+            lon in -124.5f64..-119.5, lat in 44.0f64..49.0, code_at in 0usize..2,
+        ) {
+            let crs = Crs::from_epsg([32610, 2927][code_at]).expect("in the registry");
+            let xy = crs.from_lon_lat_all(&[[lon, lat]]).expect("forward");
+            let back = crs.to_lon_lat_all(&xy).expect("inverse");
+            proptest::prop_assert!(
+                (back[0][0] - lon).abs() < 1e-7 && (back[0][1] - lat).abs() < 1e-7,
+                "{lon} {lat} -> {xy:?} -> {back:?}"
+            );
+            let geographic = Crs::from_epsg(4326).expect("4326");
+            proptest::prop_assert_eq!(geographic.from_lon_lat_all(&[[lon, lat]]), Some(vec![[lon, lat]]));
+        }
+    }
+
+    /// A known UTM coordinate: 123° W on the equator is zone 10's central meridian, at
+    /// easting 500,000 m.
+    #[test]
+    fn forward_projection_of_a_known_point() {
+        let crs = Crs::from_epsg(32610).expect("UTM 10N");
+        let [[x, y]] = crs.from_lon_lat_all(&[[-123.0, 0.0]]).expect("forward")[..] else {
+            panic!("one point");
+        };
+        assert!((x - 500_000.0).abs() < 1e-6 && y.abs() < 1e-6, "{x} {y}");
     }
 
     #[test]

@@ -3,8 +3,10 @@
 //! `gltf-validator`, installed by `.ci/run` into `tests/js`): no error and no warning, both
 //! stitched and with skirts. Each mesh is of an oblique view over the whole DEM, so blocks of
 //! several levels meet; one more, of the bundled Puget Sound 1k seen from close above, is
-//! refined past the data by fractal nodes. Large-data suite: it needs `../shared/data`, Node.js and the
-//! validator, and fails (never skips) without them.
+//! refined past the data by fractal nodes. And CesiumJS itself (npm `@cesium/engine`) reads
+//! the geodetic quantized-mesh tilesets of every georeferenced DEM and of the dataset, within
+//! each tile's declared error of the source. Large-data suite: it needs `../shared/data`,
+//! Node.js, the validator and CesiumJS, and fails (never skips) without them.
 
 mod common;
 
@@ -90,6 +92,25 @@ fn validate(files: &[PathBuf]) -> Vec<serde_json::Value> {
     reports
 }
 
+/// A dataset of the two neighbouring SRTM3 tiles N43E006 and N43E007 under `dir`, placed
+/// by their names (they disagree on their shared meridian: the first keeps its samples).
+fn srtm_dataset(dir: &Path) -> PathBuf {
+    let tiles = common::data_dir().join("srtm3-pyhgtmap");
+    let ds = dir.join("ds");
+    fmrh_ok(&[
+        "dataset".into(),
+        "build".into(),
+        "-q".into(),
+        "--seam".into(),
+        "first".into(),
+        tiles.join("N43E006.hgt").display().to_string(),
+        tiles.join("N43E007.hgt").display().to_string(),
+        "-o".into(),
+        ds.display().to_string(),
+    ]);
+    ds
+}
+
 #[test]
 fn meshes_of_every_shared_dem_and_a_dataset_are_valid_gltf() {
     let dir = tempfile::tempdir().unwrap();
@@ -128,21 +149,7 @@ fn meshes_of_every_shared_dem_and_a_dataset_are_valid_gltf() {
         }
     }
     assert!(files.len() >= 2 * 15, "{} meshes", files.len());
-    // A dataset of the two neighbouring SRTM3 tiles, placed by their names (they disagree
-    // on their shared meridian: the first keeps its samples).
-    let tiles = common::data_dir().join("srtm3-pyhgtmap");
-    let ds = dir.path().join("ds");
-    fmrh_ok(&[
-        "dataset".into(),
-        "build".into(),
-        "-q".into(),
-        "--seam".into(),
-        "first".into(),
-        tiles.join("N43E006.hgt").display().to_string(),
-        tiles.join("N43E007.hgt").display().to_string(),
-        "-o".into(),
-        ds.display().to_string(),
-    ]);
+    let ds = srtm_dataset(dir.path());
     let out = dir.path().join("dataset.glb");
     let json = serde_json::json!({
         "width": 2401, "height": 1201, "spacing_m": [67.291, 92.767], "min": -16.0, "max": 2060.0
@@ -204,5 +211,168 @@ fn meshes_of_every_shared_dem_and_a_dataset_are_valid_gltf() {
         assert_eq!(report["errors"], 0, "{report}");
         assert_eq!(report["warnings"], 0, "{report}");
         assert!(report["triangles"].as_u64().unwrap() > 0);
+    }
+}
+
+/// CesiumJS's own reading (`tests/js/cesium-sample.mjs`) of the tileset in `dir`, at
+/// `points`: the height sampleTerrainMostDetailed gives at each, and the level it took it
+/// from.
+fn cesium_samples(dir: &Path, points: &[[f64; 2]]) -> (Vec<f64>, Vec<u32>) {
+    let js = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/js");
+    assert!(
+        js.join("node_modules/@cesium/engine").is_dir(),
+        "CesiumJS is not installed: run `npm ci --prefix tests/js` (.ci/run does)"
+    );
+    let file = dir.join("points.json");
+    std::fs::write(&file, serde_json::to_vec(points).unwrap()).unwrap();
+    let out = Command::new("node")
+        .arg(js.join("cesium-sample.mjs"))
+        .arg(dir)
+        .arg(&file)
+        .output()
+        .expect("node runs (Node.js is needed for CesiumJS)");
+    assert!(
+        out.status.success(),
+        "cesium-sample.mjs: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(report["hasVertexNormals"], true);
+    assert_eq!(report["hasMetadata"], true);
+    let heights = report["heights"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|h| h.as_f64().expect("Cesium gave a height at every point"))
+        .collect();
+    let levels = report["levels"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|l| l.as_u64().unwrap() as u32)
+        .collect();
+    (heights, levels)
+}
+
+/// Geodetic quantized-mesh tilesets of every georeferenced shared DEM (the SRTM tiles by
+/// their HGT names, whose sidecars carry no machine-readable georeference) and of the
+/// N43E006 + N43E007 dataset (gzipped), opened by CesiumJS itself: at random valid samples, the
+/// height Cesium draws comes from the deepest tile on disk there, equals the reference
+/// decoder's reading of that tile (to a millimetre), and is within the tile's declared
+/// error of the source sample.
+#[test]
+fn cesium_reads_the_geodetic_tilesets_within_their_errors() {
+    use common::quantized_mesh::{read_tiles, Source};
+    let dir = tempfile::tempdir().unwrap();
+    let srtm = |rel: &str| common::data_dir().join(rel);
+    let load = |p: &Path| {
+        fmrh::ingest::load(p, &fmrh::ingest::IngestOptions::default()).expect("the DEM loads")
+    };
+    // (name, input, source)
+    let mut cases: Vec<(String, PathBuf, Source)> = Vec::new();
+    for rel in [
+        "srtm1-asmyasnikov/S46W066.hgt.gz",
+        "srtm3-pyhgtmap/N43E006.hgt",
+        "srtm3-pyhgtmap/N43E006.tiff",
+        "srtm3-srtmpy/N19W155.hgt",
+        "srtm3-srtmpy/N22W160.hgt",
+        "srtm3-srtmpy/N44W072.hgt",
+        "srtm3-srtmpy/S16E166.hgt",
+        "mount-st-helens-usgs/SainteHelens.dem",
+    ] {
+        let dem = common::data(rel);
+        let name = rel.replace(['/', '.'], "_");
+        let container = dir.path().join(format!("{name}.fmrh"));
+        fmrh_ok(&[
+            "build".into(),
+            "-q".into(),
+            dem.display().to_string(),
+            "-o".into(),
+            container.display().to_string(),
+        ]);
+        let field = load(&dem);
+        assert!(
+            field.metadata.georeference.is_some(),
+            "{rel} is georeferenced"
+        );
+        cases.push((name, container, Source::of(&field)));
+    }
+    let ds = srtm_dataset(dir.path());
+    cases.push((
+        "dataset".into(),
+        ds,
+        Source::beside(
+            &load(&srtm("srtm3-pyhgtmap/N43E006.hgt")),
+            &load(&srtm("srtm3-pyhgtmap/N43E007.hgt")),
+        ),
+    ));
+    for (name, input, source) in &cases {
+        let out = dir.path().join(format!("{name}-tiles"));
+        // The oblique view over the whole data from beyond its south-west corner.
+        let info: serde_json::Value = {
+            let o = common::fmrh(&["info", input.to_str().unwrap(), "--json"]);
+            serde_json::from_slice(&o.stdout).unwrap()
+        };
+        let width = info["width"].as_f64().or(info["columns"].as_f64()).unwrap();
+        let height = info["height"].as_f64().or(info["rows"].as_f64()).unwrap();
+        let s = &info["spacing_m"];
+        let (sx, sy) = (s[0].as_f64().unwrap(), s[1].as_f64().unwrap());
+        let (x, y) = ((width - 1.0) * sx, (height - 1.0) * sy);
+        // The dataset's tiles gzipped, as Cesium's tiles are served.
+        let gzip = if name == "dataset" {
+            "--gzip"
+        } else {
+            "--force"
+        };
+        let said = fmrh_ok(&[
+            "mesh".into(),
+            gzip.into(),
+            input.display().to_string(),
+            "--eye".into(),
+            format!("{},{},{}", -0.25 * x, 1.25 * y, 0.3 * x.max(y)),
+            "--target".into(),
+            format!("{},{},0", 0.5 * x, 0.5 * y),
+            "--tau".into(),
+            "2".into(),
+            "--format".into(),
+            "quantized-mesh".into(),
+            "-o".into(),
+            out.display().to_string(),
+        ]);
+        eprintln!("{name}: {}", said.trim());
+        let tiles = read_tiles(&out);
+        // 300 valid samples, drawn evenly at random.
+        let mut rng = common::fields::Rng::new(0x5eed ^ name.len() as u64);
+        let mut points = Vec::new();
+        let mut want = Vec::new();
+        while points.len() < 300 {
+            let k = (rng.next_u64() % source.samples.len() as u64) as usize;
+            if !source.samples[k].is_nan() {
+                points.push(source.lon_lat[k]);
+                want.push(f64::from(source.samples[k]));
+            }
+        }
+        let (heights, levels) = cesium_samples(&out, &points);
+        for (i, &[lon, lat]) in points.iter().enumerate() {
+            let holding: Vec<&common::quantized_mesh::Tile> = tiles
+                .values()
+                .filter(|t| {
+                    let [w, s, e, n] = t.bounds();
+                    lon >= w && lon <= e && lat >= s && lat <= n
+                })
+                .collect();
+            let deepest = holding.iter().map(|t| t.z).max().unwrap();
+            assert_eq!(levels[i], deepest, "{name}: Cesium's level at {lon},{lat}");
+            let ok = holding.iter().filter(|t| t.z == deepest).any(|t| {
+                let ours = t.height_at(lon, lat);
+                let error = t.meta()["error"].as_f64().unwrap();
+                (heights[i] - ours).abs() <= 1e-3 && (heights[i] - want[i]).abs() <= error + 1e-3
+            });
+            assert!(
+                ok,
+                "{name}: at {lon},{lat} Cesium draws {} where the source has {} (level {deepest})",
+                heights[i], want[i]
+            );
+        }
     }
 }

@@ -5,6 +5,7 @@
 //! over samples and their georeference, or meshes.
 
 pub mod geodetic;
+pub mod geodetic_mesh;
 pub mod geotiff;
 pub mod gltf;
 pub mod quantized_mesh;

@@ -11,12 +11,15 @@
 //! then extensions, each an id byte and a u32 length: 1, `octvertexnormals` (two bytes a
 //! vertex), and 4, `metadata` (a u32 length and JSON).
 //!
-//! **Frame.** The tile's rectangle is given in the world frame (metres, x east, y south), and
-//! so are the header's points, as `(x, -y, z)`: x east, y north, z up, a local Cartesian frame
-//! and not Earth-centred. Normals are oct-encoded in the same axes. The header's "horizon
-//! occlusion point" is the bounding sphere's centre: a local frame has no horizon. A client
-//! that places tiles on the globe must place this frame itself (the layer's `fmrh` object
-//! says where its origin is on the map, when the source said).
+//! **Frames.** [`write`] takes a tile whose header is already in its frame: Earth-centred
+//! (ECEF, WGS 84) for the global-geodetic tiles of [`super::geodetic_mesh`], which Cesium
+//! places on the globe as they are. [`encode`] writes a block's mesh in fmrh's node tiling:
+//! the tile's rectangle is given in the world frame (metres, x east, y south), and so are the
+//! header's points, as `(x, -y, z)`: x east, y north, z up, a local Cartesian frame and not
+//! Earth-centred. Normals are oct-encoded in the same axes. The header's "horizon occlusion
+//! point" is then the bounding sphere's centre: a local frame has no horizon. A client that
+//! places such tiles on the globe must place this frame itself (the layer's `fmrh` object says
+//! where its origin is on the map, when the source said).
 
 use crate::error::{Error, Result};
 use crate::mesh::BlockMesh;
@@ -53,35 +56,102 @@ pub fn oct_encode(n: [f64; 3]) -> [u8; 2] {
     [unorm(x), unorm(y)]
 }
 
-/// One tile: a block's mesh over its rectangle (samples, the node's whole footprint, which
-/// may reach past the data), with the JSON of its metadata extension.
-pub struct QuantizedTile<'a> {
-    /// The mesh (skirt vertices are left out: clients hang their own from the edge lists).
-    pub mesh: &'a BlockMesh,
-    /// West, north, east and south edges of the tile, in samples: `[col0, row0, col1, row1]`.
-    pub rect: [u64; 4],
+/// A tile's header: where it is and how big, in the frame its points are given in.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Header {
+    /// The tile's centre.
+    pub centre: [f64; 3],
+    /// The height range the vertices' heights are quantized over.
+    pub min_height: f32,
+    /// Its top.
+    pub max_height: f32,
+    /// A sphere holding every vertex: centre and radius.
+    pub sphere_centre: [f64; 3],
+    /// Its radius, metres.
+    pub sphere_radius: f64,
+    /// The horizon occlusion point (ellipsoid-scaled frame; see [`super::geodetic`]).
+    pub horizon: [f64; 3],
+}
+
+/// A tile ready to write: quantized vertices and the triangles over them.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TileData {
+    /// The header; `min_height` and `max_height` are the range `h` is quantized over.
+    pub header: Header,
+    /// West to east across the tile, `0..=QUANTIZED_MAX`.
+    pub u: Vec<u16>,
+    /// South to north, `0..=QUANTIZED_MAX`.
+    pub v: Vec<u16>,
+    /// Heights, `0..=QUANTIZED_MAX` across the header's range ([`quantize_heights`]).
+    pub h: Vec<u16>,
+    /// Triangles, counter-clockwise seen from above, over any numbering of the vertices: the
+    /// tile is written with its vertices renumbered in the order the triangles first use
+    /// them, and vertices no triangle uses are left out.
+    pub triangles: Vec<[u32; 3]>,
+    /// Oct-encoded unit normals ([`oct_encode`]), one per vertex, when known.
+    pub normals: Option<Vec<[u8; 2]>>,
     /// The metadata extension's JSON.
     pub metadata: serde_json::Value,
 }
 
-/// The `.terrain` bytes of `tile` in `frame`.
-pub fn encode(tile: &QuantizedTile<'_>, frame: &WorldFrame) -> Result<Vec<u8>> {
-    let m = tile.mesh;
-    let [c0, r0, c1, r1] = tile.rect;
-    if c0 >= c1 || r0 >= r1 {
-        return Err(Error::InvalidArgument(format!(
-            "tile rectangle {c0},{r0},{c1},{r1} has no area"
+/// The range `[lo, hi]` (binary32, as the header stores it) and quantized codes of
+/// `heights`: `round((h - lo) / (hi - lo) * QUANTIZED_MAX)`, all 0 for a flat tile.
+pub fn quantize_heights(heights: &[f64]) -> (f32, f32, Vec<u16>) {
+    let lo = heights
+        .iter()
+        .map(|&h| h as f32)
+        .fold(f32::INFINITY, f32::min);
+    let hi = heights
+        .iter()
+        .map(|&h| h as f32)
+        .fold(f32::NEG_INFINITY, f32::max);
+    let span = f64::from(hi) - f64::from(lo);
+    let q = f64::from(QUANTIZED_MAX);
+    let codes = heights
+        .iter()
+        .map(|&h| {
+            if span > 0.0 {
+                ((h - f64::from(lo)) / span * q).round().clamp(0.0, q) as u16
+            } else {
+                0
+            }
+        })
+        .collect();
+    (lo, hi, codes)
+}
+
+/// The height code `h` stands for over `[lo, hi]`, as a decoder reads it.
+pub fn dequantize_height(lo: f32, hi: f32, h: u16) -> f64 {
+    f64::from(lo) + f64::from(h) / f64::from(QUANTIZED_MAX) * (f64::from(hi) - f64::from(lo))
+}
+
+/// The `.terrain` bytes of `tile`.
+pub fn write(tile: &TileData) -> Result<Vec<u8>> {
+    let count = tile.u.len();
+    if tile.v.len() != count
+        || tile.h.len() != count
+        || tile.normals.as_ref().is_some_and(|n| n.len() != count)
+        || tile
+            .triangles
+            .iter()
+            .flatten()
+            .any(|&i| i as usize >= count)
+    {
+        return Err(Error::Internal(format!(
+            "quantized-mesh tile: {count} vertices, {} v, {} h, triangles past them",
+            tile.v.len(),
+            tile.h.len()
         )));
     }
-    // Number the surface vertices in the order the triangles first use them (the index
-    // code needs it); skirts are dropped, with their triangles.
+    if tile.triangles.is_empty() {
+        return Err(Error::InvalidArgument("a tile with no triangle".into()));
+    }
+    // Number the vertices in the order the triangles first use them (the index code needs
+    // it).
     let mut order: Vec<u32> = Vec::new();
-    let mut new_index = vec![u32::MAX; m.vertices.len()];
-    let mut triangles: Vec<[u32; 3]> = Vec::new();
-    for t in &m.triangles {
-        if t.iter().any(|&i| m.vertices[i as usize].skirt) {
-            continue;
-        }
+    let mut new_index = vec![u32::MAX; count];
+    let mut triangles: Vec<[u32; 3]> = Vec::with_capacity(tile.triangles.len());
+    for t in &tile.triangles {
         let mut out = [0u32; 3];
         for (k, &i) in t.iter().enumerate() {
             if new_index[i as usize] == u32::MAX {
@@ -92,81 +162,31 @@ pub fn encode(tile: &QuantizedTile<'_>, frame: &WorldFrame) -> Result<Vec<u8>> {
         }
         triangles.push(out);
     }
-    if triangles.is_empty() {
-        return Err(Error::InvalidArgument(format!(
-            "block {}: no triangle to write",
-            m.block
-        )));
-    }
-    let vertices: Vec<_> = order.iter().map(|&i| m.vertices[i as usize]).collect();
-    let lo = vertices
-        .iter()
-        .map(|v| v.height as f32)
-        .fold(f32::INFINITY, f32::min);
-    let hi = vertices
-        .iter()
-        .map(|v| v.height as f32)
-        .fold(f32::NEG_INFINITY, f32::max);
-    let q = f64::from(QUANTIZED_MAX);
-    let quantize = |t: f64| (t * q).round().clamp(0.0, q) as i32;
-    // A position strictly inside the tile stays off its edges (a node 2^20 samples wide has
-    // vertices 8 samples in), so that the edge lists are exactly the edge's vertices.
-    let across = |t: u64, lo: u64, hi: u64| {
-        let x = quantize((t - lo) as f64 / (hi - lo) as f64);
-        if t == lo || t == hi {
-            x
-        } else {
-            x.clamp(1, i32::from(QUANTIZED_MAX) - 1)
-        }
+    let pick = |values: &[u16]| -> Vec<i32> {
+        order
+            .iter()
+            .map(|&i| i32::from(values[i as usize]))
+            .collect()
     };
-    let u: Vec<i32> = vertices.iter().map(|p| across(p.col, c0, c1)).collect();
-    let v: Vec<i32> = vertices
-        .iter()
-        .map(|p| i32::from(QUANTIZED_MAX) - across(p.row.min(r1), r0, r1))
-        .collect();
-    let span = f64::from(hi) - f64::from(lo);
-    let h: Vec<i32> = vertices
-        .iter()
-        .map(|p| {
-            if span > 0.0 {
-                quantize((p.height - f64::from(lo)) / span)
-            } else {
-                0
-            }
-        })
-        .collect();
+    let (u, v, h) = (pick(&tile.u), pick(&tile.v), pick(&tile.h));
 
     let mut out = Vec::new();
     let put_f64 = |out: &mut Vec<u8>, x: f64| out.extend_from_slice(&x.to_le_bytes());
-    // The header, in the local frame (x east, y north, z up).
-    let corner = |col: u64, row: u64, z: f64| {
-        let p = frame.point(col as f64, row as f64, z);
-        [p.x, -p.y, p.z]
-    };
-    let (zl, zh) = (f64::from(lo), f64::from(hi));
-    let a = corner(c0, r1, zl);
-    let b = corner(c1, r0, zh);
-    let centre = [
-        (a[0] + b[0]) / 2.0,
-        (a[1] + b[1]) / 2.0,
-        (a[2] + b[2]) / 2.0,
-    ];
-    let radius =
-        ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2) + (b[2] - a[2]).powi(2)).sqrt() / 2.0;
-    for c in centre {
+    let hd = &tile.header;
+    for c in hd.centre {
         put_f64(&mut out, c);
     }
-    out.extend_from_slice(&lo.to_le_bytes());
-    out.extend_from_slice(&hi.to_le_bytes());
-    for c in centre {
+    out.extend_from_slice(&hd.min_height.to_le_bytes());
+    out.extend_from_slice(&hd.max_height.to_le_bytes());
+    for c in hd.sphere_centre {
         put_f64(&mut out, c);
     }
-    put_f64(&mut out, radius);
-    for c in centre {
+    put_f64(&mut out, hd.sphere_radius);
+    for c in hd.horizon {
         put_f64(&mut out, c);
     }
     // Vertex data.
-    let n = vertices.len();
+    let n = order.len();
     out.extend_from_slice(&(n as u32).to_le_bytes());
     for values in [&u, &v, &h] {
         let mut prev = 0;
@@ -208,12 +228,11 @@ pub fn encode(tile: &QuantizedTile<'_>, frame: &WorldFrame) -> Result<Vec<u8>> {
         }
     }
     // Extensions.
-    if m.normals.len() == m.vertices.len() {
+    if let Some(normals) = &tile.normals {
         out.push(EXT_OCT_NORMALS);
         out.extend_from_slice(&(2 * n as u32).to_le_bytes());
         for &i in &order {
-            let [e, s, up] = m.normals[i as usize];
-            out.extend_from_slice(&oct_encode([e, -s, up]));
+            out.extend_from_slice(&normals[i as usize]);
         }
     }
     let json = serde_json::to_vec(&tile.metadata)
@@ -223,6 +242,118 @@ pub fn encode(tile: &QuantizedTile<'_>, frame: &WorldFrame) -> Result<Vec<u8>> {
     out.extend_from_slice(&(json.len() as u32).to_le_bytes());
     out.extend_from_slice(&json);
     Ok(out)
+}
+
+/// One tile: a block's mesh over its rectangle (samples, the node's whole footprint, which
+/// may reach past the data), with the JSON of its metadata extension.
+pub struct QuantizedTile<'a> {
+    /// The mesh (skirt vertices are left out: clients hang their own from the edge lists).
+    pub mesh: &'a BlockMesh,
+    /// West, north, east and south edges of the tile, in samples: `[col0, row0, col1, row1]`.
+    pub rect: [u64; 4],
+    /// The metadata extension's JSON.
+    pub metadata: serde_json::Value,
+}
+
+/// The `.terrain` bytes of `tile` in `frame` (a local frame: see the module's notes).
+pub fn encode(tile: &QuantizedTile<'_>, frame: &WorldFrame) -> Result<Vec<u8>> {
+    let m = tile.mesh;
+    let [c0, r0, c1, r1] = tile.rect;
+    if c0 >= c1 || r0 >= r1 {
+        return Err(Error::InvalidArgument(format!(
+            "tile rectangle {c0},{r0},{c1},{r1} has no area"
+        )));
+    }
+    // Skirts are dropped, with their triangles.
+    let triangles: Vec<[u32; 3]> = m
+        .triangles
+        .iter()
+        .filter(|t| t.iter().all(|&i| !m.vertices[i as usize].skirt))
+        .copied()
+        .collect();
+    if triangles.is_empty() {
+        return Err(Error::InvalidArgument(format!(
+            "block {}: no triangle to write",
+            m.block
+        )));
+    }
+    let heights: Vec<f64> = m
+        .vertices
+        .iter()
+        .map(|p| if p.skirt { f64::NAN } else { p.height })
+        .collect();
+    let surface: Vec<f64> = heights.iter().copied().filter(|h| !h.is_nan()).collect();
+    let (lo, hi, _) = quantize_heights(&surface);
+    let span = f64::from(hi) - f64::from(lo);
+    let q = f64::from(QUANTIZED_MAX);
+    let quantize = |t: f64| (t * q).round().clamp(0.0, q) as i32;
+    // A position strictly inside the tile stays off its edges (a node 2^20 samples wide has
+    // vertices 8 samples in), so that the edge lists are exactly the edge's vertices.
+    let across = |t: u64, lo: u64, hi: u64| {
+        let x = quantize((t - lo) as f64 / (hi - lo) as f64);
+        if t == lo || t == hi {
+            x
+        } else {
+            x.clamp(1, i32::from(QUANTIZED_MAX) - 1)
+        }
+    };
+    let u: Vec<u16> = m
+        .vertices
+        .iter()
+        .map(|p| across(p.col.clamp(c0, c1), c0, c1) as u16)
+        .collect();
+    let v: Vec<u16> = m
+        .vertices
+        .iter()
+        .map(|p| (i32::from(QUANTIZED_MAX) - across(p.row.clamp(r0, r1), r0, r1)) as u16)
+        .collect();
+    let h: Vec<u16> = heights
+        .iter()
+        .map(|&z| {
+            if span > 0.0 && !z.is_nan() {
+                quantize((z - f64::from(lo)) / span) as u16
+            } else {
+                0
+            }
+        })
+        .collect();
+    // The header, in the local frame (x east, y north, z up).
+    let corner = |col: u64, row: u64, z: f64| {
+        let p = frame.point(col as f64, row as f64, z);
+        [p.x, -p.y, p.z]
+    };
+    let (zl, zh) = (f64::from(lo), f64::from(hi));
+    let a = corner(c0, r1, zl);
+    let b = corner(c1, r0, zh);
+    let centre = [
+        (a[0] + b[0]) / 2.0,
+        (a[1] + b[1]) / 2.0,
+        (a[2] + b[2]) / 2.0,
+    ];
+    let radius =
+        ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2) + (b[2] - a[2]).powi(2)).sqrt() / 2.0;
+    let normals = (m.normals.len() == m.vertices.len()).then(|| {
+        m.normals
+            .iter()
+            .map(|&[e, s, up]| oct_encode([e, -s, up]))
+            .collect()
+    });
+    write(&TileData {
+        header: Header {
+            centre,
+            min_height: lo,
+            max_height: hi,
+            sphere_centre: centre,
+            sphere_radius: radius,
+            horizon: centre,
+        },
+        u,
+        v,
+        h,
+        triangles,
+        normals,
+        metadata: tile.metadata.clone(),
+    })
 }
 
 #[cfg(test)]

@@ -41,6 +41,7 @@
 
 pub mod fractal;
 mod lines;
+pub mod surface;
 mod triangulate;
 
 use std::collections::HashMap;

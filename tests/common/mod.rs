@@ -92,6 +92,7 @@ pub mod bundle;
 pub mod fields;
 pub mod oracle;
 pub mod origin;
+pub mod quantized_mesh;
 pub mod serve;
 pub mod servers;
 pub mod tiles;

@@ -1,7 +1,7 @@
 //! `fmrh mesh`: a scene as triangles (`fmrh::mesh`), crack-free, written as one glTF 2.0
 //! binary (`fmrh::export::gltf`): one node per block, with its level, error and key; or as
-//! a directory of Cesium quantized-mesh tiles and their `layer.json`
-//! (`fmrh::export::quantized_mesh`), one tile per block.
+//! a directory of Cesium quantized-mesh tiles and their `layer.json` ([`tiles`]): the
+//! global-geodetic pyramid over georeferenced data, or one tile per block.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -10,12 +10,13 @@ use std::sync::Arc;
 use serde_json::{json, Value};
 
 use fmrh::export::gltf::{glb, GltfBlock};
-use fmrh::export::quantized_mesh::{self, QuantizedTile};
 use fmrh::heightfield::Georeference;
 use fmrh::mesh::{build, fractal, BlockMesh, Cracks, GridBlock};
 use fmrh::model::SampleRect;
 use fmrh::scene::{load_blocks, LoadedBlock, SceneBlock, Terrain, WorldFrame, PAYLOAD_GAP};
 use fmrh::Error;
+
+mod tiles;
 
 /// How the mesh closes cracks, as `--cracks` names it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -41,9 +42,22 @@ pub enum RefineArg {
 pub enum MeshFormat {
     /// One glTF 2.0 binary: a node and a mesh per block.
     Glb,
-    /// A directory: `layer.json` and one quantized-mesh-1.0 tile per block, at
-    /// `LEVEL/X/Y.terrain` (y counted from the south).
+    /// A directory: `layer.json` and quantized-mesh-1.0 tiles at `LEVEL/X/Y.terrain` (y
+    /// counted from the south): the global-geodetic pyramid over georeferenced data, else
+    /// one tile per block (see --tiling).
     QuantizedMesh,
+}
+
+/// How quantized-mesh tiles are laid out, as `--tiling` names it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum TilingArg {
+    /// Geodetic when the data's georeference can be placed on the globe, else nodes.
+    Auto,
+    /// Cesium's global-geodetic pyramid (EPSG:4326, two root tiles): a tileset Cesium can
+    /// load as it is. Needs a georeference with a CRS.
+    Geodetic,
+    /// One tile per block, addressed by its fmrh node, in a local frame.
+    Nodes,
 }
 
 #[derive(clap::Args)]
@@ -64,6 +78,14 @@ pub struct MeshArgs {
     /// What to write.
     #[arg(long, value_enum, default_value = "glb")]
     format: MeshFormat,
+    /// The tiling of quantized-mesh tiles.
+    #[arg(long, value_enum, default_value = "auto")]
+    tiling: TilingArg,
+    /// Store quantized-mesh tiles gzipped, for a server that sends them with
+    /// `Content-Encoding: gzip` (as the specification says tiles are served): a regular
+    /// geodetic tile keeps about a fifteenth of its bytes.
+    #[arg(long)]
+    gzip: bool,
     /// Refine past the data where the camera is closer than the data's detail: synthetic
     /// nodes below the physical blocks, deterministic, marked synthetic in every output.
     #[arg(long, value_enum)]
@@ -126,6 +148,18 @@ impl Part {
     fn error(&self) -> f64 {
         self.synthetic.map_or(self.block.error, |s| s.3)
     }
+
+    /// The part as the mesh and the surface take it.
+    fn grid(&self) -> GridBlock<'_> {
+        GridBlock {
+            rect: self.rect,
+            stride: self.stride,
+            grid_width: self.width,
+            grid_height: self.height,
+            heights: &self.heights,
+            error: self.error(),
+        }
+    }
 }
 
 /// What the scene's `extras` say besides the blocks.
@@ -168,15 +202,8 @@ fn refine_fractal(
     };
     let mut out = Vec::new();
     for mut p in parts {
-        let grid = GridBlock {
-            rect: p.rect,
-            stride: p.stride,
-            grid_width: p.width,
-            grid_height: p.height,
-            heights: &p.heights,
-            error: p.block.error,
-        };
-        let nodes = fractal::refine_block(p.block.key, &grid, &view, &context.frame, context.tau);
+        let nodes =
+            fractal::refine_block(p.block.key, &p.grid(), &view, &context.frame, context.tau);
         p.rect = scaled(p.rect);
         p.footprint = scaled(p.footprint);
         p.stride *= k;
@@ -204,13 +231,9 @@ fn refine_fractal(
 /// Runs `fmrh mesh`.
 pub fn run(args: &MeshArgs) -> Result<ExitCode, Error> {
     super::check_output(&args.output, args.force)?;
-    if args.format == MeshFormat::QuantizedMesh
-        && (args.output == std::path::Path::new("-") || super::is_dataset(&args.file)?)
-    {
+    if args.format == MeshFormat::QuantizedMesh && args.output == std::path::Path::new("-") {
         return Err(Error::InvalidArgument(
-            "quantized-mesh tiles are written to a directory (not `-`), from one container \
-             (a dataset's tiles would share tile addresses)"
-                .into(),
+            "quantized-mesh tiles are written to a directory, not `-`".into(),
         ));
     }
     let camera = args.camera.camera(&args.view)?;
@@ -219,6 +242,14 @@ pub fn run(args: &MeshArgs) -> Result<ExitCode, Error> {
         CracksArg::Stitch => Cracks::Stitch,
         CracksArg::Skirts => Cracks::Skirts,
     };
+    if args.format == MeshFormat::QuantizedMesh {
+        return tiles::run_tiles(args, &camera, &options);
+    }
+    if args.gzip {
+        return Err(Error::InvalidArgument(
+            "--gzip applies to quantized-mesh tiles, not to a .glb".into(),
+        ));
+    }
     let meshed = mesh_scene(
         &args.file,
         &args.view,
@@ -227,18 +258,13 @@ pub fn run(args: &MeshArgs) -> Result<ExitCode, Error> {
         cracks,
         args.refine,
     )?;
-    let (parts, meshes, context) = (&meshed.parts, &meshed.meshes, &meshed.context);
+    let meshes = &meshed.meshes;
     let triangles = meshed.triangles();
     let stitched = meshes.iter().filter(|m| m.stitched.contains(&true)).count();
     let synthetic = meshed.synthetic();
-    let bytes = match args.format {
-        MeshFormat::Glb => {
-            let bytes = meshed.glb()?;
-            super::write_output(&args.output, args.force, &bytes)?;
-            bytes.len() as u64
-        }
-        MeshFormat::QuantizedMesh => write_tiles(args, parts, meshes, context)?,
-    };
+    let bytes = meshed.glb()?;
+    super::write_output(&args.output, args.force, &bytes)?;
+    let bytes = bytes.len() as u64;
     eprintln!(
         "fmrh: meshed {} blocks ({} stitched to a neighbour{}) as {} triangles, {} bytes{}",
         meshes.len(),
@@ -296,37 +322,19 @@ pub fn mesh_scene(
     cracks: Cracks,
     refine: Option<RefineArg>,
 ) -> Result<Meshed, Error> {
-    let (parts, mut context) = if super::is_dataset(file)? {
-        let ds = fmrh::dataset::Dataset::open(file)?;
-        let spacing = view.given_spacing()?;
-        let scene = ds.scene(camera, options, spacing)?;
-        let loaded = ds.load_blocks(&scene)?;
-        let parts = scene
-            .blocks
-            .iter()
-            .zip(loaded)
-            .map(|(b, (loaded, stride))| {
-                Part::of(b.block, Some(b.tile), loaded, stride, b.block.rect())
-            })
-            .collect();
-        let context = Context {
-            frame: WorldFrame::new(spacing.or(ds.spacing_m())),
-            georeference: ds.georeference(),
-            tau: scene.tau,
-            mode: scene.mode,
-            units: 1,
-        };
-        (parts, context)
-    } else if let Some(url) = super::url_of(file) {
-        #[cfg(feature = "remote")]
-        {
-            tile_parts(file, view, &fmrh::Store::open_url(url)?, camera, options)?
-        }
-        #[cfg(not(feature = "remote"))]
-        return Err(super::no_remote(url));
-    } else {
-        tile_parts(file, view, &super::open(file)?, camera, options)?
-    };
+    let (parts, _, context) = scene_parts(file, view, camera, options, false)?;
+    finish_meshes(parts, context, camera, cracks, refine)
+}
+
+/// Meshes the scene blocks `parts` (refined past the data as `refine` says) with their
+/// cracks closed as `cracks` says.
+fn finish_meshes(
+    parts: Vec<Part>,
+    mut context: Context,
+    camera: &fmrh::scene::Camera,
+    cracks: Cracks,
+    refine: Option<RefineArg>,
+) -> Result<Meshed, Error> {
     if parts.is_empty() {
         return Err(Error::InvalidArgument(
             "the camera sees no terrain: there is nothing to mesh (give --window)".into(),
@@ -336,164 +344,13 @@ pub fn mesh_scene(
         Some(RefineArg::Fractal) => refine_fractal(parts, camera, &mut context)?,
         None => parts,
     };
-    let grids: Vec<GridBlock<'_>> = parts
-        .iter()
-        .map(|p| GridBlock {
-            rect: p.rect,
-            stride: p.stride,
-            grid_width: p.width,
-            grid_height: p.height,
-            heights: &p.heights,
-            error: p.error(),
-        })
-        .collect();
+    let grids: Vec<GridBlock<'_>> = parts.iter().map(Part::grid).collect();
     let meshes = build(&grids, &context.mesh_frame(), cracks)?;
     Ok(Meshed {
         parts,
         meshes,
         context,
         cracks,
-    })
-}
-
-/// Writes one quantized-mesh tile per block and `layer.json` into a new directory beside
-/// `args.output`, then renames it into place (an existing directory is replaced only with
-/// --force). Returns the bytes of the tiles.
-fn write_tiles(
-    args: &MeshArgs,
-    parts: &[Part],
-    meshes: &[BlockMesh],
-    context: &Context,
-) -> Result<u64, Error> {
-    let out = &args.output;
-    let parent = match out.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    let temp = tempfile::Builder::new()
-        .prefix(".fmrh-tiles-")
-        .tempdir_in(&parent)
-        .map_err(|e| Error::io(&parent, e))?;
-    let mut total = 0u64;
-    // Per level: the tiles written, as (x, y) with y counted from the south.
-    let mut levels: std::collections::BTreeMap<u8, Vec<(u32, u32)>> = Default::default();
-    for m in meshes {
-        let p = &parts[m.block];
-        let (level, x, y) = p.node();
-        let y = (1u32 << level) - 1 - y;
-        let f = &p.footprint;
-        let tile = QuantizedTile {
-            mesh: m,
-            rect: [f.col0, f.row0, f.col1, f.row1],
-            metadata: json!({ "fmrh": block_extras(p, m, context.units) }),
-        };
-        let bytes = quantized_mesh::encode(&tile, &context.mesh_frame())?;
-        let dir = temp.path().join(level.to_string()).join(x.to_string());
-        std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
-        let path = dir.join(format!("{y}.terrain"));
-        std::fs::write(&path, &bytes).map_err(|e| Error::io(&path, e))?;
-        total += bytes.len() as u64;
-        levels.entry(level).or_default().push((x, y));
-    }
-    let layer = layer_json(parts, meshes, context, &levels);
-    let path = temp.path().join("layer.json");
-    let text =
-        serde_json::to_vec_pretty(&layer).map_err(|e| Error::InvalidArgument(e.to_string()))?;
-    std::fs::write(&path, text).map_err(|e| Error::io(&path, e))?;
-    let kept = temp.keep();
-    if out.exists() {
-        if !args.force {
-            let _ = std::fs::remove_dir_all(&kept);
-            return super::check_output(out, false).map(|()| 0);
-        }
-        let old = parent.join(format!(".fmrh-tiles-old-{}", std::process::id()));
-        std::fs::rename(out, &old).map_err(|e| Error::io(out, e))?;
-        std::fs::rename(&kept, out).map_err(|e| Error::io(out, e))?;
-        let _ = std::fs::remove_dir_all(&old);
-    } else {
-        std::fs::rename(&kept, out).map_err(|e| Error::io(out, e))?;
-    }
-    Ok(total)
-}
-
-/// The tileset's `layer.json`: TileJSON as Cesium reads it, with the tiles available at
-/// each level, and an `fmrh` object saying what the tiles are.
-fn layer_json(
-    parts: &[Part],
-    meshes: &[BlockMesh],
-    context: &Context,
-    levels: &std::collections::BTreeMap<u8, Vec<(u32, u32)>>,
-) -> Value {
-    let available: Vec<Value> = (0..=levels.keys().max().copied().unwrap_or(0))
-        .map(|l| {
-            let mut tiles = levels.get(&l).cloned().unwrap_or_default();
-            tiles.sort_unstable_by_key(|&(x, y)| (y, x));
-            // Runs of neighbours along a row, as ranges.
-            let mut ranges: Vec<Value> = Vec::new();
-            let mut i = 0;
-            while i < tiles.len() {
-                let (x0, y) = tiles[i];
-                let mut x1 = x0;
-                while i + 1 < tiles.len() && tiles[i + 1] == (x1 + 1, y) {
-                    i += 1;
-                    x1 += 1;
-                }
-                ranges.push(json!({ "startX": x0, "startY": y, "endX": x1, "endY": y }));
-                i += 1;
-            }
-            Value::Array(ranges)
-        })
-        .collect();
-    let level_notes: Vec<Value> = levels
-        .iter()
-        .map(|(l, tiles)| {
-            let p = meshes
-                .iter()
-                .map(|m| &parts[m.block])
-                .find(|p| p.node().0 == *l);
-            let side = p.map_or(0.0, |p| {
-                (p.footprint.col1 - p.footprint.col0) as f64 / context.units as f64
-            });
-            json!({
-                "level": l,
-                "tiles": tiles.len(),
-                "tile_side_samples": side,
-                "tile_side_m": [side * context.frame.dx, side * context.frame.dy],
-                "stride_samples": p.map_or(0.0, |p| p.stride as f64 / context.units as f64),
-                "synthetic": p.is_some_and(|p| p.synthetic.is_some()),
-            })
-        })
-        .collect();
-    let mut origin = json!({ "sample": [0, 0], "world_m": [0.0, 0.0] });
-    if let Some(g) = &context.georeference {
-        origin["map"] = json!(g.origin);
-        origin["crs"] = g.crs.clone().map_or(Value::Null, Value::from);
-    }
-    json!({
-        "tilejson": "2.1.0",
-        "name": "fmrh scene",
-        "description": "One tile per block of an fmrh scene: tile LEVEL/X/Y is the fmrh node \
-            at that level, column X and row 2^LEVEL - 1 - Y (Y counted from the south). \
-            The tiles are fmrh's quadtree over the data's samples, not the global-geodetic \
-            grid, in a local frame (x east, y north, z up, metres from the data's \
-            north-west sample).",
-        "version": "1.0.0",
-        "format": "quantized-mesh-1.0",
-        "scheme": "tms",
-        "tiles": ["{z}/{x}/{y}.terrain?v={version}"],
-        "minzoom": levels.keys().min(),
-        "maxzoom": levels.keys().max(),
-        "extensions": ["octvertexnormals", "metadata"],
-        "available": available,
-        "fmrh": {
-            "tiling": "fmrh-nodes",
-            "frame": "local: x east, y north, z up, metres; the data's north-west sample at x = y = 0",
-            "origin": origin,
-            "spacing_m": [context.frame.dx, context.frame.dy],
-            "levels": level_notes,
-            "tau": context.tau,
-            "mode": context.mode,
-        }
     })
 }
 
@@ -524,42 +381,139 @@ fn block_extras(p: &Part, m: &BlockMesh, units: u64) -> Value {
     extras
 }
 
-/// The scene of one container, its blocks read and decoded.
+/// The scene `camera` sees of `file` (a container, a dataset, or a URL of either) with
+/// `options`, opened once, its blocks read and decoded; with `cover`, also the scene of the
+/// whole data from the same camera ([`cover_options`]), which answers where the camera's
+/// scene is silent.
+fn scene_parts(
+    file: &std::path::Path,
+    view: &super::scene::ViewArgs,
+    camera: &fmrh::scene::Camera,
+    options: &fmrh::scene::SceneOptions,
+    cover: bool,
+) -> Result<(Vec<Part>, Vec<Part>, Context), Error> {
+    if super::is_dataset(file)? {
+        let ds = fmrh::dataset::Dataset::open(file)?;
+        let spacing = view.given_spacing()?;
+        let frame = WorldFrame::new(spacing.or(ds.spacing_m()));
+        let parts_of = |camera: &fmrh::scene::Camera, options: &fmrh::scene::SceneOptions| {
+            let scene = ds.scene(camera, options, spacing)?;
+            let loaded = ds.load_blocks(&scene)?;
+            let parts: Vec<Part> = scene
+                .blocks
+                .iter()
+                .zip(loaded)
+                .map(|(b, (loaded, stride))| {
+                    Part::of(b.block, Some(b.tile), loaded, stride, b.block.rect())
+                })
+                .collect();
+            Ok::<_, Error>((parts, scene.tau, scene.mode))
+        };
+        let (parts, covering, tau, mode) = with_cover(parts_of, camera, options, ds.grid(), cover)?;
+        let context = Context {
+            frame,
+            georeference: ds.georeference(),
+            tau,
+            mode,
+            units: 1,
+        };
+        Ok((parts, covering, context))
+    } else if let Some(url) = super::url_of(file) {
+        #[cfg(feature = "remote")]
+        {
+            tile_parts(
+                file,
+                view,
+                &fmrh::Store::open_url(url)?,
+                camera,
+                options,
+                cover,
+            )
+        }
+        #[cfg(not(feature = "remote"))]
+        return Err(super::no_remote(url));
+    } else {
+        tile_parts(file, view, &super::open(file)?, camera, options, cover)
+    }
+}
+
+/// A scene's parts, with its tolerance and mode.
+type SceneParts = (Vec<Part>, f64, fmrh::scene::Mode);
+
+/// The scene `parts_of` gives for `camera` and `options`, its tolerance and mode, and with
+/// `cover` the cover of `data` ([`cover_options`]) too.
+fn with_cover(
+    parts_of: impl Fn(&fmrh::scene::Camera, &fmrh::scene::SceneOptions) -> Result<SceneParts, Error>,
+    camera: &fmrh::scene::Camera,
+    options: &fmrh::scene::SceneOptions,
+    data: SampleRect,
+    cover: bool,
+) -> Result<(Vec<Part>, Vec<Part>, f64, fmrh::scene::Mode), Error> {
+    let (parts, tau, mode) = parts_of(camera, options)?;
+    let covering = if cover {
+        parts_of(camera, &cover_options(options, data))?.0
+    } else {
+        Vec::new()
+    };
+    Ok((parts, covering, tau, mode))
+}
+
+/// The options of the scene that covers all of `data` as `options` would from the same
+/// camera: the same tolerance and mode over the whole data, blocks out of the frustum
+/// meeting the tolerance as if they were in it. Where the camera's own scene stops, its
+/// blocks are the camera's scene's neighbours in resolution.
+fn cover_options(
+    options: &fmrh::scene::SceneOptions,
+    data: SampleRect,
+) -> fmrh::scene::SceneOptions {
+    let mut cover = *options;
+    cover.window = Some(data);
+    cover
+}
+
+/// The scene of one container, its blocks read and decoded, and with `cover` the scene of
+/// all its data from the same camera.
 fn tile_parts<S: fmrh::store::Source>(
     file: &std::path::Path,
     view: &super::scene::ViewArgs,
     store: &fmrh::Store<S>,
     camera: &fmrh::scene::Camera,
     options: &fmrh::scene::SceneOptions,
-) -> Result<(Vec<Part>, Context), Error> {
+    cover: bool,
+) -> Result<(Vec<Part>, Vec<Part>, Context), Error> {
     let spacing = view.spacing(store, file)?;
     let terrain = Terrain::with_spacing(store, spacing)?;
-    let scene = terrain.scene(camera, options)?;
-    let loaded = load_blocks(store, &scene.blocks, PAYLOAD_GAP)?;
     let d = *store.domain();
-    let parts = scene
-        .blocks
-        .iter()
-        .zip(loaded)
-        .map(|(b, loaded)| {
-            Part::of(
-                *b,
-                None,
-                loaded,
-                d.stride(b.level),
-                d.footprint(b.level, b.x, b.y),
-            )
-        })
-        .collect();
     let metadata = &store.header().metadata;
+    let frame = WorldFrame::new(spacing.or(metadata.spacing_m));
+    let parts_of = |camera: &fmrh::scene::Camera, options: &fmrh::scene::SceneOptions| {
+        let scene = terrain.scene(camera, options)?;
+        let loaded = load_blocks(store, &scene.blocks, PAYLOAD_GAP)?;
+        let parts: Vec<Part> = scene
+            .blocks
+            .iter()
+            .zip(loaded)
+            .map(|(b, loaded)| {
+                Part::of(
+                    *b,
+                    None,
+                    loaded,
+                    d.stride(b.level),
+                    d.footprint(b.level, b.x, b.y),
+                )
+            })
+            .collect();
+        Ok::<_, Error>((parts, scene.tau, scene.mode))
+    };
+    let (parts, covering, tau, mode) = with_cover(parts_of, camera, options, d.data_rect(), cover)?;
     let context = Context {
-        frame: WorldFrame::new(spacing.or(metadata.spacing_m)),
+        frame,
         georeference: metadata.georeference.clone(),
-        tau: scene.tau,
-        mode: scene.mode,
+        tau,
+        mode,
         units: 1,
     };
-    Ok((parts, context))
+    Ok((parts, covering, context))
 }
 
 /// The GLB: each block's node named by its level and key, with its facts in `extras`; the
