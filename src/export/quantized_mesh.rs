@@ -11,7 +11,7 @@
 //! then extensions, each an id byte and a u32 length: 1, `octvertexnormals` (two bytes a
 //! vertex), and 4, `metadata` (a u32 length and JSON).
 //!
-//! **Frames.** [`write`] takes a tile whose header is already in its frame: Earth-centred
+//! **Frames.** [`write()`] takes a tile whose header is already in its frame: Earth-centred
 //! (ECEF, WGS 84) for the global-geodetic tiles of [`super::geodetic_mesh`], which Cesium
 //! places on the globe as they are. [`encode`] writes a block's mesh in fmrh's node tiling:
 //! the tile's rectangle is given in the world frame (metres, x east, y south), and so are the

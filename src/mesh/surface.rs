@@ -5,8 +5,8 @@
 //! that puts vertices elsewhere (a tile of another pyramid, whose grid follows longitude and
 //! latitude rather than samples) needs the surface between them: inside a grid cell, the
 //! triangulation of `format-spec/model.md` §4, split along the north-west to south-east
-//! diagonal, evaluated at fractional offsets. At a sample it is exactly the value
-//! [`super::GridBlock::height_at`] and `scene::reconstruct` give.
+//! diagonal, evaluated at fractional offsets. At a sample it is exactly the value the
+//! mesher and `scene::reconstruct` give there.
 //!
 //! **Ownership.** Blocks are given in priority order, and a point belongs to the first
 //! block whose closed footprint holds it. Scene blocks meet only along edges, so the order
@@ -184,7 +184,8 @@ impl<'a> Surface<'a> {
 }
 
 /// The height block `b` draws at `(col, row)` inside its footprint: at a sample, exactly
-/// [`GridBlock::height_at`]; between samples, the cell's triangle at fractional offsets.
+/// the block's own evaluation there; between samples, the cell's triangle at fractional
+/// offsets.
 pub fn height_at(b: &GridBlock<'_>, col: f64, row: f64) -> f64 {
     let r = &b.rect;
     if col.fract() == 0.0 && row.fract() == 0.0 {
