@@ -89,6 +89,7 @@ pub mod dataset;
 pub mod error;
 pub mod export;
 pub mod format;
+pub mod globe;
 pub mod heightfield;
 pub mod ingest;
 pub mod mesh;

@@ -217,13 +217,17 @@ pub fn parse_window(text: &str) -> Result<fmrh::model::SampleRect, Error> {
 
 /// Parses `x,y,z` into a vector of finite numbers.
 pub fn parse_vec3(text: &str, what: &str) -> Result<glam::DVec3, Error> {
+    let v = parse_list(text, 3, what)?;
+    Ok(glam::DVec3::new(v[0], v[1], v[2]))
+}
+
+/// Parses `n` comma-separated finite numbers.
+pub fn parse_list(text: &str, n: usize, what: &str) -> Result<Vec<f64>, Error> {
     let parts: Option<Vec<f64>> = text.split(',').map(|p| p.trim().parse().ok()).collect();
     match parts {
-        Some(v) if v.len() == 3 && v.iter().all(|x| x.is_finite()) => {
-            Ok(glam::DVec3::new(v[0], v[1], v[2]))
-        }
+        Some(v) if v.len() == n && v.iter().all(|x| x.is_finite()) => Ok(v),
         _ => Err(Error::InvalidArgument(format!(
-            "{what} `{text}`: expected three finite numbers x,y,z"
+            "{what} `{text}`: expected {n} finite numbers, comma-separated"
         ))),
     }
 }

@@ -82,6 +82,7 @@ fn render<S: fmrh::store::Source>(
     store: &fmrh::Store<S>,
 ) -> Result<ExitCode, Error> {
     let camera = args.camera.camera(&args.view)?;
+    args.camera.flat_only("fmrh render")?;
     let options = args.view.options_in(args.window.as_deref())?;
     let spacing = args.view.spacing(store, &args.file)?;
     let terrain = Terrain::with_spacing(store, spacing)?;
@@ -105,6 +106,7 @@ fn render<S: fmrh::store::Source>(
 /// A dataset's scene, across its tiles, in the dataset's world frame.
 fn render_dataset(args: &RenderArgs) -> Result<ExitCode, Error> {
     let camera = args.camera.camera(&args.view)?;
+    args.camera.flat_only("fmrh render")?;
     let options = args.view.options_in(args.window.as_deref())?;
     let ds = fmrh::dataset::Dataset::open(&args.file)?;
     let spacing = args.view.given_spacing()?;

@@ -126,27 +126,99 @@ impl ViewArgs {
 /// Where the camera is and where it looks, in the world frame.
 #[derive(clap::Args, Clone)]
 pub struct CameraArgs {
-    /// Eye position x,y,z in metres (x = col * dx east, y = row * dy south, z height).
-    #[arg(long, allow_hyphen_values = true)]
-    eye: String,
-    /// The point looked at, x,y,z.
-    #[arg(long, allow_hyphen_values = true)]
-    target: String,
+    /// Eye position x,y,z in metres (x = col * dx east, y = row * dy south, z height; with
+    /// --globe, Earth-centred Earth-fixed metres).
+    #[arg(
+        long,
+        allow_hyphen_values = true,
+        required_unless_present = "eye_geo",
+        conflicts_with = "eye_geo"
+    )]
+    eye: Option<String>,
+    /// The point looked at, x,y,z (the frame of --eye).
+    #[arg(
+        long,
+        allow_hyphen_values = true,
+        required_unless_present = "eye_geo",
+        conflicts_with = "eye_geo"
+    )]
+    target: Option<String>,
     /// Up direction on screen, x,y,z.
-    #[arg(long, default_value = "0,0,1", allow_hyphen_values = true)]
-    up: String,
+    #[arg(long, allow_hyphen_values = true, conflicts_with = "eye_geo")]
+    up: Option<String>,
+    /// --eye, --target and --up in Earth-centred Earth-fixed metres (WGS 84), the terrain
+    /// on the ellipsoid: for geographic grids (latitude and longitude).
+    #[arg(long)]
+    globe: bool,
+    /// The eye on the globe: latitude and longitude in degrees and height above the
+    /// ellipsoid in metres (implies --globe; look with --look).
+    #[arg(long, allow_hyphen_values = true, value_name = "LAT,LON,H")]
+    eye_geo: Option<String>,
+    /// With --eye-geo: heading in degrees clockwise from north and pitch in degrees above
+    /// the horizontal (-90 straight down) [default: 0,-30].
+    #[arg(long, allow_hyphen_values = true, value_name = "HEADING,PITCH")]
+    look: Option<String>,
 }
 
 impl CameraArgs {
     /// The camera, with `view`'s field of view and viewport.
     pub fn camera(&self, view: &ViewArgs) -> Result<Camera, Error> {
+        if self.look.is_some() && self.eye_geo.is_none() {
+            return Err(Error::InvalidArgument(
+                "--look takes a heading and pitch for --eye-geo; give --eye-geo too".into(),
+            ));
+        }
+        let (eye, target, up) = match &self.eye_geo {
+            Some(geo) => {
+                let [lat, lon, h] = super::parse_vec3(geo, "--eye-geo")?.to_array();
+                let look = super::parse_list(self.look.as_deref().unwrap_or("0,-30"), 2, "--look")?;
+                if !(-90.0..=90.0).contains(&lat) {
+                    return Err(Error::InvalidArgument(format!(
+                        "--eye-geo: latitude {lat} is not within -90..=90"
+                    )));
+                }
+                fmrh::globe::look(lat, lon, h, look[0], look[1])
+            }
+            None => {
+                let need = |v: &Option<String>, name: &str| {
+                    v.as_deref()
+                        .ok_or_else(|| Error::InvalidArgument(format!("{name} is required")))
+                        .and_then(|s| super::parse_vec3(s, name))
+                };
+                let up = match &self.up {
+                    Some(u) => super::parse_vec3(u, "--up")?,
+                    None => glam::DVec3::Z,
+                };
+                (
+                    need(&self.eye, "--eye")?,
+                    need(&self.target, "--target")?,
+                    up,
+                )
+            }
+        };
         Ok(Camera {
-            eye: super::parse_vec3(&self.eye, "--eye")?,
-            target: super::parse_vec3(&self.target, "--target")?,
-            up: super::parse_vec3(&self.up, "--up")?,
+            eye,
+            target,
+            up,
             fov_y_deg: view.fov,
             viewport: view.viewport()?,
         })
+    }
+
+    /// Whether the camera is on the globe (ECEF), not in the flat frame.
+    pub fn globe(&self) -> bool {
+        self.globe || self.eye_geo.is_some()
+    }
+
+    /// An error unless the camera is in the flat frame: `what` does not work on the globe
+    /// yet.
+    pub fn flat_only(&self, what: &str) -> Result<(), Error> {
+        if self.globe() {
+            return Err(Error::InvalidArgument(format!(
+                "{what} takes flat-frame cameras only so far (no --globe or --eye-geo)"
+            )));
+        }
+        Ok(())
     }
 }
 
@@ -380,6 +452,11 @@ struct RequestPlan {
 /// Runs `fmrh scene`.
 pub fn run(args: &SceneArgs) -> Result<ExitCode, Error> {
     let camera = args.camera.camera(&args.view)?;
+    if args.camera.globe() && args.refine.is_some() {
+        return Err(Error::InvalidArgument(
+            "--refine takes flat-frame cameras only so far (no --globe or --eye-geo)".into(),
+        ));
+    }
     let options = args.view.options_in(args.window.as_deref())?;
     let output = args
         .reconstruct
@@ -387,6 +464,7 @@ pub fn run(args: &SceneArgs) -> Result<ExitCode, Error> {
         .map(|p| super::sidecar::RasterOutput::new(p, args.format, args.force))
         .transpose()?;
     if super::is_dataset(&args.file)? {
+        args.camera.flat_only("a dataset's scene")?;
         return run_dataset(args, camera, options, output);
     }
     if let Some(url) = super::url_of(&args.file) {
@@ -414,8 +492,12 @@ fn run_on<S: fmrh::store::Source>(
 ) -> Result<ExitCode, Error> {
     let before = store.read_stats();
     let asked = store.source().request_stats();
-    let spacing = args.view.spacing(store, &args.file)?;
-    let terrain = Terrain::with_spacing(store, spacing)?;
+    let (spacing, terrain) = if args.camera.globe() {
+        (None, Terrain::on_globe(store)?)
+    } else {
+        let spacing = args.view.spacing(store, &args.file)?;
+        (spacing, Terrain::with_spacing(store, spacing)?)
+    };
     let scene = terrain.scene(&camera, &options)?;
     let scheduled = store.read_stats();
     let asked_scheduled = store.source().request_stats();

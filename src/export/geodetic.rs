@@ -16,120 +16,10 @@
 //! the unit sphere) that is below the horizon only when the whole tile is, following
 //! Cesium's "Horizon culling" (Ring, 2013) as its `EllipsoidalOccluder` computes it.
 
-/// The WGS84 ellipsoid's semi-major axis, metres (Cesium's `maximumRadius`).
-pub const WGS84_A: f64 = 6_378_137.0;
-
-/// The WGS84 ellipsoid's semi-minor (polar) axis, metres (Cesium's `minimumRadius`).
-pub const WGS84_B: f64 = 6_356_752.314_245_179;
-
-/// WGS84's first eccentricity squared, `1 - b²/a²`.
-pub const WGS84_E2: f64 = 1.0 - (WGS84_B * WGS84_B) / (WGS84_A * WGS84_A);
-
-/// Earth-centred, Earth-fixed coordinates (metres) of longitude `lon` and latitude `lat`
-/// (degrees) at height `h` above the WGS 84 ellipsoid.
-pub fn ecef(lon: f64, lat: f64, h: f64) -> [f64; 3] {
-    let (lam, phi) = (lon.to_radians(), lat.to_radians());
-    let n = WGS84_A / (1.0 - WGS84_E2 * phi.sin().powi(2)).sqrt();
-    [
-        (n + h) * phi.cos() * lam.cos(),
-        (n + h) * phi.cos() * lam.sin(),
-        (n * (1.0 - WGS84_E2) + h) * phi.sin(),
-    ]
-}
-
-/// The ellipsoid's outward normal (geodetic up) at `lon`, `lat` (degrees), in ECEF.
-pub fn up(lon: f64, lat: f64) -> [f64; 3] {
-    let (lam, phi) = (lon.to_radians(), lat.to_radians());
-    [phi.cos() * lam.cos(), phi.cos() * lam.sin(), phi.sin()]
-}
-
-/// `p` (ECEF) in the ellipsoid-scaled frame, where WGS 84 is the unit sphere.
-pub fn scaled(p: [f64; 3]) -> [f64; 3] {
-    [p[0] / WGS84_A, p[1] / WGS84_A, p[2] / WGS84_B]
-}
-
-/// How far out along the scaled direction the occlusion point of a tile too large for the
-/// construction is put (radii): it is then hidden only from a camera in the narrow shadow
-/// right behind the Earth.
-pub const FAR_OCCLUSION_RADII: f64 = 1000.0;
-
-/// The horizon occlusion point of a tile whose vertices are `points` (ECEF), on the ray
-/// from the Earth's centre towards `direction` (ECEF, usually the tile's bounding-sphere
-/// centre), in the ellipsoid-scaled frame: the nearest point on the ray that every vertex's
-/// horizon plane (the plane tangent to the unit sphere's cone through the vertex) keeps
-/// behind, so that whenever a vertex is above the horizon, so is the point. Vertices below
-/// the ellipsoid count as on it. A tile that reaches a quarter of the way round the globe
-/// from `direction` has no such point; it gets one [`FAR_OCCLUSION_RADII`] out instead.
-pub fn horizon_occlusion_point(direction: [f64; 3], points: &[[f64; 3]]) -> [f64; 3] {
-    let d = normalize(scaled(direction));
-    let mut magnitude: f64 = 0.0;
-    for &p in points {
-        let sp = scaled(p);
-        let len2 = dot(sp, sp);
-        let len = len2.sqrt();
-        if len == 0.0 {
-            continue;
-        }
-        let dir = [sp[0] / len, sp[1] / len, sp[2] / len];
-        let (len2, len) = (len2.max(1.0), len.max(1.0));
-        let cos_alpha = dot(dir, d);
-        let sin_alpha = norm(cross(dir, d));
-        let cos_beta = 1.0 / len;
-        let sin_beta = (len2 - 1.0).sqrt() * cos_beta;
-        let denominator = cos_alpha * cos_beta - sin_alpha * sin_beta;
-        if denominator <= 1.0 / FAR_OCCLUSION_RADII {
-            magnitude = FAR_OCCLUSION_RADII;
-            break;
-        }
-        magnitude = magnitude.max(1.0 / denominator);
-    }
-    let m = magnitude.max(1.0);
-    [d[0] * m, d[1] * m, d[2] * m]
-}
-
-/// Whether the ellipsoid-scaled point `point` is above the horizon seen from the camera at
-/// `camera` (scaled frame, outside the unit sphere): Cesium's
-/// `EllipsoidalOccluder.isScaledSpacePointVisible`.
-pub fn scaled_point_visible(camera: [f64; 3], point: [f64; 3]) -> bool {
-    let vh2 = dot(camera, camera) - 1.0;
-    let vt = [
-        point[0] - camera[0],
-        point[1] - camera[1],
-        point[2] - camera[2],
-    ];
-    let vt_dot_vc = -dot(vt, camera);
-    let occluded = if vh2 < 0.0 {
-        vt_dot_vc > 0.0
-    } else {
-        vt_dot_vc > vh2 && vt_dot_vc * vt_dot_vc / dot(vt, vt) > vh2
-    };
-    !occluded
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-fn norm(a: [f64; 3]) -> f64 {
-    dot(a, a).sqrt()
-}
-
-fn normalize(a: [f64; 3]) -> [f64; 3] {
-    let l = norm(a);
-    if l > 0.0 {
-        [a[0] / l, a[1] / l, a[2] / l]
-    } else {
-        [0.0, 0.0, 1.0]
-    }
-}
+pub use crate::globe::{
+    ecef, horizon_occlusion_point, scaled, scaled_point_visible, up, FAR_OCCLUSION_RADII, WGS84_A,
+    WGS84_B, WGS84_E2,
+};
 
 /// Samples along a side of the heightmap Cesium sizes its level-0 error by.
 pub const HEIGHTMAP_WIDTH: f64 = 65.0;
@@ -275,21 +165,6 @@ mod tests {
             geometric_error(0)
         );
         assert_eq!(geometric_error(3), geometric_error(0) / 8.0);
-    }
-
-    #[test]
-    fn ecef_of_known_points() {
-        let close = |a: [f64; 3], b: [f64; 3]| (0..3).all(|k| (a[k] - b[k]).abs() < 1e-6);
-        assert!(close(ecef(0.0, 0.0, 0.0), [WGS84_A, 0.0, 0.0]));
-        assert!(close(ecef(90.0, 0.0, 100.0), [0.0, WGS84_A + 100.0, 0.0]));
-        assert!(close(ecef(0.0, 90.0, 0.0), [0.0, 0.0, WGS84_B]));
-        assert!(close(
-            ecef(-180.0, -90.0, 10.0),
-            [0.0, 0.0, -WGS84_B - 10.0]
-        ));
-        // 45° N 45° E on the ellipsoid lies on it: (x² + y²)/a² + z²/b² = 1.
-        let [x, y, z] = scaled(ecef(45.0, 45.0, 0.0));
-        assert!((x * x + y * y + z * z - 1.0).abs() < 1e-12);
     }
 
     /// The vertices of a tile, the occlusion point of `tile` with heights `lo..=hi`.

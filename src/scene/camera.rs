@@ -11,6 +11,11 @@
 //! `e · λ / d` pixels, with `λ = S / (2 · tan(fov_y / 2))` and `S` the viewport's height in
 //! pixels. Seed 000's eq. 2 is the same relation solved for the error: `ε = τ / λ · P_min`.
 //!
+//! **On the globe** ([`TerrainFrame::Globe`]) a geographic grid's samples are placed on the
+//! WGS 84 ellipsoid instead, in Earth-centred, Earth-fixed metres, and the camera is given in
+//! the same frame: every box below is then the ECEF box of a cell's shell, and distances are
+//! true 3D distances.
+//!
 //! **Frustum.** The four side planes through the eye (no near or far plane: a terrain viewer
 //! wants everything in front of it). A point is visible when it is on the inner side of all
 //! four, which also puts it in front of the eye because the field of view is below 180°.
@@ -322,6 +327,115 @@ impl WorldFrame {
     /// The world point of sample `(col, row)` at height `z`.
     pub fn point(&self, col: f64, row: f64, z: f64) -> DVec3 {
         DVec3::new(col * self.dx, row * self.dy, z)
+    }
+}
+
+/// A geographic grid on the WGS 84 ellipsoid: sample `(col, row)` at longitude `lon0 + col ·
+/// dlon` and latitude `lat0 + row · dlat` (degrees), the world frame being ECEF metres
+/// ([`crate::globe`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GlobeFrame {
+    /// Longitude of sample column 0, degrees.
+    pub lon0: f64,
+    /// Latitude of sample row 0, degrees.
+    pub lat0: f64,
+    /// Degrees of longitude from one column to the next (east).
+    pub dlon: f64,
+    /// Degrees of latitude from one row to the next (negative for a north-up grid).
+    pub dlat: f64,
+}
+
+impl GlobeFrame {
+    /// The frame of a georeference whose CRS is geographic (longitude and latitude in
+    /// degrees); an error otherwise: a projected grid is not placed on the globe yet.
+    pub fn of(g: &crate::heightfield::Georeference) -> Result<GlobeFrame> {
+        let name = g.crs.as_deref().unwrap_or("");
+        let geographic =
+            crate::crs::Crs::parse(name).is_some_and(|c| c.kind == crate::crs::CrsKind::Geographic);
+        let finite = g.origin.iter().chain(&g.step).all(|v| v.is_finite())
+            && g.step[0] != 0.0
+            && g.step[1] != 0.0;
+        if !geographic || !finite {
+            return Err(Error::InvalidArgument(format!(
+                "the globe frame needs a geographic grid (longitude and latitude, e.g. \
+                 EPSG:4326); this one is `{name}` with origin {:?} and step {:?}",
+                g.origin, g.step
+            )));
+        }
+        Ok(GlobeFrame {
+            lon0: g.origin[0],
+            lat0: g.origin[1],
+            dlon: g.step[0],
+            dlat: g.step[1],
+        })
+    }
+
+    /// Longitude and latitude of sample position `(col, row)`, degrees.
+    pub fn lon_lat(&self, col: f64, row: f64) -> (f64, f64) {
+        (self.lon0 + col * self.dlon, self.lat0 + row * self.dlat)
+    }
+
+    /// The ECEF point of sample position `(col, row)` at height `z`.
+    pub fn point(&self, col: f64, row: f64, z: f64) -> DVec3 {
+        let (lon, lat) = self.lon_lat(col, row);
+        crate::globe::ecef_point(lon, lat.clamp(-90.0, 90.0), z)
+    }
+
+    /// The ECEF box holding samples `rect` (closed, between its grid lines) between heights
+    /// `zmin` and `zmax`.
+    pub fn rect_box(&self, rect: &crate::model::SampleRect, zmin: f64, zmax: f64) -> Aabb {
+        let (lon_a, lat_a) = self.lon_lat(rect.col0 as f64, rect.row0 as f64);
+        let (lon_b, lat_b) = self.lon_lat(rect.col1 as f64, rect.row1 as f64);
+        let (min, max) = crate::globe::shell_box(lon_a, lon_b, lat_a, lat_b, zmin, zmax);
+        Aabb { min, max }
+    }
+
+    /// Whether everything over samples `rect` up to height `zmax` is below the horizon seen
+    /// from `eye` ([`crate::globe::shell_hidden`]).
+    pub fn hidden(&self, eye: DVec3, rect: &crate::model::SampleRect, zmax: f64) -> bool {
+        let (lon_a, lat_a) = self.lon_lat(rect.col0 as f64, rect.row0 as f64);
+        let (lon_b, lat_b) = self.lon_lat(rect.col1 as f64, rect.row1 as f64);
+        crate::globe::shell_hidden(eye, lon_a, lon_b, lat_a, lat_b, zmax)
+    }
+}
+
+/// Where a terrain's samples are in the world: a flat frame, or on the globe.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum TerrainFrame {
+    /// `x = col · dx` east, `y = row · dy` south, `z` up: right for a tile, not a continent.
+    Flat(WorldFrame),
+    /// ECEF on WGS 84, from a geographic grid: distances are true 3D distances over the
+    /// curved Earth, and what is below the horizon is culled.
+    Globe(GlobeFrame),
+}
+
+impl TerrainFrame {
+    /// The world point of sample `(col, row)` at height `z`.
+    pub fn point(&self, col: f64, row: f64, z: f64) -> DVec3 {
+        match self {
+            TerrainFrame::Flat(f) => f.point(col, row, z),
+            TerrainFrame::Globe(g) => g.point(col, row, z),
+        }
+    }
+
+    /// The box of samples `rect` between heights `zmin` and `zmax`.
+    pub fn rect_box(&self, rect: &crate::model::SampleRect, zmin: f64, zmax: f64) -> Aabb {
+        match self {
+            TerrainFrame::Flat(f) => Aabb {
+                min: f.point(rect.col0 as f64, rect.row0 as f64, zmin),
+                max: f.point(rect.col1 as f64, rect.row1 as f64, zmax),
+            },
+            TerrainFrame::Globe(g) => g.rect_box(rect, zmin, zmax),
+        }
+    }
+
+    /// Whether all of samples `rect` up to height `zmax` is below the horizon from `eye`
+    /// (never, in a flat frame).
+    pub fn hidden(&self, eye: DVec3, rect: &crate::model::SampleRect, zmax: f64) -> bool {
+        match self {
+            TerrainFrame::Flat(_) => false,
+            TerrainFrame::Globe(g) => g.hidden(eye, rect, zmax),
+        }
     }
 }
 

@@ -31,7 +31,7 @@ mod uniform;
 mod view_dependent;
 
 pub use crate::format::PayloadRef;
-pub use camera::{Aabb, Camera, Coverage, View, WorldFrame};
+pub use camera::{Aabb, Camera, Coverage, GlobeFrame, TerrainFrame, View, WorldFrame};
 pub use load::{load_blocks, load_blocks_reusing, HeldGrid, LoadedBlock, PAYLOAD_GAP};
 pub use reconstruct::{reconstruct, Reconstruction};
 pub use result::{Mode, NeighbourLevels, Scene, SceneBlock, SceneOptions, SceneStats, DEFAULT_GAP};

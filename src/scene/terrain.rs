@@ -5,14 +5,15 @@
 //! **Region.** An explicit window (inclusive samples), or the frustum's footprint: the
 //! quadrants whose box, from the data's lowest to highest height, may meet the frustum. In
 //! the second case, blocks whose own box misses the frustum (exact separating-axis test) are
-//! dropped at the end: they hold nothing visible. The scene then covers every visible point
-//! of the terrain exactly once.
+//! dropped at the end: they hold nothing visible. On the globe ([`Terrain::on_globe`]) so
+//! are the quadrants and blocks wholly below the horizon. The scene then covers every
+//! visible point of the terrain exactly once.
 //!
 //! The selection asks the store for key ranges and node records; it never parses a page.
 
 use std::time::Instant;
 
-use super::camera::{Aabb, Camera, View, WorldFrame};
+use super::camera::{Aabb, Camera, Coverage, GlobeFrame, TerrainFrame, View, WorldFrame};
 use super::ranges::{self, Quadrant};
 use super::result::{Mode, Scene, SceneBlock, SceneOptions, SceneStats};
 use super::search::Search;
@@ -27,6 +28,8 @@ pub struct Terrain<'s, S: Source> {
     pub(super) store: &'s Store<S>,
     domain: Domain,
     frame: WorldFrame,
+    /// Where the samples are in the world frame cameras are given in.
+    world: TerrainFrame,
     root: StoredNode,
     thresholds: Vec<f64>,
     storage_error: f64,
@@ -49,11 +52,40 @@ impl<'s, S: Source> Terrain<'s, S> {
     pub fn with_spacing(store: &'s Store<S>, spacing_m: Option<[f64; 2]>) -> Result<Self> {
         // On a remote source, the root's page alone (not a chunk around it).
         store.fetch_ahead(Ahead::new().nodes(0, 0))?;
+        let frame = WorldFrame::new(spacing_m.or(store.header().metadata.spacing_m));
+        Terrain::with_frame(store, frame, TerrainFrame::Flat(frame))
+    }
+
+    /// The store's terrain on the WGS 84 ellipsoid: cameras in ECEF metres, boxes the ECEF
+    /// boxes of the cells' shells, and blocks below the horizon culled. The store's
+    /// georeference must be geographic ([`GlobeFrame::of`]).
+    pub fn on_globe(store: &'s Store<S>) -> Result<Self> {
+        let g = store
+            .header()
+            .metadata
+            .georeference
+            .as_ref()
+            .ok_or_else(|| {
+                Error::InvalidArgument(
+                    "the globe frame needs a georeferenced grid; this file has no georeference"
+                        .into(),
+                )
+            })?;
+        let globe = GlobeFrame::of(g)?;
+        let frame = WorldFrame::new(store.header().metadata.spacing_m);
+        Terrain::with_frame(store, frame, TerrainFrame::Globe(globe))
+    }
+
+    /// The store's terrain with `world` placing its samples (`frame` is the flat frame of
+    /// its spacing, which [`Terrain::frame`] reports).
+    pub fn with_frame(store: &'s Store<S>, frame: WorldFrame, world: TerrainFrame) -> Result<Self> {
+        store.fetch_ahead(Ahead::new().nodes(0, 0))?;
         let root = store.node(0)?;
         Ok(Terrain {
             store,
             domain: *store.domain(),
-            frame: WorldFrame::new(spacing_m.or(store.header().metadata.spacing_m)),
+            frame,
+            world,
             root,
             thresholds: store.clusters().iter().map(|c| c.threshold).collect(),
             storage_error: store.header().storage_error(),
@@ -82,9 +114,20 @@ impl<'s, S: Source> Terrain<'s, S> {
         &self.thresholds
     }
 
-    /// The world frame.
+    /// The flat frame of the store's spacing (the world frame unless on the globe).
     pub fn frame(&self) -> WorldFrame {
         self.frame
+    }
+
+    /// Where the samples are in the world frame cameras are given in.
+    pub fn world(&self) -> TerrainFrame {
+        self.world
+    }
+
+    /// Whether everything over `rect` up to `zmax` is below the horizon seen from `view`
+    /// (only ever on the globe).
+    pub fn hidden(&self, view: &View, rect: &SampleRect, zmax: f32) -> bool {
+        self.world.hidden(view.eye, rect, f64::from(zmax))
     }
 
     /// The geometry.
@@ -94,14 +137,7 @@ impl<'s, S: Source> Terrain<'s, S> {
 
     /// The box of the samples `rect` between heights `zmin` and `zmax`.
     pub fn rect_box(&self, rect: &SampleRect, zmin: f32, zmax: f32) -> Aabb {
-        Aabb {
-            min: self
-                .frame
-                .point(rect.col0 as f64, rect.row0 as f64, f64::from(zmin)),
-            max: self
-                .frame
-                .point(rect.col1 as f64, rect.row1 as f64, f64::from(zmax)),
-        }
+        self.world.rect_box(rect, f64::from(zmin), f64::from(zmax))
     }
 
     /// The box of a node record: its footprint clipped to the data, by its height range.
@@ -144,7 +180,13 @@ impl<'s, S: Source> Terrain<'s, S> {
                 let blocks = ranges::window_blocks(&d, &w);
                 ranges::decompose(&d, ranges::window_classifier(&d, blocks))
             }
-            None => ranges::decompose(&d, |q| view.classify(&self.quadrant_box(q))),
+            None => ranges::decompose(&d, |q| {
+                if self.hidden(view, &q.samples(&d), self.root.max_height) {
+                    Coverage::Outside
+                } else {
+                    view.classify(&self.quadrant_box(q))
+                }
+            }),
         };
         let span = window.or_else(|| {
             quadrants
@@ -258,7 +300,9 @@ impl<'s, S: Source> Terrain<'s, S> {
         blocks.sort_unstable_by_key(|b| (b.key, b.level));
         blocks.dedup_by_key(|b| (b.key, b.level));
         if window.is_none() {
-            blocks.retain(|b| view.intersects(&self.block_box(b)));
+            blocks.retain(|b| {
+                view.intersects(&self.block_box(b)) && !self.hidden(view, &b.rect(), b.max_height)
+            });
         }
         stitch::set_neighbours(&self.domain, blocks);
     }

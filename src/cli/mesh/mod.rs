@@ -237,6 +237,7 @@ pub fn run(args: &MeshArgs) -> Result<ExitCode, Error> {
         ));
     }
     let camera = args.camera.camera(&args.view)?;
+    args.camera.flat_only("fmrh mesh")?;
     let options = args.view.options_in(args.window.as_deref())?;
     let cracks = match args.cracks {
         CracksArg::Stitch => Cracks::Stitch,

@@ -1,0 +1,432 @@
+//! Scenes on the globe (`Terrain::on_globe`): a geographic container's samples on the WGS 84
+//! ellipsoid, cameras in Earth-centred Earth-fixed metres. For random containers anywhere
+//! (over a pole, across the antimeridian, ordinary ones) and random cameras (on the ground,
+//! low, from orbit, straight down or at the horizon), with distances and visibility computed
+//! here from the WGS 84 formulas:
+//!
+//! * **one cover of what is seen**: every sample whose point (at its height) is inside the
+//!   frustum and above the horizon lies in exactly one scene block, and no sample in two;
+//! * **the tolerance holds at true 3D distances**: each block's `e*` seen from the eye's
+//!   distance to the nearest of its grid points (their real heights, in ECEF) is within
+//!   `tau` pixels;
+//! * **nothing wholly below the horizon is kept**: every block's shell (its footprint up to
+//!   its highest height, lifted by the margin `globe::horizon_lattice` declares for it) has
+//!   a point above the horizon on a lattice of 49 x 49, while everything culled was below
+//!   it (the first property).
+//!
+//! A horizon the test is blind to would fail the first property (a visible sample with no
+//! block); a frame that measured distances on the flat grid would fail the second from
+//! orbit.
+
+mod common;
+
+use fmrh::globe;
+use fmrh::heightfield::Georeference;
+use fmrh::scene::{load_blocks, Camera, SceneOptions, Terrain, PAYLOAD_GAP};
+use fmrh::Heightfield;
+use glam::DVec3;
+use proptest::prelude::*;
+
+/// Where a test container lies.
+#[derive(Clone, Copy, Debug)]
+enum Place {
+    /// Its north-west sample at (lon, lat), 0.01° steps.
+    Anywhere(f64, f64),
+    /// Row 0 on the north pole, all longitudes, down to 80° N.
+    NorthPole,
+    /// From 179.5° E across the antimeridian to 180.5° (-179.5°), at `lat`.
+    Antimeridian(f64),
+}
+
+fn place() -> impl Strategy<Value = Place> {
+    prop_oneof![
+        3 => (-180.0f64..179.0, -80.0f64..85.0).prop_map(|(lon, lat)| Place::Anywhere(lon, lat)),
+        1 => Just(Place::NorthPole),
+        1 => (-60.0f64..60.0).prop_map(Place::Antimeridian),
+    ]
+}
+
+/// A geographic field of `w x h` samples at `place`, and the centre of its area.
+fn field_at(place: Place, seed: u64) -> (Heightfield, f64, f64) {
+    let (w, h, origin, step) = match place {
+        Place::Anywhere(lon, lat) => (101, 81, [lon, lat], [0.01, -0.01]),
+        Place::NorthPole => (129, 65, [0.0, 90.0], [360.0 / 128.0, -10.0 / 64.0]),
+        Place::Antimeridian(lat) => (101, 61, [179.5, lat], [0.01, -0.01]),
+    };
+    let mut f = common::fields::make(w, h, common::fields::Character::Hills, 0.0, seed);
+    // Hills of ±100 m on a 1,000 m plateau.
+    let samples: Vec<f32> = f.samples().iter().map(|v| v * 5.0 + 1000.0).collect();
+    let mut g = Heightfield::new(w, h, samples).unwrap();
+    g.metadata = f.metadata.clone();
+    g.metadata.georeference = Some(Georeference {
+        crs: Some("EPSG:4326".into()),
+        origin,
+        step,
+    });
+    f = g;
+    let centre_lon = origin[0] + step[0] * f64::from(w - 1) / 2.0;
+    let centre_lat = origin[1] + step[1] * f64::from(h - 1) / 2.0;
+    (f, centre_lon, centre_lat)
+}
+
+/// The ECEF point of sample `(col, row)` of `f` at its height.
+fn sample_point(f: &Heightfield, col: u32, row: u32) -> DVec3 {
+    let g = f.metadata.georeference.as_ref().unwrap();
+    let lon = g.origin[0] + f64::from(col) * g.step[0];
+    let lat = (g.origin[1] + f64::from(row) * g.step[1]).clamp(-90.0, 90.0);
+    let z = f.samples()[(row * f.width() + col) as usize];
+    globe::ecef_point(lon, lat, f64::from(z))
+}
+
+/// Whether `p` (ECEF) is above the horizon from `eye`, a point below the ellipsoid counting
+/// as on it (Cesium's convention).
+fn above_horizon(eye: DVec3, p: DVec3) -> bool {
+    let (lon, lat, h) = globe::geodetic(p);
+    let q = globe::ecef_point(lon, lat, h.max(0.0));
+    !globe::scaled_point_hidden(
+        DVec3::from(globe::scaled(eye.to_array())),
+        DVec3::from(globe::scaled(q.to_array())),
+    )
+}
+
+/// A camera: offsets of the eye from the data's centre in degrees, its height (log-uniform,
+/// 30 m to 30,000 km, or 1.3 to 10 km over the data) and how it looks: at a data sample (chosen by two fractions), or along
+/// a heading and pitch.
+#[derive(Clone, Copy, Debug)]
+struct Cam {
+    dlon: f64,
+    dlat: f64,
+    log_h: f64,
+    look: Look,
+}
+
+#[derive(Clone, Copy, Debug)]
+enum Look {
+    At(f64, f64),
+    Along(f64, f64),
+}
+
+fn camera() -> impl Strategy<Value = Cam> {
+    let look = prop_oneof![
+        3 => (0.0f64..1.0, 0.0f64..1.0).prop_map(|(a, b)| Look::At(a, b)),
+        1 => (0.0f64..360.0, -90.0f64..5.0).prop_map(|(h, p)| Look::Along(h, p)),
+    ];
+    // Anywhere from beside the data to far beyond its horizon, or low over it.
+    let eye = prop_oneof![
+        (-8.0f64..8.0, -8.0f64..8.0, 1.5f64..7.5),
+        (-0.6f64..0.6, -0.6f64..0.6, 3.1f64..4.0),
+    ];
+    (eye, look).prop_map(|((dlon, dlat, log_h), look)| Cam {
+        dlon,
+        dlat,
+        log_h,
+        look,
+    })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 128, ..ProptestConfig::default() })]
+    #[test]
+    fn globe_scenes_cover_what_is_seen_within_tau(
+        place in place(), seed in 0u64..1000,
+        cam in camera(),
+        tau in 0.5f64..4.0,
+    ) {
+        let (field, lon, lat) = field_at(place, seed);
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("g.fmrh");
+        fmrh::create(&file, field.clone(), &fmrh::CreateOptions { block_size: 17, ..fmrh::CreateOptions::default() }).unwrap();
+        let store = fmrh::Store::open(&file).unwrap();
+        let terrain = Terrain::on_globe(&store).unwrap();
+        let h = 10f64.powf(cam.log_h);
+        let cam_lat = (lat + cam.dlat).clamp(-89.9, 89.9);
+        let camera = match cam.look {
+            Look::Along(heading, pitch) => {
+                let (eye, target, up) = globe::look(cam_lat, lon + cam.dlon, h, heading, pitch);
+                let mut c = Camera::looking_at(eye, target);
+                c.up = up;
+                c
+            }
+            Look::At(a, b) => {
+                let eye = globe::ecef_point(lon + cam.dlon, cam_lat, h);
+                let col = (a * f64::from(field.width() - 1)) as u32;
+                let row = (b * f64::from(field.height() - 1)) as u32;
+                let mut c = Camera::looking_at(eye, sample_point(&field, col, row));
+                c.up = DVec3::from(globe::up(lon + cam.dlon, cam_lat));
+                c
+            }
+        };
+        let eye = camera.eye;
+        let view = camera.view().unwrap();
+        let scene = terrain.scene(&camera, &SceneOptions::new(tau)).unwrap();
+        let data = store.domain().data_rect();
+
+        // One cover of what is seen.
+        let (w, hgt) = (field.width(), field.height());
+        let mut seen = 0;
+        for row in (0..hgt).step_by(2).chain([hgt - 1]) {
+            for col in (0..w).step_by(2).chain([w - 1]) {
+                let (c, r) = (u64::from(col), u64::from(row));
+                // Owned: the half-open footprint, plus the data's last column and row.
+                let owners = scene.blocks.iter().filter(|b| {
+                    let x = c >= b.col0 && (c < b.col1 || (c == b.col1 && b.col1 == data.col1));
+                    let y = r >= b.row0 && (r < b.row1 || (r == b.row1 && b.row1 == data.row1));
+                    x && y
+                }).count();
+                prop_assert!(owners <= 1, "sample {col},{row} in {owners} blocks");
+                let p = sample_point(&field, col, row);
+                let in_frustum = view.planes.iter().all(|pl| pl.normal.dot(p) + pl.offset >= 0.0);
+                if in_frustum && above_horizon(eye, p) {
+                    seen += 1;
+                    prop_assert_eq!(owners, 1, "visible sample {},{} ({:?}) in no block", col, row, place);
+                }
+            }
+        }
+
+        // The tolerance at true 3D distances, to the blocks' real grid points.
+        let loaded = load_blocks(&store, &scene.blocks, PAYLOAD_GAP).unwrap();
+        let d = *store.domain();
+        let g = field.metadata.georeference.clone().unwrap();
+        for (b, l) in scene.blocks.iter().zip(&loaded) {
+            let s = d.stride(b.level);
+            let mut nearest = f64::INFINITY;
+            for j in 0..l.height {
+                for i in 0..l.width {
+                    let (c, r) = (b.col0 + u64::from(i) * s, b.row0 + u64::from(j) * s);
+                    if c > data.col1 || r > data.row1 {
+                        continue;
+                    }
+                    let z = l.heights[(j * l.width + i) as usize];
+                    let lon = g.origin[0] + c as f64 * g.step[0];
+                    let lat = (g.origin[1] + r as f64 * g.step[1]).clamp(-90.0, 90.0);
+                    nearest = nearest.min((globe::ecef_point(lon, lat, f64::from(z)) - eye).length());
+                }
+            }
+            let px = if b.error == 0.0 { 0.0 } else { b.error * view.lambda / nearest };
+            prop_assert!(px <= tau * (1.0 + 1e-9), "block {} level {}: {px} px at {nearest} m", b.key, b.level);
+
+            // Not wholly below the horizon: its shell's top has a visible point.
+            let (lon_a, lat_a) = (g.origin[0] + b.col0 as f64 * g.step[0], g.origin[1] + b.row0 as f64 * g.step[1]);
+            let (lon_b, lat_b) = (g.origin[0] + b.col1 as f64 * g.step[0], g.origin[1] + b.row1 as f64 * g.step[1]);
+            let Some((_, lift)) = globe::horizon_lattice(lon_a, lon_b, lat_a, lat_b, f64::from(b.max_height)) else {
+                continue; // too large a cell to be culled at all
+            };
+            let n = 48;
+            let top = f64::from(b.max_height).max(0.0) + lift;
+            let visible = (0..=n).any(|i| (0..=n).any(|j| {
+                let lon = lon_a + (lon_b - lon_a) * f64::from(i) / f64::from(n);
+                let lat = (lat_a + (lat_b - lat_a) * f64::from(j) / f64::from(n)).clamp(-90.0, 90.0);
+                above_horizon(eye, globe::ecef_point(lon, lat, top))
+            }));
+            prop_assert!(visible, "block {} level {} is wholly below the horizon", b.key, b.level);
+        }
+        // Seen samples mean blocks; none seen from far beyond the horizon can still leave
+        // blocks only when their shells peek above it (checked above).
+        if seen > 0 {
+            prop_assert!(!scene.blocks.is_empty());
+        }
+    }
+}
+
+/// The bundled SRTM tile N43E006 as a container under `dir`.
+fn n43(dir: &std::path::Path) -> std::path::PathBuf {
+    let dem = common::data("srtm3-pyhgtmap/N43E006.hgt.gz");
+    let file = dir.join("n43.fmrh");
+    let field = fmrh::ingest::load(&dem, &fmrh::ingest::IngestOptions::default()).unwrap();
+    fmrh::create(&file, field, &fmrh::CreateOptions::default()).unwrap();
+    file
+}
+
+/// From orbit above the data the far side is culled and the scene is the coarsest block; from
+/// the ground the scene is fine near the eye.
+#[test]
+fn orbit_and_ground_views_of_a_real_tile() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = fmrh::Store::open(&n43(dir.path())).unwrap();
+    let terrain = Terrain::on_globe(&store).unwrap();
+    let scene_at = |lat, lon, h, heading, pitch| {
+        let (eye, target, up) = globe::look(lat, lon, h, heading, pitch);
+        let mut c = Camera::looking_at(eye, target);
+        c.up = up;
+        terrain.scene(&c, &SceneOptions::new(1.0)).unwrap()
+    };
+    let orbit = scene_at(43.5, 6.5, 20_000_000.0, 0.0, -90.0);
+    assert_eq!(orbit.blocks.len(), 1);
+    assert_eq!(orbit.blocks[0].level, 0);
+    // The antipode's sky: the tile is below the horizon.
+    let far = scene_at(-43.5, -173.5, 400_000.0, 0.0, -90.0);
+    assert!(far.blocks.is_empty());
+    let ground = scene_at(43.1, 6.5, 2500.0, 0.0, -10.0);
+    let finest = store.domain().finest_level();
+    assert!(ground.blocks.iter().any(|b| b.level == finest));
+    assert!(ground.stats.max_screen_error <= 1.0);
+}
+
+/// For nearby cameras the flat frame and the globe agree: on N43E006, with eyes up to 30 km
+/// south of the tile at 3 km, at least 85 % of the larger scene's blocks are in both, and
+/// wherever two blocks of the two scenes overlap their levels differ by at most one (the
+/// flat frame's one spacing against the true one, 1.7 % apart across the tile's degree of
+/// latitude, moves a few blocks by a level). `benches/globe_vs_flat.rs` tabulates where the
+/// flat frame breaks for distant cameras.
+#[test]
+fn flat_and_globe_scenes_agree_nearby() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = fmrh::Store::open(&n43(dir.path())).unwrap();
+    let flat = Terrain::new(&store).unwrap();
+    let on_globe = Terrain::on_globe(&store).unwrap();
+    let fr = flat.frame();
+    let g = store.header().metadata.georeference.clone().unwrap();
+    let data = store.domain().data_rect();
+    let to_globe = |p: DVec3| {
+        let lon = g.origin[0] + p.x / fr.dx * g.step[0];
+        let lat = g.origin[1] + p.y / fr.dy * g.step[1];
+        globe::ecef_point(lon, lat, p.z)
+    };
+    let centre = DVec3::new(
+        data.col1 as f64 / 2.0 * fr.dx,
+        data.row1 as f64 / 2.0 * fr.dy,
+        500.0,
+    );
+    for d_km in [0.0, 10.0, 30.0] {
+        let eye = DVec3::new(centre.x, data.row1 as f64 * fr.dy + d_km * 1000.0, 3000.0);
+        let a = flat
+            .scene(&Camera::looking_at(eye, centre), &SceneOptions::new(1.0))
+            .unwrap();
+        let mut c = Camera::looking_at(to_globe(eye), to_globe(centre));
+        c.up = DVec3::from(globe::up(6.5, 43.5));
+        let b = on_globe.scene(&c, &SceneOptions::new(1.0)).unwrap();
+        let ids = |s: &fmrh::scene::Scene| -> std::collections::BTreeSet<(u8, u32, u32)> {
+            s.blocks.iter().map(|b| (b.level, b.x, b.y)).collect()
+        };
+        let shared = ids(&a).intersection(&ids(&b)).count();
+        let larger = a.blocks.len().max(b.blocks.len());
+        assert!(
+            shared as f64 >= 0.85 * larger as f64,
+            "{d_km} km: {shared} shared of {} and {}",
+            a.blocks.len(),
+            b.blocks.len()
+        );
+        for x in &a.blocks {
+            for y in &b.blocks {
+                let overlap =
+                    x.col0 < y.col1 && y.col0 < x.col1 && x.row0 < y.row1 && y.row0 < x.row1;
+                if overlap {
+                    assert!(
+                        x.level.abs_diff(y.level) <= 1,
+                        "{d_km} km: levels {} and {}",
+                        x.level,
+                        y.level
+                    );
+                }
+            }
+        }
+    }
+}
+
+/// `fmrh scene --eye-geo LAT,LON,H --look HEADING,PITCH` (and `--globe` with ECEF
+/// `--eye`/`--target`) gives the library's globe scene; what cannot be placed on the globe
+/// is refused with a clear error and a non-zero exit.
+#[test]
+fn the_cli_takes_cameras_on_the_globe() {
+    let dir = tempfile::tempdir().unwrap();
+    let dem = common::data("srtm3-pyhgtmap/N43E006.hgt.gz");
+    let file = dir.path().join("n43.fmrh");
+    let built = common::fmrh(&[
+        "build",
+        dem.to_str().unwrap(),
+        "-o",
+        file.to_str().unwrap(),
+        "-q",
+    ]);
+    assert!(built.status.success());
+    let f = file.to_str().unwrap();
+    let run = |args: &[&str]| common::fmrh(&[&["scene", f][..], args].concat());
+    let json = |o: &std::process::Output| -> serde_json::Value {
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        serde_json::from_slice(&o.stdout).unwrap()
+    };
+    let geo = json(&run(&[
+        "--eye-geo",
+        "43.1,6.5,2500",
+        "--look",
+        "0,-10",
+        "--tau",
+        "1",
+        "--json",
+    ]));
+    let (eye, target, up) = globe::look(43.1, 6.5, 2500.0, 0.0, -10.0);
+    let store = fmrh::Store::open(&file).unwrap();
+    let mut c = Camera::looking_at(eye, target);
+    c.up = up;
+    let scene = Terrain::on_globe(&store)
+        .unwrap()
+        .scene(&c, &SceneOptions::new(1.0))
+        .unwrap();
+    let blocks = geo["blocks"].as_array().unwrap();
+    assert_eq!(blocks.len(), scene.blocks.len());
+    for (j, b) in blocks.iter().zip(&scene.blocks) {
+        assert_eq!(j["key"].as_u64(), Some(b.key));
+    }
+    // The same camera as ECEF vectors.
+    let v = |p: DVec3| format!("{},{},{}", p.x, p.y, p.z);
+    let ecef = json(&run(&[
+        "--globe",
+        "--eye",
+        &v(eye),
+        "--target",
+        &v(target),
+        "--up",
+        &v(up),
+        "--tau",
+        "1",
+        "--json",
+    ]));
+    assert_eq!(ecef["blocks"], geo["blocks"]);
+    // Refusals.
+    let bad = run(&["--eye-geo", "95,6.5,100", "--tau", "1"]);
+    assert!(!bad.status.success() && String::from_utf8_lossy(&bad.stderr).contains("latitude"));
+    let both = run(&[
+        "--eye-geo",
+        "43,6.5,100",
+        "--eye",
+        "0,0,0",
+        "--target",
+        "1,1,1",
+        "--tau",
+        "1",
+    ]);
+    assert!(!both.status.success());
+    let look_alone = run(&[
+        "--eye", "0,0,0", "--target", "1,1,1", "--look", "0,-10", "--tau", "1",
+    ]);
+    assert!(
+        !look_alone.status.success()
+            && String::from_utf8_lossy(&look_alone.stderr).contains("eye-geo"),
+        "{}",
+        String::from_utf8_lossy(&look_alone.stderr)
+    );
+    let mut field = common::fields::make(64, 64, common::fields::Character::Hills, 0.0, 1);
+    field.metadata.spacing_m = Some([10.0, 10.0]);
+    let plain = dir.path().join("plain.fmrh");
+    fmrh::create(&plain, field, &fmrh::CreateOptions::default()).unwrap();
+    let r = common::fmrh(&[
+        "scene",
+        plain.to_str().unwrap(),
+        "--eye-geo",
+        "43,6.5,100",
+        "--tau",
+        "1",
+    ]);
+    assert!(!r.status.success() && String::from_utf8_lossy(&r.stderr).contains("georeference"));
+    let m = common::fmrh(&[
+        "mesh",
+        f,
+        "--eye-geo",
+        "43.1,6.5,2500",
+        "--tau",
+        "1",
+        "-o",
+        dir.path().join("x.glb").to_str().unwrap(),
+    ]);
+    assert!(!m.status.success() && String::from_utf8_lossy(&m.stderr).contains("flat-frame"));
+}
