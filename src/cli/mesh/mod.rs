@@ -323,7 +323,7 @@ pub fn mesh_scene(
     cracks: Cracks,
     refine: Option<RefineArg>,
 ) -> Result<Meshed, Error> {
-    let (parts, _, context) = scene_parts(file, view, camera, options, false)?;
+    let (parts, _, context) = scene_parts(file, view, camera, options, |_| false)?;
     finish_meshes(parts, context, camera, cracks, refine)
 }
 
@@ -383,15 +383,15 @@ fn block_extras(p: &Part, m: &BlockMesh, units: u64) -> Value {
 }
 
 /// The scene `camera` sees of `file` (a container, a dataset, or a URL of either) with
-/// `options`, opened once, its blocks read and decoded; with `cover`, also the scene of the
-/// whole data from the same camera ([`cover_options`]), which answers where the camera's
-/// scene is silent.
+/// `options`, opened once, its blocks read and decoded; when `cover` says so of the data's
+/// georeference, also the scene of the whole data from the same camera
+/// ([`cover_options`]), which answers where the camera's scene is silent.
 fn scene_parts(
     file: &std::path::Path,
     view: &super::scene::ViewArgs,
     camera: &fmrh::scene::Camera,
     options: &fmrh::scene::SceneOptions,
-    cover: bool,
+    cover: impl Fn(Option<&Georeference>) -> bool,
 ) -> Result<(Vec<Part>, Vec<Part>, Context), Error> {
     if super::is_dataset(file)? {
         let ds = fmrh::dataset::Dataset::open(file)?;
@@ -410,10 +410,13 @@ fn scene_parts(
                 .collect();
             Ok::<_, Error>((parts, scene.tau, scene.mode))
         };
-        let (parts, covering, tau, mode) = with_cover(parts_of, camera, options, ds.grid(), cover)?;
+        let georeference = ds.georeference();
+        let wanted = cover(georeference.as_ref());
+        let (parts, covering, tau, mode) =
+            with_cover(parts_of, camera, options, ds.grid(), wanted)?;
         let context = Context {
             frame,
-            georeference: ds.georeference(),
+            georeference,
             tau,
             mode,
             units: 1,
@@ -472,15 +475,15 @@ fn cover_options(
     cover
 }
 
-/// The scene of one container, its blocks read and decoded, and with `cover` the scene of
-/// all its data from the same camera.
+/// The scene of one container, its blocks read and decoded, and when `cover` says so of its
+/// georeference the scene of all its data from the same camera.
 fn tile_parts<S: fmrh::store::Source>(
     file: &std::path::Path,
     view: &super::scene::ViewArgs,
     store: &fmrh::Store<S>,
     camera: &fmrh::scene::Camera,
     options: &fmrh::scene::SceneOptions,
-    cover: bool,
+    cover: impl Fn(Option<&Georeference>) -> bool,
 ) -> Result<(Vec<Part>, Vec<Part>, Context), Error> {
     let spacing = view.spacing(store, file)?;
     let terrain = Terrain::with_spacing(store, spacing)?;
@@ -506,7 +509,9 @@ fn tile_parts<S: fmrh::store::Source>(
             .collect();
         Ok::<_, Error>((parts, scene.tau, scene.mode))
     };
-    let (parts, covering, tau, mode) = with_cover(parts_of, camera, options, d.data_rect(), cover)?;
+    let wanted = cover(metadata.georeference.as_ref());
+    let (parts, covering, tau, mode) =
+        with_cover(parts_of, camera, options, d.data_rect(), wanted)?;
     let context = Context {
         frame,
         georeference: metadata.georeference.clone(),

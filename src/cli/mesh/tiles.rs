@@ -43,7 +43,12 @@ pub(super) fn run_tiles(
     camera: &fmrh::scene::Camera,
     options: &fmrh::scene::SceneOptions,
 ) -> Result<ExitCode, Error> {
-    let (parts, cover, context) = scene_parts(&args.file, &args.view, camera, options, true)?;
+    // The cover is for geodetic tiles only: a scene over the whole data, not made for nothing.
+    let geodetic_wanted = |g: Option<&fmrh::heightfield::Georeference>| {
+        args.tiling != TilingArg::Nodes && g.is_some_and(|g| Placement::new(g, 1.0).is_ok())
+    };
+    let (parts, cover, context) =
+        scene_parts(&args.file, &args.view, camera, options, geodetic_wanted)?;
     if parts.is_empty() {
         return Err(Error::InvalidArgument(
             "the camera sees no terrain: there is nothing to mesh (give --window)".into(),
