@@ -14,6 +14,9 @@
 //!   a point above the horizon on a lattice of 49 x 49, while everything culled was below
 //!   it (the first property).
 //!
+//! The same properties hold on the bundled whole-Earth grid (ETOPO1 at 0.5°, pole rows and
+//! both antimeridian columns) for cameras anywhere, over the poles and from orbit.
+//!
 //! A horizon the test is blind to would fail the first property (a visible sample with no
 //! block); a frame that measured distances on the flat grid would fail the second from
 //! orbit.
@@ -156,76 +159,248 @@ proptest! {
                 c
             }
         };
-        let eye = camera.eye;
-        let view = camera.view().unwrap();
-        let scene = terrain.scene(&camera, &SceneOptions::new(tau)).unwrap();
-        let data = store.domain().data_rect();
+        check_scene(&field, &store, &terrain, &camera, tau, &format!("{place:?}"))?;
+    }
+}
 
-        // One cover of what is seen.
-        let (w, hgt) = (field.width(), field.height());
-        let mut seen = 0;
-        for row in (0..hgt).step_by(2).chain([hgt - 1]) {
-            for col in (0..w).step_by(2).chain([w - 1]) {
-                let (c, r) = (u64::from(col), u64::from(row));
-                // Owned: the half-open footprint, plus the data's last column and row.
-                let owners = scene.blocks.iter().filter(|b| {
+/// The bundled whole-Earth grid (ETOPO1 at 0.5°: row 0 the north pole, row 360 the south
+/// pole, columns -180° to +180°) and a container of it, built once for every case.
+fn whole_earth() -> &'static (tempfile::TempDir, std::path::PathBuf, Heightfield) {
+    static EARTH: std::sync::OnceLock<(tempfile::TempDir, std::path::PathBuf, Heightfield)> =
+        std::sync::OnceLock::new();
+    EARTH.get_or_init(|| {
+        let dem = common::data("etopo1-pybacktrack/etopo1-bed-0.5deg.tif");
+        let field = fmrh::ingest::load(&dem, &fmrh::ingest::IngestOptions::default()).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("earth.fmrh");
+        fmrh::create(&file, field.clone(), &fmrh::CreateOptions::default()).unwrap();
+        (dir, file, field)
+    })
+}
+
+/// A camera anywhere around the Earth: over the poles, across the antimeridian, from orbit
+/// (up to 40,000 km) down to 100 m, looking straight down, along a heading and pitch, or at
+/// a point of the globe near it.
+fn earth_camera() -> impl Strategy<Value = (f64, f64, f64, Look)> {
+    let lat = prop_oneof![4 => -90.0f64..=90.0, 1 => 88.0f64..=90.0, 1 => -90.0f64..=-88.0];
+    let lon = prop_oneof![4 => -180.0f64..=180.0, 1 => 178.0f64..=180.0, 1 => -180.0f64..=-178.0];
+    let look = prop_oneof![
+        1 => Just(Look::Along(0.0, -90.0)),
+        2 => (0.0f64..360.0, -90.0f64..10.0).prop_map(|(h, p)| Look::Along(h, p)),
+        // A point up to 40° away in longitude and latitude.
+        2 => (-40.0f64..40.0, -40.0f64..40.0).prop_map(|(a, b)| Look::At(a, b)),
+    ];
+    (lat, lon, 2.0f64..7.6, look)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+    /// The properties on the whole Earth: one cover of what is seen wherever the camera is
+    /// (the grid's pole rows and its two antimeridian columns included), within tau at true
+    /// distances, nothing below the horizon.
+    #[test]
+    fn whole_earth_scenes_cover_what_is_seen_within_tau(
+        (lat, lon, log_h, look) in earth_camera(),
+        tau in 0.5f64..4.0,
+    ) {
+        let (_, file, field) = whole_earth();
+        let store = fmrh::Store::open(file).unwrap();
+        let terrain = Terrain::on_globe(&store).unwrap();
+        let h = 10f64.powf(log_h);
+        let lat_eye = lat.clamp(-89.999, 89.999);
+        let camera = match look {
+            Look::Along(heading, pitch) => {
+                let (eye, target, up) = globe::look(lat_eye, lon, h, heading, pitch);
+                let mut c = Camera::looking_at(eye, target);
+                c.up = up;
+                c
+            }
+            Look::At(dlon, dlat) => {
+                let eye = globe::ecef_point(lon, lat_eye, h);
+                let target = globe::ecef_point(lon + dlon, (lat + dlat).clamp(-90.0, 90.0), 0.0);
+                let mut c = Camera::looking_at(eye, target);
+                // Any up not along the view.
+                let fwd = (target - eye).normalize_or_zero();
+                let up = DVec3::from(globe::up(lon, lat_eye));
+                c.up = if fwd.cross(up).length() > 1e-3 { up } else { DVec3::X.cross(fwd).normalize_or(DVec3::Y) };
+                c
+            }
+        };
+        if camera.view().is_err() {
+            return Ok(()); // a degenerate camera (target at the eye): refused, not a scene
+        }
+        check_scene(field, &store, &terrain, &camera, tau, &format!("eye {lat},{lon},{h}"))?;
+    }
+}
+
+/// Over the north pole the whole pole row is seen and owned by one block per sample; over
+/// the antimeridian both of the grid's edge columns (the same meridian, -180° and +180°) are
+/// seen and drawn; from orbit a hemisphere is seen, the other culled.
+#[test]
+fn whole_earth_over_the_pole_and_the_antimeridian() {
+    let (_, file, field) = whole_earth();
+    let store = fmrh::Store::open(file).unwrap();
+    let terrain = Terrain::on_globe(&store).unwrap();
+    let down = |lat: f64, lon: f64, h: f64| {
+        let (eye, target, up) = globe::look(lat, lon, h, 0.0, -90.0);
+        let mut c = Camera::looking_at(eye, target);
+        c.up = up;
+        c
+    };
+    let owner = |scene: &fmrh::scene::Scene, col: u64, row: u64| {
+        scene
+            .blocks
+            .iter()
+            .filter(|b| b.col0 <= col && col <= b.col1 && b.row0 <= row && row <= b.row1)
+            .count()
+    };
+    let (w, h) = (u64::from(field.width()), u64::from(field.height()));
+    let pole = down(89.999, 0.0, 3_000_000.0);
+    let seen = check_scene(field, &store, &terrain, &pole, 1.0, "pole").unwrap();
+    let scene = terrain.scene(&pole, &SceneOptions::new(1.0)).unwrap();
+    assert!(seen > 1000, "{seen}");
+    for col in 0..w {
+        assert!(owner(&scene, col, 0) >= 1, "pole sample {col} not drawn");
+    }
+    assert!(
+        (0..w).all(|c| owner(&scene, c, h - 1) == 0),
+        "the south pole is hidden"
+    );
+
+    let anti = down(10.0, 180.0, 2_000_000.0);
+    let seen = check_scene(field, &store, &terrain, &anti, 1.0, "antimeridian").unwrap();
+    let scene = terrain.scene(&anti, &SceneOptions::new(1.0)).unwrap();
+    assert!(seen > 100, "{seen}");
+    assert!(owner(&scene, 0, 160) >= 1 && owner(&scene, w - 1, 160) >= 1);
+
+    let orbit = down(43.5, 6.5, 20_000_000.0);
+    let seen = check_scene(field, &store, &terrain, &orbit, 1.0, "orbit").unwrap();
+    let total = (w.div_ceil(2) + 1) * (h.div_ceil(2) + 1);
+    assert!(
+        seen as u64 > total / 4 && (seen as u64) < total * 3 / 4,
+        "{seen} of {total}"
+    );
+}
+
+/// Checks the three properties of the module doc for `camera`'s scene over `store` (built
+/// from `field`); returns how many of the samples it looked at are seen.
+fn check_scene(
+    field: &Heightfield,
+    store: &fmrh::Store,
+    terrain: &Terrain<'_, fmrh::store::FileSource>,
+    camera: &Camera,
+    tau: f64,
+    what: &str,
+) -> Result<usize, TestCaseError> {
+    let eye = camera.eye;
+    let view = camera.view().unwrap();
+    let scene = terrain.scene(camera, &SceneOptions::new(tau)).unwrap();
+    let data = store.domain().data_rect();
+
+    // One cover of what is seen.
+    let (w, hgt) = (field.width(), field.height());
+    let mut seen = 0;
+    for row in (0..hgt).step_by(2).chain([hgt - 1]) {
+        for col in (0..w).step_by(2).chain([w - 1]) {
+            let (c, r) = (u64::from(col), u64::from(row));
+            // Owned: the half-open footprint, plus the data's last column and row.
+            let owners = scene
+                .blocks
+                .iter()
+                .filter(|b| {
                     let x = c >= b.col0 && (c < b.col1 || (c == b.col1 && b.col1 == data.col1));
                     let y = r >= b.row0 && (r < b.row1 || (r == b.row1 && b.row1 == data.row1));
                     x && y
-                }).count();
-                prop_assert!(owners <= 1, "sample {col},{row} in {owners} blocks");
-                let p = sample_point(&field, col, row);
-                let in_frustum = view.planes.iter().all(|pl| pl.normal.dot(p) + pl.offset >= 0.0);
-                if in_frustum && above_horizon(eye, p) {
-                    seen += 1;
-                    prop_assert_eq!(owners, 1, "visible sample {},{} ({:?}) in no block", col, row, place);
-                }
+                })
+                .count();
+            prop_assert!(owners <= 1, "sample {col},{row} in {owners} blocks");
+            let p = sample_point(field, col, row);
+            let in_frustum = view
+                .planes
+                .iter()
+                .all(|pl| pl.normal.dot(p) + pl.offset >= 0.0);
+            if in_frustum && above_horizon(eye, p) {
+                seen += 1;
+                prop_assert_eq!(
+                    owners,
+                    1,
+                    "visible sample {},{} ({:?}) in no block",
+                    col,
+                    row,
+                    what
+                );
             }
-        }
-
-        // The tolerance at true 3D distances, to the blocks' real grid points.
-        let loaded = load_blocks(&store, &scene.blocks, PAYLOAD_GAP).unwrap();
-        let d = *store.domain();
-        let g = field.metadata.georeference.clone().unwrap();
-        for (b, l) in scene.blocks.iter().zip(&loaded) {
-            let s = d.stride(b.level);
-            let mut nearest = f64::INFINITY;
-            for j in 0..l.height {
-                for i in 0..l.width {
-                    let (c, r) = (b.col0 + u64::from(i) * s, b.row0 + u64::from(j) * s);
-                    if c > data.col1 || r > data.row1 {
-                        continue;
-                    }
-                    let z = l.heights[(j * l.width + i) as usize];
-                    let lon = g.origin[0] + c as f64 * g.step[0];
-                    let lat = (g.origin[1] + r as f64 * g.step[1]).clamp(-90.0, 90.0);
-                    nearest = nearest.min((globe::ecef_point(lon, lat, f64::from(z)) - eye).length());
-                }
-            }
-            let px = if b.error == 0.0 { 0.0 } else { b.error * view.lambda / nearest };
-            prop_assert!(px <= tau * (1.0 + 1e-9), "block {} level {}: {px} px at {nearest} m", b.key, b.level);
-
-            // Not wholly below the horizon: its shell's top has a visible point.
-            let (lon_a, lat_a) = (g.origin[0] + b.col0 as f64 * g.step[0], g.origin[1] + b.row0 as f64 * g.step[1]);
-            let (lon_b, lat_b) = (g.origin[0] + b.col1 as f64 * g.step[0], g.origin[1] + b.row1 as f64 * g.step[1]);
-            let Some((_, lift)) = globe::horizon_lattice(lon_a, lon_b, lat_a, lat_b, f64::from(b.max_height)) else {
-                continue; // too large a cell to be culled at all
-            };
-            let n = 48;
-            let top = f64::from(b.max_height).max(0.0) + lift;
-            let visible = (0..=n).any(|i| (0..=n).any(|j| {
-                let lon = lon_a + (lon_b - lon_a) * f64::from(i) / f64::from(n);
-                let lat = (lat_a + (lat_b - lat_a) * f64::from(j) / f64::from(n)).clamp(-90.0, 90.0);
-                above_horizon(eye, globe::ecef_point(lon, lat, top))
-            }));
-            prop_assert!(visible, "block {} level {} is wholly below the horizon", b.key, b.level);
-        }
-        // Seen samples mean blocks; none seen from far beyond the horizon can still leave
-        // blocks only when their shells peek above it (checked above).
-        if seen > 0 {
-            prop_assert!(!scene.blocks.is_empty());
         }
     }
+
+    // The tolerance at true 3D distances, to the blocks' real grid points.
+    let loaded = load_blocks(store, &scene.blocks, PAYLOAD_GAP).unwrap();
+    let d = *store.domain();
+    let g = field.metadata.georeference.clone().unwrap();
+    for (b, l) in scene.blocks.iter().zip(&loaded) {
+        let s = d.stride(b.level);
+        let mut nearest = f64::INFINITY;
+        for j in 0..l.height {
+            for i in 0..l.width {
+                let (c, r) = (b.col0 + u64::from(i) * s, b.row0 + u64::from(j) * s);
+                if c > data.col1 || r > data.row1 {
+                    continue;
+                }
+                let z = l.heights[(j * l.width + i) as usize];
+                let lon = g.origin[0] + c as f64 * g.step[0];
+                let lat = (g.origin[1] + r as f64 * g.step[1]).clamp(-90.0, 90.0);
+                nearest = nearest.min((globe::ecef_point(lon, lat, f64::from(z)) - eye).length());
+            }
+        }
+        let px = if b.error == 0.0 {
+            0.0
+        } else {
+            b.error * view.lambda / nearest
+        };
+        prop_assert!(
+            px <= tau * (1.0 + 1e-9),
+            "block {} level {}: {px} px at {nearest} m",
+            b.key,
+            b.level
+        );
+
+        // Not wholly below the horizon: its shell's top has a visible point.
+        let (lon_a, lat_a) = (
+            g.origin[0] + b.col0 as f64 * g.step[0],
+            g.origin[1] + b.row0 as f64 * g.step[1],
+        );
+        let (lon_b, lat_b) = (
+            g.origin[0] + b.col1 as f64 * g.step[0],
+            g.origin[1] + b.row1 as f64 * g.step[1],
+        );
+        let Some((_, lift)) =
+            globe::horizon_lattice(lon_a, lon_b, lat_a, lat_b, f64::from(b.max_height))
+        else {
+            continue; // too large a cell to be culled at all
+        };
+        let n = 48;
+        let top = f64::from(b.max_height).max(0.0) + lift;
+        let visible = (0..=n).any(|i| {
+            (0..=n).any(|j| {
+                let lon = lon_a + (lon_b - lon_a) * f64::from(i) / f64::from(n);
+                let lat =
+                    (lat_a + (lat_b - lat_a) * f64::from(j) / f64::from(n)).clamp(-90.0, 90.0);
+                above_horizon(eye, globe::ecef_point(lon, lat, top))
+            })
+        });
+        prop_assert!(
+            visible,
+            "block {} level {} is wholly below the horizon",
+            b.key,
+            b.level
+        );
+    }
+    // Seen samples mean blocks; none seen from far beyond the horizon can still leave
+    // blocks only when their shells peek above it (checked above).
+    if seen > 0 {
+        prop_assert!(!scene.blocks.is_empty());
+    }
+    Ok(seen)
 }
 
 /// The bundled SRTM tile N43E006 as a container under `dir`.
