@@ -18,6 +18,7 @@
 
 pub mod baseline;
 pub mod camera;
+pub mod layers;
 pub mod load;
 pub mod path;
 pub mod ranges;
@@ -32,6 +33,7 @@ mod view_dependent;
 
 pub use crate::format::PayloadRef;
 pub use camera::{Aabb, Camera, Coverage, GlobeFrame, TerrainFrame, View, WorldFrame};
+pub use layers::{LayerBlock, LayeredScene, Layers, LonLatRect};
 pub use load::{load_blocks, load_blocks_reusing, HeldGrid, LoadedBlock, PAYLOAD_GAP};
 pub use reconstruct::{reconstruct, Reconstruction};
 pub use result::{Mode, NeighbourLevels, Scene, SceneBlock, SceneOptions, SceneStats, DEFAULT_GAP};
