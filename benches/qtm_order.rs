@@ -14,12 +14,12 @@
 //!   ties (tiles near the poles, where the ZOT plane shrinks) by latitude and longitude;
 //! * `hilbert`: the Hilbert curve over the 360 × 180 tile grid (what a dataset's manifest
 //!   uses for its tiles, `format-spec/dataset.md`);
-//! * `morton`: the Z-order of the tile grid;
+//! * `morton`: the Z-order of the tile grid (seed 001's code, `MortonKey`);
 //! * `rows`: row after row, west to east.
 //!
 //! `cargo bench --bench qtm_order`. Counts, not timings: the same on any machine.
 
-use fmrh::curve::{hilbert_encode, QtmCell};
+use fmrh::curve::{hilbert_encode, MortonKey, QtmCell};
 use fmrh::format::manifest::TILES_PER_PAGE;
 use fmrh::globe;
 use fmrh::scene::{Aabb, Camera};
@@ -41,16 +41,6 @@ fn tiles() -> Vec<Tile> {
     out
 }
 
-fn spread(v: u32) -> u64 {
-    let mut x = u64::from(v);
-    x = (x | (x << 16)) & 0x0000_ffff_0000_ffff;
-    x = (x | (x << 8)) & 0x00ff_00ff_00ff_00ff;
-    x = (x | (x << 4)) & 0x0f0f_0f0f_0f0f_0f0f;
-    x = (x | (x << 2)) & 0x3333_3333_3333_3333;
-    x = (x | (x << 1)) & 0x5555_5555_5555_5555;
-    x
-}
-
 /// The tile's grid position: column from -180°, row from the north.
 fn grid(t: &Tile) -> (u32, u32) {
     ((t.lon + 180) as u32, (89 - t.lat) as u32)
@@ -63,7 +53,7 @@ fn key(order: &str, t: &Tile) -> (u64, i32, i32) {
             .map(|q| q.curve_index())
             .unwrap_or(u64::MAX),
         "hilbert" => hilbert_encode(9, c, r),
-        "morton" => spread(c) | (spread(r) << 1),
+        "morton" => MortonKey::from_node(9, c, r).code(),
         _ => u64::from(r) * 360 + u64::from(c),
     };
     (k, t.lat, t.lon)

@@ -19,10 +19,8 @@ mod common;
 
 use fmrh::globe;
 use fmrh::mesh::surface::Surface;
-use fmrh::mesh::GridBlock;
-use fmrh::scene::{Camera, LayeredScene, Layers, LoadedBlock, SceneOptions, Terrain};
+use fmrh::scene::{Camera, Layers, SceneOptions, Terrain};
 use fmrh::Heightfield;
-use glam::DVec3;
 use proptest::prelude::*;
 
 struct Built {
@@ -35,26 +33,40 @@ fn built() -> &'static Built {
     static B: std::sync::OnceLock<Built> = std::sync::OnceLock::new();
     B.get_or_init(|| {
         let dir = tempfile::tempdir().unwrap();
-        let mut files = Vec::new();
-        let mut fields = Vec::new();
-        for (name, rel) in [
+        let (files, fields) = [
             ("earth", "etopo1-pybacktrack/etopo1-bed-0.5deg.tif"),
             ("n6", "srtm3-pyhgtmap/N43E006.hgt.gz"),
             ("n7", "srtm3-pyhgtmap/N43E007.hgt.gz"),
-        ] {
-            let f = fmrh::ingest::load(&common::data(rel), &fmrh::ingest::IngestOptions::default())
-                .unwrap();
-            let file = dir.path().join(format!("{name}.fmrh"));
-            fmrh::create(&file, f.clone(), &fmrh::CreateOptions::default()).unwrap();
-            files.push(file);
-            fields.push(f);
-        }
+        ]
+        .iter()
+        .map(|(name, rel)| common::globe::container(dir.path(), name, rel))
+        .unzip();
         Built {
             _dir: dir,
             files,
             fields,
         }
     })
+}
+
+/// The built files, opened.
+fn stores() -> Vec<fmrh::Store> {
+    built()
+        .files
+        .iter()
+        .map(|f| fmrh::Store::open(f).unwrap())
+        .collect()
+}
+
+/// The stores as layers on the globe, the base first.
+fn layers_of(stores: &[fmrh::Store]) -> Layers<'_, fmrh::store::FileSource> {
+    Layers::new(
+        stores
+            .iter()
+            .map(|s| Terrain::on_globe(s).unwrap())
+            .collect(),
+    )
+    .unwrap()
 }
 
 /// Longitude, latitude and height of sample `(col, row)` of `f`.
@@ -64,34 +76,6 @@ fn sample(f: &Heightfield, col: u32, row: u32) -> (f64, f64, f64) {
     let lat = (g.origin[1] + f64::from(row) * g.step[1]).clamp(-90.0, 90.0);
     let z = f.samples()[(row * f.width() + col) as usize];
     (lon, lat, f64::from(if z.is_nan() { 0.0 } else { z }))
-}
-
-fn above_horizon(eye: DVec3, p: DVec3) -> bool {
-    let (lon, lat, h) = globe::geodetic(p);
-    let q = globe::ecef_point(lon, lat, h.max(0.0));
-    !globe::scaled_point_hidden(
-        DVec3::from(globe::scaled(eye.to_array())),
-        DVec3::from(globe::scaled(q.to_array())),
-    )
-}
-
-/// The grid of block `k` of the scene, as the mesh and the surface take it.
-fn grid<'a, S: fmrh::store::Source>(
-    layers: &Layers<'_, S>,
-    scene: &LayeredScene,
-    loaded: &'a [LoadedBlock],
-    k: usize,
-) -> GridBlock<'a> {
-    let b = &scene.blocks[k];
-    let d = layers.layers()[b.layer].terrain.domain();
-    GridBlock {
-        rect: b.block.rect(),
-        stride: d.stride(b.block.level),
-        grid_width: loaded[k].width,
-        grid_height: loaded[k].height,
-        heights: &loaded[k].heights,
-        error: b.block.error,
-    }
 }
 
 /// A change made to the skirts before they are checked (to show the check can fail).
@@ -104,16 +88,8 @@ fn check(
     skirts_override: Option<&SkirtEdit>,
 ) -> Result<usize, TestCaseError> {
     let b = built();
-    let stores: Vec<fmrh::Store> = b
-        .files
-        .iter()
-        .map(|f| fmrh::Store::open(f).unwrap())
-        .collect();
-    let terrains: Vec<_> = stores
-        .iter()
-        .map(|s| Terrain::on_globe(s).unwrap())
-        .collect();
-    let layers = Layers::new(terrains).unwrap();
+    let stores = stores();
+    let layers = layers_of(&stores);
     let scene = layers.scene(camera, &SceneOptions::new(tau)).unwrap();
     let view = camera.view().unwrap();
     let eye = camera.eye;
@@ -205,7 +181,7 @@ fn check(
                 .planes
                 .iter()
                 .all(|pl| pl.normal.dot(p) + pl.offset >= 0.0);
-            if !(in_frustum && above_horizon(eye, p)) {
+            if !(in_frustum && common::globe::above_horizon(eye, p)) {
                 continue;
             }
             seen += 1;
@@ -259,7 +235,7 @@ fn check(
         .map(|ks| {
             Surface::new(
                 ks.iter()
-                    .map(|&k| grid(&layers, &scene, &loaded, k))
+                    .map(|&k| layers.grid(&scene, &loaded, k))
                     .collect(),
             )
         })
@@ -359,17 +335,8 @@ fn orbit_to_ground_without_holes_or_cracks() {
 /// points: a coarse layer's sample lines fall between a fine block's grid points.
 #[test]
 fn skirts_are_measured_between_grid_points() {
-    let b = built();
-    let stores: Vec<fmrh::Store> = b
-        .files
-        .iter()
-        .map(|f| fmrh::Store::open(f).unwrap())
-        .collect();
-    let terrains: Vec<_> = stores
-        .iter()
-        .map(|s| Terrain::on_globe(s).unwrap())
-        .collect();
-    let layers = Layers::new(terrains).unwrap();
+    let stores = stores();
+    let layers = layers_of(&stores);
     let camera = camera_at(43.25, 6.35, 2.0e5, 20.0, -55.0);
     let scene = layers.scene(&camera, &SceneOptions::new(1.0)).unwrap();
     let loaded = layers.load(&scene).unwrap();
@@ -446,18 +413,8 @@ fn the_cli_draws_layers() {
         String::from_utf8_lossy(&out.stderr)
     );
     let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    let stores: Vec<fmrh::Store> = b
-        .files
-        .iter()
-        .map(|f| fmrh::Store::open(f).unwrap())
-        .collect();
-    let layers = Layers::new(
-        stores
-            .iter()
-            .map(|s| Terrain::on_globe(s).unwrap())
-            .collect(),
-    )
-    .unwrap();
+    let stores = stores();
+    let layers = layers_of(&stores);
     let scene = layers
         .scene(
             &camera_at(43.25, 6.35, 2.0e5, 20.0, -55.0),

@@ -81,17 +81,6 @@ fn sample_point(f: &Heightfield, col: u32, row: u32) -> DVec3 {
     globe::ecef_point(lon, lat, f64::from(z))
 }
 
-/// Whether `p` (ECEF) is above the horizon from `eye`, a point below the ellipsoid counting
-/// as on it (Cesium's convention).
-fn above_horizon(eye: DVec3, p: DVec3) -> bool {
-    let (lon, lat, h) = globe::geodetic(p);
-    let q = globe::ecef_point(lon, lat, h.max(0.0));
-    !globe::scaled_point_hidden(
-        DVec3::from(globe::scaled(eye.to_array())),
-        DVec3::from(globe::scaled(q.to_array())),
-    )
-}
-
 /// A camera: offsets of the eye from the data's centre in degrees, its height (log-uniform,
 /// 30 m to 30,000 km, or 1.3 to 10 km over the data) and how it looks: at a data sample (chosen by two fractions), or along
 /// a heading and pitch.
@@ -169,11 +158,12 @@ fn whole_earth() -> &'static (tempfile::TempDir, std::path::PathBuf, Heightfield
     static EARTH: std::sync::OnceLock<(tempfile::TempDir, std::path::PathBuf, Heightfield)> =
         std::sync::OnceLock::new();
     EARTH.get_or_init(|| {
-        let dem = common::data("etopo1-pybacktrack/etopo1-bed-0.5deg.tif");
-        let field = fmrh::ingest::load(&dem, &fmrh::ingest::IngestOptions::default()).unwrap();
         let dir = tempfile::tempdir().unwrap();
-        let file = dir.path().join("earth.fmrh");
-        fmrh::create(&file, field.clone(), &fmrh::CreateOptions::default()).unwrap();
+        let (file, field) = common::globe::container(
+            dir.path(),
+            "earth",
+            "etopo1-pybacktrack/etopo1-bed-0.5deg.tif",
+        );
         (dir, file, field)
     })
 }
@@ -319,7 +309,7 @@ fn check_scene(
                 .planes
                 .iter()
                 .all(|pl| pl.normal.dot(p) + pl.offset >= 0.0);
-            if in_frustum && above_horizon(eye, p) {
+            if in_frustum && common::globe::above_horizon(eye, p) {
                 seen += 1;
                 prop_assert_eq!(
                     owners,
@@ -385,7 +375,7 @@ fn check_scene(
                 let lon = lon_a + (lon_b - lon_a) * f64::from(i) / f64::from(n);
                 let lat =
                     (lat_a + (lat_b - lat_a) * f64::from(j) / f64::from(n)).clamp(-90.0, 90.0);
-                above_horizon(eye, globe::ecef_point(lon, lat, top))
+                common::globe::above_horizon(eye, globe::ecef_point(lon, lat, top))
             })
         });
         prop_assert!(
@@ -405,11 +395,7 @@ fn check_scene(
 
 /// The bundled SRTM tile N43E006 as a container under `dir`.
 fn n43(dir: &std::path::Path) -> std::path::PathBuf {
-    let dem = common::data("srtm3-pyhgtmap/N43E006.hgt.gz");
-    let file = dir.join("n43.fmrh");
-    let field = fmrh::ingest::load(&dem, &fmrh::ingest::IngestOptions::default()).unwrap();
-    fmrh::create(&file, field, &fmrh::CreateOptions::default()).unwrap();
-    file
+    common::globe::container(dir, "n43", "srtm3-pyhgtmap/N43E006.hgt.gz").0
 }
 
 /// From orbit above the data the far side is culled and the scene is the coarsest block; from

@@ -198,7 +198,8 @@ pub struct LayeredScene {
     pub layers: Vec<SceneStats>,
     /// Blocks dropped because the layers above cover them.
     pub hidden_by_layers: u64,
-    /// The layers' statistics summed (blocks and bytes after the cut; errors maximised).
+    /// The layers' statistics summed (blocks, samples, triangles and bytes after the cut;
+    /// errors maximised).
     pub stats: SceneStats,
 }
 
@@ -255,6 +256,7 @@ impl<'s, S: Source> Layers<'s, S> {
         for (i, layer) in self.layers.iter().enumerate() {
             let scene = layer.terrain.scene(camera, options)?;
             let above: Vec<LonLatRect> = self.layers[i + 1..].iter().map(|l| l.footprint).collect();
+            let side = u64::from(layer.terrain.domain().block_size());
             for b in scene.blocks {
                 let r = LonLatRect::of_samples(&layer.frame, &b.rect());
                 let cutouts: Vec<LonLatRect> = above.iter().flat_map(|f| r.clips(f)).collect();
@@ -263,6 +265,8 @@ impl<'s, S: Source> Layers<'s, S> {
                     continue;
                 }
                 stats.blocks += 1;
+                stats.samples += side * side;
+                stats.triangles += 2 * (side - 1) * (side - 1);
                 stats.bytes += u64::from(b.payload.len);
                 stats.max_error = stats.max_error.max(b.error);
                 stats.max_screen_error = stats.max_screen_error.max(b.screen_error);
@@ -308,6 +312,59 @@ impl<'s, S: Source> Layers<'s, S> {
             .collect()
     }
 
+    /// Block `k` of `scene` as the mesh and the surface take it, given the scene's blocks
+    /// loaded in order ([`Layers::load`]).
+    pub fn grid<'a>(
+        &self,
+        scene: &LayeredScene,
+        loaded: &'a [super::LoadedBlock],
+        k: usize,
+    ) -> GridBlock<'a> {
+        let b = &scene.blocks[k];
+        GridBlock {
+            rect: b.block.rect(),
+            stride: self.layers[b.layer].terrain.domain().stride(b.block.level),
+            grid_width: loaded[k].width,
+            grid_height: loaded[k].height,
+            heights: &loaded[k].heights,
+            error: b.block.error,
+        }
+    }
+
+    /// The edges of samples `rect` of layer `j` that lie on its footprint's border.
+    fn border_seams(&self, j: usize, rect: &SampleRect) -> Vec<Seam> {
+        let layer = &self.layers[j];
+        let data = layer.terrain.domain().data_rect();
+        let (lon_a, lat_a) = layer.frame.lon_lat(rect.col0 as f64, rect.row0 as f64);
+        let (lon_b, lat_b) = layer.frame.lon_lat(rect.col1 as f64, rect.row1 as f64);
+        let parallel = |at| Seam {
+            along_lon: true,
+            at,
+            from: lon_a,
+            to: lon_b,
+        };
+        let meridian = |at| Seam {
+            along_lon: false,
+            at,
+            from: lat_a,
+            to: lat_b,
+        };
+        let mut out = Vec::new();
+        if rect.row0 == data.row0 {
+            out.push(parallel(lat_a));
+        }
+        if rect.row1 == data.row1 {
+            out.push(parallel(lat_b));
+        }
+        if rect.col0 == data.col0 {
+            out.push(meridian(lon_a));
+        }
+        if rect.col1 == data.col1 {
+            out.push(meridian(lon_b));
+        }
+        out
+    }
+
     /// The skirt depth of each block of `scene` (metres; 0 off the seams), given its blocks
     /// loaded in order ([`Layers::load`]): see the module doc.
     pub fn skirts(&self, scene: &LayeredScene, loaded: &[super::LoadedBlock]) -> Result<Vec<f64>> {
@@ -319,124 +376,119 @@ impl<'s, S: Source> Layers<'s, S> {
             )));
         }
         let n = self.layers.len();
-        // Each layer's surface, with the index of each of its blocks in the scene.
+        let grids: Vec<GridBlock<'_>> = (0..scene.blocks.len())
+            .map(|k| self.grid(scene, loaded, k))
+            .collect();
+        // Each layer's blocks (their indices in the scene) and surface.
         let mut index: Vec<Vec<usize>> = vec![Vec::new(); n];
         for (k, b) in scene.blocks.iter().enumerate() {
             index[b.layer].push(k);
         }
-        let grid = |k: usize| {
-            let b = &scene.blocks[k];
-            let d = self.layers[b.layer].terrain.domain();
-            GridBlock {
-                rect: b.block.rect(),
-                stride: d.stride(b.block.level),
-                grid_width: loaded[k].width,
-                grid_height: loaded[k].height,
-                heights: &loaded[k].heights,
-                error: b.block.error,
-            }
-        };
         let surfaces: Vec<Surface<'_>> = index
             .iter()
-            .map(|ks| Surface::new(ks.iter().map(|&k| grid(k)).collect()))
+            .map(|ks| Surface::new(ks.iter().map(|&k| grids[k]).collect()))
             .collect();
         let mut depth = vec![0.0f64; scene.blocks.len()];
-        for j in 0..n {
-            let layer = &self.layers[j];
-            let data = layer.terrain.domain().data_rect();
-            for &k in &index[j] {
-                let r = scene.blocks[k].block.rect();
-                let g = grid(k);
-                // The block's edges on its layer's footprint border: (along a row?, the
-                // fixed line, from, to), in the layer's samples.
-                let mut edges = Vec::new();
-                if r.row0 == data.row0 {
-                    edges.push((true, r.row0 as f64, r.col0 as f64, r.col1 as f64));
-                }
-                if r.row1 == data.row1 {
-                    edges.push((true, r.row1 as f64, r.col0 as f64, r.col1 as f64));
-                }
-                if r.col0 == data.col0 {
-                    edges.push((false, r.col0 as f64, r.row0 as f64, r.row1 as f64));
-                }
-                if r.col1 == data.col1 {
-                    edges.push((false, r.col1 as f64, r.row0 as f64, r.row1 as f64));
-                }
-                for (along_row, line, from, to) in edges {
-                    // Every point where either surface along the seam may bend: this block's
-                    // breaks, and those of every other layer's blocks, brought to its samples.
-                    let mut ts = grid_breaks(&g, along_row, line, from, to);
-                    for (i, other) in self.layers.iter().enumerate() {
-                        if i == j {
-                            continue;
-                        }
-                        for &ko in &index[i] {
-                            let go = grid(ko);
-                            // The seam line in the other grid's samples, and back.
-                            let to_other = |t: f64| {
-                                let (c, w) = if along_row { (t, line) } else { (line, t) };
-                                let (lon, lat) = layer.frame.lon_lat(c, w);
-                                sample_of(&other.frame, lon, lat)
-                            };
-                            let (a, b) = (to_other(from), to_other(to));
-                            let (o_line, o_from, o_to) = if along_row {
-                                (a.1, a.0.min(b.0), a.0.max(b.0))
-                            } else {
-                                (a.0, a.1.min(b.1), a.1.max(b.1))
-                            };
-                            let orr = go.rect;
-                            let (lo, hi) = if along_row {
-                                (orr.col0 as f64, orr.col1 as f64)
-                            } else {
-                                (orr.row0 as f64, orr.row1 as f64)
-                            };
-                            let (line_lo, line_hi) = if along_row {
-                                (orr.row0 as f64, orr.row1 as f64)
-                            } else {
-                                (orr.col0 as f64, orr.col1 as f64)
-                            };
-                            if o_line < line_lo || o_line > line_hi || o_to < lo || o_from > hi {
-                                continue;
-                            }
-                            for ot in
-                                grid_breaks(&go, along_row, o_line, o_from.max(lo), o_to.min(hi))
-                            {
-                                // The other grid's parameter, back to this one's by proportion.
-                                let span = o_to - o_from;
-                                if span > 0.0 {
-                                    ts.push(from + (ot - o_from) / span * (to - from));
-                                }
-                            }
-                        }
+        for (k, block) in scene.blocks.iter().enumerate() {
+            let j = block.layer;
+            for seam in self.border_seams(j, &block.block.rect()) {
+                // Every point where any block's surface may bend along the seam.
+                let mut ts = Vec::new();
+                for (i, layer) in self.layers.iter().enumerate() {
+                    for &ko in &index[i] {
+                        ts.extend(layer.seam_breaks(&grids[ko], &seam));
                     }
-                    for t in ts {
-                        if !(t >= from && t <= to) {
+                }
+                for t in ts {
+                    let (lon, lat) = seam.point(t);
+                    let (c, w) = self.layers[j].sample_of(lon, lat);
+                    let own = crate::mesh::surface::height_at(&grids[k], c, w);
+                    // Across the seam: every other layer drawing there (at a footprint's
+                    // corner several meet; where a layer is cut out on both sides this only
+                    // deepens a skirt, which never opens a crack).
+                    for i in (0..n).filter(|&i| i != j) {
+                        let other = &self.layers[i];
+                        if !other.footprint.contains(lon, lat) {
                             continue;
                         }
-                        let (c, w) = if along_row { (t, line) } else { (line, t) };
-                        let own = crate::mesh::surface::height_at(&g, c, w);
-                        let (lon, lat) = layer.frame.lon_lat(c, w);
-                        // Across the seam: every other layer drawing there (at a footprint's
-                        // corner several meet; where a layer is cut out on both sides this only
-                        // deepens a skirt, which never opens a crack).
-                        for i in (0..n).filter(|&i| i != j) {
-                            let other = &self.layers[i];
-                            if !other.footprint.contains(lon, lat) {
-                                continue;
-                            }
-                            let (oc, or) = sample_of(&other.frame, lon, lat);
-                            let Some(s) = surfaces[i].at(oc, or) else {
-                                continue;
-                            };
-                            let ko = index[i][s.block];
-                            depth[k] = depth[k].max(own - s.height);
-                            depth[ko] = depth[ko].max(s.height - own);
-                        }
+                        let (oc, or) = other.sample_of(lon, lat);
+                        let Some(s) = surfaces[i].at(oc, or) else {
+                            continue;
+                        };
+                        let ko = index[i][s.block];
+                        depth[k] = depth[k].max(own - s.height);
+                        depth[ko] = depth[ko].max(s.height - own);
                     }
                 }
             }
         }
         Ok(depth)
+    }
+}
+
+/// A piece of a layer's footprint border, degrees: along a parallel (longitudes `from` to
+/// `to` at latitude `at`) or a meridian (latitudes `from` to `to` at longitude `at`).
+struct Seam {
+    along_lon: bool,
+    at: f64,
+    from: f64,
+    to: f64,
+}
+
+impl Seam {
+    /// Longitude and latitude of the point at parameter `t` (a longitude or a latitude).
+    fn point(&self, t: f64) -> (f64, f64) {
+        if self.along_lon {
+            (t, self.at)
+        } else {
+            (self.at, t)
+        }
+    }
+}
+
+impl<S: Source> Layer<'_, S> {
+    /// The fractional sample position of `lon`, `lat` on this layer's grid, the longitude
+    /// taken a whole turn either way when that puts it in the footprint.
+    fn sample_of(&self, lon: f64, lat: f64) -> (f64, f64) {
+        let f = &self.footprint;
+        let lon = [0.0, -360.0, 360.0]
+            .iter()
+            .map(|t| lon + t)
+            .find(|l| *l >= f.lon0 && *l <= f.lon1)
+            .unwrap_or(lon);
+        (
+            (lon - self.frame.lon0) / self.frame.dlon,
+            (lat - self.frame.lat0) / self.frame.dlat,
+        )
+    }
+
+    /// Where block `g` of this layer may bend along `seam`, as seam parameters: the seam
+    /// brought into the grid's samples, [`grid_breaks`] there, and back.
+    fn seam_breaks(&self, g: &GridBlock<'_>, seam: &Seam) -> Vec<f64> {
+        let (a, b) = (
+            self.sample_of(seam.point(seam.from).0, seam.point(seam.from).1),
+            self.sample_of(seam.point(seam.to).0, seam.point(seam.to).1),
+        );
+        // In the grid, a parallel is a row (the column varies) and a meridian a column.
+        let (line, ta, tb) = if seam.along_lon {
+            (a.1, a.0, b.0)
+        } else {
+            (a.0, a.1, b.1)
+        };
+        let r = &g.rect;
+        let (line_lo, line_hi, lo, hi) = if seam.along_lon {
+            (r.row0, r.row1, r.col0, r.col1)
+        } else {
+            (r.col0, r.col1, r.row0, r.row1)
+        };
+        let (from, to) = (ta.min(tb).max(lo as f64), ta.max(tb).min(hi as f64));
+        if ta == tb || line < line_lo as f64 || line > line_hi as f64 || from > to {
+            return Vec::new();
+        }
+        grid_breaks(g, seam.along_lon, line, from, to)
+            .into_iter()
+            .map(|x| seam.from + (x - ta) / (tb - ta) * (seam.to - seam.from))
+            .collect()
     }
 }
 
@@ -475,23 +527,6 @@ fn grid_breaks(g: &GridBlock<'_>, along_row: bool, line: f64, from: f64, to: f64
         }
     }
     out
-}
-
-/// The fractional sample position of `lon`, `lat` on `frame`, the longitude taken a whole
-/// turn either way if that puts it nearer the grid's origin side.
-fn sample_of(frame: &GlobeFrame, lon: f64, lat: f64) -> (f64, f64) {
-    let row = (lat - frame.lat0) / frame.dlat;
-    let col = [-360.0, 0.0, 360.0]
-        .iter()
-        .map(|t| (lon + t - frame.lon0) / frame.dlon)
-        .fold(f64::NAN, |best, c| {
-            if best.is_nan() || (c >= 0.0 && (best < 0.0 || c < best)) {
-                c
-            } else {
-                best
-            }
-        });
-    (col, row)
 }
 
 /// Whether every edge of `fp` inside `below` lies on a sample line of the grid `frame`.
@@ -541,6 +576,53 @@ mod tests {
             lon1,
             lat0,
             lat1,
+        }
+    }
+
+    /// Between consecutive breaks the surface along a line is linear (so a gap's maximum is
+    /// at a break): rows and columns on and between grid lines, of a coarse random block.
+    #[test]
+    fn surfaces_are_linear_between_breaks() {
+        let (stride, w) = (4u64, 6u32);
+        let heights: Vec<f32> = (0..w * w)
+            .map(|i| ((i * 7919) % 113) as f32 * 3.5 - 100.0)
+            .collect();
+        let g = GridBlock {
+            rect: SampleRect {
+                col0: 8,
+                row0: 4,
+                col1: 28,
+                row1: 24,
+            },
+            stride,
+            grid_width: w,
+            grid_height: w,
+            heights: &heights,
+            error: 0.0,
+        };
+        for along_row in [true, false] {
+            for line in [8.0, 9.0, 10.5, 12.0, 15.0, 23.75] {
+                let (from, to) = if along_row { (8.0, 28.0) } else { (4.0, 24.0) };
+                let mut ts = grid_breaks(&g, along_row, line, from, to);
+                ts.sort_by(f64::total_cmp);
+                ts.dedup();
+                let at = |t: f64| {
+                    let (c, r) = if along_row { (t, line) } else { (line, t) };
+                    crate::mesh::surface::height_at(&g, c, r)
+                };
+                for p in ts.windows(2) {
+                    for f in [0.25, 0.5, 0.75] {
+                        let t = p[0] + f * (p[1] - p[0]);
+                        let linear = at(p[0]) + f * (at(p[1]) - at(p[0]));
+                        assert!(
+                            (at(t) - linear).abs() < 1e-9,
+                            "{along_row} line {line}: bends between {} and {}",
+                            p[0],
+                            p[1]
+                        );
+                    }
+                }
+            }
         }
     }
 

@@ -90,6 +90,7 @@ pub fn bytes_of(
 
 pub mod bundle;
 pub mod fields;
+pub mod globe;
 pub mod oracle;
 pub mod origin;
 pub mod quantized_mesh;
