@@ -38,7 +38,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use cog::{cog_scene, make_cog};
-use fmrh::scene::{load_blocks, Camera, SceneOptions, Terrain, WorldFrame};
+use fmrh::scene::{load_blocks, Camera, SceneOptions, Terrain, TerrainFrame, WorldFrame};
 use fmrh::store::RequestStats;
 use fmrh::Store;
 
@@ -253,7 +253,7 @@ fn main() {
         let frame = WorldFrame::new(Some(dem.spacing));
         for (cam_name, cam) in dem.cameras() {
             let view = cam.view().expect("camera");
-            let (tiles, cog_px) = cog_scene(cog, frame, &view, 1.0);
+            let (tiles, cog_px) = cog_scene(cog, TerrainFrame::Flat(frame), &view, 1.0);
             let tiles: Vec<(usize, usize, usize)> = tiles
                 .iter()
                 .map(|&(l, t)| {

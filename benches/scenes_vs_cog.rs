@@ -33,7 +33,7 @@ mod dems;
 use std::time::Instant;
 
 use cog::{cog_decode, cog_reads, cog_scene, make_cog};
-use fmrh::scene::{load_blocks, SceneOptions, Terrain, WorldFrame};
+use fmrh::scene::{load_blocks, SceneOptions, Terrain, TerrainFrame, WorldFrame};
 use fmrh::Store;
 
 fn main() {
@@ -75,12 +75,12 @@ fn main() {
                         t.elapsed().as_secs_f64() * 1e6
                     })
                     .fold(f64::INFINITY, f64::min);
-                let (tiles, cog_px) = cog_scene(&cog, frame, &view, tau);
+                let (tiles, cog_px) = cog_scene(&cog, TerrainFrame::Flat(frame), &view, tau);
                 let (cog_bytes, cog_calls) = cog_reads(&cog, &tiles);
                 let cog_us = (0..5)
                     .map(|_| {
                         let t = Instant::now();
-                        let chosen = cog_scene(&cog, frame, &view, tau).0;
+                        let chosen = cog_scene(&cog, TerrainFrame::Flat(frame), &view, tau).0;
                         cog_decode(&cog, &chosen);
                         t.elapsed().as_secs_f64() * 1e6
                     })

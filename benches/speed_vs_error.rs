@@ -30,7 +30,7 @@ use plotters::prelude::*;
 
 use fmrh::scene::{
     baseline, load_blocks, reconstruct, Camera, Mode, Scene, SceneBlock, SceneOptions, Terrain,
-    View, WorldFrame,
+    TerrainFrame, View, WorldFrame,
 };
 use fmrh::store::FileSource;
 use fmrh::{Heightfield, Store};
@@ -222,12 +222,13 @@ fn main() {
                 for method in METHODS {
                     let p = if method == "COG" {
                         let Some(cog) = &cog else { continue };
-                        let (tiles, _) = cog::cog_scene(cog, frame, &view, tau);
+                        let (tiles, _) = cog::cog_scene(cog, TerrainFrame::Flat(frame), &view, tau);
                         let (bytes, _) = cog::cog_reads(cog, &tiles);
                         let us = (0..3)
                             .map(|_| {
                                 let t = Instant::now();
-                                let chosen = cog::cog_scene(cog, frame, &view, tau).0;
+                                let chosen =
+                                    cog::cog_scene(cog, TerrainFrame::Flat(frame), &view, tau).0;
                                 cog::cog_decode(cog, &chosen);
                                 t.elapsed().as_secs_f64() * 1e6
                             })

@@ -14,7 +14,8 @@ use std::process::Command;
 use tiff::decoder::{Decoder, DecodingResult};
 use tiff::tags::Tag;
 
-use fmrh::scene::{Aabb, View, WorldFrame};
+use fmrh::model::SampleRect;
+use fmrh::scene::{Aabb, TerrainFrame, View, WorldFrame};
 use fmrh::Heightfield;
 
 /// One level of the COG: the full resolution (0) or an overview.
@@ -205,8 +206,18 @@ fn for_each_sample(
             let u = ((c as f64 + 0.5) / fx - 0.5).clamp(px0 as f64, (px1 - 1) as f64);
             let (i0, q) = (u.floor() as usize, u - u.floor());
             let i1 = (i0 + 1).min(px1 - 1);
-            let z = (1.0 - t) * ((1.0 - q) * at(i0, j0) + q * at(i1, j0))
-                + t * ((1.0 - q) * at(i0, j1) + q * at(i1, j1));
+            // Terms of weight 0 are left out, so that a void beside a sample (NaN) does not
+            // spoil the surface where it has no weight (at level 0, every sample).
+            let z = [
+                ((1.0 - t) * (1.0 - q), i0, j0),
+                ((1.0 - t) * q, i1, j0),
+                (t * (1.0 - q), i0, j1),
+                (t * q, i1, j1),
+            ]
+            .iter()
+            .filter(|w| w.0 != 0.0)
+            .map(|&(w, i, j)| w * at(i, j))
+            .sum::<f64>();
             f(c, r, s, z);
         }
     }
@@ -235,37 +246,47 @@ fn measure(level: &mut Level, raster: &[f32], src: &[f32], w: usize, h: usize) {
     }
 }
 
-/// The tiles (level, index) the COG reader chooses for `view` at `tau`.
+/// The source samples tile `t` of level `l` covers (inclusive).
+pub fn tile_rect(cog: &Cog, l: usize, t: usize) -> SampleRect {
+    let lv = &cog.levels[l];
+    let (tx_n, _) = lv.tiles_across();
+    let (tx, ty) = (t % tx_n, t / tx_n);
+    let (c0, c1) = footprint(
+        tx * lv.tile,
+        ((tx + 1) * lv.tile).min(lv.width),
+        lv.width,
+        cog.src_w,
+    );
+    let (r0, r1) = footprint(
+        ty * lv.tile,
+        ((ty + 1) * lv.tile).min(lv.height),
+        lv.height,
+        cog.src_h,
+    );
+    SampleRect {
+        col0: c0 as u64,
+        row0: r0 as u64,
+        col1: (c1 - 1) as u64,
+        row1: (r1 - 1) as u64,
+    }
+}
+
+/// The tiles (level, index) the COG reader chooses for `view` at `tau`, the tiles placed by
+/// `frame` (flat, or on the globe, where tiles wholly below the horizon are not read).
 pub fn cog_scene(
     cog: &Cog,
-    frame: WorldFrame,
+    frame: TerrainFrame,
     view: &View,
     tau: f64,
 ) -> (Vec<(usize, usize)>, f64) {
     let top = cog.levels.len() - 1;
-    let tile_box = |l: usize, t: usize| -> (Aabb, (usize, usize, usize, usize)) {
-        let lv = &cog.levels[l];
-        let (tx_n, _) = lv.tiles_across();
-        let (tx, ty) = (t % tx_n, t / tx_n);
-        let (c0, c1) = footprint(
-            tx * lv.tile,
-            ((tx + 1) * lv.tile).min(lv.width),
-            lv.width,
-            cog.src_w,
-        );
-        let (r0, r1) = footprint(
-            ty * lv.tile,
-            ((ty + 1) * lv.tile).min(lv.height),
-            lv.height,
-            cog.src_h,
-        );
-        let (lo, hi) = lv.range[t];
+    let tile_box = |l: usize, t: usize| -> (Aabb, bool, SampleRect) {
+        let rect = tile_rect(cog, l, t);
+        let (lo, hi) = cog.levels[l].range[t];
         (
-            Aabb {
-                min: frame.point(c0 as f64, r0 as f64, f64::from(lo)),
-                max: frame.point((c1 - 1) as f64, (r1 - 1) as f64, f64::from(hi)),
-            },
-            (c0, c1, r0, r1),
+            frame.rect_box(&rect, f64::from(lo), f64::from(hi)),
+            frame.hidden(view.eye, &rect, f64::from(hi)),
+            rect,
         )
     };
     let mut chosen = Vec::new();
@@ -277,8 +298,8 @@ pub fn cog_scene(
         if !seen.insert((l, t)) {
             continue;
         }
-        let (bx, (c0, c1, r0, r1)) = tile_box(l, t);
-        if !view.intersects(&bx) {
+        let (bx, hidden, r) = tile_box(l, t);
+        if hidden || !view.intersects(&bx) {
             continue;
         }
         let se = view.screen_error(cog.levels[l].error[t], bx.distance(view.eye));
@@ -292,8 +313,8 @@ pub fn cog_scene(
         let (ftx, fty) = fine.tiles_across();
         for fy in 0..fty {
             for fx in 0..ftx {
-                let (_, (d0, d1, e0, e1)) = tile_box(l - 1, fy * ftx + fx);
-                if d0 < c1 && c0 < d1 && e0 < r1 && r0 < e1 {
+                let (_, _, f) = tile_box(l - 1, fy * ftx + fx);
+                if f.intersect(&r).is_some() {
                     todo.push((l - 1, fy * ftx + fx));
                 }
             }

@@ -3,7 +3,8 @@
 //!
 //! Read the submodules in order: [`domain`] (blocks, levels, padding), [`raster`] (voids
 //! mended), [`measure`] (the static error), [`tree`] (monotone errors, pruning, Hilbert
-//! pre-order), [`cluster`] (cuts). [`Model::build`] runs them all.
+//! pre-order), [`cluster`] (cuts). [`Model::build`] runs them all. [`thinning`] measures what
+//! coarsening a geographic grid's polar nodes east-west would save; nothing stores it yet.
 
 pub mod cluster;
 pub mod domain;
@@ -11,6 +12,7 @@ pub mod edit;
 pub mod measure;
 pub mod precision;
 pub mod raster;
+pub mod thinning;
 pub mod tree;
 
 pub use cluster::{Cluster, MAX_CLUSTERS};
