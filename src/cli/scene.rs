@@ -473,7 +473,6 @@ pub fn run(args: &SceneArgs) -> Result<ExitCode, Error> {
         return run_layers(args, &camera, &options);
     }
     if super::is_dataset(&args.file)? {
-        args.camera.flat_only("a dataset's scene")?;
         return run_dataset(args, camera, options, output);
     }
     if let Some(url) = super::url_of(&args.file) {
@@ -834,7 +833,18 @@ fn run_dataset(
     let ds = fmrh::dataset::Dataset::open(&args.file)?;
     let asked = ds.request_stats();
     let spacing = args.view.given_spacing()?;
-    let scene = ds.scene(&camera, &options, spacing)?;
+    let scene = if args.camera.globe() {
+        if spacing.is_some() {
+            return Err(Error::InvalidArgument(
+                "--spacing sets the flat frame's spacing; on the globe the georeference places \
+                 the samples: drop --spacing or the globe camera"
+                    .into(),
+            ));
+        }
+        ds.scene_on_globe(&camera, &options)?
+    } else {
+        ds.scene(&camera, &options, spacing)?
+    };
     let schedule = scene
         .tiles
         .iter()

@@ -4,6 +4,11 @@
 //! moved back by as much. Tiles meet only along shared edge lines, so the tiles' covers
 //! together cover the view once: no hole (but the dataset's own holes), no overlap.
 //!
+//! On the globe ([`Dataset::scene_on_globe`], `docs/globe-design.md` §2) the world frame is
+//! ECEF: each tile's grid is placed at the longitudes and latitudes the dataset's
+//! georeference gives its samples, the camera is the same for every tile, and tiles wholly
+//! below the horizon are not opened.
+//!
 //! Only the tiles whose box (their rectangle by their height range, both in the manifest)
 //! meets the frustum or the window are opened, and only the manifest's tile pages whose
 //! boxes meet it are read. Neighbour levels across a tile border are filled in from the
@@ -17,7 +22,8 @@ use super::reader::{Dataset, Tile};
 use crate::error::{Error, Result};
 use crate::model::SampleRect;
 use crate::scene::{
-    Aabb, Camera, Mode, NeighbourLevels, SceneBlock, SceneOptions, SceneStats, Terrain, WorldFrame,
+    Aabb, Camera, GlobeFrame, Mode, NeighbourLevels, SceneBlock, SceneOptions, SceneStats, Terrain,
+    TerrainFrame, View, WorldFrame,
 };
 use crate::store::ReadStats;
 
@@ -68,13 +74,42 @@ pub struct DatasetScene {
     pub tiles: Vec<TilePart>,
 }
 
-/// The box of `rect` (dataset samples) between `lo` and `hi`, in the dataset's frame; an
-/// empty range (an all-void tile) is taken as height 0.
-fn rect_box(frame: &WorldFrame, rect: &SampleRect, lo: f32, hi: f32) -> Aabb {
-    let (lo, hi) = if lo <= hi { (lo, hi) } else { (0.0, 0.0) };
-    Aabb {
-        min: frame.point(rect.col0 as f64, rect.row0 as f64, f64::from(lo)),
-        max: frame.point(rect.col1 as f64, rect.row1 as f64, f64::from(hi)),
+/// Where a dataset's samples are in the world: the flat frame of its spacing (tile `t` at
+/// `(col0·dx, row0·dy)`), or the WGS 84 ellipsoid by its geographic georeference (ECEF, one
+/// frame for every tile: nothing to shift).
+#[derive(Clone, Copy, Debug)]
+enum Placement {
+    Flat(WorldFrame),
+    Globe(GlobeFrame),
+}
+
+impl Placement {
+    /// The box of `rect` (dataset samples) between `lo` and `hi`; an empty range (an
+    /// all-void tile) is taken as height 0.
+    fn rect_box(&self, rect: &SampleRect, lo: f32, hi: f32) -> Aabb {
+        let (lo, hi) = if lo <= hi { (lo, hi) } else { (0.0, 0.0) };
+        match self {
+            Placement::Flat(frame) => Aabb {
+                min: frame.point(rect.col0 as f64, rect.row0 as f64, f64::from(lo)),
+                max: frame.point(rect.col1 as f64, rect.row1 as f64, f64::from(hi)),
+            },
+            Placement::Globe(g) => g.rect_box(rect, f64::from(lo), f64::from(hi)),
+        }
+    }
+
+    /// Whether `view` may see anything of `rect` between `lo` and `hi`: its box meets the
+    /// frustum and, on the globe, it is not wholly below the horizon.
+    fn may_see(&self, view: &View, rect: &SampleRect, lo: f32, hi: f32) -> bool {
+        if !view.intersects(&self.rect_box(rect, lo, hi)) {
+            return false;
+        }
+        match self {
+            Placement::Flat(_) => true,
+            Placement::Globe(g) => {
+                let top = if lo <= hi { hi } else { 0.0 };
+                !g.hidden(view.eye, rect, f64::from(top))
+            }
+        }
     }
 }
 
@@ -91,6 +126,21 @@ impl Dataset {
         }
     }
 
+    /// The dataset's grid on the WGS 84 ellipsoid: sample `(col, row)` of the dataset at the
+    /// longitude and latitude its georeference gives. An error unless the dataset has a
+    /// geographic georeference (its tiles were placed by SRTM names or geographic
+    /// GeoTIFFs).
+    pub fn globe_frame(&self) -> Result<GlobeFrame> {
+        let g = self.georeference().ok_or_else(|| {
+            Error::InvalidArgument(format!(
+                "{}: the globe frame needs a georeferenced dataset; this one has no \
+                 georeference (its tiles were placed by a layout)",
+                self.dir().display()
+            ))
+        })?;
+        GlobeFrame::of(&g)
+    }
+
     /// The tiles a scene may need: those whose boxes meet `window` (dataset samples), or the
     /// frustum when there is no window. Reads only the tile pages whose boxes meet it.
     pub fn scene_tiles(
@@ -98,6 +148,25 @@ impl Dataset {
         camera: &Camera,
         window: Option<SampleRect>,
         frame: &WorldFrame,
+    ) -> Result<Vec<Tile>> {
+        self.tiles_seen(camera, window, &Placement::Flat(*frame))
+    }
+
+    /// [`Dataset::scene_tiles`] on the globe: the tiles whose ECEF boxes meet the frustum
+    /// (or `window`), less those wholly below the horizon.
+    pub fn scene_tiles_on_globe(
+        &self,
+        camera: &Camera,
+        window: Option<SampleRect>,
+    ) -> Result<Vec<Tile>> {
+        self.tiles_seen(camera, window, &Placement::Globe(self.globe_frame()?))
+    }
+
+    fn tiles_seen(
+        &self,
+        camera: &Camera,
+        window: Option<SampleRect>,
+        place: &Placement,
     ) -> Result<Vec<Tile>> {
         let view = camera.view()?;
         match window {
@@ -108,12 +177,7 @@ impl Dataset {
                 let seen: Vec<usize> = (0..head.pages.len())
                     .filter(|&p| {
                         let e = &head.pages[p];
-                        view.intersects(&rect_box(
-                            frame,
-                            &e.rect(),
-                            e.min_height.get(),
-                            e.max_height.get(),
-                        ))
+                        place.may_see(&view, &e.rect(), e.min_height.get(), e.max_height.get())
                     })
                     .collect();
                 self.state().fetch_pages(self.manifest_source(), &seen)?;
@@ -126,8 +190,7 @@ impl Dataset {
                         .iter()
                         .enumerate()
                     {
-                        let b = rect_box(frame, &t.rect(), t.min_height.get(), t.max_height.get());
-                        if view.intersects(&b) {
+                        if place.may_see(&view, &t.rect(), t.min_height.get(), t.max_height.get()) {
                             out.push(Tile {
                                 index: first + i as u64,
                                 record: *t,
@@ -148,8 +211,27 @@ impl Dataset {
         options: &SceneOptions,
         spacing_m: Option<[f64; 2]>,
     ) -> Result<DatasetScene> {
-        let started = std::time::Instant::now();
         let frame = self.frame(spacing_m)?;
+        self.scene_in(camera, options, Placement::Flat(frame))
+    }
+
+    /// The blocks `camera` (ECEF metres) needs at `options.tau` with the dataset on the WGS
+    /// 84 ellipsoid ([`Dataset::globe_frame`]): each tile's scene on the globe
+    /// ([`Terrain::on_globe`]'s, its grid placed by the dataset's georeference), tiles and
+    /// blocks wholly below the horizon culled, distances true 3D distances. The tiles meet
+    /// along shared sample lines as in the flat frame, so the cover is one cover still.
+    pub fn scene_on_globe(&self, camera: &Camera, options: &SceneOptions) -> Result<DatasetScene> {
+        let globe = self.globe_frame()?;
+        self.scene_in(camera, options, Placement::Globe(globe))
+    }
+
+    fn scene_in(
+        &self,
+        camera: &Camera,
+        options: &SceneOptions,
+        place: Placement,
+    ) -> Result<DatasetScene> {
+        let started = std::time::Instant::now();
         let view = camera.view()?;
         if let Some(w) = options.window {
             let grid = self.grid();
@@ -160,7 +242,7 @@ impl Dataset {
                 )));
             }
         }
-        let tiles = self.scene_tiles(camera, options.window, &frame)?;
+        let tiles = self.tiles_seen(camera, options.window, &place)?;
         // Uniform mode: one static bound over the view, from the nearest tile part.
         let p_min = (options.mode == Mode::Uniform).then(|| {
             tiles
@@ -170,13 +252,9 @@ impl Dataset {
                         .window
                         .and_then(|w| w.intersect(&t.rect()))
                         .unwrap_or(t.rect());
-                    rect_box(
-                        &frame,
-                        &part,
-                        t.record.min_height.get(),
-                        t.record.max_height.get(),
-                    )
-                    .distance(view.eye)
+                    place
+                        .rect_box(&part, t.record.min_height.get(), t.record.max_height.get())
+                        .distance(view.eye)
                 })
                 .fold(f64::INFINITY, f64::min)
         });
@@ -202,8 +280,21 @@ impl Dataset {
             };
             let store = self.open_tile(tile)?;
             let before = store.read_stats();
-            let terrain = Terrain::with_spacing(&store, Some([frame.dx, frame.dy]))?;
-            let local_camera = in_tile(camera, &r, &frame);
+            let (terrain, local_camera) = match place {
+                Placement::Flat(frame) => (
+                    Terrain::with_spacing(&store, Some([frame.dx, frame.dy]))?,
+                    in_tile(camera, &r, &frame),
+                ),
+                Placement::Globe(g) => {
+                    // The tile's samples where the dataset's grid puts them, so that
+                    // neighbours meet on exactly the same longitudes and latitudes.
+                    let (lon0, lat0) = g.lon_lat(r.col0 as f64, r.row0 as f64);
+                    let tile_frame = GlobeFrame { lon0, lat0, ..g };
+                    let flat = WorldFrame::new(store.header().metadata.spacing_m);
+                    let t = Terrain::with_frame(&store, flat, TerrainFrame::Globe(tile_frame))?;
+                    (t, *camera)
+                }
+            };
             let tile_options = SceneOptions {
                 window: local_window,
                 ..*options
