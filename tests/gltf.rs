@@ -12,8 +12,10 @@ mod common;
 
 use std::path::Path;
 
-use fmrh::mesh::{build, Cracks, GridBlock};
-use fmrh::scene::{load_blocks, Camera, SceneOptions, Terrain, WorldFrame, PAYLOAD_GAP};
+use fmrh::mesh::{build, build_in, Cracks, GridBlock};
+use fmrh::scene::{
+    load_blocks, Camera, SceneOptions, Terrain, TerrainFrame, WorldFrame, PAYLOAD_GAP,
+};
 use serde_json::Value;
 
 /// The JSON and binary chunks of a GLB, after checking its framing.
@@ -209,6 +211,123 @@ fn the_glb_is_the_scene_mesh_in_the_documented_axes() {
                 assert_eq!(acc["max"][a].as_f64(), Some(max));
             }
         }
+    }
+}
+
+/// On the globe (`--eye-geo`), every vertex of the `.glb`, taken back from the local
+/// east-north-up frame the scene's `extras` name to latitude, longitude and height, is its
+/// mesh vertex's sample on WGS 84 at its height, and every normal points away from the
+/// Earth; the meshes are the library's (`build_in` on the globe frame) vertex for vertex.
+#[test]
+fn a_globe_glb_is_the_scene_mesh_on_the_ellipsoid() {
+    let dir = tempfile::tempdir().unwrap();
+    let (file, _) = common::globe::container(dir.path(), "n6", "srtm3-pyhgtmap/N43E006.hgt.gz");
+    let store = fmrh::Store::open(&file).unwrap();
+    let terrain = Terrain::on_globe(&store).unwrap();
+    let TerrainFrame::Globe(g) = terrain.world() else {
+        panic!("a geographic grid is on the globe")
+    };
+    let (eye, target, up) = fmrh::globe::look(43.3, 6.4, 30_000.0, 30.0, -40.0);
+    let mut camera = Camera::looking_at(eye, target);
+    camera.up = up;
+    let scene = terrain.scene(&camera, &SceneOptions::new(1.0)).unwrap();
+    let loaded = load_blocks(&store, &scene.blocks, PAYLOAD_GAP).unwrap();
+    let d = store.domain();
+    let grids: Vec<GridBlock<'_>> = scene
+        .blocks
+        .iter()
+        .zip(&loaded)
+        .map(|(b, l)| GridBlock {
+            rect: b.rect(),
+            stride: d.stride(b.level),
+            grid_width: l.width,
+            grid_height: l.height,
+            heights: &l.heights,
+            error: b.error,
+        })
+        .collect();
+    let meshes = build_in(&grids, &TerrainFrame::Globe(g), Cracks::Stitch).unwrap();
+    let out = dir.path().join("globe.glb");
+    let run = common::fmrh(&[
+        "mesh",
+        file.to_str().unwrap(),
+        "--eye-geo",
+        "43.3,6.4,30000",
+        "--look",
+        "30,-40",
+        "--tau",
+        "1",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let (json, bin) = chunks(&std::fs::read(&out).unwrap());
+    let o = &json["scenes"][0]["extras"]["fmrh"]["origin"]["lon_lat_h"];
+    let (lon0, lat0) = (o[0].as_f64().unwrap(), o[1].as_f64().unwrap());
+    let origin = fmrh::globe::ecef_point(lon0, lat0, 0.0);
+    let [east, north, upward] = fmrh::globe::enu(lon0, lat0);
+    let to_ecef = |x: f64, y: f64, z: f64| origin + east * x + upward * y - north * z;
+    let nodes = json["nodes"].as_array().unwrap();
+    assert_eq!(nodes.len(), meshes.len());
+    let mut checked = 0;
+    for (node, m) in nodes.iter().zip(&meshes) {
+        let prim = &json["meshes"][node["mesh"].as_u64().unwrap() as usize]["primitives"][0];
+        let positions = read_accessor(
+            &json,
+            &bin,
+            prim["attributes"]["POSITION"].as_u64().unwrap(),
+        );
+        let normals = read_accessor(&json, &bin, prim["attributes"]["NORMAL"].as_u64().unwrap());
+        assert_eq!(positions.len(), 3 * m.vertices.len());
+        for (k, v) in m.vertices.iter().enumerate() {
+            let p = to_ecef(positions[3 * k], positions[3 * k + 1], positions[3 * k + 2]);
+            let (lon, lat, h) = fmrh::globe::geodetic(p);
+            let (want_lon, want_lat) = g.lon_lat(v.col as f64, v.row as f64);
+            // Single-precision positions up to ~100 km from the origin: about a centimetre.
+            assert!(
+                (lon - want_lon).abs() < 2e-7 && (lat - want_lat).abs() < 2e-7,
+                "vertex {k}: ({lon}, {lat}) for ({want_lon}, {want_lat})"
+            );
+            assert!(
+                (h - v.height).abs() < 0.05,
+                "vertex {k}: height {h} for {}",
+                v.height
+            );
+            let n = to_ecef(normals[3 * k], normals[3 * k + 1], normals[3 * k + 2]) - origin;
+            assert!((n.length() - 1.0).abs() < 1e-5);
+            let local_up = glam::DVec3::from(fmrh::globe::up(lon, lat));
+            assert!(
+                n.dot(local_up) > 0.0,
+                "vertex {k}: normal {n:?} points down"
+            );
+            checked += 1;
+        }
+    }
+    assert!(checked > 1000, "{checked} vertices");
+    // Tiles of quantized-mesh and refinement past the data stay flat-frame only.
+    for extra in [
+        &["--format", "quantized-mesh"][..],
+        &["--refine", "fractal"][..],
+    ] {
+        let mut args = vec![
+            "mesh",
+            file.to_str().unwrap(),
+            "--eye-geo",
+            "43.3,6.4,30000",
+            "--tau",
+            "1",
+            "-o",
+        ];
+        let o2 = dir.path().join("refused");
+        args.push(o2.to_str().unwrap());
+        args.extend_from_slice(extra);
+        let r = common::fmrh(&args);
+        assert_eq!(r.status.code(), Some(2), "{extra:?}");
+        assert!(!o2.exists());
     }
 }
 

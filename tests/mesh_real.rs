@@ -3,7 +3,8 @@
 //! `gltf-validator`, installed by `.ci/run` into `tests/js`): no error and no warning, both
 //! stitched and with skirts. Each mesh is of an oblique view over the whole DEM, so blocks of
 //! several levels meet; one more, of the bundled Puget Sound 1k seen from close above, is
-//! refined past the data by fractal nodes. And CesiumJS itself (npm `@cesium/engine`) reads
+//! refined past the data by fractal nodes; two more are of the dataset on the globe
+//! (`--eye-geo`, vertices in a local east-north-up frame). And CesiumJS itself (npm `@cesium/engine`) reads
 //! the geodetic quantized-mesh tilesets of every georeferenced DEM and of the dataset, within
 //! each tile's declared error of the source. Large-data suite: it needs `../shared/data`,
 //! Node.js, the validator and CesiumJS, and fails (never skips) without them.
@@ -193,6 +194,29 @@ fn meshes_of_every_shared_dem_and_a_dataset_are_valid_gltf() {
     assert!(said.contains(" synthetic"), "{said}");
     stitched.push(("ps1k fractal".into(), said));
     files.push(out);
+
+    // On the globe: the dataset of the two SRTM3 tiles from 30 km, looking across their
+    // border, and from orbit.
+    for (name, eye, look) in [
+        ("globe-near", "43.4,6.9,30000", "45,-35"),
+        ("globe-orbit", "43.5,7.0,5000000", "0,-90"),
+    ] {
+        let out = dir.path().join(format!("{name}.glb"));
+        let said = fmrh_ok(&[
+            "mesh".into(),
+            ds.display().to_string(),
+            "--eye-geo".into(),
+            eye.into(),
+            "--look".into(),
+            look.into(),
+            "--tau".into(),
+            "1".into(),
+            "-o".into(),
+            out.display().to_string(),
+        ]);
+        stitched.push((format!("N43E006+N43E007 {name}"), said));
+        files.push(out);
+    }
 
     for (name, said) in &stitched {
         println!("{name}: {}", said.trim());

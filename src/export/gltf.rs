@@ -5,7 +5,9 @@
 //! up. A point `(x, y, z)` of the world frame is the glTF point `(x - ox, z, y - oy)`: X
 //! east, Y up, Z south, in metres from the origin `(ox, oy)` the caller chooses (the
 //! north-west corner of what it meshes, so that single-precision positions keep
-//! centimetres), heights as they are. The origin goes into the scene's `extras`.
+//! centimetres), heights as they are. The origin goes into the scene's `extras`. On the
+//! globe ([`GltfFrame::Globe`]) the axes are the same at the origin, a point on WGS 84: X
+//! east, Y up, Z south of its local east-north-up frame, ECEF positions taken from it.
 //!
 //! **Layout.** One buffer (the GLB's binary chunk) holds two buffer views: the vertex
 //! attributes of every block (positions then normals, three f32 each, block after block),
@@ -19,7 +21,9 @@ use serde_json::{json, Value};
 
 use crate::error::{Error, Result};
 use crate::mesh::BlockMesh;
-use crate::scene::WorldFrame;
+use glam::DVec3;
+
+use crate::scene::{GlobeFrame, WorldFrame};
 
 /// A block's mesh and what its node says of it.
 pub struct GltfBlock<'a> {
@@ -54,6 +58,70 @@ fn linear(c: u8) -> f64 {
     }
 }
 
+/// Where a GLB's vertices are: the flat world frame from an origin (see the module doc), or
+/// the WGS 84 ellipsoid in a local east-north-up frame.
+#[derive(Clone, Copy, Debug)]
+pub enum GltfFrame {
+    /// `frame`'s `(x, y, z)` as `(x - ox, z, y - oy)`.
+    Flat {
+        /// The samples' world frame.
+        frame: WorldFrame,
+        /// `[ox, oy]`, world metres.
+        origin: [f64; 2],
+    },
+    /// `frame`'s ECEF point `p` as `(east, up, south)`: `p - origin` along the east, up and
+    /// minus north axes of the origin (its longitude and latitude, height 0). Still X east,
+    /// Y up and Z south at the origin; away from it the Earth curves down.
+    Globe {
+        /// The samples on the globe.
+        frame: GlobeFrame,
+        /// Longitude and latitude of the origin, degrees.
+        lon: f64,
+        /// Latitude of the origin, degrees.
+        lat: f64,
+    },
+}
+
+/// A globe frame's origin (ECEF) and its east, up and south axes, found once per GLB.
+type Local = (DVec3, [DVec3; 3]);
+
+impl GltfFrame {
+    fn local(&self) -> Local {
+        match *self {
+            GltfFrame::Flat { .. } => (DVec3::ZERO, [DVec3::X, DVec3::Y, DVec3::Z]),
+            GltfFrame::Globe { lon, lat, .. } => {
+                let [east, north, up] = crate::globe::enu(lon, lat);
+                (crate::globe::ecef_point(lon, lat, 0.0), [east, up, -north])
+            }
+        }
+    }
+
+    /// Mesh vertex `(col, row, height)` in glTF metres.
+    fn position(&self, (origin, axes): &Local, col: f64, row: f64, h: f64) -> [f64; 3] {
+        match self {
+            GltfFrame::Flat { frame, origin } => {
+                let p = frame.point(col, row, h);
+                [p.x - origin[0], p.z, p.y - origin[1]]
+            }
+            GltfFrame::Globe { frame, .. } => {
+                let d = frame.point(col, row, h) - *origin;
+                [d.dot(axes[0]), d.dot(axes[1]), d.dot(axes[2])]
+            }
+        }
+    }
+
+    /// A world normal in glTF axes.
+    fn normal(&self, (_, axes): &Local, n: [f64; 3]) -> [f64; 3] {
+        match self {
+            GltfFrame::Flat { .. } => [n[0], n[2], n[1]],
+            GltfFrame::Globe { .. } => {
+                let n = DVec3::from(n);
+                [n.dot(axes[0]), n.dot(axes[1]), n.dot(axes[2])]
+            }
+        }
+    }
+}
+
 /// The GLB of `blocks` in `frame`, positions from `origin` (world metres, `[x, y]`), with
 /// `scene_extras` on the scene. Blocks without triangles are left out; there must be one
 /// with.
@@ -63,6 +131,19 @@ pub fn glb(
     origin: [f64; 2],
     scene_extras: Value,
 ) -> Result<Vec<u8>> {
+    glb_in(
+        blocks,
+        &GltfFrame::Flat {
+            frame: *frame,
+            origin,
+        },
+        scene_extras,
+    )
+}
+
+/// [`glb`] with the vertices placed by `frame`, flat or on the globe.
+pub fn glb_in(blocks: &[GltfBlock<'_>], frame: &GltfFrame, scene_extras: Value) -> Result<Vec<u8>> {
+    let local = frame.local();
     let blocks: Vec<&GltfBlock<'_>> = blocks
         .iter()
         .filter(|b| !b.mesh.triangles.is_empty())
@@ -109,12 +190,9 @@ pub fn glb(
             .vertices
             .iter()
             .map(|v| {
-                let p = frame.point(v.col as f64, v.row as f64, v.height);
-                [
-                    (p.x - origin[0]) as f32,
-                    p.z as f32,
-                    (p.y - origin[1]) as f32,
-                ]
+                frame
+                    .position(&local, v.col as f64, v.row as f64, v.height)
+                    .map(|c| c as f32)
             })
             .collect();
         let mut min = [f32::INFINITY; 3];
@@ -133,7 +211,7 @@ pub fn glb(
         }
         let normal_offset = attributes.len();
         for n in &m.normals {
-            let v = glam::Vec3::new(n[0] as f32, n[2] as f32, n[1] as f32);
+            let v = glam::Vec3::from(frame.normal(&local, *n).map(|c| c as f32));
             let v = v.try_normalize().unwrap_or(glam::Vec3::Y);
             for c in v.to_array() {
                 attributes.extend_from_slice(&c.to_le_bytes());

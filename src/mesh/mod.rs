@@ -52,7 +52,7 @@ use rayon::prelude::*;
 use crate::error::{Error, Result};
 use crate::model::measure::surface;
 use crate::model::SampleRect;
-use crate::scene::WorldFrame;
+use crate::scene::{TerrainFrame, WorldFrame};
 
 use lines::Lines;
 use triangulate::Triangles;
@@ -179,6 +179,16 @@ pub fn build(
     frame: &WorldFrame,
     cracks: Cracks,
 ) -> Result<Vec<BlockMesh>> {
+    build_in(blocks, &TerrainFrame::Flat(*frame), cracks)
+}
+
+/// [`build`] with the samples placed by `frame`, flat or on the globe: the meshes are the
+/// same (they are made in samples), only the normals are taken in `frame`'s world.
+pub fn build_in(
+    blocks: &[GridBlock<'_>],
+    frame: &TerrainFrame,
+    cracks: Cracks,
+) -> Result<Vec<BlockMesh>> {
     for (i, b) in blocks.iter().enumerate() {
         b.check(i)?;
     }
@@ -235,7 +245,7 @@ fn on_edge(rect: &SampleRect, v: &MeshVertex) -> bool {
 
 /// The area-weighted sum of the normals of the surface triangles around each vertex (skirt
 /// vertices: their surface vertex's, filled in afterwards by position).
-fn face_normals(m: &BlockMesh, frame: &WorldFrame) -> Vec<DVec3> {
+fn face_normals(m: &BlockMesh, frame: &TerrainFrame) -> Vec<DVec3> {
     let point = |v: &MeshVertex| frame.point(v.col as f64, v.row as f64, v.height);
     let mut sums = vec![DVec3::ZERO; m.vertices.len()];
     for t in &m.triangles {
@@ -246,6 +256,13 @@ fn face_normals(m: &BlockMesh, frame: &WorldFrame) -> Vec<DVec3> {
         // Counter-clockwise from above in a frame whose y points south: the cross product
         // of the edges points down, so the upward normal is its opposite.
         let n = -(point(b) - point(a)).cross(point(c) - point(a));
+        // ECEF is right-handed and east-south-up (the flat frame's axes) is not, so where
+        // columns run east and rows south the product above points the other way on the
+        // globe: turned over, so that normals point away from the Earth.
+        let n = match frame {
+            TerrainFrame::Globe(g) if g.dlon * g.dlat < 0.0 => -n,
+            _ => n,
+        };
         for i in t {
             sums[*i as usize] += n;
         }

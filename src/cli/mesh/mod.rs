@@ -9,9 +9,9 @@ use std::sync::Arc;
 
 use serde_json::{json, Value};
 
-use fmrh::export::gltf::{glb, GltfBlock};
+use fmrh::export::gltf::{glb_in, GltfBlock, GltfFrame};
 use fmrh::heightfield::Georeference;
-use fmrh::mesh::{build, fractal, BlockMesh, Cracks, GridBlock};
+use fmrh::mesh::{build_in, fractal, BlockMesh, Cracks, GridBlock};
 use fmrh::model::SampleRect;
 use fmrh::scene::{load_blocks, LoadedBlock, SceneBlock, Terrain, WorldFrame, PAYLOAD_GAP};
 use fmrh::Error;
@@ -166,6 +166,9 @@ impl Part {
 struct Context {
     /// The world frame of samples.
     frame: WorldFrame,
+    /// With a camera on the globe: where the samples are on it (the meshes' vertices then
+    /// go into a local east-north-up frame).
+    globe: Option<fmrh::scene::GlobeFrame>,
     georeference: Option<Georeference>,
     tau: f64,
     mode: fmrh::scene::Mode,
@@ -237,7 +240,19 @@ pub fn run(args: &MeshArgs) -> Result<ExitCode, Error> {
         ));
     }
     let camera = args.camera.camera(&args.view)?;
-    args.camera.flat_only("fmrh mesh")?;
+    let globe = args.camera.globe();
+    if globe && args.format == MeshFormat::QuantizedMesh {
+        return Err(Error::InvalidArgument(
+            "quantized-mesh tiles follow their own geodetic tiling from a flat-frame camera; \
+             on the globe (--eye-geo, --globe) fmrh mesh writes a .glb"
+                .into(),
+        ));
+    }
+    if globe && args.refine.is_some() {
+        return Err(Error::InvalidArgument(
+            "--refine takes flat-frame cameras only so far (no --globe or --eye-geo)".into(),
+        ));
+    }
     let options = args.view.options_in(args.window.as_deref())?;
     let cracks = match args.cracks {
         CracksArg::Stitch => Cracks::Stitch,
@@ -258,6 +273,7 @@ pub fn run(args: &MeshArgs) -> Result<ExitCode, Error> {
         &options,
         cracks,
         args.refine,
+        globe,
     )?;
     let meshes = &meshed.meshes;
     let triangles = meshed.triangles();
@@ -314,7 +330,8 @@ impl Meshed {
 
 /// Meshes the scene `camera` sees of `file` (a container, a dataset, or a URL of either)
 /// with `options`, its cracks closed as `cracks` says, refined past the data as `refine`
-/// says. An error when the camera sees no terrain.
+/// says; `globe`: the camera is in ECEF and the data on the WGS 84 ellipsoid. An error when
+/// the camera sees no terrain.
 pub fn mesh_scene(
     file: &std::path::Path,
     view: &super::scene::ViewArgs,
@@ -322,8 +339,9 @@ pub fn mesh_scene(
     options: &fmrh::scene::SceneOptions,
     cracks: Cracks,
     refine: Option<RefineArg>,
+    globe: bool,
 ) -> Result<Meshed, Error> {
-    let (parts, _, context) = scene_parts(file, view, camera, options, |_| false)?;
+    let (parts, _, context) = scene_parts(file, view, camera, options, |_| false, globe)?;
     finish_meshes(parts, context, camera, cracks, refine)
 }
 
@@ -346,7 +364,16 @@ fn finish_meshes(
         None => parts,
     };
     let grids: Vec<GridBlock<'_>> = parts.iter().map(Part::grid).collect();
-    let meshes = build(&grids, &context.mesh_frame(), cracks)?;
+    let frame = match context.globe {
+        Some(g) if context.units == 1 => fmrh::scene::TerrainFrame::Globe(g),
+        Some(_) => {
+            return Err(Error::Internal(
+                "a refined mesh on the globe (refinement is refused there)".into(),
+            ))
+        }
+        None => fmrh::scene::TerrainFrame::Flat(context.mesh_frame()),
+    };
+    let meshes = build_in(&grids, &frame, cracks)?;
     Ok(Meshed {
         parts,
         meshes,
@@ -392,13 +419,26 @@ fn scene_parts(
     camera: &fmrh::scene::Camera,
     options: &fmrh::scene::SceneOptions,
     cover: impl Fn(Option<&Georeference>) -> bool,
+    globe: bool,
 ) -> Result<(Vec<Part>, Vec<Part>, Context), Error> {
     if super::is_dataset(file)? {
         let ds = fmrh::dataset::Dataset::open(file)?;
         let spacing = view.given_spacing()?;
+        if globe && spacing.is_some() {
+            return Err(Error::InvalidArgument(
+                "--spacing sets the flat frame's spacing; on the globe the georeference places \
+                 the samples: drop --spacing or the globe camera"
+                    .into(),
+            ));
+        }
         let frame = WorldFrame::new(spacing.or(ds.spacing_m()));
+        let on_globe = globe.then(|| ds.globe_frame()).transpose()?;
         let parts_of = |camera: &fmrh::scene::Camera, options: &fmrh::scene::SceneOptions| {
-            let scene = ds.scene(camera, options, spacing)?;
+            let scene = if globe {
+                ds.scene_on_globe(camera, options)?
+            } else {
+                ds.scene(camera, options, spacing)?
+            };
             let loaded = ds.load_blocks(&scene)?;
             let parts: Vec<Part> = scene
                 .blocks
@@ -416,6 +456,7 @@ fn scene_parts(
             with_cover(parts_of, camera, options, ds.grid(), wanted)?;
         let context = Context {
             frame,
+            globe: on_globe,
             georeference,
             tau,
             mode,
@@ -432,12 +473,21 @@ fn scene_parts(
                 camera,
                 options,
                 cover,
+                globe,
             )
         }
         #[cfg(not(feature = "remote"))]
         return Err(super::no_remote(url));
     } else {
-        tile_parts(file, view, &super::open(file)?, camera, options, cover)
+        tile_parts(
+            file,
+            view,
+            &super::open(file)?,
+            camera,
+            options,
+            cover,
+            globe,
+        )
     }
 }
 
@@ -484,9 +534,18 @@ fn tile_parts<S: fmrh::store::Source>(
     camera: &fmrh::scene::Camera,
     options: &fmrh::scene::SceneOptions,
     cover: impl Fn(Option<&Georeference>) -> bool,
+    globe: bool,
 ) -> Result<(Vec<Part>, Vec<Part>, Context), Error> {
-    let spacing = view.spacing(store, file)?;
-    let terrain = Terrain::with_spacing(store, spacing)?;
+    let (spacing, terrain) = if globe {
+        (None, Terrain::on_globe(store)?)
+    } else {
+        let spacing = view.spacing(store, file)?;
+        (spacing, Terrain::with_spacing(store, spacing)?)
+    };
+    let on_globe = match terrain.world() {
+        fmrh::scene::TerrainFrame::Globe(g) => Some(g),
+        fmrh::scene::TerrainFrame::Flat(_) => None,
+    };
     let d = *store.domain();
     let metadata = &store.header().metadata;
     let frame = WorldFrame::new(spacing.or(metadata.spacing_m));
@@ -514,6 +573,7 @@ fn tile_parts<S: fmrh::store::Source>(
         with_cover(parts_of, camera, options, d.data_rect(), wanted)?;
     let context = Context {
         frame,
+        globe: on_globe,
         georeference: metadata.georeference.clone(),
         tau,
         mode,
@@ -539,6 +599,24 @@ fn encode(
         ));
     };
     let origin = [col0 as f64 * frame.dx, row0 as f64 * frame.dy];
+    let place = match context.globe {
+        None => GltfFrame::Flat {
+            frame: *frame,
+            origin,
+        },
+        Some(g) => {
+            // The middle of what is meshed, on the ellipsoid.
+            let col1 = meshes.iter().map(|m| parts[m.block].rect.col1).max();
+            let row1 = meshes.iter().map(|m| parts[m.block].rect.row1).max();
+            let (c1, r1) = (col1.unwrap_or(col0), row1.unwrap_or(row0));
+            let (lon, lat) = g.lon_lat((col0 + c1) as f64 / 2.0, (row0 + r1) as f64 / 2.0);
+            GltfFrame::Globe {
+                frame: g,
+                lon,
+                lat: lat.clamp(-90.0, 90.0),
+            }
+        }
+    };
     let blocks: Vec<GltfBlock<'_>> = meshes
         .iter()
         .map(|m| {
@@ -572,9 +650,21 @@ fn encode(
         origin_extras["map"] = json!([g.origin[0] + c * g.step[0], g.origin[1] + r * g.step[1]]);
         origin_extras["crs"] = g.crs.clone().map_or(Value::Null, Value::from);
     }
+    let axes = match place {
+        GltfFrame::Flat { .. } => {
+            "X east, Y up (height), Z south, in metres; X and Z from the origin"
+        }
+        GltfFrame::Globe { lon, lat, .. } => {
+            origin_extras = json!({
+                "lon_lat_h": [lon, lat, 0.0],
+                "ecef": fmrh::globe::ecef(lon, lat, 0.0),
+            });
+            "WGS 84: X east, Y up, Z south at the origin (a local east-north-up frame, height 0), in metres"
+        }
+    };
     let scene_extras = json!({
         "fmrh": {
-            "axes": "X east, Y up (height), Z south, in metres; X and Z from the origin",
+            "axes": axes,
             "origin": origin_extras,
             "spacing_m": [context.frame.dx, context.frame.dy],
             "refine": if context.units > 1 { "fractal" } else { "none" },
@@ -584,5 +674,5 @@ fn encode(
             "blocks": meshes.len(),
         }
     });
-    glb(&blocks, frame, origin, scene_extras)
+    glb_in(&blocks, &place, scene_extras)
 }

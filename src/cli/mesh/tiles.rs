@@ -47,8 +47,14 @@ pub(super) fn run_tiles(
     let geodetic_wanted = |g: Option<&fmrh::heightfield::Georeference>| {
         args.tiling != TilingArg::Nodes && g.is_some_and(|g| Placement::new(g, 1.0).is_ok())
     };
-    let (parts, cover, context) =
-        scene_parts(&args.file, &args.view, camera, options, geodetic_wanted)?;
+    let (parts, cover, context) = scene_parts(
+        &args.file,
+        &args.view,
+        camera,
+        options,
+        geodetic_wanted,
+        false,
+    )?;
     if parts.is_empty() {
         return Err(Error::InvalidArgument(
             "the camera sees no terrain: there is nothing to mesh (give --window)".into(),

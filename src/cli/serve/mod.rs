@@ -572,6 +572,7 @@ fn mesh(q: &ViewQuery<'_>) -> Result<Answer, Error> {
         &options,
         q.cracks,
         q.refine,
+        false,
     )?;
     let glb = meshed.glb()?;
     Ok(bytes(200, "model/gltf-binary", glb)
