@@ -21,9 +21,9 @@
 //! their own levels of detail, from different sources: they need not meet. Each block on a
 //! seam gets a skirt ([`Layers::skirts`]), a curtain below its seam edges, as deep as its
 //! edge lies above the other side's surface at the most. Both surfaces are linear along the
-//! seam between the points where either may bend: whole samples of either grid, and where the
-//! seam crosses a grid cell's diagonal (a block coarser than its data has grid lines that the
-//! seam runs between). The gap is measured at every such point of both sides (`grid_breaks`),
+//! seam between the points where either may bend: the grid lines of every block along it (a
+//! physical block's are its whole samples), and where the seam crosses a grid cell's
+//! diagonal (a block coarser than its data has grid lines that the seam runs between). The gap is measured at every such point of both sides (`grid_breaks`),
 //! against every other layer drawing there (several meet at a footprint's corner), so the
 //! maximum bounds the gap everywhere on the seam: with the skirts hung, the side that is
 //! higher at any point of the seam reaches below the other, and no crack is seen (the mesh
@@ -493,9 +493,9 @@ impl<S: Source> Layer<'_, S> {
 }
 
 /// Where block `g`'s surface may bend along the line `line` (a row when `along_row`, else a
-/// column) between `from` and `to` (samples): every whole sample (its grid lines among
-/// them), and where the line crosses a grid cell's north-west to south-east diagonal when it
-/// runs between grid lines (`format-spec/model.md` §4); the ends too.
+/// column) between `from` and `to` (samples): its grid lines across, and where the line
+/// crosses a grid cell's north-west to south-east diagonal when it runs between grid lines
+/// (`format-spec/model.md` §4); the ends too.
 fn grid_breaks(g: &GridBlock<'_>, along_row: bool, line: f64, from: f64, to: f64) -> Vec<f64> {
     let s = g.stride as f64;
     let (origin_line, origin_t) = if along_row {
@@ -504,10 +504,16 @@ fn grid_breaks(g: &GridBlock<'_>, along_row: bool, line: f64, from: f64, to: f64
         (g.rect.col0 as f64, g.rect.row0 as f64)
     };
     let mut out = vec![from, to];
-    let mut t = from.ceil();
-    while t <= to {
+    // Its grid lines across (every whole sample for a physical block): between two of them
+    // and off the diagonals below, the surface is one plane.
+    let mut k = ((from - origin_t) / s).ceil();
+    loop {
+        let t = origin_t + k * s;
+        if t > to {
+            break;
+        }
         out.push(t);
-        t += 1.0;
+        k += 1.0;
     }
     // Offset of the line inside its row (column) of cells: the diagonal meets it that far
     // past each grid line across.
