@@ -579,6 +579,9 @@ fn the_cli_takes_cameras_on_the_globe() {
         "1",
     ]);
     assert!(!r.status.success() && String::from_utf8_lossy(&r.stderr).contains("georeference"));
+    // `fmrh mesh` meshes a globe scene (tests/gltf.rs checks its vertices); `fmrh render`
+    // does not draw one yet, and says so.
+    let glb = dir.path().join("x.glb");
     let m = common::fmrh(&[
         "mesh",
         f,
@@ -587,7 +590,112 @@ fn the_cli_takes_cameras_on_the_globe() {
         "--tau",
         "1",
         "-o",
-        dir.path().join("x.glb").to_str().unwrap(),
+        glb.to_str().unwrap(),
     ]);
-    assert!(!m.status.success() && String::from_utf8_lossy(&m.stderr).contains("flat-frame"));
+    assert!(m.status.success(), "{}", String::from_utf8_lossy(&m.stderr));
+    assert!(glb.exists());
+    let png = dir.path().join("x.png");
+    let r = common::fmrh(&[
+        "render",
+        f,
+        "--eye-geo",
+        "43.1,6.5,2500",
+        "--tau",
+        "1",
+        "-o",
+        png.to_str().unwrap(),
+    ]);
+    assert!(!r.status.success() && String::from_utf8_lossy(&r.stderr).contains("flat-frame"));
+    assert!(!png.exists());
+}
+
+/// `fmrh fly --geo` replays a path of cameras on the globe (latitude, longitude, height,
+/// heading, pitch) from orbit to the ground through the frame scheduler: each frame shows
+/// exactly the blocks of that camera's scene on the globe, loads only what the frame before
+/// did not hold, and a malformed line or a flat-frame option is refused.
+#[test]
+fn a_geographic_path_flies_from_orbit_to_the_ground() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = n43(dir.path());
+    let heights = [2.0e7, 5.0e6, 1.0e6, 2.0e5, 5.0e4, 1.0e4, 3.0e3, 1.0e3];
+    let lines: Vec<String> = heights
+        .iter()
+        .enumerate()
+        .map(|(i, h)| format!("43.3,6.4,{h},30,{}", -90.0 + 8.0 * i as f64))
+        .collect();
+    let path = dir.path().join("orbit.csv");
+    std::fs::write(
+        &path,
+        format!("lat,lon,h,heading,pitch\n{}\n", lines.join("\n")),
+    )
+    .unwrap();
+    let out = common::ok_json(&common::fmrh(&[
+        "fly",
+        file.to_str().unwrap(),
+        "--path",
+        path.to_str().unwrap(),
+        "--geo",
+        "--tau",
+        "1",
+        "--json",
+    ]));
+    let frames = out["frames"].as_array().unwrap();
+    assert_eq!(frames.len(), heights.len());
+    // The library's scheduler and scenes, frame by frame.
+    let store = std::sync::Arc::new(fmrh::Store::open(&file).unwrap());
+    let options = fmrh::scene::ScheduleOptions {
+        globe: true,
+        ..fmrh::scene::ScheduleOptions::new(1.0)
+    };
+    let mut scheduler =
+        fmrh::scene::Scheduler::new(std::sync::Arc::clone(&store), options).unwrap();
+    let terrain = Terrain::on_globe(&store).unwrap();
+    let mut held = std::collections::BTreeSet::new();
+    for (i, h) in heights.iter().enumerate() {
+        let (eye, target, up) = globe::look(43.3, 6.4, *h, 30.0, -90.0 + 8.0 * i as f64);
+        let mut c = Camera::looking_at(eye, target);
+        c.up = up;
+        let scene = terrain.scene(&c, &SceneOptions::new(1.0)).unwrap();
+        let want: std::collections::BTreeSet<(u8, u32, u32)> =
+            scene.blocks.iter().map(|b| (b.level, b.x, b.y)).collect();
+        assert!(!want.is_empty(), "frame {i} sees the tile");
+        let f = scheduler.frame(&c).unwrap();
+        let got: std::collections::BTreeSet<(u8, u32, u32)> = f
+            .load
+            .iter()
+            .chain(&f.keep)
+            .map(|b| (b.level, b.x, b.y))
+            .collect();
+        assert_eq!(got, want, "frame {i}");
+        let loaded: std::collections::BTreeSet<(u8, u32, u32)> =
+            f.load.iter().map(|b| (b.level, b.x, b.y)).collect();
+        assert!(loaded.is_disjoint(&held), "frame {i} loads what it held");
+        held = got;
+        let j = &frames[i];
+        assert_eq!(j["visible"].as_u64(), Some(want.len() as u64), "frame {i}");
+        assert_eq!(j["loaded"].as_u64(), Some(f.stats.loaded), "frame {i}");
+        assert!(j["max_screen_error"].as_f64().unwrap() <= 1.0);
+    }
+    // Refusals: a line that is not five numbers, a latitude off the globe, --spacing.
+    for (text, extra) in [
+        ("43.3,6.4,1000,30\n", None),
+        ("95,6.4,1000,30,-20\n", None),
+        ("43.3,6.4,1000,30,-20\n", Some("90")),
+    ] {
+        std::fs::write(&path, text).unwrap();
+        let mut args = vec![
+            "fly",
+            file.to_str().unwrap(),
+            "--path",
+            path.to_str().unwrap(),
+            "--geo",
+            "--tau",
+            "1",
+        ];
+        if let Some(s) = extra {
+            args.extend(["--spacing", s]);
+        }
+        let r = common::fmrh(&args);
+        assert_eq!(r.status.code(), Some(2), "{text}");
+    }
 }

@@ -17,9 +17,15 @@ use super::scene::ViewArgs;
 pub struct FlyArgs {
     /// The container, or a dataset's directory (the path in the dataset's world frame).
     file: PathBuf,
-    /// The camera path: CSV, one camera a line, eye_x,eye_y,eye_z,target_x,target_y,target_z.
+    /// The camera path: CSV, one camera a line, eye_x,eye_y,eye_z,target_x,target_y,target_z
+    /// (with --geo: latitude,longitude,height,heading,pitch).
     #[arg(long)]
     path: PathBuf,
+    /// The path's cameras are on the globe (latitude and longitude in degrees, height above
+    /// the WGS 84 ellipsoid in metres, heading clockwise from north, pitch above the
+    /// horizontal), and so are the container's samples (a geographic grid).
+    #[arg(long)]
+    geo: bool,
     #[command(flatten)]
     view: ViewArgs,
     /// Metres: blocks that leave the view but stay this close remain resident.
@@ -73,8 +79,26 @@ pub fn run(args: &FlyArgs) -> Result<ExitCode, Error> {
         viewport: args.view.viewport()?,
         ..Camera::looking_at(glam::DVec3::ZERO, glam::DVec3::X)
     };
-    let cameras = path::parse(&text, &template)?;
+    let cameras = if args.geo {
+        if args.view.spacing.is_some() {
+            return Err(Error::InvalidArgument(
+                "--spacing sets the flat frame's spacing; with --geo the georeference places \
+                 the samples: drop one of them"
+                    .into(),
+            ));
+        }
+        path::parse_geo(&text, &template)?
+    } else {
+        path::parse(&text, &template)?
+    };
     if super::is_dataset(&args.file)? {
+        if args.geo {
+            return Err(Error::InvalidArgument(
+                "fmrh fly takes flat-frame paths over a dataset so far (no --geo); \
+                 `fmrh scene DATASET --eye-geo` places one camera on the globe"
+                    .into(),
+            ));
+        }
         return replay_dataset(args, &cameras);
     }
     if let Some(url) = super::url_of(&args.file) {
@@ -104,7 +128,12 @@ fn replay<S: fmrh::store::Source + 'static>(
         cache_radius: args.cache_radius,
         memory_budget: args.budget,
         prefetch: args.prefetch,
-        spacing_m: args.view.spacing(&store, &args.file)?,
+        spacing_m: if args.geo {
+            None
+        } else {
+            args.view.spacing(&store, &args.file)?
+        },
+        globe: args.geo,
     };
     let open = store.open_reads();
     let counted = Arc::clone(&store);
@@ -154,6 +183,7 @@ fn replay_dataset(args: &FlyArgs, cameras: &[Camera]) -> Result<ExitCode, Error>
             .as_deref()
             .map(super::build::parse_spacing)
             .transpose()?,
+        globe: false,
     };
     let mut scheduler = fmrh::dataset::DatasetScheduler::new(&ds, options)?;
     let mut frames = Vec::with_capacity(cameras.len());

@@ -48,8 +48,14 @@ pub struct DatasetScheduler<'d> {
 }
 
 impl<'d> DatasetScheduler<'d> {
-    /// A scheduler over `dataset` (`options.spacing_m` overrides the dataset's spacing).
+    /// A scheduler over `dataset` (`options.spacing_m` overrides the dataset's spacing). In
+    /// the flat frame only so far: `options.globe` is refused.
     pub fn new(dataset: &'d Dataset, options: ScheduleOptions) -> Result<Self> {
+        if options.globe {
+            return Err(crate::Error::InvalidArgument(
+                "a dataset's frames are scheduled in the flat frame only so far (no globe)".into(),
+            ));
+        }
         let frame = dataset.frame(options.spacing_m)?;
         Ok(DatasetScheduler {
             dataset,

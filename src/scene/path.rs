@@ -11,6 +11,48 @@ use crate::error::{Error, Result};
 
 use super::camera::Camera;
 
+/// Parses a path of cameras on the globe: one camera a line,
+/// `latitude,longitude,height,heading,pitch` (degrees, metres above the ellipsoid, heading
+/// clockwise from north, pitch above the horizontal), placed by [`crate::globe::look`] in
+/// ECEF metres. Blank lines, `#` comments and a non-numeric first line are skipped, as in
+/// [`parse`]; field of view and viewport come from `template`.
+pub fn parse_geo(text: &str, template: &Camera) -> Result<Vec<Camera>> {
+    let mut out = Vec::new();
+    for (n, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+        let values: Option<Vec<f64>> = fields.iter().map(|f| f.parse().ok()).collect();
+        match values {
+            Some(v) if v.len() == 5 && v.iter().all(|x| x.is_finite()) && v[0].abs() <= 90.0 => {
+                let (eye, target, up) = crate::globe::look(v[0], v[1], v[2], v[3], v[4]);
+                out.push(Camera {
+                    eye,
+                    target,
+                    up,
+                    ..*template
+                });
+            }
+            None if out.is_empty() && n == 0 => continue, // a header
+            _ => {
+                return Err(Error::InvalidArgument(format!(
+                    "path line {}: expected latitude,longitude,height,heading,pitch (finite \
+                     numbers, latitude within -90..=90), got `{line}`",
+                    n + 1
+                )))
+            }
+        }
+    }
+    if out.is_empty() {
+        return Err(Error::InvalidArgument(
+            "the camera path has no camera".into(),
+        ));
+    }
+    Ok(out)
+}
+
 /// The CSV header the generators write.
 pub const HEADER: &str = "eye_x,eye_y,eye_z,target_x,target_y,target_z";
 

@@ -80,6 +80,9 @@ pub struct ScheduleOptions {
     /// Ground spacing `[east, south]` in metres, instead of the store's (see
     /// [`Terrain::with_spacing`]).
     pub spacing_m: Option<[f64; 2]>,
+    /// The store's samples on the WGS 84 ellipsoid and the cameras in ECEF metres
+    /// ([`Terrain::on_globe`]; `spacing_m` is then unused).
+    pub globe: bool,
 }
 
 impl ScheduleOptions {
@@ -92,6 +95,16 @@ impl ScheduleOptions {
             memory_budget: 256 << 20,
             prefetch: false,
             spacing_m: None,
+            globe: false,
+        }
+    }
+
+    /// The terrain these options select scenes on: flat, or on the globe.
+    fn terrain<'s, S: Source>(&self, store: &'s Store<S>) -> Result<Terrain<'s, S>> {
+        if self.globe {
+            Terrain::on_globe(store)
+        } else {
+            Terrain::with_spacing(store, self.spacing_m)
         }
     }
 }
@@ -175,7 +188,7 @@ impl<S: Source + 'static> Scheduler<S> {
                 )));
             }
         }
-        Terrain::with_spacing(&store, options.spacing_m)?; // the root must be readable
+        options.terrain(&store)?; // the root must be readable (and on the globe, placed)
         let prefetcher = options
             .prefetch
             .then(|| Prefetcher::start(Arc::clone(&store), options));
@@ -230,7 +243,7 @@ impl<S: Source + 'static> Scheduler<S> {
     pub fn frame(&mut self, camera: &Camera) -> Result<Frame> {
         let started = Instant::now();
         let store = Arc::clone(&self.store);
-        let terrain = Terrain::with_spacing(&store, self.options.spacing_m)?;
+        let terrain = self.options.terrain(&store)?;
         let scene = terrain.scene(camera, &self.options.scene)?;
         let index = self.frames;
         let visible: HashSet<BlockId> = scene.blocks.iter().map(BlockId::of).collect();
@@ -479,7 +492,7 @@ fn warm<S: Source>(
     camera: Camera,
     have: &HashSet<BlockId>,
 ) {
-    let Ok(terrain) = Terrain::with_spacing(store, options.spacing_m) else {
+    let Ok(terrain) = options.terrain(store) else {
         return;
     };
     let Ok(scene) = terrain.scene(&camera, &options.scene) else {
