@@ -11,7 +11,9 @@
 //!   the frustum, above the horizon) lies in exactly one block, in both modes;
 //! * **within tau** in uniform mode too;
 //! * the CLI's `--eye-geo` answer is the library's, and a dataset with no georeference is
-//!   refused on the globe with a clear error.
+//!   refused on the globe with a clear error;
+//! * **frames** (`fmrh fly DATASET --geo`, `DatasetScheduler` with `globe`) from orbit to
+//!   1 km show the dataset's globe scene, and a memory radius holds the tiles within it.
 //!
 //! Placing every tile at the dataset's origin (not at its own place) fails the first two.
 
@@ -306,4 +308,86 @@ fn the_cli_takes_geographic_cameras_for_datasets() {
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("georeference"), "{err}");
+}
+
+/// `fmrh fly DATASET --geo` and `DatasetScheduler` with `globe`: frame by frame from orbit to
+/// 1 km over the border, the blocks in view are the dataset's scene on the globe, and the
+/// CLI's frames are the library's; with a memory radius, the tiles within it are scheduled
+/// even when out of view, and a tile beyond it is not.
+#[test]
+fn a_geographic_path_flies_over_the_dataset() {
+    use fmrh::dataset::DatasetScheduler;
+    use fmrh::scene::ScheduleOptions;
+    let b = built();
+    let ds = Dataset::open(&b.ds).unwrap();
+    let heights = [2.0e7, 1.0e6, 1.0e5, 2.0e4, 5.0e3, 1.0e3];
+    let pitch = |i: usize| -90.0 + 12.0 * i as f64;
+    let globe = ScheduleOptions {
+        globe: true,
+        ..ScheduleOptions::new(1.0)
+    };
+    let mut scheduler = DatasetScheduler::new(&ds, globe).unwrap();
+    let mut visible = Vec::new();
+    for (i, h) in heights.iter().enumerate() {
+        let camera = camera_at(43.4, 6.9, *h, 45.0, pitch(i));
+        let scene = ds.scene_on_globe(&camera, &SceneOptions::new(1.0)).unwrap();
+        assert!(!scene.blocks.is_empty(), "frame {i}");
+        let f = scheduler.frame(&camera).unwrap();
+        assert_eq!(f.stats.visible, scene.blocks.len() as u64, "frame {i}");
+        assert!(f.stats.max_screen_error <= 1.0);
+        visible.push(f.stats.visible);
+    }
+    let path = b.ds.with_file_name("geo-path.csv");
+    let lines: Vec<String> = heights
+        .iter()
+        .enumerate()
+        .map(|(i, h)| format!("43.4,6.9,{h},45,{}", pitch(i)))
+        .collect();
+    std::fs::write(&path, lines.join("\n")).unwrap();
+    let out = common::ok_json(&common::fmrh(&[
+        "fly",
+        b.ds.to_str().unwrap(),
+        "--path",
+        path.to_str().unwrap(),
+        "--geo",
+        "--tau",
+        "1",
+        "--json",
+    ]));
+    let cli: Vec<u64> = out["frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f["visible"].as_u64().unwrap())
+        .collect();
+    assert_eq!(cli, visible);
+    // Low over N43E006, 8 km west of the border, looking west: only N43E006 is in view; a
+    // 50 km memory radius holds N43E007 too.
+    let west = camera_at(43.4, 6.9, 1000.0, 270.0, -10.0);
+    let scene = ds.scene_on_globe(&west, &SceneOptions::new(1.0)).unwrap();
+    assert!(scene.blocks.iter().all(|b| b.tile == 0));
+    let ringed = ScheduleOptions {
+        memory_radius: 50_000.0,
+        ..globe
+    };
+    let in_view = DatasetScheduler::new(&ds, globe)
+        .unwrap()
+        .frame(&west)
+        .unwrap();
+    assert_eq!(in_view.tiles, 1);
+    let near = DatasetScheduler::new(&ds, ringed)
+        .unwrap()
+        .frame(&west)
+        .unwrap();
+    assert_eq!(near.tiles, 2);
+    assert_eq!(near.stats.visible, in_view.stats.visible);
+    // Looking west from 5.5° E, neither tile is in view; N43E006 (40 km east) is within
+    // the radius, N43E007 (120 km) is not.
+    let far_west = camera_at(43.4, 5.5, 1000.0, 270.0, -10.0);
+    let far = DatasetScheduler::new(&ds, ringed)
+        .unwrap()
+        .frame(&far_west)
+        .unwrap();
+    assert_eq!(far.tiles, 1);
+    assert_eq!(far.stats.visible, 0);
 }

@@ -23,7 +23,7 @@ pub struct FlyArgs {
     path: PathBuf,
     /// The path's cameras are on the globe (latitude and longitude in degrees, height above
     /// the WGS 84 ellipsoid in metres, heading clockwise from north, pitch above the
-    /// horizontal), and so are the container's samples (a geographic grid).
+    /// horizontal), and so are the samples (a geographic container or dataset).
     #[arg(long)]
     geo: bool,
     #[command(flatten)]
@@ -92,13 +92,6 @@ pub fn run(args: &FlyArgs) -> Result<ExitCode, Error> {
         path::parse(&text, &template)?
     };
     if super::is_dataset(&args.file)? {
-        if args.geo {
-            return Err(Error::InvalidArgument(
-                "fmrh fly takes flat-frame paths over a dataset so far (no --geo); \
-                 `fmrh scene DATASET --eye-geo` places one camera on the globe"
-                    .into(),
-            ));
-        }
         return replay_dataset(args, &cameras);
     }
     if let Some(url) = super::url_of(&args.file) {
@@ -134,6 +127,7 @@ fn replay<S: fmrh::store::Source + 'static>(
             args.view.spacing(&store, &args.file)?
         },
         globe: args.geo,
+        globe_frame: None,
     };
     let open = store.open_reads();
     let counted = Arc::clone(&store);
@@ -183,7 +177,8 @@ fn replay_dataset(args: &FlyArgs, cameras: &[Camera]) -> Result<ExitCode, Error>
             .as_deref()
             .map(super::build::parse_spacing)
             .transpose()?,
-        globe: false,
+        globe: args.geo,
+        globe_frame: None,
     };
     let mut scheduler = fmrh::dataset::DatasetScheduler::new(&ds, options)?;
     let mut frames = Vec::with_capacity(cameras.len());

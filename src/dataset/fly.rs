@@ -6,6 +6,10 @@
 //! single file, so prefetch works across tiles: a tile ahead of the camera joins as soon as
 //! its box comes within the cache radius.
 //!
+//! On the globe (`ScheduleOptions::globe`) the camera is in ECEF and the same for every tile,
+//! each tile placed by the dataset's grid, and tiles join by their ECEF boxes, less those
+//! below the horizon, or by the longitude-latitude window of the radii.
+//!
 //! In uniform mode each tile picks its own bound from its own nearest distance (a dataset
 //! scene, [`Dataset::scene`], gives every tile the nearest distance over all of them).
 
@@ -18,7 +22,7 @@ use serde::Serialize;
 use super::reader::{Dataset, Tile};
 use crate::error::Result;
 use crate::model::SampleRect;
-use crate::scene::{Camera, FrameStats, ScheduleOptions, Scheduler, WorldFrame};
+use crate::scene::{Camera, FrameStats, GlobeFrame, ScheduleOptions, Scheduler, WorldFrame};
 use crate::store::{AnySource, ReadStats};
 
 /// One frame over a dataset.
@@ -41,6 +45,8 @@ pub struct DatasetScheduler<'d> {
     dataset: &'d Dataset,
     options: ScheduleOptions,
     frame: WorldFrame,
+    /// On the globe: the dataset's grid there.
+    globe: Option<GlobeFrame>,
     tiles: BTreeMap<u64, (SampleRect, Scheduler<AnySource>)>,
     frames: u64,
     /// What the tiles read, of schedulers already dropped.
@@ -48,15 +54,17 @@ pub struct DatasetScheduler<'d> {
 }
 
 impl<'d> DatasetScheduler<'d> {
-    /// A scheduler over `dataset` (`options.spacing_m` overrides the dataset's spacing). In
-    /// the flat frame only so far: `options.globe` is refused.
+    /// A scheduler over `dataset` (`options.spacing_m` overrides the dataset's spacing). With
+    /// `options.globe` the dataset is on the WGS 84 ellipsoid ([`Dataset::globe_frame`]) and
+    /// the cameras in ECEF: each tile placed as [`Dataset::scene_on_globe`] places it.
     pub fn new(dataset: &'d Dataset, options: ScheduleOptions) -> Result<Self> {
-        if options.globe {
-            return Err(crate::Error::InvalidArgument(
-                "a dataset's frames are scheduled in the flat frame only so far (no globe)".into(),
-            ));
-        }
-        let frame = dataset.frame(options.spacing_m)?;
+        let (frame, globe) = if options.globe {
+            let g = dataset.globe_frame()?;
+            let spacing = options.spacing_m.or(dataset.spacing_m());
+            (WorldFrame::new(spacing), Some(g))
+        } else {
+            (dataset.frame(options.spacing_m)?, None)
+        };
         Ok(DatasetScheduler {
             dataset,
             options: ScheduleOptions {
@@ -64,6 +72,7 @@ impl<'d> DatasetScheduler<'d> {
                 ..options
             },
             frame,
+            globe,
             tiles: BTreeMap::new(),
             frames: 0,
             dropped_reads: ReadStats::default(),
@@ -74,6 +83,9 @@ impl<'d> DatasetScheduler<'d> {
     fn near(&self, eye: DVec3, radius: f64) -> Result<Vec<Tile>> {
         if radius <= 0.0 {
             return Ok(Vec::new());
+        }
+        if let Some(g) = self.globe {
+            return self.near_on_globe(&g, eye, radius);
         }
         let grid = self.dataset.grid();
         let span = |v: f64, step: f64, max: u64| -> (u64, u64) {
@@ -94,6 +106,63 @@ impl<'d> DatasetScheduler<'d> {
         })
     }
 
+    /// On the globe, the tiles of the longitude-latitude window that holds every point of
+    /// the terrain within `radius` metres of `eye`. Terrain is at least 6,300 km from the
+    /// Earth's centre, so such a point is at most `2 asin(radius / 12,600 km)` of arc from
+    /// the eye's direction; geodetic and geocentric latitudes differ by less than 0.2°.
+    fn near_on_globe(&self, g: &GlobeFrame, eye: DVec3, radius: f64) -> Result<Vec<Tile>> {
+        const LEAST_RADIUS: f64 = 6_300_000.0;
+        let grid = self.dataset.grid();
+        let x = radius / (2.0 * LEAST_RADIUS);
+        if x >= 1.0 {
+            return self.dataset.tiles_meeting(&grid);
+        }
+        let arc = 2.0 * x.asin().to_degrees() + 0.2;
+        let (lon, lat, _) = crate::globe::geodetic(eye);
+        let (lat_a, lat_b) = ((lat - arc).max(-90.0), (lat + arc).min(90.0));
+        let widest = lat_a.abs().max(lat_b.abs());
+        let (ra, rb) = ((lat_a - g.lat0) / g.dlat, (lat_b - g.lat0) / g.dlat);
+        let (r0, r1) = (ra.min(rb).floor(), ra.max(rb).ceil());
+        if r1 < 0.0 || r0 > grid.row1 as f64 {
+            return Ok(Vec::new());
+        }
+        let clamp = |v: f64, max: u64| (v.max(0.0) as u64).min(max);
+        let (r0, r1) = (clamp(r0, grid.row1), clamp(r1, grid.row1));
+        // Every longitude when the window reaches a pole or spans half the Earth; else the
+        // window once a turn either side too, as the grid's longitudes may run past ±180°.
+        let half = if widest >= 90.0 {
+            f64::INFINITY
+        } else {
+            arc / widest.to_radians().cos()
+        };
+        let spans: Vec<(f64, f64)> = if half >= 180.0 {
+            vec![(f64::NEG_INFINITY, f64::INFINITY)]
+        } else {
+            [-360.0, 0.0, 360.0]
+                .iter()
+                .map(|t| (lon + t - half, lon + t + half))
+                .collect()
+        };
+        let mut out: BTreeMap<u64, Tile> = BTreeMap::new();
+        for (a, b) in spans {
+            let (ca, cb) = ((a - g.lon0) / g.dlon, (b - g.lon0) / g.dlon);
+            let (c0, c1) = (ca.min(cb).floor(), ca.max(cb).ceil());
+            if c1 < 0.0 || c0 > grid.col1 as f64 {
+                continue;
+            }
+            let rect = SampleRect {
+                col0: clamp(c0, grid.col1),
+                row0: r0,
+                col1: clamp(c1, grid.col1),
+                row1: r1,
+            };
+            for t in self.dataset.tiles_meeting(&rect)? {
+                out.insert(t.index, t);
+            }
+        }
+        Ok(out.into_values().collect())
+    }
+
     /// What the tiles' files have read since they were opened, schedulers dropped included.
     pub fn read_stats(&self) -> ReadStats {
         self.tiles.values().fold(self.dropped_reads, |a, (_, s)| {
@@ -105,7 +174,11 @@ impl<'d> DatasetScheduler<'d> {
     pub fn frame(&mut self, camera: &Camera) -> Result<DatasetFrame> {
         let started = Instant::now();
         let mut wanted: BTreeMap<u64, Tile> = BTreeMap::new();
-        for t in self.dataset.scene_tiles(camera, None, &self.frame)? {
+        let seen = match self.globe {
+            Some(_) => self.dataset.scene_tiles_on_globe(camera, None)?,
+            None => self.dataset.scene_tiles(camera, None, &self.frame)?,
+        };
+        for t in seen {
             wanted.insert(t.index, t);
         }
         let radius = self.options.memory_radius.max(if self.options.prefetch {
@@ -136,13 +209,25 @@ impl<'d> DatasetScheduler<'d> {
         for (k, t) in &wanted {
             if !self.tiles.contains_key(k) {
                 let store = self.dataset.open_tile(t)?;
-                self.tiles
-                    .insert(*k, (t.rect(), Scheduler::new(store, self.options)?));
+                let r = t.rect();
+                // On the globe, the tile where the dataset's grid puts it.
+                let globe_frame = self.globe.map(|g| {
+                    let (lon0, lat0) = g.lon_lat(r.col0 as f64, r.row0 as f64);
+                    GlobeFrame { lon0, lat0, ..g }
+                });
+                let options = ScheduleOptions {
+                    globe_frame,
+                    ..self.options
+                };
+                self.tiles.insert(*k, (r, Scheduler::new(store, options)?));
             }
         }
         let mut tiles = 0;
         for (r, s) in self.tiles.values_mut() {
-            let local = super::scene::in_tile(camera, r, &self.frame);
+            let local = match self.globe {
+                Some(_) => *camera,
+                None => super::scene::in_tile(camera, r, &self.frame),
+            };
             let f = s.frame(&local)?;
             let x = f.stats;
             stats.visible += x.visible;

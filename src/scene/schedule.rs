@@ -36,7 +36,7 @@ use crate::error::Result;
 use crate::format::StoredNode;
 use crate::store::{Source, Store};
 
-use super::camera::Camera;
+use super::camera::{Camera, GlobeFrame, TerrainFrame, WorldFrame};
 use super::load::{load_blocks, load_blocks_reusing, LoadedBlock, PAYLOAD_GAP};
 use super::{Scene, SceneBlock, SceneOptions, Terrain};
 
@@ -83,6 +83,9 @@ pub struct ScheduleOptions {
     /// The store's samples on the WGS 84 ellipsoid and the cameras in ECEF metres
     /// ([`Terrain::on_globe`]; `spacing_m` is then unused).
     pub globe: bool,
+    /// With `globe`: where the samples are, instead of the store's own georeference (a
+    /// dataset places each tile by the dataset's grid).
+    pub globe_frame: Option<GlobeFrame>,
 }
 
 impl ScheduleOptions {
@@ -96,15 +99,20 @@ impl ScheduleOptions {
             prefetch: false,
             spacing_m: None,
             globe: false,
+            globe_frame: None,
         }
     }
 
     /// The terrain these options select scenes on: flat, or on the globe.
     fn terrain<'s, S: Source>(&self, store: &'s Store<S>) -> Result<Terrain<'s, S>> {
-        if self.globe {
-            Terrain::on_globe(store)
-        } else {
-            Terrain::with_spacing(store, self.spacing_m)
+        match (self.globe, self.globe_frame) {
+            (false, _) => Terrain::with_spacing(store, self.spacing_m),
+            (true, None) => Terrain::on_globe(store),
+            (true, Some(g)) => Terrain::with_frame(
+                store,
+                WorldFrame::new(store.header().metadata.spacing_m),
+                TerrainFrame::Globe(g),
+            ),
         }
     }
 }
