@@ -34,7 +34,6 @@ use std::collections::HashSet;
 use std::path::PathBuf;
 use std::time::Instant;
 
-use fmrh::globe;
 use fmrh::scene::{
     Camera, GlobeFrame, LayeredScene, Layers, LonLatRect, SceneOptions, Terrain, TerrainFrame,
 };
@@ -67,9 +66,7 @@ fn camera(i: usize, lat: f64, lon: f64, z: f64) -> (f64, Camera) {
     let (h, s) = (HEADING.to_radians(), 6_371_000.0f64);
     let lat_e = lat - (back * h.cos() / s).to_degrees();
     let lon_e = lon - (back * h.sin() / (s * lat.to_radians().cos())).to_degrees();
-    let (eye, target, up) = globe::look(lat_e, lon_e, z + above, HEADING, pitch);
-    let mut c = Camera::looking_at(eye, target);
-    c.up = up;
+    let c = Camera::on_globe(lat_e, lon_e, z + above, HEADING, pitch);
     (above, c)
 }
 

@@ -136,9 +136,7 @@ fn main() {
     );
     let mut totals = [(0usize, 0usize); 4];
     for (name, lat, lon, h, heading, pitch) in cameras {
-        let (eye, target, up) = globe::look(lat, lon, h, heading, pitch);
-        let mut camera = Camera::looking_at(eye, target);
-        camera.up = up;
+        let camera = Camera::on_globe(lat, lon, h, heading, pitch);
         let mut row = Vec::new();
         let mut count = 0;
         for (o, order) in sorted.iter().enumerate() {

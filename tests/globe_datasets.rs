@@ -66,13 +66,6 @@ fn built() -> &'static Built {
     })
 }
 
-fn camera_at(lat: f64, lon: f64, h: f64, heading: f64, pitch: f64) -> Camera {
-    let (eye, target, up) = globe::look(lat, lon, h, heading, pitch);
-    let mut c = Camera::looking_at(eye, target);
-    c.up = up;
-    c
-}
-
 type Key = (u8, u32, u32);
 
 fn keys_of_tile(scene: &DatasetScene, tile: u64) -> BTreeSet<Key> {
@@ -188,7 +181,7 @@ proptest! {
         lat in 42.5f64..44.5, lon in 5.5f64..8.5, log_h in 2.5f64..7.3,
         heading in 0.0f64..360.0, pitch in -90.0f64..-5.0, tau in 0.5f64..4.0,
     ) {
-        check(&camera_at(lat, lon, 10f64.powf(log_h), heading, pitch), tau)?;
+        check(&Camera::on_globe(lat, lon, 10f64.powf(log_h), heading, pitch), tau)?;
     }
 }
 
@@ -202,7 +195,7 @@ fn across_the_border() {
         (300_000.0, 0.0, -90.0),
         (2.0e7, 0.0, -90.0),
     ] {
-        let camera = camera_at(43.4, 6.9, h, heading, pitch);
+        let camera = Camera::on_globe(43.4, 6.9, h, heading, pitch);
         let seen = check(&camera, 1.0).unwrap();
         assert!(seen > 0, "the camera at {h} m sees the tiles");
         let ds = Dataset::open(&built().ds).unwrap();
@@ -216,12 +209,12 @@ fn across_the_border() {
 #[test]
 fn tiles_below_the_horizon_are_not_opened() {
     let ds = Dataset::open(&built().ds).unwrap();
-    let camera = camera_at(-43.5, -173.0, 1.0e6, 0.0, -90.0);
+    let camera = Camera::on_globe(-43.5, -173.0, 1.0e6, 0.0, -90.0);
     let scene = ds.scene_on_globe(&camera, &SceneOptions::new(1.0)).unwrap();
     assert!(scene.blocks.is_empty());
     assert_eq!(ds.tiles_opened(), 0);
     // Looking at them from the same height above them, they are.
-    let near = camera_at(43.5, 7.0, 1.0e6, 0.0, -90.0);
+    let near = Camera::on_globe(43.5, 7.0, 1.0e6, 0.0, -90.0);
     assert!(!ds
         .scene_on_globe(&near, &SceneOptions::new(1.0))
         .unwrap()
@@ -249,7 +242,7 @@ fn the_cli_takes_geographic_cameras_for_datasets() {
     let ds = Dataset::open(&b.ds).unwrap();
     let scene = ds
         .scene_on_globe(
-            &camera_at(43.4, 6.9, 30_000.0, 45.0, -35.0),
+            &Camera::on_globe(43.4, 6.9, 30_000.0, 45.0, -35.0),
             &SceneOptions::new(1.0),
         )
         .unwrap();
@@ -329,7 +322,7 @@ fn a_geographic_path_flies_over_the_dataset() {
     let mut scheduler = DatasetScheduler::new(&ds, globe).unwrap();
     let mut visible = Vec::new();
     for (i, h) in heights.iter().enumerate() {
-        let camera = camera_at(43.4, 6.9, *h, 45.0, pitch(i));
+        let camera = Camera::on_globe(43.4, 6.9, *h, 45.0, pitch(i));
         let scene = ds.scene_on_globe(&camera, &SceneOptions::new(1.0)).unwrap();
         assert!(!scene.blocks.is_empty(), "frame {i}");
         let f = scheduler.frame(&camera).unwrap();
@@ -363,7 +356,7 @@ fn a_geographic_path_flies_over_the_dataset() {
     assert_eq!(cli, visible);
     // Low over N43E006, 8 km west of the border, looking west: only N43E006 is in view; a
     // 50 km memory radius holds N43E007 too.
-    let west = camera_at(43.4, 6.9, 1000.0, 270.0, -10.0);
+    let west = Camera::on_globe(43.4, 6.9, 1000.0, 270.0, -10.0);
     let scene = ds.scene_on_globe(&west, &SceneOptions::new(1.0)).unwrap();
     assert!(scene.blocks.iter().all(|b| b.tile == 0));
     let ringed = ScheduleOptions {
@@ -383,7 +376,7 @@ fn a_geographic_path_flies_over_the_dataset() {
     assert_eq!(near.stats.visible, in_view.stats.visible);
     // Looking west from 5.5° E, neither tile is in view; N43E006 (40 km east) is within
     // the radius, N43E007 (120 km) is not.
-    let far_west = camera_at(43.4, 5.5, 1000.0, 270.0, -10.0);
+    let far_west = Camera::on_globe(43.4, 5.5, 1000.0, 270.0, -10.0);
     let far = DatasetScheduler::new(&ds, ringed)
         .unwrap()
         .frame(&far_west)

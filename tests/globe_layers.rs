@@ -300,13 +300,6 @@ fn check(
     Ok(seen)
 }
 
-fn camera_at(lat: f64, lon: f64, h: f64, heading: f64, pitch: f64) -> Camera {
-    let (eye, target, up) = globe::look(lat, lon, h, heading, pitch);
-    let mut c = Camera::looking_at(eye, target);
-    c.up = up;
-    c
-}
-
 proptest! {
     #![proptest_config(ProptestConfig { cases: 24, ..ProptestConfig::default() })]
     #[test]
@@ -316,7 +309,7 @@ proptest! {
         tau in 0.5f64..4.0,
     ) {
         let h = 10f64.powf(log_h);
-        check(&camera_at(lat, lon, h, heading, pitch), tau, None)?;
+        check(&Camera::on_globe(lat, lon, h, heading, pitch), tau, None)?;
     }
 }
 
@@ -325,7 +318,7 @@ proptest! {
 fn orbit_to_ground_without_holes_or_cracks() {
     let mut seen_any = 0;
     for h in [2.0e7, 5.0e6, 1.0e6, 2.0e5, 5.0e4, 1.0e4, 3.0e3, 800.0] {
-        let seen = check(&camera_at(43.25, 6.35, h, 20.0, -55.0), 1.0, None).unwrap();
+        let seen = check(&Camera::on_globe(43.25, 6.35, h, 20.0, -55.0), 1.0, None).unwrap();
         seen_any += usize::from(seen > 0);
     }
     assert_eq!(seen_any, 8, "every frame of the fly-through sees terrain");
@@ -337,7 +330,7 @@ fn orbit_to_ground_without_holes_or_cracks() {
 fn skirts_are_measured_between_grid_points() {
     let stores = stores();
     let layers = layers_of(&stores);
-    let camera = camera_at(43.25, 6.35, 2.0e5, 20.0, -55.0);
+    let camera = Camera::on_globe(43.25, 6.35, 2.0e5, 20.0, -55.0);
     let scene = layers.scene(&camera, &SceneOptions::new(1.0)).unwrap();
     let loaded = layers.load(&scene).unwrap();
     let skirts = layers.skirts(&scene, &loaded).unwrap();
@@ -417,7 +410,7 @@ fn the_cli_draws_layers() {
     let layers = layers_of(&stores);
     let scene = layers
         .scene(
-            &camera_at(43.25, 6.35, 2.0e5, 20.0, -55.0),
+            &Camera::on_globe(43.25, 6.35, 2.0e5, 20.0, -55.0),
             &SceneOptions::new(1.0),
         )
         .unwrap();

@@ -134,10 +134,7 @@ proptest! {
         let cam_lat = (lat + cam.dlat).clamp(-89.9, 89.9);
         let camera = match cam.look {
             Look::Along(heading, pitch) => {
-                let (eye, target, up) = globe::look(cam_lat, lon + cam.dlon, h, heading, pitch);
-                let mut c = Camera::looking_at(eye, target);
-                c.up = up;
-                c
+                Camera::on_globe(cam_lat, lon + cam.dlon, h, heading, pitch)
             }
             Look::At(a, b) => {
                 let eye = globe::ecef_point(lon + cam.dlon, cam_lat, h);
@@ -200,10 +197,7 @@ proptest! {
         let lat_eye = lat.clamp(-89.999, 89.999);
         let camera = match look {
             Look::Along(heading, pitch) => {
-                let (eye, target, up) = globe::look(lat_eye, lon, h, heading, pitch);
-                let mut c = Camera::looking_at(eye, target);
-                c.up = up;
-                c
+                Camera::on_globe(lat_eye, lon, h, heading, pitch)
             }
             Look::At(dlon, dlat) => {
                 let eye = globe::ecef_point(lon, lat_eye, h);
@@ -231,12 +225,7 @@ fn whole_earth_over_the_pole_and_the_antimeridian() {
     let (_, file, field) = whole_earth();
     let store = fmrh::Store::open(file).unwrap();
     let terrain = Terrain::on_globe(&store).unwrap();
-    let down = |lat: f64, lon: f64, h: f64| {
-        let (eye, target, up) = globe::look(lat, lon, h, 0.0, -90.0);
-        let mut c = Camera::looking_at(eye, target);
-        c.up = up;
-        c
-    };
+    let down = |lat: f64, lon: f64, h: f64| Camera::on_globe(lat, lon, h, 0.0, -90.0);
     let owner = |scene: &fmrh::scene::Scene, col: u64, row: u64| {
         scene
             .blocks
@@ -406,9 +395,7 @@ fn orbit_and_ground_views_of_a_real_tile() {
     let store = fmrh::Store::open(&n43(dir.path())).unwrap();
     let terrain = Terrain::on_globe(&store).unwrap();
     let scene_at = |lat, lon, h, heading, pitch| {
-        let (eye, target, up) = globe::look(lat, lon, h, heading, pitch);
-        let mut c = Camera::looking_at(eye, target);
-        c.up = up;
+        let c = Camera::on_globe(lat, lon, h, heading, pitch);
         terrain.scene(&c, &SceneOptions::new(1.0)).unwrap()
     };
     let orbit = scene_at(43.5, 6.5, 20_000_000.0, 0.0, -90.0);
@@ -652,9 +639,7 @@ fn a_geographic_path_flies_from_orbit_to_the_ground() {
     let terrain = Terrain::on_globe(&store).unwrap();
     let mut held = std::collections::BTreeSet::new();
     for (i, h) in heights.iter().enumerate() {
-        let (eye, target, up) = globe::look(43.3, 6.4, *h, 30.0, -90.0 + 8.0 * i as f64);
-        let mut c = Camera::looking_at(eye, target);
-        c.up = up;
+        let c = Camera::on_globe(43.3, 6.4, *h, 30.0, -90.0 + 8.0 * i as f64);
         let scene = terrain.scene(&c, &SceneOptions::new(1.0)).unwrap();
         let want: std::collections::BTreeSet<(u8, u32, u32)> =
             scene.blocks.iter().map(|b| (b.level, b.x, b.y)).collect();

@@ -135,14 +135,7 @@ fn the_glb_is_the_scene_mesh_in_the_documented_axes() {
             .blocks
             .iter()
             .zip(&loaded)
-            .map(|(b, l)| GridBlock {
-                rect: b.rect(),
-                stride: d.stride(b.level),
-                grid_width: l.width,
-                grid_height: l.height,
-                heights: &l.heights,
-                error: b.error,
-            })
+            .map(|(b, l)| GridBlock::of(b, l, d.stride(b.level)))
             .collect();
         let frame = WorldFrame::new(Some([10.0, 10.0]));
         let meshes = build(&grids, &frame, cracks).unwrap();
@@ -227,9 +220,7 @@ fn a_globe_glb_is_the_scene_mesh_on_the_ellipsoid() {
     let TerrainFrame::Globe(g) = terrain.world() else {
         panic!("a geographic grid is on the globe")
     };
-    let (eye, target, up) = fmrh::globe::look(43.3, 6.4, 30_000.0, 30.0, -40.0);
-    let mut camera = Camera::looking_at(eye, target);
-    camera.up = up;
+    let camera = Camera::on_globe(43.3, 6.4, 30_000.0, 30.0, -40.0);
     let scene = terrain.scene(&camera, &SceneOptions::new(1.0)).unwrap();
     let loaded = load_blocks(&store, &scene.blocks, PAYLOAD_GAP).unwrap();
     let d = store.domain();
@@ -237,14 +228,7 @@ fn a_globe_glb_is_the_scene_mesh_on_the_ellipsoid() {
         .blocks
         .iter()
         .zip(&loaded)
-        .map(|(b, l)| GridBlock {
-            rect: b.rect(),
-            stride: d.stride(b.level),
-            grid_width: l.width,
-            grid_height: l.height,
-            heights: &l.heights,
-            error: b.error,
-        })
+        .map(|(b, l)| GridBlock::of(b, l, d.stride(b.level)))
         .collect();
     let meshes = build_in(&grids, &TerrainFrame::Globe(g), Cracks::Stitch).unwrap();
     let out = dir.path().join("globe.glb");
@@ -408,14 +392,7 @@ fn refine_fractal_marks_the_same_synthetic_nodes_in_scene_and_mesh() {
     let mut want = Vec::new();
     let mut refined = 0;
     for (b, l) in scene.blocks.iter().zip(&loaded) {
-        let grid = GridBlock {
-            rect: b.rect(),
-            stride: d.stride(b.level),
-            grid_width: l.width,
-            grid_height: l.height,
-            heights: &l.heights,
-            error: b.error,
-        };
+        let grid = GridBlock::of(b, l, d.stride(b.level));
         let nodes = fractal::refine_block(b.key, &grid, &view, &frame, tau);
         if nodes.is_empty() {
             continue;

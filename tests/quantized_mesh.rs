@@ -72,14 +72,7 @@ fn tiles_decode_to_the_stitched_mesh() {
         .blocks
         .iter()
         .zip(&loaded)
-        .map(|(b, l)| GridBlock {
-            rect: b.rect(),
-            stride: d.stride(b.level),
-            grid_width: l.width,
-            grid_height: l.height,
-            heights: &l.heights,
-            error: b.error,
-        })
+        .map(|(b, l)| GridBlock::of(b, l, d.stride(b.level)))
         .collect();
     let meshes = build(&grids, &WorldFrame::new(Some([10.0, 10.0])), Cracks::Stitch).unwrap();
     assert!(meshes.iter().any(|m| m.stitched.contains(&true)));

@@ -79,14 +79,8 @@ pub fn run(args: &FlyArgs) -> Result<ExitCode, Error> {
         viewport: args.view.viewport()?,
         ..Camera::looking_at(glam::DVec3::ZERO, glam::DVec3::X)
     };
+    args.view.flat_spacing_only(args.geo)?;
     let cameras = if args.geo {
-        if args.view.spacing.is_some() {
-            return Err(Error::InvalidArgument(
-                "--spacing sets the flat frame's spacing; with --geo the georeference places \
-                 the samples: drop one of them"
-                    .into(),
-            ));
-        }
         path::parse_geo(&text, &template)?
     } else {
         path::parse(&text, &template)?

@@ -103,6 +103,19 @@ impl ViewArgs {
             .transpose()
     }
 
+    /// An error when `--spacing` is given for a camera on the globe, where the
+    /// georeference places the samples and a flat spacing means nothing.
+    pub fn flat_spacing_only(&self, globe: bool) -> Result<(), Error> {
+        if globe && self.spacing.is_some() {
+            return Err(Error::InvalidArgument(
+                "--spacing sets the flat frame's spacing; on the globe (--eye-geo, --globe, \
+                 --geo) the georeference places the samples: drop one of them"
+                    .into(),
+            ));
+        }
+        Ok(())
+    }
+
     /// [`ViewArgs::options`] restricted to `window` (the `--window` text), if given.
     pub fn options_in(&self, window: Option<&str>) -> Result<SceneOptions, Error> {
         let mut options = self.options();
@@ -341,14 +354,7 @@ fn fractal_report(
         nodes: Vec::new(),
     };
     for (b, tile, loaded, stride) in blocks {
-        let grid = GridBlock {
-            rect: b.rect(),
-            stride: *stride,
-            grid_width: loaded.width,
-            grid_height: loaded.height,
-            heights: &loaded.heights,
-            error: b.error,
-        };
+        let grid = GridBlock::of(b, loaded, *stride);
         let nodes = fractal::refine_block(b.key, &grid, &view, frame, tau);
         if !nodes.is_empty() {
             report.refined_blocks += 1;
@@ -458,6 +464,7 @@ struct RequestPlan {
 /// Runs `fmrh scene`.
 pub fn run(args: &SceneArgs) -> Result<ExitCode, Error> {
     let camera = args.camera.camera(&args.view)?;
+    args.view.flat_spacing_only(args.camera.globe())?;
     if args.camera.globe() && args.refine.is_some() {
         return Err(Error::InvalidArgument(
             "--refine takes flat-frame cameras only so far (no --globe or --eye-geo)".into(),
@@ -834,13 +841,6 @@ fn run_dataset(
     let asked = ds.request_stats();
     let spacing = args.view.given_spacing()?;
     let scene = if args.camera.globe() {
-        if spacing.is_some() {
-            return Err(Error::InvalidArgument(
-                "--spacing sets the flat frame's spacing; on the globe the georeference places \
-                 the samples: drop --spacing or the globe camera"
-                    .into(),
-            ));
-        }
         ds.scene_on_globe(&camera, &options)?
     } else {
         ds.scene(&camera, &options, spacing)?

@@ -211,10 +211,7 @@ impl<'d> DatasetScheduler<'d> {
                 let store = self.dataset.open_tile(t)?;
                 let r = t.rect();
                 // On the globe, the tile where the dataset's grid puts it.
-                let globe_frame = self.globe.map(|g| {
-                    let (lon0, lat0) = g.lon_lat(r.col0 as f64, r.row0 as f64);
-                    GlobeFrame { lon0, lat0, ..g }
-                });
+                let globe_frame = self.globe.map(|g| g.at_sample(r.col0, r.row0));
                 let options = ScheduleOptions {
                     globe_frame,
                     ..self.options

@@ -74,43 +74,18 @@ pub struct DatasetScene {
     pub tiles: Vec<TilePart>,
 }
 
-/// Where a dataset's samples are in the world: the flat frame of its spacing (tile `t` at
-/// `(col0·dx, row0·dy)`), or the WGS 84 ellipsoid by its geographic georeference (ECEF, one
-/// frame for every tile: nothing to shift).
-#[derive(Clone, Copy, Debug)]
-enum Placement {
-    Flat(WorldFrame),
-    Globe(GlobeFrame),
+/// The box of `rect` (dataset samples) between `lo` and `hi` in `world`; an empty range (an
+/// all-void tile) is taken as height 0.
+fn rect_box(world: &TerrainFrame, rect: &SampleRect, lo: f32, hi: f32) -> Aabb {
+    let (lo, hi) = if lo <= hi { (lo, hi) } else { (0.0, 0.0) };
+    world.rect_box(rect, f64::from(lo), f64::from(hi))
 }
 
-impl Placement {
-    /// The box of `rect` (dataset samples) between `lo` and `hi`; an empty range (an
-    /// all-void tile) is taken as height 0.
-    fn rect_box(&self, rect: &SampleRect, lo: f32, hi: f32) -> Aabb {
-        let (lo, hi) = if lo <= hi { (lo, hi) } else { (0.0, 0.0) };
-        match self {
-            Placement::Flat(frame) => Aabb {
-                min: frame.point(rect.col0 as f64, rect.row0 as f64, f64::from(lo)),
-                max: frame.point(rect.col1 as f64, rect.row1 as f64, f64::from(hi)),
-            },
-            Placement::Globe(g) => g.rect_box(rect, f64::from(lo), f64::from(hi)),
-        }
-    }
-
-    /// Whether `view` may see anything of `rect` between `lo` and `hi`: its box meets the
-    /// frustum and, on the globe, it is not wholly below the horizon.
-    fn may_see(&self, view: &View, rect: &SampleRect, lo: f32, hi: f32) -> bool {
-        if !view.intersects(&self.rect_box(rect, lo, hi)) {
-            return false;
-        }
-        match self {
-            Placement::Flat(_) => true,
-            Placement::Globe(g) => {
-                let top = if lo <= hi { hi } else { 0.0 };
-                !g.hidden(view.eye, rect, f64::from(top))
-            }
-        }
-    }
+/// Whether `view` may see anything of `rect` between `lo` and `hi`: its box meets the
+/// frustum and, on the globe, it is not wholly below the horizon.
+fn may_see(world: &TerrainFrame, view: &View, rect: &SampleRect, lo: f32, hi: f32) -> bool {
+    let top = if lo <= hi { hi } else { 0.0 };
+    view.intersects(&rect_box(world, rect, lo, hi)) && !world.hidden(view.eye, rect, f64::from(top))
 }
 
 impl Dataset {
@@ -149,7 +124,7 @@ impl Dataset {
         window: Option<SampleRect>,
         frame: &WorldFrame,
     ) -> Result<Vec<Tile>> {
-        self.tiles_seen(camera, window, &Placement::Flat(*frame))
+        self.tiles_seen(camera, window, &TerrainFrame::Flat(*frame))
     }
 
     /// [`Dataset::scene_tiles`] on the globe: the tiles whose ECEF boxes meet the frustum
@@ -159,14 +134,14 @@ impl Dataset {
         camera: &Camera,
         window: Option<SampleRect>,
     ) -> Result<Vec<Tile>> {
-        self.tiles_seen(camera, window, &Placement::Globe(self.globe_frame()?))
+        self.tiles_seen(camera, window, &TerrainFrame::Globe(self.globe_frame()?))
     }
 
     fn tiles_seen(
         &self,
         camera: &Camera,
         window: Option<SampleRect>,
-        place: &Placement,
+        world: &TerrainFrame,
     ) -> Result<Vec<Tile>> {
         let view = camera.view()?;
         match window {
@@ -177,7 +152,13 @@ impl Dataset {
                 let seen: Vec<usize> = (0..head.pages.len())
                     .filter(|&p| {
                         let e = &head.pages[p];
-                        place.may_see(&view, &e.rect(), e.min_height.get(), e.max_height.get())
+                        may_see(
+                            world,
+                            &view,
+                            &e.rect(),
+                            e.min_height.get(),
+                            e.max_height.get(),
+                        )
                     })
                     .collect();
                 self.state().fetch_pages(self.manifest_source(), &seen)?;
@@ -190,7 +171,13 @@ impl Dataset {
                         .iter()
                         .enumerate()
                     {
-                        if place.may_see(&view, &t.rect(), t.min_height.get(), t.max_height.get()) {
+                        if may_see(
+                            world,
+                            &view,
+                            &t.rect(),
+                            t.min_height.get(),
+                            t.max_height.get(),
+                        ) {
                             out.push(Tile {
                                 index: first + i as u64,
                                 record: *t,
@@ -212,7 +199,7 @@ impl Dataset {
         spacing_m: Option<[f64; 2]>,
     ) -> Result<DatasetScene> {
         let frame = self.frame(spacing_m)?;
-        self.scene_in(camera, options, Placement::Flat(frame))
+        self.scene_in(camera, options, TerrainFrame::Flat(frame))
     }
 
     /// The blocks `camera` (ECEF metres) needs at `options.tau` with the dataset on the WGS
@@ -222,14 +209,14 @@ impl Dataset {
     /// along shared sample lines as in the flat frame, so the cover is one cover still.
     pub fn scene_on_globe(&self, camera: &Camera, options: &SceneOptions) -> Result<DatasetScene> {
         let globe = self.globe_frame()?;
-        self.scene_in(camera, options, Placement::Globe(globe))
+        self.scene_in(camera, options, TerrainFrame::Globe(globe))
     }
 
     fn scene_in(
         &self,
         camera: &Camera,
         options: &SceneOptions,
-        place: Placement,
+        world: TerrainFrame,
     ) -> Result<DatasetScene> {
         let started = std::time::Instant::now();
         let view = camera.view()?;
@@ -242,7 +229,7 @@ impl Dataset {
                 )));
             }
         }
-        let tiles = self.tiles_seen(camera, options.window, &place)?;
+        let tiles = self.tiles_seen(camera, options.window, &world)?;
         // Uniform mode: one static bound over the view, from the nearest tile part.
         let p_min = (options.mode == Mode::Uniform).then(|| {
             tiles
@@ -252,9 +239,13 @@ impl Dataset {
                         .window
                         .and_then(|w| w.intersect(&t.rect()))
                         .unwrap_or(t.rect());
-                    place
-                        .rect_box(&part, t.record.min_height.get(), t.record.max_height.get())
-                        .distance(view.eye)
+                    rect_box(
+                        &world,
+                        &part,
+                        t.record.min_height.get(),
+                        t.record.max_height.get(),
+                    )
+                    .distance(view.eye)
                 })
                 .fold(f64::INFINITY, f64::min)
         });
@@ -280,16 +271,15 @@ impl Dataset {
             };
             let store = self.open_tile(tile)?;
             let before = store.read_stats();
-            let (terrain, local_camera) = match place {
-                Placement::Flat(frame) => (
+            let (terrain, local_camera) = match world {
+                TerrainFrame::Flat(frame) => (
                     Terrain::with_spacing(&store, Some([frame.dx, frame.dy]))?,
                     in_tile(camera, &r, &frame),
                 ),
-                Placement::Globe(g) => {
+                TerrainFrame::Globe(g) => {
                     // The tile's samples where the dataset's grid puts them, so that
                     // neighbours meet on exactly the same longitudes and latitudes.
-                    let (lon0, lat0) = g.lon_lat(r.col0 as f64, r.row0 as f64);
-                    let tile_frame = GlobeFrame { lon0, lat0, ..g };
+                    let tile_frame = g.at_sample(r.col0, r.row0);
                     let flat = WorldFrame::new(store.header().metadata.spacing_m);
                     let t = Terrain::with_frame(&store, flat, TerrainFrame::Globe(tile_frame))?;
                     (t, *camera)

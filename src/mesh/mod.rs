@@ -52,7 +52,7 @@ use rayon::prelude::*;
 use crate::error::{Error, Result};
 use crate::model::measure::surface;
 use crate::model::SampleRect;
-use crate::scene::{TerrainFrame, WorldFrame};
+use crate::scene::{LoadedBlock, SceneBlock, TerrainFrame, WorldFrame};
 
 use lines::Lines;
 use triangulate::Triangles;
@@ -87,7 +87,20 @@ pub struct GridBlock<'a> {
     pub error: f64,
 }
 
-impl GridBlock<'_> {
+impl<'a> GridBlock<'a> {
+    /// Scene block `b` as the mesh takes it: its footprint and `e*`, and the grid `loaded`
+    /// holds for it, `stride` samples apart (its level's).
+    pub fn of(b: &SceneBlock, loaded: &'a LoadedBlock, stride: u64) -> GridBlock<'a> {
+        GridBlock {
+            rect: b.rect(),
+            stride,
+            grid_width: loaded.width,
+            grid_height: loaded.height,
+            heights: &loaded.heights,
+            error: b.error,
+        }
+    }
+
     /// The height the block's surface draws at sample `(col, row)` of its footprint.
     fn height_at(&self, col: u64, row: u64) -> f64 {
         let (u, v, s) = (col - self.rect.col0, row - self.rect.row0, self.stride);

@@ -60,6 +60,18 @@ impl Camera {
         }
     }
 
+    /// A camera on the globe ([`crate::globe::look`]): the eye at latitude `lat` and
+    /// longitude `lon` (degrees), `h` metres above the WGS 84 ellipsoid, looking along
+    /// `heading` (degrees clockwise from north) and `pitch` (degrees above the horizontal), in
+    /// ECEF metres; 60° vertical field of view, 1024 × 768.
+    pub fn on_globe(lat: f64, lon: f64, h: f64, heading: f64, pitch: f64) -> Camera {
+        let (eye, target, up) = crate::globe::look(lat, lon, h, heading, pitch);
+        Camera {
+            up,
+            ..Camera::looking_at(eye, target)
+        }
+    }
+
     /// Checks the camera and derives its view geometry. Non-finite input, a target equal to
     /// the eye, a zero up vector, a field of view outside (0°, 180°) or an empty viewport is an
     /// [`Error::InvalidArgument`].
@@ -368,6 +380,16 @@ impl GlobeFrame {
             dlon: g.step[0],
             dlat: g.step[1],
         })
+    }
+
+    /// The same grid counted from sample `(col, row)`: where a tile starting there lies.
+    pub fn at_sample(&self, col: u64, row: u64) -> GlobeFrame {
+        let (lon0, lat0) = self.lon_lat(col as f64, row as f64);
+        GlobeFrame {
+            lon0,
+            lat0,
+            ..*self
+        }
     }
 
     /// Longitude and latitude of sample position `(col, row)`, degrees.

@@ -321,14 +321,8 @@ impl<'s, S: Source> Layers<'s, S> {
         k: usize,
     ) -> GridBlock<'a> {
         let b = &scene.blocks[k];
-        GridBlock {
-            rect: b.block.rect(),
-            stride: self.layers[b.layer].terrain.domain().stride(b.block.level),
-            grid_width: loaded[k].width,
-            grid_height: loaded[k].height,
-            heights: &loaded[k].heights,
-            error: b.block.error,
-        }
+        let stride = self.layers[b.layer].terrain.domain().stride(b.block.level);
+        GridBlock::of(&b.block, &loaded[k], stride)
     }
 
     /// The edges of samples `rect` of layer `j` that lie on its footprint's border.

@@ -11,79 +11,64 @@ use crate::error::{Error, Result};
 
 use super::camera::Camera;
 
-/// Parses a path of cameras on the globe: one camera a line,
-/// `latitude,longitude,height,heading,pitch` (degrees, metres above the ellipsoid, heading
-/// clockwise from north, pitch above the horizontal), placed by [`crate::globe::look`] in
-/// ECEF metres. Blank lines, `#` comments and a non-numeric first line are skipped, as in
-/// [`parse`]; field of view and viewport come from `template`.
-pub fn parse_geo(text: &str, template: &Camera) -> Result<Vec<Camera>> {
-    let mut out = Vec::new();
-    for (n, line) in text.lines().enumerate() {
-        let line = line.trim();
-        if line.is_empty() || line.starts_with('#') {
-            continue;
-        }
-        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
-        let values: Option<Vec<f64>> = fields.iter().map(|f| f.parse().ok()).collect();
-        match values {
-            Some(v) if v.len() == 5 && v.iter().all(|x| x.is_finite()) && v[0].abs() <= 90.0 => {
-                let (eye, target, up) = crate::globe::look(v[0], v[1], v[2], v[3], v[4]);
-                out.push(Camera {
-                    eye,
-                    target,
-                    up,
-                    ..*template
-                });
-            }
-            None if out.is_empty() && n == 0 => continue, // a header
-            _ => {
-                return Err(Error::InvalidArgument(format!(
-                    "path line {}: expected latitude,longitude,height,heading,pitch (finite \
-                     numbers, latitude within -90..=90), got `{line}`",
-                    n + 1
-                )))
-            }
-        }
-    }
-    if out.is_empty() {
-        return Err(Error::InvalidArgument(
-            "the camera path has no camera".into(),
-        ));
-    }
-    Ok(out)
-}
-
 /// The CSV header the generators write.
 pub const HEADER: &str = "eye_x,eye_y,eye_z,target_x,target_y,target_z";
 
 /// Parses a path; every camera gets `template`'s up, field of view and viewport.
 pub fn parse(text: &str, template: &Camera) -> Result<Vec<Camera>> {
+    parse_lines(text, &format!("six numbers {HEADER}"), |v| {
+        (v.len() == 6).then(|| Camera {
+            eye: DVec3::new(v[0], v[1], v[2]),
+            target: DVec3::new(v[3], v[4], v[5]),
+            ..*template
+        })
+    })
+}
+
+/// Parses a path of cameras on the globe: one camera a line,
+/// `latitude,longitude,height,heading,pitch` (degrees, metres above the ellipsoid, heading
+/// clockwise from north, pitch above the horizontal), placed by [`Camera::on_globe`] in
+/// ECEF metres. Lines are skipped as [`parse`] skips them; field of view and viewport come
+/// from `template`.
+pub fn parse_geo(text: &str, template: &Camera) -> Result<Vec<Camera>> {
+    parse_lines(
+        text,
+        "latitude,longitude,height,heading,pitch (latitude within -90..=90)",
+        |v| {
+            (v.len() == 5 && v[0].abs() <= 90.0).then(|| Camera {
+                fov_y_deg: template.fov_y_deg,
+                viewport: template.viewport,
+                ..Camera::on_globe(v[0], v[1], v[2], v[3], v[4])
+            })
+        },
+    )
+}
+
+/// The cameras `camera` makes of the numbers of each line of `text` (`None`: not a camera,
+/// so not `expected`), blank lines, `#` comments and a non-numeric first line (a header)
+/// skipped; each camera must make a view.
+fn parse_lines(
+    text: &str,
+    expected: &str,
+    camera: impl Fn(&[f64]) -> Option<Camera>,
+) -> Result<Vec<Camera>> {
     let mut out = Vec::new();
     for (n, line) in text.lines().enumerate() {
         let line = line.trim();
         if line.is_empty() || line.starts_with('#') {
             continue;
         }
-        let fields: Vec<&str> = line.split(',').map(str::trim).collect();
-        let values: Option<Vec<f64>> = fields.iter().map(|f| f.parse().ok()).collect();
+        let values: Option<Vec<f64>> = line.split(',').map(|f| f.trim().parse().ok()).collect();
         let cam = match values {
-            Some(v) if v.len() == 6 => Camera {
-                eye: DVec3::new(v[0], v[1], v[2]),
-                target: DVec3::new(v[3], v[4], v[5]),
-                ..*template
-            },
-            None if out.is_empty()
-                && fields.iter().any(|f| f.parse::<f64>().is_err())
-                && n == 0 =>
-            {
-                continue; // a header
-            }
-            _ => {
-                return Err(Error::InvalidArgument(format!(
-                    "camera path line {}: expected six numbers {HEADER}, got `{line}`",
-                    n + 1
-                )))
-            }
+            Some(v) if v.iter().all(|x| x.is_finite()) => camera(&v),
+            None if out.is_empty() && n == 0 => continue, // a header
+            _ => None,
+        };
+        let Some(cam) = cam else {
+            return Err(Error::InvalidArgument(format!(
+                "camera path line {}: expected {expected}, got `{line}`",
+                n + 1
+            )));
         };
         cam.view()
             .map_err(|e| Error::InvalidArgument(format!("camera path line {}: {e}", n + 1)))?;

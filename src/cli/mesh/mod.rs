@@ -241,6 +241,7 @@ pub fn run(args: &MeshArgs) -> Result<ExitCode, Error> {
     }
     let camera = args.camera.camera(&args.view)?;
     let globe = args.camera.globe();
+    args.view.flat_spacing_only(globe)?;
     if globe && args.format == MeshFormat::QuantizedMesh {
         return Err(Error::InvalidArgument(
             "quantized-mesh tiles follow their own geodetic tiling from a flat-frame camera; \
@@ -424,13 +425,6 @@ fn scene_parts(
     if super::is_dataset(file)? {
         let ds = fmrh::dataset::Dataset::open(file)?;
         let spacing = view.given_spacing()?;
-        if globe && spacing.is_some() {
-            return Err(Error::InvalidArgument(
-                "--spacing sets the flat frame's spacing; on the globe the georeference places \
-                 the samples: drop --spacing or the globe camera"
-                    .into(),
-            ));
-        }
         let frame = WorldFrame::new(spacing.or(ds.spacing_m()));
         let on_globe = globe.then(|| ds.globe_frame()).transpose()?;
         let parts_of = |camera: &fmrh::scene::Camera, options: &fmrh::scene::SceneOptions| {
