@@ -21,14 +21,23 @@
 //! resampled linearly: a longitude-latitude product made from isotropic ground data, which
 //! polar grids are, samples the ground that much more densely east-west).
 //!
+//! **Stored (format 6).** Then the same grid built twice as `fmrh build` writes it (payloads
+//! coded against their parents where smaller, 4 KiB pages): square (`--no-thin`) and thinned
+//! by area (the default for longitude-latitude grids, with the √2 error guard), both with
+//! the square build's thresholds. Side by side: file and grid bytes, and for each threshold
+//! δ the bytes a uniform scene at δ reads: the payloads of the cluster's cut plus every
+//! ancestor grid they are coded against (what a reader must decode first).
+//!
 //! `cargo bench --bench thinning` (bundled data only). No timings.
 
 use std::collections::HashMap;
 use std::path::PathBuf;
 
 use fmrh::model::thinning::{cut, thinned_grid, AreaThinning, LatLonSpacing};
-use fmrh::model::{BuildOptions, Model};
+use fmrh::model::{BuildOptions, Model, ThinByArea, Thresholds};
+use fmrh::store::{write_to, WriteOptions};
 use fmrh::Heightfield;
+use fmrh::Store;
 
 fn bundled(rel: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -56,7 +65,14 @@ fn report(name: &str, field: Heightfield) {
         dlat: g.step[1],
         dlon: g.step[0],
     };
-    let model = Model::build(field, &BuildOptions::default()).expect("model");
+    let model = Model::build(
+        field.clone(),
+        &BuildOptions {
+            thin: ThinByArea::Off,
+            ..BuildOptions::default()
+        },
+    )
+    .expect("model");
     let tree = model.tree();
     let d = model.domain();
     let by_area = AreaThinning::measure(model.raster(), tree, &spacing);
@@ -150,6 +166,89 @@ fn report(name: &str, field: Heightfield) {
             saved(a.1, w.1),
         );
     }
+    stored(&field);
+}
+
+/// `field` built and written square and thinned, in memory.
+fn stored(field: &Heightfield) {
+    let square = Model::build(
+        field.clone(),
+        &BuildOptions {
+            thin: ThinByArea::Off,
+            ..BuildOptions::default()
+        },
+    )
+    .expect("model");
+    let thresholds: Vec<f64> = square.clusters().iter().map(|c| c.threshold).collect();
+    let thinned = Model::build(
+        field.clone(),
+        &BuildOptions {
+            thresholds: Thresholds::Explicit(thresholds.clone()),
+            thin: ThinByArea::Auto,
+            ..BuildOptions::default()
+        },
+    )
+    .expect("model");
+    let bytes = |m: &Model| {
+        let mut out = std::io::Cursor::new(Vec::new());
+        write_to(m, &field.metadata, &WriteOptions::default(), &mut out).expect("written");
+        Store::from_bytes(out.into_inner()).expect("opens")
+    };
+    let (a, b) = (bytes(&square), bytes(&thinned));
+    let thin_count = thinned.tree().nodes().iter().filter(|n| n.thin > 0).count();
+    let (la, lb) = (a.layout().expect("layout"), b.layout().expect("layout"));
+    let saved = |a: u64, b: u64| (1.0 - b as f64 / a.max(1) as f64) * 100.0;
+    println!(
+        "\nstored (format 6): {thin_count} coarse grids thinned; file {} -> {} bytes ({:+.1} % saved), grid payloads {} -> {} ({:+.1} % saved), block payloads {} -> {} ({:+.1} % saved: fewer of a block's samples are held by a thinned parent)",
+        la.file_length,
+        lb.file_length,
+        saved(la.file_length, lb.file_length),
+        la.grid_bytes,
+        lb.grid_bytes,
+        saved(la.grid_bytes, lb.grid_bytes),
+        la.block_bytes,
+        lb.block_bytes,
+        saved(la.block_bytes, lb.block_bytes)
+    );
+    println!("\n| δ (m) | square: nodes | KB read | thinned: nodes | KB read | saved |");
+    println!("|---|---|---|---|---|---|");
+    for (c, delta) in thresholds.iter().enumerate() {
+        let (na, ka) = read_at(&a, &square, c);
+        let (nb, kb) = read_at(&b, &thinned, c);
+        println!(
+            "| {delta:.1} | {na} | {:.1} | {nb} | {:.1} | {:+.1} % |",
+            ka as f64 / 1024.0,
+            kb as f64 / 1024.0,
+            saved(ka, kb)
+        );
+    }
+}
+
+/// The nodes of cluster `c`'s cut and the payload bytes a reader reads to draw them: their
+/// own and every grid they are coded against, transitively, each once.
+fn read_at<S: fmrh::store::Source>(store: &Store<S>, model: &Model, c: usize) -> (usize, u64) {
+    let nodes = store.nodes().expect("nodes");
+    let finest = store.domain().finest_level();
+    let mut seen = std::collections::HashSet::new();
+    let mut bytes = 0u64;
+    let cut = &model.clusters()[c].nodes;
+    for &i in cut {
+        let mut todo = vec![i];
+        while let Some(i) = todo.pop() {
+            if !seen.insert(i) {
+                continue;
+            }
+            let n = &nodes[i as usize];
+            bytes += u64::from(n.payload.len);
+            if n.level == finest {
+                let b = store.stored_block(n.x, n.y).expect("block");
+                todo.extend(b.against);
+            } else if n.grid_against_parent {
+                todo.extend(n.parent);
+            }
+        }
+    }
+    (cut.len(), bytes)
 }
 
 fn main() {

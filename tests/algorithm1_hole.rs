@@ -35,6 +35,7 @@ fn literal_algorithm_one_leaves_a_hole_the_cut_does_not() {
             block_size: 9,
             thresholds: Thresholds::Explicit(thresholds.clone()),
             precision: None,
+            thin: Default::default(),
         },
     )
     .unwrap();

@@ -54,7 +54,10 @@ fn a_lattice_field_codes_blocks_against_parents_and_is_smaller() {
     let with = bytes_of(&field, 33, &WriteOptions::default());
     let alone = bytes_of(&field, 33, &alone_options());
     let store = Store::from_bytes(with.clone()).unwrap();
-    assert_eq!(store.state().format_version, (5, 0));
+    assert_eq!(
+        store.state().format_version,
+        (fmrh::format::FORMAT_MAJOR, 0)
+    );
     let (against, all) = coded_against(&store);
     assert!(against * 2 > all, "{against} of {all} blocks");
     let back = store.read_window(store.domain().data_rect()).unwrap();

@@ -34,6 +34,7 @@ fn write_with(hf: &Heightfield, block: u32, options: &WriteOptions) -> Vec<u8> {
             block_size: block,
             thresholds: Thresholds::Ladder,
             precision: None,
+            thin: Default::default(),
         },
     )
     .unwrap();

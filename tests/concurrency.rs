@@ -66,6 +66,7 @@ fn readers_running_scenes_see_only_whole_snapshots() {
             block_size: 65,
             thresholds: Thresholds::Ladder,
             precision: None,
+            thin: Default::default(),
         },
     )
     .unwrap();

@@ -46,6 +46,7 @@ fn write_as(
             block_size,
             thresholds: Thresholds::Ladder,
             precision: None,
+            thin: Default::default(),
         },
     )
     .unwrap();

@@ -21,6 +21,7 @@ fn small_container() -> Vec<u8> {
             block_size: 9,
             thresholds: Thresholds::Ladder,
             precision: None,
+            thin: Default::default(),
         },
     )
     .unwrap();

@@ -72,7 +72,7 @@ proptest! {
     /// Random thresholds give random cuts; Algorithm 2 visits each in key order.
     #[test]
     fn algorithm2_order_is_key_order(field in any_field(90), cuts in prop::collection::vec(0.0..1.0f64, 1..6)) {
-        let model = Model::build(field, &BuildOptions { block_size: 9, thresholds: Thresholds::Explicit(vec![0.0]), precision: None }).unwrap();
+        let model = Model::build(field, &BuildOptions { block_size: 9, thresholds: Thresholds::Explicit(vec![0.0]), precision: None, thin: Default::default() }).unwrap();
         let root = model.max_error();
         for t in cuts {
             let nodes = cluster::cut(model.tree(), t * root);

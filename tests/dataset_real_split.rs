@@ -50,7 +50,7 @@ proptest! {
         let rects = tiles::split(field, &cuts(w, k, &mut rng), &cuts(h, k, &mut rng), &[]);
         let dir = tempfile::tempdir().unwrap();
         let options = fmrh::dataset::DatasetOptions {
-            build: BuildOptions { block_size: 9, thresholds: Thresholds::Ladder, precision: None },
+            build: BuildOptions { block_size: 9, thresholds: Thresholds::Ladder, precision: None, thin: Default::default() },
             ..tiles::options(None)
         };
         let ds = Dataset::open(&tiles::build(dir.path(), field, &rects, &options)).unwrap();

@@ -82,6 +82,7 @@ fn build(out: &Path) {
             block_size: 9,
             thresholds: Thresholds::Ladder,
             precision: None,
+            thin: Default::default(),
         },
         write: WriteOptions {
             page_size: 1024,

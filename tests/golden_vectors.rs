@@ -6,9 +6,10 @@
 //! regenerate with `FMRH_BLESS=1 cargo test --release --test golden_vectors`.
 //!
 //! Files of older versions stay readable: `format-spec/vectors/v1.1/`, `v1.2/`, `v2.0/`,
-//! `v2.1/`, `v3.0/` and `v4.0/` keep the same vectors as those versions wrote them. They must
-//! read and verify exactly as the current ones do; 2.x to 4.x files accept a transaction
-//! (which makes them 5.0), 1.x files refuse one.
+//! `v2.1/`, `v3.0/`, `v4.0/` and `v5.0/` keep the same vectors as those versions wrote them.
+//! They must read and verify exactly as the current ones do; 2.x to 5.x files accept a
+//! transaction (which makes them 6.0), 1.x files refuse one. The polar vector (format 6.0: a
+//! longitude-latitude grid at 80° N whose coarse grids are thinned by area) has no older copy.
 
 use std::io::Cursor;
 use std::path::PathBuf;
@@ -30,6 +31,8 @@ struct Vector {
     /// layout of a state whose metadata is too large to bundle. Older versions have no
     /// such vector.
     paged: bool,
+    /// Thinned by area (format 6.0): no older version has it.
+    thinned: bool,
 }
 
 fn vectors() -> Vec<Vector> {
@@ -59,6 +62,23 @@ fn vectors() -> Vec<Vector> {
         (x as f32 * 0.41).sin() * 7.3 + (y as f32 * 0.29).cos() * 4.1 + 100.0
     })
     .unwrap();
+    // At 80° N a column is 0.17 of a row apart on the ground: the coarse grids keep every
+    // fourth column where that does not raise their error. The relief runs east-west as a
+    // plane (every grid, thinned and expanded, is the square one) with waves north-south.
+    let mut polar = Heightfield::from_fn(33, 33, |x, y| {
+        300.0 + x as f32 + (25.0 * (y as f32 * 0.3).cos()).round()
+    })
+    .unwrap();
+    polar.metadata = Metadata {
+        spacing_m: None,
+        georeference: Some(Georeference {
+            crs: Some("EPSG:4326".into()),
+            origin: [20.0, 80.0],
+            step: [0.01, -0.01],
+        }),
+        units: Some("metres".into()),
+        source_format: "test".into(),
+    };
     vec![
         Vector {
             name: "ramp-9x9",
@@ -67,6 +87,7 @@ fn vectors() -> Vec<Vector> {
             thresholds: Thresholds::Ladder,
             precision: None,
             paged: false,
+            thinned: false,
         },
         Vector {
             name: "hills-20x13-voids",
@@ -75,6 +96,7 @@ fn vectors() -> Vec<Vector> {
             thresholds: Thresholds::Ladder,
             precision: None,
             paged: false,
+            thinned: false,
         },
         Vector {
             name: "cliff-33x33",
@@ -83,6 +105,7 @@ fn vectors() -> Vec<Vector> {
             thresholds: Thresholds::Explicit(vec![0.0, 1.0, 10.0]),
             precision: None,
             paged: false,
+            thinned: false,
         },
         Vector {
             name: "waves-17x17-precision-0.3",
@@ -91,6 +114,7 @@ fn vectors() -> Vec<Vector> {
             thresholds: Thresholds::Ladder,
             precision: Some(0.3),
             paged: false,
+            thinned: false,
         },
         Vector {
             name: "hills-20x13-voids-paged",
@@ -99,16 +123,31 @@ fn vectors() -> Vec<Vector> {
             thresholds: Thresholds::Ladder,
             precision: None,
             paged: true,
+            thinned: false,
+        },
+        Vector {
+            name: "polar-33x33-thinned",
+            field: polar,
+            block_size: 9,
+            thresholds: Thresholds::Ladder,
+            precision: None,
+            paged: false,
+            thinned: true,
         },
     ]
 }
 
 /// The vectors a format older than 2.1 has: those without a storage precision.
 fn lossless_vectors() -> Vec<Vector> {
-    vectors()
+    old_vectors()
         .into_iter()
         .filter(|v| v.precision.is_none() && !v.paged)
         .collect()
+}
+
+/// The vectors formats 2.1 to 5.0 have: all but the thinned one.
+fn old_vectors() -> Vec<Vector> {
+    vectors().into_iter().filter(|v| !v.thinned).collect()
 }
 
 fn build(v: &Vector) -> Vec<u8> {
@@ -118,6 +157,7 @@ fn build(v: &Vector) -> Vec<u8> {
             block_size: v.block_size,
             thresholds: v.thresholds.clone(),
             precision: v.precision.map(|q| fmrh::model::Precision::new(q).unwrap()),
+            thin: Default::default(),
         },
     )
     .unwrap();
@@ -307,7 +347,7 @@ fn vector_commit_record_fields_sit_where_the_spec_says() {
     // Spot checks against the byte table of format-spec/container.md §3.
     let bytes = build(&vectors()[1]);
     assert_eq!(&bytes[0..8], b"FMRH\r\n\x1a\n");
-    assert_eq!(u16::from_le_bytes([bytes[8], bytes[9]]), 5); // major
+    assert_eq!(u16::from_le_bytes([bytes[8], bytes[9]]), 6); // major
     assert_eq!(u16::from_le_bytes([bytes[10], bytes[11]]), 0); // minor
     assert_eq!(u32::from_le_bytes(bytes[12..16].try_into().unwrap()), 1024); // page size
     assert_eq!(u64::from_le_bytes(bytes[16..24].try_into().unwrap()), 1); // txn id
@@ -403,23 +443,25 @@ fn format_1_vectors_read_verify_and_refuse_writes() {
     }
 }
 
-/// Format 2.x to 4.x files (the vectors as 2.0 and 2.1 wrote them, every table in pages of
+/// Format 2.x to 5.x files (the vectors as 2.0 and 2.1 wrote them, every table in pages of
 /// its own, in 2.0 the dataset header's precision field still reserved and zero; as 3.0 wrote
-/// them, every block coded alone; as 4.0 wrote them, every grid coded alone) read sample for sample, pass `verify --full`, and accept a
-/// transaction, whose commit makes them 5.0 (format §8) with their metadata in a bundle.
+/// them, every block coded alone; as 4.0 wrote them, every grid coded alone; as 5.0 wrote
+/// them, no grid thinned) read sample for sample, pass `verify --full`, and accept a
+/// transaction, whose commit makes them 6.0 (format §8) with their metadata in a bundle.
 #[test]
-fn format_2_to_4_vectors_read_verify_and_take_a_transaction() {
+fn format_2_to_5_vectors_read_verify_and_take_a_transaction() {
     let old_vectors = lossless_vectors()
         .into_iter()
         .map(|v| ((2u16, 0u16), v))
         .chain(
-            vectors()
+            old_vectors()
                 .into_iter()
                 .filter(|v| !v.paged)
                 .map(|v| ((2, 1), v)),
         )
-        .chain(vectors().into_iter().map(|v| ((3, 0), v)))
-        .chain(vectors().into_iter().map(|v| ((4, 0), v)));
+        .chain(old_vectors().into_iter().map(|v| ((3, 0), v)))
+        .chain(old_vectors().into_iter().map(|v| ((4, 0), v)))
+        .chain(old_vectors().into_iter().map(|v| ((5, 0), v)));
     for ((major, minor), v) in old_vectors {
         let old = dir()
             .join(format!("v{major}.{minor}"))
@@ -457,7 +499,7 @@ fn format_2_to_4_vectors_read_verify_and_take_a_transaction() {
         txn.commit().unwrap();
         drop(c);
         let store = fmrh::Store::open(&copy).unwrap();
-        assert_eq!(store.state().format_version, (5, 0), "{}", v.name);
+        assert_eq!(store.state().format_version, (6, 0), "{}", v.name);
         assert!(store.layout().unwrap().bundle_bytes > 0, "{}", v.name);
         let got = store
             .read_window(fmrh::model::SampleRect {
@@ -503,4 +545,84 @@ fn precision_field_sits_where_the_spec_says() {
             "{a} vs {b}"
         );
     }
+}
+
+/// Format 6's thinned grids, read by the spec alone (container §7 "Thinned grids", model
+/// §4a): the polar vector's header has flag 16; some coarse grid has flag bits 3–6 set; its
+/// heights' code holds exactly the kept columns (every `k`-th and the last, in rows of
+/// `kw`); expanding them with the spec's formula, written out here, gives the grid the reader
+/// returns bit for bit; and its kept columns are the decimation's own heights.
+#[test]
+fn the_polar_vector_pins_thinned_grids() {
+    let v = vectors().into_iter().find(|v| v.thinned).unwrap();
+    let bytes = build(&v);
+    let raw = bundle_of(&bytes);
+    let h = 24;
+    let flags = u16::from_le_bytes(raw[h + 14..h + 16].try_into().unwrap());
+    assert_eq!(flags & 16, 16, "the dataset header's thinned flag");
+    let store = fmrh::Store::from_bytes(bytes).unwrap();
+    let d = *store.domain();
+    let b = d.block_size();
+    let (mut thinned, mut alone) = (0, 0);
+    for n in store
+        .nodes()
+        .unwrap()
+        .iter()
+        .filter(|n| n.level < d.finest_level())
+    {
+        let t = n.grid_thin;
+        if t == 0 {
+            continue;
+        }
+        thinned += 1;
+        let k = 1u32 << t;
+        let (gw, gh) = d.grid_dims(n.level, n.x, n.y);
+        let kept: Vec<u32> = (0..gw).filter(|i| i % k == 0 || *i == gw - 1).collect();
+        let kw = kept.len();
+        let grid = store.grid(n).unwrap();
+        let view = grid.view();
+        // The kept heights, as the reader returns them; checked against the code below.
+        let heights: Vec<f32> = (0..gh)
+            .flat_map(|j| kept.iter().map(move |&c| (c, j)))
+            .map(|(c, j)| view.height(c, j))
+            .collect();
+        if !n.grid_against_parent {
+            alone += 1;
+            let payload = store.payload(n.payload).unwrap();
+            let a = u32::from_le_bytes(payload[..4].try_into().unwrap()) as usize;
+            let mut coded = vec![0f32; kw * gh as usize];
+            fmrh::codec::decode(&payload[4..4 + a], kw, &mut coded).unwrap();
+            assert_eq!(
+                coded, heights,
+                "the code holds the kept columns, in rows of kw"
+            );
+        }
+        let s = d.stride(n.level);
+        let fp = d.footprint(n.level, n.x, n.y);
+        for j in 0..gh {
+            let row = &heights[j as usize * kw..(j as usize + 1) * kw];
+            for i in 0..gw {
+                let c0 = k * (i / k);
+                let want = if let Some(p) = kept.iter().position(|&c| c == i) {
+                    row[p]
+                } else {
+                    let c1 = (c0 + k).min(gw - 1);
+                    let p0 = kept.iter().position(|&c| c == c0).unwrap();
+                    let p1 = kept.iter().position(|&c| c == c1).unwrap();
+                    let (t, n) = (f64::from(i - c0), f64::from(c1 - c0));
+                    ((f64::from(row[p0]) * (n - t) + f64::from(row[p1]) * t) / n) as f32
+                };
+                assert_eq!(view.height(i, j).to_bits(), want.to_bits(), "({i}, {j})");
+            }
+            for (p, &c) in kept.iter().enumerate() {
+                let col = (fp.col0 + u64::from(c) * s).min(u64::from(d.width() - 1));
+                let r = (fp.row0 + u64::from(j) * s).min(u64::from(d.height() - 1));
+                let sample = v.field.get(col as u32, r as u32).unwrap();
+                assert_eq!(row[p].to_bits(), sample.to_bits(), "kept ({c}, {j})");
+            }
+        }
+        assert!(k < b);
+    }
+    assert!(thinned > 0, "no grid of the polar vector is thinned");
+    assert!(alone > 0, "no thinned grid is coded alone");
 }

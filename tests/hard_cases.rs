@@ -19,6 +19,7 @@ fn build(field: &Heightfield, b: u32, thresholds: Thresholds) -> Model {
             block_size: b,
             thresholds,
             precision: None,
+            thin: Default::default(),
         },
     )
     .unwrap();

@@ -22,7 +22,7 @@ proptest! {
 
     #[test]
     fn invariants_hold_with_the_default_ladder(field in any_field(70), b in block_size()) {
-        let model = Model::build(field.clone(), &BuildOptions { block_size: b, thresholds: Thresholds::Ladder, precision: None }).unwrap();
+        let model = Model::build(field.clone(), &BuildOptions { block_size: b, thresholds: Thresholds::Ladder, precision: None, thin: Default::default() }).unwrap();
         check_model(&model, &field);
     }
 
@@ -32,7 +32,7 @@ proptest! {
         b in block_size(),
         thresholds in prop::collection::vec(prop_oneof![Just(0.0), 0.0..200.0f64, 0.0..2.0f64], 1..6),
     ) {
-        let options = BuildOptions { block_size: b, thresholds: Thresholds::Explicit(thresholds.clone()), precision: None };
+        let options = BuildOptions { block_size: b, thresholds: Thresholds::Explicit(thresholds.clone()), precision: None, thin: Default::default() };
         let model = Model::build(field.clone(), &options).unwrap();
         let mut expected = thresholds.clone();
         expected.sort_by(f64::total_cmp);
@@ -59,7 +59,7 @@ proptest! {
 
     #[test]
     fn node_grids_are_nested_point_decimations(field in any_field(60), b in block_size()) {
-        let model = Model::build(field.clone(), &BuildOptions { block_size: b, thresholds: Thresholds::Ladder, precision: None }).unwrap();
+        let model = Model::build(field.clone(), &BuildOptions { block_size: b, thresholds: Thresholds::Ladder, precision: None, thin: Default::default() }).unwrap();
         let tree = model.tree();
         let b = model.domain().block_size() as usize;
         for i in 0..tree.nodes().len() as u32 {

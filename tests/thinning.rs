@@ -23,6 +23,7 @@ fn build(field: Heightfield, b: u32) -> Model {
             block_size: b,
             thresholds: Thresholds::Ladder,
             precision: None,
+            thin: Default::default(),
         },
     )
     .unwrap()

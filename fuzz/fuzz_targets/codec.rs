@@ -49,7 +49,9 @@ fuzz_target!(|data: &[u8]| {
         let (w, h) = (width as u32, rows as u32);
         let voids = u32::from(mode >> 2) % (w * h + 1);
         let _ = fmrh::format::payload::load_block(rest, w, h, voids);
-        let _ = fmrh::format::payload::load_grid(rest, (w, h), mode & 2 != 0, mode & 4 != 0);
+        // Format 6: grids thinned by up to 2^7 (the decoder refuses what a grid cannot hold).
+        let thin = (mode >> 3) & 7;
+        let _ = fmrh::format::payload::load_grid(rest, (w, h), (mode & 2 != 0, mode & 4 != 0), thin);
         let (cols, rows_at): (Vec<u64>, Vec<u64>) =
             ((0..width as u64).collect(), (0..rows as u64).collect());
         let (pc, pr) = (parent_axis(width), parent_axis(rows));

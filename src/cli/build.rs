@@ -8,7 +8,9 @@ use serde::Serialize;
 
 use fmrh::format::page_size_for;
 use fmrh::ingest;
-use fmrh::model::{precision, BuildOptions, Model, Precision, Thresholds, DEFAULT_BLOCK_SIZE};
+use fmrh::model::{
+    precision, BuildOptions, Model, Precision, ThinByArea, Thresholds, DEFAULT_BLOCK_SIZE,
+};
 use fmrh::store::{write_file, WriteOptions, WriteSummary};
 use fmrh::Error;
 
@@ -56,6 +58,12 @@ pub struct BuildArgs {
     /// payloads decode faster and whose scenes read no ancestor grids.
     #[arg(long, alias = "blocks-alone")]
     payloads_alone: bool,
+    /// Keep every node's grid square. By default a longitude-latitude grid's coarse nodes
+    /// are thinned by area: near the poles, where a node's samples are much closer east-west
+    /// than north-south, it stores every k-th column only (k a power of two), wherever that
+    /// does not raise its error (format 6; docs/globe-design.md §4).
+    #[arg(long)]
+    no_thin: bool,
     /// No progress bar.
     #[arg(long, short)]
     quiet: bool,
@@ -97,6 +105,9 @@ struct BuildReport {
     max_error: f64,
     /// The storage step heights were kept to, when they were not kept bit for bit.
     precision: Option<f64>,
+    /// Nodes whose grids are stored thinned by area, per thinning factor (absent when none).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    thinned_nodes: Vec<ThinnedCount>,
     /// How far a stored height may be from its source (9/16 of the step; 0 when bit for bit).
     storage_error: f64,
     /// The largest |stored - source| over real heights, measured (at most precision / 2).
@@ -107,6 +118,13 @@ struct BuildReport {
     /// Present when a container was written.
     output: Option<OutputReport>,
     peak_memory_bytes: Option<u64>,
+}
+
+#[derive(Serialize)]
+struct ThinnedCount {
+    /// Columns kept: every `factor`-th.
+    factor: u32,
+    nodes: usize,
 }
 
 #[derive(Serialize)]
@@ -202,6 +220,11 @@ pub fn run(args: &BuildArgs) -> Result<ExitCode, Error> {
             }
             p => p,
         },
+        thin: if args.no_thin {
+            ThinByArea::Off
+        } else {
+            ThinByArea::Auto
+        },
     };
     let t1 = Instant::now();
     let model = Model::build_with_progress(heightfield, &options, progress)?;
@@ -253,6 +276,13 @@ pub fn run(args: &BuildArgs) -> Result<ExitCode, Error> {
         nodes_per_level: model.tree().nodes_per_level(),
         max_error: model.max_error(),
         precision: model.precision().map(Precision::step),
+        thinned_nodes: (1..=fmrh::model::thinning::MAX_THIN_LOG2)
+            .map(|t| ThinnedCount {
+                factor: 1 << t,
+                nodes: model.tree().nodes().iter().filter(|n| n.thin == t).count(),
+            })
+            .filter(|c| c.nodes > 0)
+            .collect(),
         storage_error: model.precision().map_or(0.0, Precision::bound),
         storage_error_measured: model.precision().and(model.storage_error_measured()),
         clusters: model

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use fmrh::dataset::{self, DatasetOptions, SeamPolicy, TileInput};
-use fmrh::model::{precision::Precision, BuildOptions, Thresholds, DEFAULT_BLOCK_SIZE};
+use fmrh::model::{precision::Precision, BuildOptions, ThinByArea, Thresholds, DEFAULT_BLOCK_SIZE};
 use fmrh::store::WriteOptions;
 use fmrh::Error;
 
@@ -70,6 +70,9 @@ pub struct TileOptions {
     /// Code every payload alone (see `fmrh build --payloads-alone`).
     #[arg(long, alias = "blocks-alone")]
     payloads_alone: bool,
+    /// Keep every node's grid square (see `fmrh build --no-thin`).
+    #[arg(long)]
+    no_thin: bool,
     /// Ground distance between samples in metres, DX or DX,DY, for every tile.
     #[arg(long, value_delimiter = ',')]
     spacing: Option<Vec<f64>>,
@@ -88,6 +91,11 @@ impl TileOptions {
                     None => Thresholds::Ladder,
                 },
                 precision: self.precision.map(Precision::new).transpose()?,
+                thin: if self.no_thin {
+                    ThinByArea::Off
+                } else {
+                    ThinByArea::Auto
+                },
             },
             write: WriteOptions {
                 page_size: self.page_size.unwrap_or(0),

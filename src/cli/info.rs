@@ -53,6 +53,10 @@ struct Info {
     precision: Option<f64>,
     /// How far a stored height may be from its source (0 when bit for bit).
     storage_error: f64,
+    /// Whether coarse grids may be stored thinned by area (format 6).
+    thinned_by_area: bool,
+    /// Coarse grids stored thinned by area: every k-th column only.
+    thinned_grids: u64,
     nodes: u64,
     nodes_per_level: Vec<u64>,
     physical_blocks: u64,
@@ -423,6 +427,8 @@ fn report<S: fmrh::store::Source>(
         max_error: h.max_error,
         precision: h.precision.map(|p| p.step()),
         storage_error: h.storage_error(),
+        thinned_by_area: h.thinned_by_area,
+        thinned_grids: nodes.iter().filter(|n| n.grid_thin > 0).count() as u64,
         nodes: h.node_count,
         nodes_per_level: per_level,
         physical_blocks: h.block_count,
@@ -495,6 +501,13 @@ fn print_info(path: &std::path::Path, i: &Info) {
             i.storage_error
         ),
         None => println!("  precision   lossless"),
+    }
+    if i.thinned_by_area {
+        println!(
+            "  thinning    by area: {} of {} coarse grids keep every k-th column",
+            i.thinned_grids,
+            i.nodes - i.nodes_per_level.last().copied().unwrap_or(0)
+        );
     }
     println!("  clusters    {}", i.clusters.len());
     println!("      threshold    max error      nodes  index pages (depth)");

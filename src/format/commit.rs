@@ -29,8 +29,8 @@ use super::bundle::BundleRef;
 use super::tree::TreeRef;
 use super::{
     crc32, is_zero, page_size_is_valid, Invariant, Violation, FORMAT_MAJOR, FORMAT_MINOR,
-    LAST_MINOR_OF_1, LAST_MINOR_OF_2, LAST_MINOR_OF_3, LAST_MINOR_OF_4, MAGIC, MAX_PAGE_SIZE,
-    MIN_PAGE_SIZE,
+    LAST_MINOR_OF_1, LAST_MINOR_OF_2, LAST_MINOR_OF_3, LAST_MINOR_OF_4, LAST_MINOR_OF_5, MAGIC,
+    MAX_PAGE_SIZE, MIN_PAGE_SIZE,
 };
 
 /// Bytes of a commit record at the start of its slot page; the rest of the page is zero.
@@ -197,6 +197,12 @@ impl CommitRecord {
         self.major.get() >= 5
     }
 
+    /// Whether its nodes' grids may be stored thinned by area (format 6.x): before, the node
+    /// record's flag bits 3 to 6 were reserved, zero.
+    pub fn grids_thinned(&self) -> bool {
+        self.major.get() >= 6
+    }
+
     /// Whether its metadata bundle is stored a frame per page, read page by page (5.x), not
     /// as one frame read whole at open.
     pub fn bundle_framed(&self) -> bool {
@@ -337,6 +343,7 @@ pub fn classify(bytes: &[u8], slot: u8, offset: u64) -> Slot {
     }
     let newer_minor = match r.major.get() {
         FORMAT_MAJOR => r.minor.get() > FORMAT_MINOR,
+        5 => r.minor.get() > LAST_MINOR_OF_5,
         4 => r.minor.get() > LAST_MINOR_OF_4,
         3 => r.minor.get() > LAST_MINOR_OF_3,
         2 => r.minor.get() > LAST_MINOR_OF_2,

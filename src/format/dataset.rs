@@ -25,7 +25,10 @@ pub const HAS_GEOREFERENCE: u16 = 2;
 pub const HAS_CRS: u16 = 4;
 /// Flag: the units string is present.
 pub const HAS_UNITS: u16 = 8;
-const KNOWN_FLAGS: u16 = HAS_SPACING | HAS_GEOREFERENCE | HAS_CRS | HAS_UNITS;
+/// Flag (format 6): the nodes are thinned by area ([`crate::model::thinning`]) by the
+/// spacing of the georeference, which is geographic; an editor thins by the same rule.
+pub const THINNED_BY_AREA: u16 = 16;
+const KNOWN_FLAGS: u16 = HAS_SPACING | HAS_GEOREFERENCE | HAS_CRS | HAS_UNITS | THINNED_BY_AREA;
 
 #[derive(Clone, Copy, Debug, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
 #[repr(C)]
@@ -81,6 +84,8 @@ pub struct DatasetHeader {
     pub precision: Option<Precision>,
     /// Spacing, georeference, units and provenance.
     pub metadata: Metadata,
+    /// Whether nodes are thinned by area by the georeference's spacing (format 6).
+    pub thinned_by_area: bool,
 }
 
 impl DatasetHeader {
@@ -88,6 +93,15 @@ impl DatasetHeader {
     /// when heights are stored bit for bit.
     pub fn storage_error(&self) -> f64 {
         self.precision.map_or(0.0, Precision::bound)
+    }
+
+    /// The spacing nodes are thinned by area with, if they are (format 6).
+    pub fn thinning(&self) -> Option<crate::model::LatLonSpacing> {
+        self.metadata
+            .georeference
+            .as_ref()
+            .and_then(crate::model::LatLonSpacing::of_georeference)
+            .filter(|_| self.thinned_by_area)
     }
 
     /// The header describing `model`, built from a heightfield with `metadata`.
@@ -106,6 +120,7 @@ impl DatasetHeader {
             cluster_count: u32::try_from(model.clusters().len()).unwrap_or(u32::MAX),
             precision: model.precision(),
             metadata: metadata.clone(),
+            thinned_by_area: model.thinning().is_some(),
         }
     }
 
@@ -133,6 +148,9 @@ impl DatasetHeader {
         }
         if m.units.is_some() {
             flags |= HAS_UNITS;
+        }
+        if self.thinned_by_area {
+            flags |= THINNED_BY_AREA;
         }
         let g = m.georeference.as_ref();
         let pair = |v: [f64; 2]| [F64::new(v[0]), F64::new(v[1])];
@@ -283,6 +301,18 @@ impl DatasetHeader {
             units: (flags & HAS_UNITS != 0).then_some(units),
             source_format,
         };
+        let thinned_by_area = flags & THINNED_BY_AREA != 0;
+        if thinned_by_area
+            && metadata
+                .georeference
+                .as_ref()
+                .and_then(crate::model::LatLonSpacing::of_georeference)
+                .is_none()
+        {
+            return Err(bad(
+                "thinned by area without a geographic georeference to thin by".into(),
+            ));
+        }
         Ok(DatasetHeader {
             domain,
             valid_samples: f.valid_samples.get(),
@@ -294,6 +324,7 @@ impl DatasetHeader {
             cluster_count,
             precision,
             metadata,
+            thinned_by_area,
         })
     }
 }

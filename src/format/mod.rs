@@ -79,7 +79,7 @@ pub use payload::PayloadRef;
 pub use records::{
     AdjacencyEntry, BlockRecord, FreeEntry, FreePage, IndexEntry, NodeRecord, ScanEntry,
     StoredBlock, StoredNode, NODE_GRID_AGAINST_PARENT, NODE_GRID_BITMAP_FLAGGED,
-    NODE_GRID_HAS_VOIDS, ROOT_PARENT,
+    NODE_GRID_HAS_VOIDS, NODE_GRID_THIN_MASK, NODE_GRID_THIN_SHIFT, ROOT_PARENT,
 };
 pub use tree::{TreeRef, TreeSpec, MAX_TREE_DEPTH};
 
@@ -87,7 +87,12 @@ pub use tree::{TreeRef, TreeSpec, MAX_TREE_DEPTH};
 /// transfers, as PNG's signature does.
 pub const MAGIC: [u8; 8] = *b"FMRH\r\n\x1a\n";
 
-/// Incompatible revisions of the format. Writers write 5; readers read 1 to 5.
+/// Incompatible revisions of the format. Writers write 6; readers read 1 to 6.
+///
+/// 6.0 may store a node's coarse grid *thinned by area* (the node record's flag bits 3 to 6,
+/// [`records::NODE_GRID_THIN_MASK`]): only every `k`-th column and the last, which a reader
+/// expands back (§7). A 5.x reader would take such a grid for a corrupt one. Everything else
+/// is as in 5.0, so a 5.x file is read as it is and a transaction on it writes a 6.0 state.
 ///
 /// 5.0 may code a node's coarse grid *against its parent's grid* as 4.0 codes physical
 /// blocks (the node record's flag [`records::NODE_GRID_AGAINST_PARENT`]): decoding a grid may
@@ -106,10 +111,13 @@ pub const MAGIC: [u8; 8] = *b"FMRH\r\n\x1a\n";
 /// writes a 3.0 state. 2.0 stored payloads coded ([`payload::store_block`],
 /// [`crate::codec`]) where 1.x stored raw `f32`: a 1.x file is read as it is, and refused
 /// for writing (it would mix raw and coded payloads): rebuild it with `fmrh build`.
-pub const FORMAT_MAJOR: u16 = 5;
+pub const FORMAT_MAJOR: u16 = 6;
 
 /// Compatible additions within [`FORMAT_MAJOR`]: none yet.
 pub const FORMAT_MINOR: u16 = 0;
+
+/// The last minor version of major 5.
+pub const LAST_MINOR_OF_5: u16 = 0;
 
 /// The last minor version of major 4.
 pub const LAST_MINOR_OF_4: u16 = 0;

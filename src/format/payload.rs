@@ -293,37 +293,88 @@ pub fn grid_axes(domain: &Domain, level: u8, x: u32, y: u32) -> (Vec<u64>, Vec<u
     )
 }
 
+/// Where the stored heights of a grid thinned by `2^thin` lie ([`grid_axes`], its columns
+/// the kept ones, [`kept_axis`]): what a payload coded against it sees, and what its own
+/// heights are coded at.
+pub fn stored_grid_axes(
+    domain: &Domain,
+    level: u8,
+    x: u32,
+    y: u32,
+    thin: u8,
+) -> (Vec<u64>, Vec<u64>) {
+    let (cols, rows) = grid_axes(domain, level, x, y);
+    if thin == 0 {
+        return (cols, rows);
+    }
+    (kept_axis(&cols, thin), rows)
+}
+
+/// The kept columns' heights of a row-major grid layout `heights` of `gw` columns thinned by
+/// `2^thin` (all of them when `thin` is 0).
+pub fn kept_heights(heights: &[f32], gw: u32, thin: u8) -> Vec<f32> {
+    if thin == 0 {
+        return heights.to_vec();
+    }
+    let kept: Vec<usize> = crate::model::thinning::kept_columns(gw, 1 << thin)
+        .map(|i| i as usize)
+        .collect();
+    heights
+        .chunks_exact(gw.max(1) as usize)
+        .flat_map(|row| kept.iter().filter_map(move |&i| row.get(i).copied()))
+        .collect()
+}
+
 /// Format 2: the stored form of a grid's layout `raw` of `gw × gh` heights (see the module
-/// docs), trying the lattice `step` as [`store_block`] does.
-pub fn store_grid(raw: &[u8], gw: u32, gh: u32, coding: Coding) -> Vec<u8> {
-    store_grid_with(raw, gw, gh, |heights| {
-        Some(coding.code(heights, gw.max(1) as usize))
+/// docs), trying the lattice `step` as [`store_block`] does. Format 6: with `thin` > 0 only
+/// the kept columns of the layout's heights are coded ([`crate::model::thinning`]).
+pub fn store_grid(raw: &[u8], (gw, gh): (u32, u32), thin: u8, coding: Coding) -> Vec<u8> {
+    let kw = kept_width(gw, thin);
+    store_grid_with(raw, (gw, gh), thin, |heights| {
+        Some(coding.code(heights, kw.max(1) as usize))
     })
     .unwrap_or_default()
+}
+
+/// How many columns a grid of `gw` stored columns thinned by `2^thin` keeps.
+pub fn kept_width(gw: u32, thin: u8) -> u32 {
+    crate::model::thinning::kept_count(gw, 1 << thin)
+}
+
+/// The sample columns a grid stored thinned by `2^thin` keeps, of its columns `cols`
+/// ([`grid_axes`]).
+pub fn kept_axis(cols: &[u64], thin: u8) -> Vec<u64> {
+    let gw = u32::try_from(cols.len()).unwrap_or(u32::MAX);
+    crate::model::thinning::kept_columns(gw, 1 << thin)
+        .filter_map(|i| cols.get(i as usize).copied())
+        .collect()
 }
 
 /// Format 5: the stored form of a grid's layout `raw` of `gw × gh` heights at `at`, its
 /// heights coded against `parent`'s grid ([`codec::parent`]) and its bitmap as
 /// [`store_grid`] stores it. `None` when the grid does not lie inside the parent, a height
-/// the parent holds differs from the parent's, or `coding` is raw.
+/// the parent holds differs from the parent's, or `coding` is raw. Format 6: a grid thinned
+/// by `2^thin` codes its kept columns, which `at` names ([`kept_axis`]), and a parent
+/// stored thinned is its kept columns too.
 pub fn store_grid_against(
     raw: &[u8],
     (gw, gh): (u32, u32),
+    thin: u8,
     coding: Coding,
     at: Axes<'_>,
     parent: Parent<'_>,
 ) -> Option<Vec<u8>> {
-    store_grid_with(raw, gw, gh, |heights| {
+    store_grid_with(raw, (gw, gh), thin, |heights| {
         coding.code_against(heights, at, parent)
     })
 }
 
-/// A grid's stored form: the heights' code from `code_heights` (`None`: it does not apply),
-/// then the void bitmap as it is.
+/// A grid's stored form: the code from `code_heights` (`None`: it does not apply) of its
+/// heights (their kept columns when thinned by `2^thin`), then the void bitmap as it is.
 fn store_grid_with(
     raw: &[u8],
-    gw: u32,
-    gh: u32,
+    (gw, gh): (u32, u32),
+    thin: u8,
     code_heights: impl FnOnce(&[f32]) -> Option<Vec<u8>>,
 ) -> Option<Vec<u8>> {
     let n = gw as usize * gh as usize;
@@ -331,6 +382,7 @@ fn store_grid_with(
         .chunks_exact(4)
         .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
         .collect();
+    let heights = kept_heights(&heights, gw, thin);
     let a = code_heights(&heights)?;
     let mut out = Vec::with_capacity(5 + a.len() + raw.len().saturating_sub(4 * n));
     out.extend_from_slice(&u32::try_from(a.len()).ok()?.to_le_bytes());
@@ -345,26 +397,32 @@ fn store_grid_with(
 /// Format 2: a grid's layout from its stored form, or why it does not decode. `flagged_bitmap`
 /// (the node's flag bit 2, format 5): the bitmap follows a void flag
 /// ([`crate::codec::voids`]), else it is raw.
+/// Format 6: a grid thinned by `2^thin` decodes its kept columns and expands them back
+/// ([`crate::model::thinning::expand_row`]).
 pub fn load_grid(
     stored: &[u8],
     (gw, gh): (u32, u32),
-    has_voids: bool,
-    flagged_bitmap: bool,
+    (has_voids, flagged_bitmap): (bool, bool),
+    thin: u8,
 ) -> Result<Vec<u8>, String> {
+    let kw = kept_width(gw, thin);
     load_grid_with(
         stored,
         (gw, gh),
         (has_voids, flagged_bitmap),
-        |a, heights| codec::decode(a, gw.max(1) as usize, heights).map_err(|e| e.to_string()),
+        thin,
+        |a, heights| codec::decode(a, kw.max(1) as usize, heights).map_err(|e| e.to_string()),
     )
 }
 
 /// Format 5: a grid's layout from its stored form when its heights (at `at`) are coded
-/// against `parent`'s grid, or why it does not decode (`flagged_bitmap` as [`load_grid`]).
+/// against `parent`'s grid, or why it does not decode (`flagged_bitmap` and `thin` as
+/// [`load_grid`]; `at` names the kept columns, [`kept_axis`]).
 pub fn load_grid_against(
     stored: &[u8],
     (gw, gh): (u32, u32),
     (has_voids, flagged_bitmap): (bool, bool),
+    thin: u8,
     at: Axes<'_>,
     parent: Parent<'_>,
 ) -> Result<Vec<u8>, String> {
@@ -372,6 +430,7 @@ pub fn load_grid_against(
         stored,
         (gw, gh),
         (has_voids, flagged_bitmap),
+        thin,
         |a, heights| {
             codec::parent::decode_against(a, at, parent, heights).map_err(|e| e.to_string())
         },
@@ -383,9 +442,15 @@ fn load_grid_with(
     stored: &[u8],
     (gw, gh): (u32, u32),
     (has_voids, flagged_bitmap): (bool, bool),
+    thin: u8,
     heights_from: impl FnOnce(&[u8], &mut [f32]) -> Result<(), String>,
 ) -> Result<Vec<u8>, String> {
     check_shape(gw, gh)?;
+    if thin > 0
+        && (thin > crate::model::thinning::MAX_THIN_LOG2 || (1u32 << thin) >= MAX_BLOCK_SIZE)
+    {
+        return Err(format!("a grid thinned by 2^{thin}"));
+    }
     let n = gw as usize * gh as usize;
     let (a, tail) = split_stored(stored)?;
     let bitmap = match (has_voids, flagged_bitmap, tail.split_first()) {
@@ -406,8 +471,21 @@ fn load_grid_with(
     if bitmap.len() != want {
         return Err(format!("{} bitmap bytes, {want} expected", bitmap.len()));
     }
-    let mut heights = vec![0f32; n];
-    heights_from(a, &mut heights).map_err(|e| format!("heights: {e}"))?;
+    let kw = kept_width(gw, thin) as usize;
+    let mut kept = vec![0f32; kw * gh as usize];
+    heights_from(a, &mut kept).map_err(|e| format!("heights: {e}"))?;
+    let heights = if thin > 0 {
+        let mut full = vec![0f32; n];
+        for (row, k) in full
+            .chunks_exact_mut(gw as usize)
+            .zip(kept.chunks_exact(kw))
+        {
+            crate::model::thinning::expand_row(k, 1 << thin, row);
+        }
+        full
+    } else {
+        kept
+    };
     let mut out: Vec<u8> = heights.iter().flat_map(|v| v.to_le_bytes()).collect();
     out.extend_from_slice(&bitmap);
     Ok(out)
@@ -448,28 +526,10 @@ pub fn block_len(width: u32, height: u32, void_count: u32) -> u64 {
     4 * (u64::from(width) * u64::from(height) + u64::from(void_count))
 }
 
-/// The stored columns and rows `(gw, gh)` of the grid of node `(x, y)` at `level`.
+/// The stored columns and rows `(gw, gh)` of the grid of node `(x, y)` at `level`
+/// ([`Domain::grid_dims`]).
 pub fn grid_dims(domain: &Domain, level: u8, x: u32, y: u32) -> (u32, u32) {
-    let fp = domain.footprint(level, x, y);
-    let s = domain.stride(level);
-    let b = domain.block_size();
-    let dim = |start: u64, last_data: u64| -> u32 {
-        // Grid samples at start + i * s inside the data, plus one clamp sample if any lie past.
-        let inside = if start > last_data {
-            0
-        } else {
-            u32::try_from((last_data - start) / s + 1).map_or(b, |n| n.min(b))
-        };
-        if inside < b {
-            inside + 1
-        } else {
-            b
-        }
-    };
-    (
-        dim(fp.col0, u64::from(domain.width() - 1)),
-        dim(fp.row0, u64::from(domain.height() - 1)),
-    )
+    domain.grid_dims(level, x, y)
 }
 
 /// Bytes of a coarse grid's payload of `gw × gh` stored samples.
@@ -632,7 +692,7 @@ mod stored_tests {
         refused(load_block(&stored, 1 << 20, 9, 0), "a side");
         refused(load_block(&stored, 0, 9, 0), "a side");
         refused(
-            load_grid(&stored, (u32::MAX, u32::MAX), true, true),
+            load_grid(&stored, (u32::MAX, u32::MAX), (true, true), 0),
             "a side",
         );
     }
@@ -650,23 +710,26 @@ mod stored_tests {
         let heights: Vec<f32> = (0..25).map(|i| i as f32).collect();
         let void: Vec<bool> = (0..25).map(|i| i % 7 == 0).collect();
         let raw = encode_grid(&heights, &void, true);
-        let stored = store_grid(&raw, 5, 5, Coding::default());
+        let stored = store_grid(&raw, (5, 5), 0, Coding::default());
         assert_eq!(
-            load_grid(&stored, (5, 5), true, true).expect("decodes"),
+            load_grid(&stored, (5, 5), (true, true), 0).expect("decodes"),
             raw
         );
         assert!(
-            load_grid(&stored, (5, 5), false, true).is_err(),
+            load_grid(&stored, (5, 5), (false, true), 0).is_err(),
             "the bitmap is not expected"
         );
         let mut longer = stored.clone();
         longer.push(0);
-        assert!(load_grid(&longer, (5, 5), true, true).is_err());
+        assert!(load_grid(&longer, (5, 5), (true, true), 0).is_err());
         // Before format 5 the bitmap followed raw, with no flag.
         let a = u32::from_le_bytes(stored[..4].try_into().expect("a length")) as usize;
         let mut old = stored[..4 + a].to_vec();
         old.extend_from_slice(&raw[4 * 25..]);
-        assert_eq!(load_grid(&old, (5, 5), true, false).expect("decodes"), raw);
-        assert!(load_grid(&old, (5, 5), true, true).is_err());
+        assert_eq!(
+            load_grid(&old, (5, 5), (true, false), 0).expect("decodes"),
+            raw
+        );
+        assert!(load_grid(&old, (5, 5), (true, true), 0).is_err());
     }
 }

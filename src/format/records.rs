@@ -29,6 +29,14 @@ pub const NODE_GRID_AGAINST_PARENT: u16 = 2;
 /// [`NODE_GRID_HAS_VOIDS`]. A grid kept from an older state keeps its raw bitmap.
 pub const NODE_GRID_BITMAP_FLAGGED: u16 = 4;
 
+/// [`NodeRecord::flags`] (format 6): bits 3 to 6 hold `log₂ k`, the factor the coarse grid
+/// is thinned by east-west (thinning by area, [`crate::model::thinning`]); 0 for a square
+/// grid. The payload then stores only the kept columns (format §7).
+pub const NODE_GRID_THIN_MASK: u16 = 0x78;
+
+/// The shift of [`NODE_GRID_THIN_MASK`].
+pub const NODE_GRID_THIN_SHIFT: u32 = 3;
+
 /// One node of the FMRH.
 #[derive(
     Clone, Copy, Debug, PartialEq, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned,
@@ -44,7 +52,8 @@ pub struct NodeRecord {
     /// Bit 0 ([`NODE_GRID_HAS_VOIDS`]): the coarse grid has void or padding samples, and its
     /// payload carries the void bitmap. Bit 1 ([`NODE_GRID_AGAINST_PARENT`], format 5): the
     /// grid is coded against its parent's. Bit 2 ([`NODE_GRID_BITMAP_FLAGGED`], format 5):
-    /// the bitmap follows a void flag.
+    /// the bitmap follows a void flag. Bits 3 to 6 ([`NODE_GRID_THIN_MASK`], format 6):
+    /// `log₂` of the grid's thinning factor.
     pub flags: U16,
     /// Column among the level's nodes.
     pub x: U32,
@@ -110,6 +119,8 @@ pub struct StoredNode {
     pub grid_against_parent: bool,
     /// Whether its coarse grid's void bitmap follows a void flag (format 5).
     pub grid_bitmap_flagged: bool,
+    /// `log₂` of the factor its coarse grid is thinned by east-west (format 6); 0: square.
+    pub grid_thin: u8,
 }
 
 impl NodeRecord {
@@ -133,6 +144,8 @@ impl NodeRecord {
             grid_has_voids: self.flags.get() & NODE_GRID_HAS_VOIDS != 0,
             grid_against_parent: self.flags.get() & NODE_GRID_AGAINST_PARENT != 0,
             grid_bitmap_flagged: self.flags.get() & NODE_GRID_BITMAP_FLAGGED != 0,
+            // Four bits.
+            grid_thin: ((self.flags.get() & NODE_GRID_THIN_MASK) >> NODE_GRID_THIN_SHIFT) as u8,
         }
     }
 
@@ -155,7 +168,7 @@ impl NodeRecord {
                     NODE_GRID_BITMAP_FLAGGED
                 } else {
                     0
-                },
+                } | (u16::from(node.grid_thin) << NODE_GRID_THIN_SHIFT) & NODE_GRID_THIN_MASK,
             ),
             x: U32::new(node.x),
             y: U32::new(node.y),

@@ -178,6 +178,31 @@ impl Domain {
         }
     }
 
+    /// The stored columns and rows `(gw, gh)` of the grid of node `(x, y)` at `level`
+    /// (format §7): its grid samples inside the data, plus one clamp sample if any lie past
+    /// the data's east (south) edge. Grid column `i >= gw` reads column `gw - 1`.
+    pub fn grid_dims(&self, level: u8, x: u32, y: u32) -> (u32, u32) {
+        let fp = self.footprint(level, x, y);
+        let s = self.stride(level);
+        let b = self.block_size;
+        let dim = |start: u64, last_data: u64| -> u32 {
+            let inside = if start > last_data {
+                0
+            } else {
+                u32::try_from((last_data - start) / s + 1).map_or(b, |n| n.min(b))
+            };
+            if inside < b {
+                inside + 1
+            } else {
+                b
+            }
+        };
+        (
+            dim(fp.col0, u64::from(self.width - 1)),
+            dim(fp.row0, u64::from(self.height - 1)),
+        )
+    }
+
     /// Padding samples added east and south to square the domain.
     pub fn padding_samples(&self) -> u64 {
         self.side() * self.side() - u64::from(self.width) * u64::from(self.height)

@@ -16,6 +16,11 @@
 //! again from scratch and compared, and the changed stand-ins join the dirty region (see
 //! [`MendedRaster::replace`]).
 //!
+//! **Thinning by area** (format 6, [`super::thinning`]) follows the same rule as a build: a
+//! node's candidate factor depends on its footprint alone, so the editor keeps, beside each
+//! node's square bands, the bands of its grid thinned by that factor, and decides from the
+//! two errors as [`super::tree::Measurements::thin_by_area`] does.
+//!
 //! **Thresholds** stay those the editor was given (for a container: the stored ones). A fresh
 //! build of the same samples with [`Thresholds::Explicit`](super::Thresholds) of them gives
 //! the same model.
@@ -27,6 +32,7 @@ use super::domain::{Domain, SampleRect};
 use super::measure::{measure_band, NodeStats};
 use super::precision::{self, Precision};
 use super::raster::MendedRaster;
+use super::thinning::{candidate_log2, keeps_thinned, LatLonSpacing};
 use super::tree::{Fmrh, Measurements};
 use super::Model;
 use crate::error::{Error, Result};
@@ -40,6 +46,11 @@ pub struct ModelEditor {
     measured: Measurements,
     /// Per level, row-major nodes, `b - 1` bands each.
     bands: Vec<Vec<NodeStats>>,
+    /// Per level, row-major nodes: `log₂` of the candidate thinning factor (empty levels
+    /// when the model is not thinned).
+    candidates: Vec<Vec<u8>>,
+    /// As `bands`, for the grids thinned by their candidate factor (empty where it is 1).
+    thin_bands: Vec<Vec<NodeStats>>,
 }
 
 /// One band of one node: `(level, x, y, band)`.
@@ -47,13 +58,16 @@ type BandId = (u8, u32, u32, u32);
 
 impl ModelEditor {
     /// Builds the model of `heightfield` with blocks of `block_size` samples, exactly
-    /// `thresholds` and the storage `precision` (validated as for [`Model::build`]). Heights
-    /// are quantised to the precision here and in every patch, as a build would.
+    /// `thresholds` and the storage `precision` (validated as for [`Model::build`]), its
+    /// nodes thinned by area with `thinning` if given (as a build with
+    /// [`super::ThinByArea::Spacing`]). Heights are quantised to the precision here and in
+    /// every patch, as a build would.
     pub fn new(
         heightfield: Heightfield,
         block_size: u32,
         thresholds: &[f64],
         precision: Option<Precision>,
+        thinning: Option<LatLonSpacing>,
     ) -> Result<Self> {
         let domain = Domain::new(heightfield.width(), heightfield.height(), block_size)?;
         let thresholds =
@@ -65,33 +79,76 @@ impl ModelEditor {
         let raster = MendedRaster::new(heightfield)
             .with_storage_error(precision.map_or(0.0, Precision::bound));
         let per_node = domain.block_size() - 1;
-        let bands: Vec<Vec<NodeStats>> = (0..domain.levels())
-            .map(|level| {
-                let (cols, _) = domain.nodes_across(level);
-                let count = node_count(&domain, level) * per_node as usize;
-                (0..count)
-                    .into_par_iter()
-                    .map(|i| {
-                        let node = i / per_node as usize;
-                        let (x, y) = ((node % cols as usize) as u32, (node / cols as usize) as u32);
-                        let k = u64::from(i as u32 % per_node);
-                        measure_band(&raster, &domain, level, x, y, k)
-                    })
-                    .collect()
+        let candidates: Vec<Vec<u8>> = (0..domain.levels())
+            .map(|level| match &thinning {
+                Some(spacing) => {
+                    let (cols, _) = domain.nodes_across(level);
+                    (0..node_count(&domain, level))
+                        .map(|i| {
+                            let (x, y) = ((i % cols as usize) as u32, (i / cols as usize) as u32);
+                            candidate_log2(spacing, &domain, level, x, y)
+                        })
+                        .collect()
+                }
+                None => Vec::new(),
             })
             .collect();
-        let measured = Measurements::from_stats(
+        let measure_all = |thinned: bool| -> Vec<Vec<NodeStats>> {
+            (0..domain.levels())
+                .map(|level| {
+                    let cand = &candidates[usize::from(level)];
+                    if thinned && cand.iter().all(|&c| c == 0) {
+                        return Vec::new();
+                    }
+                    let (cols, _) = domain.nodes_across(level);
+                    let count = node_count(&domain, level) * per_node as usize;
+                    (0..count)
+                        .into_par_iter()
+                        .map(|i| {
+                            let node = i / per_node as usize;
+                            let (x, y) =
+                                ((node % cols as usize) as u32, (node / cols as usize) as u32);
+                            let k = u64::from(i as u32 % per_node);
+                            let thin = if thinned { cand[node] } else { 0 };
+                            if thinned && thin == 0 {
+                                return NodeStats::EMPTY;
+                            }
+                            measure_band(&raster, &domain, level, (x, y), k, thin)
+                        })
+                        .collect()
+                })
+                .collect()
+        };
+        let bands = measure_all(false);
+        let thin_bands = measure_all(true);
+        let mut measured = Measurements::from_stats(
             (0..domain.levels())
                 .map(|level| {
                     let (cols, rows) = domain.nodes_across(level);
-                    let stats = bands[usize::from(level)]
-                        .chunks(per_node as usize)
-                        .map(|c| c.iter().fold(NodeStats::EMPTY, |a, &b| a.merge(b)))
+                    let stats = (0..node_count(&domain, level))
+                        .map(|node| {
+                            node_stats(&bands, &candidates, &thin_bands, per_node, level, node).0
+                        })
                         .collect();
                     (cols, rows, stats)
                 })
                 .collect(),
         );
+        for (level, m) in measured.levels.iter_mut().enumerate() {
+            m.thin = (0..node_count(&domain, level as u8))
+                .map(|node| {
+                    node_stats(
+                        &bands,
+                        &candidates,
+                        &thin_bands,
+                        per_node,
+                        level as u8,
+                        node,
+                    )
+                    .1
+                })
+                .collect();
+        }
         let tree = Fmrh::prune(domain, &measured, thresholds[0]);
         let clusters = cluster::build_clusters(&tree, &thresholds);
         Ok(ModelEditor {
@@ -101,10 +158,13 @@ impl ModelEditor {
                 clusters,
                 precision,
                 storage_error_measured: None,
+                thinning,
             },
             thresholds,
             measured,
             bands,
+            candidates,
+            thin_bands,
         })
     }
 
@@ -159,28 +219,87 @@ impl ModelEditor {
         todo.sort_unstable();
         todo.dedup();
         let raster = &self.model.raster;
-        let measured: Vec<NodeStats> = todo
-            .par_iter()
-            .map(|&(level, x, y, k)| measure_band(raster, &d, level, x, y, u64::from(k)))
-            .collect();
+        let candidates = &self.candidates;
         let per_node = (d.block_size() - 1) as usize;
-        for (&(level, x, y, k), stats) in todo.iter().zip(measured) {
+        let measured: Vec<(NodeStats, Option<NodeStats>)> = todo
+            .par_iter()
+            .map(|&(level, x, y, k)| {
+                let (cols, _) = d.nodes_across(level);
+                let node = y as usize * cols as usize + x as usize;
+                let thin = candidates[usize::from(level)]
+                    .get(node)
+                    .copied()
+                    .unwrap_or(0);
+                let square = measure_band(raster, &d, level, (x, y), u64::from(k), 0);
+                let thinned =
+                    (thin > 0).then(|| measure_band(raster, &d, level, (x, y), u64::from(k), thin));
+                (square, thinned)
+            })
+            .collect();
+        for (&(level, x, y, k), (square, thinned)) in todo.iter().zip(measured) {
             let (cols, _) = d.nodes_across(level);
-            let node = y as usize * cols as usize + x as usize;
-            self.bands[usize::from(level)][node * per_node + k as usize] = stats;
+            let at = (y as usize * cols as usize + x as usize) * per_node + k as usize;
+            self.bands[usize::from(level)][at] = square;
+            if let Some(t) = thinned {
+                self.thin_bands[usize::from(level)][at] = t;
+            }
         }
         let mut nodes: Vec<(u8, u32, u32)> = todo.iter().map(|&(l, x, y, _)| (l, x, y)).collect();
         nodes.dedup();
         for (level, x, y) in nodes {
             let lm = &mut self.measured.levels[usize::from(level)];
             let node = y as usize * lm.cols as usize + x as usize;
-            let bands = &self.bands[usize::from(level)][node * per_node..(node + 1) * per_node];
-            lm.stats[node] = bands.iter().fold(NodeStats::EMPTY, |a, &b| a.merge(b));
+            let (stats, thin) = node_stats(
+                &self.bands,
+                &self.candidates,
+                &self.thin_bands,
+                per_node as u32,
+                level,
+                node,
+            );
+            lm.stats[node] = stats;
+            if let Some(t) = lm.thin.get_mut(node) {
+                *t = thin;
+            }
         }
         self.measured.update_monotone();
         self.model.tree = Fmrh::prune(d, &self.measured, self.thresholds[0]);
         self.model.clusters = cluster::build_clusters(&self.model.tree, &self.thresholds);
         Ok(dirty)
+    }
+}
+
+/// A node's statistics from its bands, and `log₂` of the factor its grid is stored thinned
+/// by: its square bands' merge, with the thinned bands' error where the build's rule
+/// ([`keeps_thinned`]) keeps it thinned.
+fn node_stats(
+    bands: &[Vec<NodeStats>],
+    candidates: &[Vec<u8>],
+    thin_bands: &[Vec<NodeStats>],
+    per_node: u32,
+    level: u8,
+    node: usize,
+) -> (NodeStats, u8) {
+    let per_node = per_node as usize;
+    let range = node * per_node..(node + 1) * per_node;
+    let merge = |b: &[NodeStats]| b.iter().fold(NodeStats::EMPTY, |a, &b| a.merge(b));
+    let level = usize::from(level);
+    let square = merge(&bands[level][range.clone()]);
+    let thin = candidates[level].get(node).copied().unwrap_or(0);
+    if thin == 0 {
+        return (square, 0);
+    }
+    let thinned = merge(&thin_bands[level][range]);
+    if keeps_thinned(square.error, thinned.error) {
+        (
+            NodeStats {
+                error: thinned.error,
+                ..square
+            },
+            thin,
+        )
+    } else {
+        (square, 0)
     }
 }
 
@@ -247,7 +366,7 @@ mod tests {
         let (w, h) = (70u32, 45u32);
         let base = wavy(w, h, 0.0);
         let thresholds = [0.0, 0.5, 2.0, 8.0];
-        let mut ed = ModelEditor::new(base.clone(), 9, &thresholds, None).unwrap();
+        let mut ed = ModelEditor::new(base.clone(), 9, &thresholds, None, None).unwrap();
         let mut samples = base.samples().to_vec();
         let patches = [
             (10u64, 7u64, wavy(13, 9, 1.0)),
@@ -274,6 +393,7 @@ mod tests {
                     block_size: 9,
                     thresholds: Thresholds::Explicit(thresholds.to_vec()),
                     precision: None,
+                    thin: Default::default(),
                 },
             )
             .unwrap();
@@ -290,7 +410,7 @@ mod tests {
 
     #[test]
     fn patch_outside_is_refused() {
-        let mut ed = ModelEditor::new(wavy(20, 20, 0.0), 9, &[0.0, 1.0], None).unwrap();
+        let mut ed = ModelEditor::new(wavy(20, 20, 0.0), 9, &[0.0, 1.0], None, None).unwrap();
         let before = ed.model().tree().nodes().to_vec();
         let err = ed.replace(15, 0, &wavy(6, 2, 0.0)).unwrap_err();
         assert!(matches!(err, Error::InvalidArgument(_)), "{err}");

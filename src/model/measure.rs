@@ -99,7 +99,7 @@ pub fn measure_level(raster: &MendedRaster, domain: &Domain, level: u8) -> Vec<N
             .into_par_iter()
             .map(|i| {
                 let (x, y) = node_at(i);
-                measure_node(raster, domain, level, x, y)
+                measure_node(raster, domain, level, (x, y), 0)
             })
             .collect()
     } else {
@@ -107,7 +107,7 @@ pub fn measure_level(raster: &MendedRaster, domain: &Domain, level: u8) -> Vec<N
             .into_par_iter()
             .map(|k| {
                 let (x, y) = node_at(k / bands);
-                measure_band(raster, domain, level, x, y, (k % bands) as u64)
+                measure_band(raster, domain, level, (x, y), (k % bands) as u64, 0)
             })
             .collect();
         parts
@@ -117,28 +117,31 @@ pub fn measure_level(raster: &MendedRaster, domain: &Domain, level: u8) -> Vec<N
     }
 }
 
-/// Measures node `(x, y)` of `level` on its own.
+/// Measures node `(x, y)` of `level` on its own, its grid thinned by `2^thin` east-west
+/// (0: square; see [`super::thinning`]).
 pub fn measure_node(
     raster: &MendedRaster,
     domain: &Domain,
     level: u8,
-    x: u32,
-    y: u32,
+    (x, y): (u32, u32),
+    thin: u8,
 ) -> NodeStats {
     (0..u64::from(domain.block_size() - 1))
-        .map(|band| measure_band(raster, domain, level, x, y, band))
+        .map(|band| measure_band(raster, domain, level, (x, y), band, thin))
         .fold(NodeStats::EMPTY, NodeStats::merge)
 }
 
 /// Measures one band of a node: the sample rows of its cell row `band`. The band takes its
 /// north edge row; its south edge row belongs to the next band, except for the last band.
+/// The grid is thinned by `2^thin` east-west and expanded back as a reader draws it
+/// ([`super::thinning::thin_in_place`]); 0 keeps it square.
 pub(crate) fn measure_band(
     raster: &MendedRaster,
     domain: &Domain,
     level: u8,
-    x: u32,
-    y: u32,
+    (x, y): (u32, u32),
     band: u64,
+    thin: u8,
 ) -> NodeStats {
     let fp = domain.footprint(level, x, y);
     let s = domain.stride(level);
@@ -184,12 +187,17 @@ pub(crate) fn measure_band(
 
     // The band's grid rows: north and south edges of its cells, clamped into the data.
     let b = domain.block_size() as usize;
-    let north: Vec<f32> = (0..b as u64)
+    let mut north: Vec<f32> = (0..b as u64)
         .map(|i| raster.value(fp.col0 + i * s, gy0))
         .collect();
-    let south: Vec<f32> = (0..b as u64)
+    let mut south: Vec<f32> = (0..b as u64)
         .map(|i| raster.value(fp.col0 + i * s, gy0 + s))
         .collect();
+    if thin > 0 {
+        let (gw, _) = domain.grid_dims(level, x, y);
+        super::thinning::thin_in_place(&mut north, b, gw, 1 << thin);
+        super::thinning::thin_in_place(&mut south, b, gw, 1 << thin);
+    }
     let shift = s.trailing_zeros();
     let last_cell = b as u64 - 2;
     let mut error = 0.0f64;

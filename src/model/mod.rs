@@ -21,6 +21,7 @@ pub use edit::ModelEditor;
 pub use measure::NodeStats;
 pub use precision::Precision;
 pub use raster::MendedRaster;
+pub use thinning::{LatLonSpacing, ThinByArea};
 pub use tree::{Fmrh, Measurements, Node, NO_PARENT};
 
 use crate::error::Result;
@@ -46,6 +47,9 @@ pub struct BuildOptions {
     /// Store heights to this step, within half of it (see [`precision`]); `None` keeps them
     /// bit for bit.
     pub precision: Option<Precision>,
+    /// Thin nodes by area (format 6, [`thinning`]): by default where the heightfield is a
+    /// longitude-latitude grid.
+    pub thin: ThinByArea,
 }
 
 impl Default for BuildOptions {
@@ -54,6 +58,7 @@ impl Default for BuildOptions {
             block_size: DEFAULT_BLOCK_SIZE,
             thresholds: Thresholds::Ladder,
             precision: None,
+            thin: ThinByArea::Auto,
         }
     }
 }
@@ -66,6 +71,7 @@ pub struct Model {
     clusters: Vec<Cluster>,
     precision: Option<Precision>,
     storage_error_measured: Option<f64>,
+    thinning: Option<LatLonSpacing>,
 }
 
 /// A node's grid: the `b × b` point-decimation of the mended raster over its footprint, with
@@ -105,6 +111,9 @@ impl Model {
             Thresholds::Ladder => None,
         };
         let precision = options.precision;
+        let thinning = options
+            .thin
+            .spacing(heightfield.metadata.georeference.as_ref());
         let (heightfield, storage_error_measured) = match precision {
             Some(p) => {
                 let (hf, worst) = p.quantise_heightfield(heightfield);
@@ -114,7 +123,10 @@ impl Model {
         };
         let floor = precision.map_or(0.0, Precision::bound);
         let raster = MendedRaster::new(heightfield).with_storage_error(floor);
-        let measured = Measurements::measure_with_progress(&raster, &domain, progress);
+        let mut measured = Measurements::measure_with_progress(&raster, &domain, progress);
+        if let Some(spacing) = &thinning {
+            measured.thin_by_area(&raster, &domain, spacing);
+        }
         let thresholds = explicit.clone().unwrap_or_else(|| {
             let mut ladder =
                 cluster::default_ladder(measured.root_error(), measured.min_positive_error());
@@ -135,6 +147,7 @@ impl Model {
             clusters,
             precision,
             storage_error_measured,
+            thinning,
         })
     }
 
@@ -170,6 +183,11 @@ impl Model {
         self.storage_error_measured
     }
 
+    /// The spacing its nodes were thinned by area with ([`thinning`]), if they were.
+    pub fn thinning(&self) -> Option<LatLonSpacing> {
+        self.thinning
+    }
+
     /// The largest static error anywhere: the root's `e*`.
     pub fn max_error(&self) -> f64 {
         self.tree.nodes()[0].monotone_error
@@ -178,7 +196,8 @@ impl Model {
     /// The grid of node `index` (see [`NodeGrid`]).
     pub fn node_grid(&self, index: u32) -> NodeGrid {
         let fp = self.tree.footprint(index);
-        let level = self.tree.node(index).level;
+        let node = *self.tree.node(index);
+        let level = node.level;
         let (b, s) = (self.domain().block_size(), self.domain().stride(level));
         let mut heights = Vec::with_capacity(b as usize * b as usize);
         let mut void = Vec::with_capacity(b as usize * b as usize);
@@ -188,6 +207,11 @@ impl Model {
                 heights.push(self.raster.value(col, row));
                 void.push(!self.raster.is_valid(col, row));
             }
+        }
+        if node.thin > 0 {
+            // Stored thinned (format 6): the grid a reader expands, bit for bit.
+            let (gw, _) = self.domain().grid_dims(level, node.x, node.y);
+            thinning::thin_in_place(&mut heights, b as usize, gw, 1 << node.thin);
         }
         NodeGrid {
             size: b,

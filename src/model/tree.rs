@@ -54,6 +54,9 @@ pub struct Node {
     pub valid_samples: u64,
     /// Index of the parent, [`NO_PARENT`] for the root.
     pub parent: u32,
+    /// `log₂` of the factor its grid is thinned by east-west (format 6, [`super::thinning`]);
+    /// 0 for a square grid.
+    pub thin: u8,
     /// Nodes in this node's subtree, itself included: its descendants are
     /// `index + 1 .. index + subtree_len`.
     pub subtree_len: u32,
@@ -70,6 +73,9 @@ pub struct LevelMeasurements {
     pub stats: Vec<NodeStats>,
     /// Per node: the monotone error `e*`.
     pub monotone: Vec<f64>,
+    /// Per node: `log₂` of its thinning factor ([`super::thinning`]); empty when none is
+    /// thinned.
+    pub thin: Vec<u8>,
 }
 
 impl LevelMeasurements {
@@ -126,12 +132,58 @@ impl Measurements {
                     cols,
                     rows,
                     monotone: Vec::new(),
+                    thin: Vec::new(),
                     stats,
                 })
                 .collect(),
         };
         m.update_monotone();
         m
+    }
+
+    /// Thins every node above the finest level by area ([`super::thinning`]): where its
+    /// grid thinned by its candidate factor keeps its error within
+    /// [`super::thinning::THIN_ERROR_RATIO`] times the square grid's, the node's error
+    /// becomes the thinned grid's and its factor is kept. Then every `e*` again.
+    pub fn thin_by_area(
+        &mut self,
+        raster: &MendedRaster,
+        domain: &Domain,
+        spacing: &super::thinning::LatLonSpacing,
+    ) {
+        use super::thinning::{candidate_log2, keeps_thinned};
+        use rayon::prelude::*;
+        for (level, m) in self.levels.iter_mut().enumerate() {
+            let level = level as u8;
+            let cols = m.cols as usize;
+            let decided: Vec<(u8, f64)> = m
+                .stats
+                .par_iter()
+                .enumerate()
+                .map(|(i, square)| {
+                    let (x, y) = ((i % cols) as u32, (i / cols) as u32);
+                    let thin = candidate_log2(spacing, domain, level, x, y);
+                    if thin == 0 {
+                        return (0, square.error);
+                    }
+                    let e = super::measure::measure_node(raster, domain, level, (x, y), thin).error;
+                    if keeps_thinned(square.error, e) {
+                        (thin, e)
+                    } else {
+                        (0, square.error)
+                    }
+                })
+                .collect();
+            if decided.iter().all(|d| d.0 == 0) {
+                m.thin.clear();
+                continue;
+            }
+            m.thin = decided.iter().map(|d| d.0).collect();
+            for (s, d) in m.stats.iter_mut().zip(&decided) {
+                s.error = d.1;
+            }
+        }
+        self.update_monotone();
     }
 
     /// Recomputes every `e*` from the node errors.
@@ -209,6 +261,7 @@ impl Fmrh {
             valid_samples: stats.valid_samples,
             parent,
             subtree_len: 1,
+            thin: m.thin.get(i).copied().unwrap_or(0),
         });
         if level < self.domain.finest_level() && monotone > self.delta_min {
             let mut children: Vec<(HilbertKey, u32, u32)> = (0..4u32)

@@ -704,6 +704,19 @@ impl<S: Source> Store<S> {
         }
         let dims = payload::grid_dims(d, node.level, node.x, node.y);
         let has_voids = node.grid_has_voids;
+        let thin = node.grid_thin;
+        if thin > 0 && (!self.commit.grids_thinned() || (1u32 << thin) >= size) {
+            return Err(self.corrupt(Violation::new(
+                Invariant::NodeTable,
+                at(),
+                format!(
+                    "a grid thinned by 2^{thin}, which format {}.{} with {size}-sample grids \
+                     cannot hold",
+                    self.commit.major.get(),
+                    self.commit.minor.get()
+                ),
+            )));
+        }
         let bytes = if self.commit.payloads_coded() {
             let decoded = if node.grid_against_parent {
                 let p = match parent {
@@ -715,11 +728,12 @@ impl<S: Source> Store<S> {
                         )))
                     }
                 };
-                let (cols, rows) = payload::grid_axes(d, node.level, node.x, node.y);
+                let (cols, rows) = payload::stored_grid_axes(d, node.level, node.x, node.y, thin);
                 payload::load_grid_against(
                     &bytes,
                     dims,
                     (has_voids, node.grid_bitmap_flagged),
+                    thin,
                     crate::codec::parent::Axes {
                         cols: &cols,
                         rows: &rows,
@@ -727,7 +741,7 @@ impl<S: Source> Store<S> {
                     p.parent(),
                 )
             } else {
-                payload::load_grid(&bytes, dims, has_voids, node.grid_bitmap_flagged)
+                payload::load_grid(&bytes, dims, (has_voids, node.grid_bitmap_flagged), thin)
             }
             .map_err(|e| {
                 self.corrupt(Violation::new(
@@ -894,14 +908,18 @@ pub struct ParentGrid {
 
 impl ParentGrid {
     /// The grid `grid` of node `index` (`node`) of `store`, for decoding its children.
+    /// A grid stored thinned (format 6) is its kept columns: the heights it stores.
     pub fn of<S: Source>(store: &Store<S>, index: u32, node: &StoredNode, grid: &Grid<'_>) -> Self {
-        let (cols, rows) = payload::grid_axes(store.domain(), node.level, node.x, node.y);
+        let d = store.domain();
+        let (cols, rows) = payload::stored_grid_axes(d, node.level, node.x, node.y, node.grid_thin);
+        let view = grid.view();
+        let layout: Vec<f32> = view.stored().iter().map(|h| h.get()).collect();
         ParentGrid {
             node: index,
             payload: node.payload,
             cols,
             rows,
-            heights: grid.view().stored().iter().map(|h| h.get()).collect(),
+            heights: payload::kept_heights(&layout, view.stored_width, node.grid_thin),
         }
     }
 
@@ -921,17 +939,18 @@ impl ParentGrid {
             return None;
         }
         let (cols, rows) = payload::grid_axes(d, node.level, node.x, node.y);
-        let stored = heights
+        let layout: Vec<f32> = heights
             .chunks_exact(b)
             .take(rows.len())
             .flat_map(|row| row[..cols.len()].iter().copied())
             .collect();
+        let gw = u32::try_from(cols.len()).ok()?;
         Some(ParentGrid {
             node: index,
             payload: node.payload,
-            cols,
+            cols: payload::kept_axis(&cols, node.grid_thin),
             rows,
-            heights: stored,
+            heights: payload::kept_heights(&layout, gw, node.grid_thin),
         })
     }
 

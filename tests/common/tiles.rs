@@ -87,6 +87,7 @@ pub fn options(thresholds: Option<Vec<f64>>) -> DatasetOptions {
             block_size: 9,
             thresholds: thresholds.map_or(Thresholds::Ladder, Thresholds::Explicit),
             precision: None,
+            thin: Default::default(),
         },
         write: WriteOptions {
             page_size: 1024,

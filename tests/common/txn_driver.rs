@@ -169,6 +169,7 @@ fn build_bytes_with(
             block_size: block,
             thresholds: thresholds.clone(),
             precision: None,
+            thin: Default::default(),
         },
     )
     .expect("the model builds");

@@ -219,6 +219,15 @@ pub(crate) fn write_state<I: Io>(
             )
         ))
     };
+    // Whether node `i`'s grid is stored thinned as it was (format 6). A planar payload reads
+    // its parent's *stored* heights at its own samples: if the parent's thinning changed,
+    // so did which of them the parent stores, even where no height did.
+    let thin_same = |i: u32| {
+        let n = tree.node(i);
+        old_at
+            .get(&(n.level, n.x, n.y))
+            .is_some_and(|o| o.decode().grid_thin == n.thin)
+    };
     for (i, n) in tree.nodes().iter().enumerate() {
         let at = (n.level, n.x, n.y);
         seen.insert(at);
@@ -244,10 +253,15 @@ pub(crate) fn write_state<I: Io>(
             continue;
         }
         let keep = match old {
-            Some(o) if o.level < finest && !heights_changed(id) => {
+            // The thinning decision reads the whole footprint, not only the grid's samples:
+            // a grid is kept only as it is stored now.
+            Some(o)
+                if o.level < finest && !heights_changed(id) && o.decode().grid_thin == n.thin =>
+            {
                 let against = o.decode().grid_against_parent;
                 let parent_same = n.parent != crate::model::NO_PARENT
-                    && (!heights_changed(n.parent) || planar_only(o.payload())?);
+                    && (!heights_changed(n.parent)
+                        || (thin_same(n.parent) && planar_only(o.payload())?));
                 (!against || parent_same).then_some(o)
             }
             _ => None,
@@ -299,7 +313,9 @@ pub(crate) fn write_state<I: Io>(
             _ if meets(&shape.rect) => None,
             None => Some(None),
             Some(_) => match parent_now {
-                Some(p) if !heights_changed(p) || planar_only(old.payload())? => Some(Some(p)),
+                Some(p) if !heights_changed(p) || (thin_same(p) && planar_only(old.payload())?) => {
+                    Some(Some(p))
+                }
                 _ => None,
             },
         };

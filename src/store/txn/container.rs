@@ -378,6 +378,7 @@ impl<I: Io> WriteTxn<'_, I> {
                 base.domain().block_size(),
                 &thresholds,
                 base.header().precision,
+                base.header().thinning(),
             )?;
             self.cache.editor = Some(editor);
         }

@@ -8,7 +8,7 @@ use crate::error::Result;
 use crate::format::payload::GridView;
 use crate::format::Invariant;
 use crate::heightfield::Heightfield;
-use crate::model::{cluster, BuildOptions, Model, Thresholds, NO_PARENT};
+use crate::model::{cluster, BuildOptions, Model, ThinByArea, Thresholds, NO_PARENT};
 use crate::progress::Progress;
 use crate::store::write::tables::{clipped_grid, node_id};
 use crate::store::{Source, Store};
@@ -131,6 +131,10 @@ pub(super) fn check_measured<S: Source>(
         block_size: d.block_size(),
         thresholds: Thresholds::Explicit(store.clusters().iter().map(|c| c.threshold).collect()),
         precision: store.header().precision,
+        thin: match store.header().thinning() {
+            Some(spacing) => ThinByArea::Spacing(spacing),
+            None => ThinByArea::Off,
+        },
     };
     let model = match Model::build_with_progress(hf, &options, progress) {
         Ok(m) => m,
@@ -159,9 +163,10 @@ pub(super) fn check_measured<S: Source>(
             && s.monotone_error.get().to_bits() == n.monotone_error.to_bits()
             && s.min_height.get().to_bits() == n.min_height.to_bits()
             && s.max_height.get().to_bits() == n.max_height.to_bits()
-            && s.valid_samples.get() == n.valid_samples;
+            && s.valid_samples.get() == n.valid_samples
+            && s.decode().grid_thin == if n.level < finest { n.thin } else { 0 };
         if !same {
-            checks.fail(id, format!("node {i}: stored error/range/count differ from the blocks' (stored e {} e* {}, measured e {} e* {})", s.static_error.get(), s.monotone_error.get(), n.static_error, n.monotone_error));
+            checks.fail(id, format!("node {i}: stored error/range/count/thinning differ from the blocks' (stored e {} e* {} thinned by 2^{}, measured e {} e* {} thinned by 2^{})", s.static_error.get(), s.monotone_error.get(), s.decode().grid_thin, n.static_error, n.monotone_error, n.thin));
             continue;
         }
         if n.level < finest {

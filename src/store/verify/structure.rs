@@ -6,6 +6,7 @@ use crate::curve::HilbertKey;
 use crate::format::payload;
 use crate::format::{
     FreePage, Invariant, NODE_GRID_AGAINST_PARENT, NODE_GRID_BITMAP_FLAGGED, NODE_GRID_HAS_VOIDS,
+    NODE_GRID_THIN_MASK, NODE_GRID_THIN_SHIFT,
 };
 use crate::model::{cluster, NO_PARENT};
 use crate::store::btree::PageSet;
@@ -111,11 +112,20 @@ pub(super) fn check_nodes<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut 
             );
         }
         let flags = n.flags.get();
-        let known = if store.commit_record().grids_against_parents() {
+        let record = store.commit_record();
+        let known = if record.grids_thinned() {
+            NODE_GRID_HAS_VOIDS
+                | NODE_GRID_AGAINST_PARENT
+                | NODE_GRID_BITMAP_FLAGGED
+                | NODE_GRID_THIN_MASK
+        } else if record.grids_against_parents() {
             NODE_GRID_HAS_VOIDS | NODE_GRID_AGAINST_PARENT | NODE_GRID_BITMAP_FLAGGED
         } else {
             NODE_GRID_HAS_VOIDS
         };
+        // A thinned grid keeps at least two columns: k <= b - 1.
+        let thin = (flags & NODE_GRID_THIN_MASK) >> NODE_GRID_THIN_SHIFT;
+        let thin_ok = thin == 0 || (1u32 << thin) < d.block_size();
         if flags & !known != 0
             || (level == finest && flags != 0)
             || (flags & NODE_GRID_BITMAP_FLAGGED != 0 && flags & NODE_GRID_HAS_VOIDS == 0)
@@ -124,6 +134,14 @@ pub(super) fn check_nodes<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut 
             checks.fail(
                 id,
                 format!("{at}: unknown flags {flags:#x} or reserved bits set"),
+            );
+        } else if !thin_ok {
+            checks.fail(
+                id,
+                format!(
+                    "{at}: its grid is thinned by 2^{thin}, more than a grid of {} columns allows",
+                    d.block_size()
+                ),
             );
         } else if flags & NODE_GRID_AGAINST_PARENT != 0 && i == 0 {
             checks.fail(

@@ -77,6 +77,19 @@ pub(crate) fn write_named<W: Write + Seek>(
             format::MAX_PAGE_SIZE
         )));
     }
+    // A reader and an editor thin by the georeference's spacing (format 6): a model thinned
+    // by any other would be stored with errors no one could measure again.
+    let georeferenced = metadata
+        .georeference
+        .as_ref()
+        .and_then(crate::model::LatLonSpacing::of_georeference);
+    if model.thinning().is_some() && model.thinning() != georeferenced {
+        return Err(Error::InvalidArgument(
+            "the model is thinned by area by a spacing its georeference does not give: \
+             build it from a longitude-latitude heightfield, or without thinning"
+                .into(),
+        ));
+    }
     let mut out = PageWriter {
         w,
         name,

@@ -135,6 +135,9 @@ pub struct CreateOptions {
     /// Store heights to this step, within half of it (see [`crate::model::precision`]);
     /// `None` keeps them bit for bit.
     pub precision: Option<crate::model::Precision>,
+    /// Thin nodes by area (format 6): by default where the heightfield is a
+    /// longitude-latitude grid ([`crate::model::thinning`]).
+    pub thin: crate::model::ThinByArea,
     /// Page size and progress.
     pub write: WriteOptions,
     /// Replace an existing file (atomically) instead of refusing.
@@ -147,6 +150,7 @@ impl Default for CreateOptions {
             block_size: DEFAULT_BLOCK_SIZE,
             thresholds: Thresholds::Ladder,
             precision: None,
+            thin: crate::model::ThinByArea::Auto,
             write: WriteOptions::default(),
             overwrite: false,
         }
@@ -181,6 +185,7 @@ pub fn create(
             block_size: options.block_size,
             thresholds: options.thresholds.clone(),
             precision: options.precision,
+            thin: options.thin,
         },
     )?;
     write_file(&model, &metadata, path, &options.write, options.overwrite)

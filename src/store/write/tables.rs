@@ -256,6 +256,7 @@ pub(crate) fn write_tables(
             grid_has_voids: !at_finest && refs.grid_voids[i],
             grid_against_parent: !at_finest && refs.grid_against[i],
             grid_bitmap_flagged: !at_finest && refs.grid_voids[i] && !refs.grid_raw_bitmap[i],
+            grid_thin: if at_finest { 0 } else { n.thin },
         };
         node_records.extend_from_slice(NodeRecord::encode(&stored).as_bytes());
     }
@@ -397,15 +398,16 @@ pub(crate) fn encode_grid(
     let (g, gw, gh) = clipped_grid(model, node);
     let layout = payload::encode_grid(&g.heights, &g.void, has_voids);
     let coding = coding(model, raw, quick);
-    let alone = payload::store_grid(&layout, gw, gh, coding);
     let n = model.tree().node(node);
+    let alone = payload::store_grid(&layout, (gw, gh), n.thin, coding);
     let against = (against_parent && !raw && n.parent != NO_PARENT)
         .then(|| {
             let p = ParentOf::new(model, n.parent);
-            let (cols, rows) = payload::grid_axes(model.domain(), n.level, n.x, n.y);
+            let (cols, rows) = payload::stored_grid_axes(model.domain(), n.level, n.x, n.y, n.thin);
             payload::store_grid_against(
                 &layout,
                 (gw, gh),
+                n.thin,
                 coding,
                 Axes {
                     cols: &cols,
@@ -433,7 +435,8 @@ fn coding(model: &Model, raw: bool, quick: bool) -> payload::Coding {
 }
 
 /// A node's grid as a payload coded against it sees it: its stored heights (the model's,
-/// which its payload decodes to, whether written now or kept) and where they lie.
+/// which its payload decodes to, whether written now or kept; only the kept columns of a
+/// grid stored thinned, format 6) and where they lie.
 struct ParentOf {
     heights: Vec<f32>,
     cols: Vec<u64>,
@@ -443,10 +446,10 @@ struct ParentOf {
 impl ParentOf {
     fn new(model: &Model, node: u32) -> ParentOf {
         let n = model.tree().node(node);
-        let (g, _, _) = clipped_grid(model, node);
-        let (cols, rows) = payload::grid_axes(model.domain(), n.level, n.x, n.y);
+        let (g, gw, _) = clipped_grid(model, node);
+        let (cols, rows) = payload::stored_grid_axes(model.domain(), n.level, n.x, n.y, n.thin);
         ParentOf {
-            heights: g.heights,
+            heights: payload::kept_heights(&g.heights, gw, n.thin),
             cols,
             rows,
         }
