@@ -121,33 +121,25 @@ impl ModelEditor {
         };
         let bands = measure_all(false);
         let thin_bands = measure_all(true);
+        // Each node's statistics and thinning, decided once from its two sets of bands.
+        let decided: Vec<Vec<(NodeStats, u8)>> = (0..domain.levels())
+            .map(|level| {
+                (0..node_count(&domain, level))
+                    .map(|node| node_stats(&bands, &candidates, &thin_bands, per_node, level, node))
+                    .collect()
+            })
+            .collect();
         let mut measured = Measurements::from_stats(
             (0..domain.levels())
-                .map(|level| {
+                .zip(&decided)
+                .map(|(level, d)| {
                     let (cols, rows) = domain.nodes_across(level);
-                    let stats = (0..node_count(&domain, level))
-                        .map(|node| {
-                            node_stats(&bands, &candidates, &thin_bands, per_node, level, node).0
-                        })
-                        .collect();
-                    (cols, rows, stats)
+                    (cols, rows, d.iter().map(|n| n.0).collect())
                 })
                 .collect(),
         );
-        for (level, m) in measured.levels.iter_mut().enumerate() {
-            m.thin = (0..node_count(&domain, level as u8))
-                .map(|node| {
-                    node_stats(
-                        &bands,
-                        &candidates,
-                        &thin_bands,
-                        per_node,
-                        level as u8,
-                        node,
-                    )
-                    .1
-                })
-                .collect();
+        for (m, d) in measured.levels.iter_mut().zip(&decided) {
+            m.thin = d.iter().map(|n| n.1).collect();
         }
         let tree = Fmrh::prune(domain, &measured, thresholds[0]);
         let clusters = cluster::build_clusters(&tree, &thresholds);
