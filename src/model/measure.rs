@@ -90,6 +90,31 @@ pub fn surface(nw: f32, ne: f32, sw: f32, se: f32, s: u64, u: u64, v: u64) -> f6
 /// Measures every existing node of `level`; the result is row-major over
 /// [`Domain::nodes_across`].
 pub fn measure_level(raster: &MendedRaster, domain: &Domain, level: u8) -> Vec<NodeStats> {
+    measure_level_with(raster, domain, level, |_| Some(0))
+}
+
+/// Measures the nodes of `level` whose grid is thinned by `2^t` for `thin[i] = t > 0`
+/// (row-major, [`super::thinning`]); the others come back [`NodeStats::EMPTY`], unmeasured.
+pub fn measure_level_thinned(
+    raster: &MendedRaster,
+    domain: &Domain,
+    level: u8,
+    thin: &[u8],
+) -> Vec<NodeStats> {
+    measure_level_with(raster, domain, level, |i| {
+        thin.get(i).copied().filter(|&t| t > 0)
+    })
+}
+
+/// Measures node `i` of `level` (row-major) thinned by `2^t` where `thin(i)` is `Some(t)`,
+/// not at all where it is `None`. The work is spread by node, or for the few big nodes near
+/// the root by band.
+fn measure_level_with(
+    raster: &MendedRaster,
+    domain: &Domain,
+    level: u8,
+    thin: impl Fn(usize) -> Option<u8> + Sync,
+) -> Vec<NodeStats> {
     let (cols, rows) = domain.nodes_across(level);
     let nodes = cols as usize * rows as usize;
     let bands = domain.block_size() as usize - 1;
@@ -98,16 +123,25 @@ pub fn measure_level(raster: &MendedRaster, domain: &Domain, level: u8) -> Vec<N
         (0..nodes)
             .into_par_iter()
             .map(|i| {
-                let (x, y) = node_at(i);
-                measure_node(raster, domain, level, (x, y), 0)
+                thin(i).map_or(NodeStats::EMPTY, |t| {
+                    measure_node(raster, domain, level, node_at(i), t)
+                })
             })
             .collect()
     } else {
         let parts: Vec<NodeStats> = (0..nodes * bands)
             .into_par_iter()
             .map(|k| {
-                let (x, y) = node_at(k / bands);
-                measure_band(raster, domain, level, (x, y), (k % bands) as u64, 0)
+                thin(k / bands).map_or(NodeStats::EMPTY, |t| {
+                    measure_band(
+                        raster,
+                        domain,
+                        level,
+                        node_at(k / bands),
+                        (k % bands) as u64,
+                        t,
+                    )
+                })
             })
             .collect();
         parts

@@ -152,35 +152,26 @@ impl Measurements {
         spacing: &super::thinning::LatLonSpacing,
     ) {
         use super::thinning::{candidate_log2, keeps_thinned};
-        use rayon::prelude::*;
         for (level, m) in self.levels.iter_mut().enumerate() {
             let level = level as u8;
             let cols = m.cols as usize;
-            let decided: Vec<(u8, f64)> = m
-                .stats
-                .par_iter()
-                .enumerate()
-                .map(|(i, square)| {
-                    let (x, y) = ((i % cols) as u32, (i / cols) as u32);
-                    let thin = candidate_log2(spacing, domain, level, x, y);
-                    if thin == 0 {
-                        return (0, square.error);
-                    }
-                    let e = super::measure::measure_node(raster, domain, level, (x, y), thin).error;
-                    if keeps_thinned(square.error, e) {
-                        (thin, e)
-                    } else {
-                        (0, square.error)
-                    }
+            let candidates: Vec<u8> = (0..m.stats.len())
+                .map(|i| {
+                    candidate_log2(spacing, domain, level, (i % cols) as u32, (i / cols) as u32)
                 })
                 .collect();
-            if decided.iter().all(|d| d.0 == 0) {
-                m.thin.clear();
+            m.thin.clear();
+            if candidates.iter().all(|&t| t == 0) {
                 continue;
             }
-            m.thin = decided.iter().map(|d| d.0).collect();
-            for (s, d) in m.stats.iter_mut().zip(&decided) {
-                s.error = d.1;
+            let thinned = super::measure::measure_level_thinned(raster, domain, level, &candidates);
+            m.thin = candidates;
+            for ((s, t), e) in m.stats.iter_mut().zip(m.thin.iter_mut()).zip(&thinned) {
+                if *t > 0 && keeps_thinned(s.error, e.error) {
+                    s.error = e.error;
+                } else {
+                    *t = 0;
+                }
             }
         }
         self.update_monotone();
