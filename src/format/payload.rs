@@ -382,7 +382,12 @@ fn store_grid_with(
         .chunks_exact(4)
         .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
         .collect();
-    let heights = kept_heights(&heights, gw, thin);
+    // A square grid codes its layout's heights as they are, without a copy.
+    let heights = if thin == 0 {
+        heights
+    } else {
+        kept_heights(&heights, gw, thin)
+    };
     let a = code_heights(&heights)?;
     let mut out = Vec::with_capacity(5 + a.len() + raw.len().saturating_sub(4 * n));
     out.extend_from_slice(&u32::try_from(a.len()).ok()?.to_le_bytes());
