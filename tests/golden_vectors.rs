@@ -10,6 +10,11 @@
 //! They must read and verify exactly as the current ones do; 2.x to 5.x files accept a
 //! transaction (which makes them 6.0), 1.x files refuse one. The polar vector (format 6.0: a
 //! longitude-latitude grid at 80° N whose coarse grids are thinned by area) has no older copy.
+//!
+//! Three more pins: a crafted vector (`slot-1-beside-invalid-slot-0.fmrh`: where slot 1 lies
+//! when slot 0 is sealed but invalid, §3); every `.info.json` under `format-spec/vectors/`
+//! is what `fmrh info --json` prints today; and `container.md` states the code's
+//! `FORMAT_MAJOR.FORMAT_MINOR` and last minors.
 
 use std::io::Cursor;
 use std::path::PathBuf;
@@ -625,4 +630,220 @@ fn the_polar_vector_pins_thinned_grids() {
     }
     assert!(thinned > 0, "no grid of the polar vector is thinned");
     assert!(alone > 0, "no thinned grid is coded alone");
+}
+
+/// Where slot 1 lies when slot 0 is sealed but invalid (container.md §3, step 2): slot 0
+/// names no page size then, however sealed, and the reader searches every allowed offset.
+/// The vector is the ramp vector (1024-byte pages) with slot 0 resealed naming 2048 (so its
+/// file length, 3072, is not whole pages: invalid) and slot 1 at byte 1024 holding the
+/// original state as txn 10. It opens at txn 10 from slot 1, and the validator fails I-4
+/// alone (the inactive slot is not a valid record). Built from the ramp vector's bytes, so
+/// the vector pins both the rule and the writer.
+fn slot_vector() -> Vec<u8> {
+    let mut bytes = build(&vectors()[0]);
+    assert_eq!(u32::from_le_bytes(bytes[12..16].try_into().unwrap()), 1024);
+    let reseal = |r: &mut [u8]| {
+        let crc = crc32fast::hash(&r[..252]);
+        r[252..256].copy_from_slice(&crc.to_le_bytes());
+    };
+    let mut slot1 = bytes[..256].to_vec();
+    slot1[16..24].copy_from_slice(&10u64.to_le_bytes());
+    reseal(&mut slot1);
+    bytes[1024..1280].copy_from_slice(&slot1);
+    bytes[12..16].copy_from_slice(&2048u32.to_le_bytes());
+    reseal(&mut bytes[..256]);
+    bytes
+}
+
+#[test]
+fn the_slot_vector_pins_where_slot_1_lies() {
+    let bless = std::env::var_os("FMRH_BLESS").is_some();
+    let bytes = slot_vector();
+    let file = dir().join("slot-1-beside-invalid-slot-0.fmrh");
+    if bless {
+        std::fs::write(&file, &bytes).unwrap();
+        // Its reading, which every_vectors_info_json_is_what_info_prints checks.
+        let out = Command::new(env!("CARGO_BIN_EXE_fmrh"))
+            .args(["info", "--json", file.to_str().unwrap()])
+            .output()
+            .unwrap();
+        assert!(out.status.success());
+        std::fs::write(file.with_extension("info.json"), &out.stdout).unwrap();
+    }
+    let stored = std::fs::read(&file)
+        .unwrap_or_else(|e| panic!("{}: {e} (bless to create)", file.display()));
+    assert!(stored == bytes, "the slot vector drifted");
+    let store = fmrh::Store::open(&file).unwrap();
+    assert_eq!(store.txn_id(), 10, "the state is slot 1's");
+    let report = fmrh::verify(
+        fmrh::store::FileSource::open(&file).unwrap(),
+        fmrh::VerifyMode::Full,
+    )
+    .unwrap();
+    let failed: Vec<fmrh::Invariant> = report
+        .checks
+        .iter()
+        .filter(|c| c.status == fmrh::store::CheckStatus::Failed)
+        .map(|c| c.id)
+        .collect();
+    assert_eq!(failed, vec![fmrh::Invariant::InactiveSlot], "{report:?}");
+}
+
+/// Every `.info.json` under `format-spec/vectors/` (the current vectors, every older
+/// version's, the crafted ones and the dataset's) is exactly what `fmrh info --json` prints
+/// for its file today: a reader of the spec checks its reading against them, so they must not
+/// go stale when `info` gains a field. `FMRH_BLESS=1` rewrites them.
+#[test]
+fn every_vectors_info_json_is_what_info_prints() {
+    let bless = std::env::var_os("FMRH_BLESS").is_some();
+    let mut infos = Vec::new();
+    let mut folders = vec![dir()];
+    while let Some(folder) = folders.pop() {
+        for e in std::fs::read_dir(&folder).unwrap() {
+            let path = e.unwrap().path();
+            if path.is_dir() {
+                folders.push(path);
+            } else if path.to_string_lossy().ends_with("info.json") {
+                infos.push(path);
+            }
+        }
+    }
+    infos.sort();
+    // 6 current, 28 of older versions (v1.1 to v5.0), the crafted slot vector and the
+    // dataset: none may be missed.
+    assert!(infos.len() >= 36, "{} info files", infos.len());
+    for info in infos {
+        let name = info.file_name().unwrap().to_string_lossy().into_owned();
+        // `X.info.json` describes `X.fmrh`; a dataset's `info.json` describes its folder.
+        let subject = match name.strip_suffix(".info.json") {
+            Some(stem) => info.with_file_name(format!("{stem}.fmrh")),
+            None => info.parent().unwrap().to_path_buf(),
+        };
+        let out = Command::new(env!("CARGO_BIN_EXE_fmrh"))
+            .args(["info", "--json", subject.to_str().unwrap()])
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}: {}",
+            subject.display(),
+            String::from_utf8_lossy(&out.stderr)
+        );
+        if bless {
+            std::fs::write(&info, &out.stdout).unwrap();
+        }
+        let want: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(&info).unwrap()).unwrap();
+        let got: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(got, want, "{}: info --json drifted", info.display());
+    }
+}
+
+/// The spec's stated current version is the code's: container.md's title, its commit record
+/// table and versioning section (`FORMAT_MAJOR (n)`, `FORMAT_MINOR (n)`, every
+/// `LAST_MINOR_OF_n = m`), and its invariant I-2's range of majors.
+#[test]
+fn the_spec_states_the_codes_format_version() {
+    use fmrh::format::{
+        FORMAT_MAJOR, FORMAT_MINOR, LAST_MINOR_OF_1, LAST_MINOR_OF_2, LAST_MINOR_OF_3,
+        LAST_MINOR_OF_4, LAST_MINOR_OF_5,
+    };
+    let spec = std::fs::read_to_string(
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("format-spec/container.md"),
+    )
+    .unwrap();
+    let version = format!("{FORMAT_MAJOR}.{FORMAT_MINOR}");
+    let title = spec.lines().next().unwrap();
+    assert_eq!(
+        title,
+        format!("# The `.fmrh` container, format {version}"),
+        "the title"
+    );
+    for stated in [
+        format!("`FORMAT_MAJOR` ({FORMAT_MAJOR})"),
+        format!("`FORMAT_MINOR` ({FORMAT_MINOR})"),
+        format!("`FORMAT_MAJOR.FORMAT_MINOR` =\n{version}"),
+        format!("| 8 | 2 | u16 | major | format major version: {FORMAT_MAJOR} "),
+        format!("| 10 | 2 | u16 | minor | format minor version: {FORMAT_MINOR} "),
+        format!("major version is 1 to {FORMAT_MAJOR}."),
+        format!("*valid* (sealed, major 1 to {FORMAT_MAJOR},"),
+    ] {
+        assert!(
+            spec.contains(&stated),
+            "container.md does not say {stated:?}"
+        );
+    }
+    for (major, last) in [
+        (1, LAST_MINOR_OF_1),
+        (2, LAST_MINOR_OF_2),
+        (3, LAST_MINOR_OF_3),
+        (4, LAST_MINOR_OF_4),
+        (5, LAST_MINOR_OF_5),
+    ] {
+        let stated = format!("`LAST_MINOR_OF_{major}` = {last}");
+        assert!(
+            spec.contains(&stated),
+            "container.md does not say {stated:?}"
+        );
+    }
+    // No "format N.M" names a version newer than the code's.
+    for (i, _) in spec.match_indices("format ") {
+        let rest = &spec[i + 7..];
+        let digits: String = rest
+            .chars()
+            .take_while(|c| c.is_ascii_digit() || *c == '.')
+            .collect();
+        if let Some((ma, mi)) = digits.trim_end_matches('.').split_once('.') {
+            if let (Ok(ma), Ok(mi)) = (ma.parse::<u16>(), mi.parse::<u16>()) {
+                assert!(
+                    (ma, mi) <= (FORMAT_MAJOR, FORMAT_MINOR),
+                    "container.md names format {ma}.{mi}"
+                );
+            }
+        }
+    }
+}
+
+/// Container §7: a void at a position the parent's grid holds is a void, not the parent's
+/// height (the void wins). The voids vector has such a sample: (19, 12), the clamp column and
+/// an even row, in a block coded against its parent, where the parent's grid holds a mended
+/// height. A reader that let the held value win would read that height there.
+#[test]
+fn the_voids_vector_pins_a_void_at_a_held_position() {
+    let store = fmrh::Store::open(&dir().join("hills-20x13-voids.fmrh")).unwrap();
+    let d = *store.domain();
+    let (c, r) = (19u32, 12u32);
+    let side = d.block_size() - 1;
+    let (x, y) = (
+        (c / side).min(d.nodes_across(d.finest_level()).0 - 1),
+        (r / side).min(d.nodes_across(d.finest_level()).1 - 1),
+    );
+    let info = store.stored_block(x, y).unwrap();
+    let parent = info.against.expect("the block is coded against its parent");
+    let node = store.node(parent).unwrap();
+    let grid = store.grid(&node).unwrap();
+    let fp = d.footprint(node.level, node.x, node.y);
+    let s = d.stride(node.level);
+    let (gw, gh) = d.grid_dims(node.level, node.x, node.y);
+    let col_of = |i: u32| (fp.col0 + u64::from(i) * s).min(u64::from(d.width() - 1));
+    let row_of = |j: u32| (fp.row0 + u64::from(j) * s).min(u64::from(d.height() - 1));
+    let i = (0..gw)
+        .find(|&i| col_of(i) == u64::from(c))
+        .expect("a held column");
+    let j = (0..gh)
+        .find(|&j| row_of(j) == u64::from(r))
+        .expect("a held row");
+    let held = grid.view().height(i, j);
+    assert!(held.is_finite(), "the parent holds a height there: {held}");
+    let block = store.block(x, y).unwrap();
+    let v = block.view();
+    let got = v
+        .samples()
+        .get(
+            ((u64::from(r) - block.rect.row0) * u64::from(v.width) + u64::from(c) - block.rect.col0)
+                as usize,
+        )
+        .unwrap()
+        .get();
+    assert_eq!(got.to_bits(), 0x7FC0_0000, "the void wins");
 }

@@ -4,6 +4,8 @@
 //! * the newest *sealed* commit record decides: one of another major version with a higher
 //!   txn id makes the file unsupported, even beside a valid 1.x record (§3);
 //! * a slot-1 record whose page size is not slot 0's is invalid, not a second geometry (§3);
+//! * a slot 0 that is sealed but invalid names no page size: slot 1 is searched for (§3);
+//! * a node's thinning bits are reserved where the dataset header lacks flag 16 (§6.1, I-10);
 //! * a file shorter than the newest valid record's `file_length` is corrupt (I-3), and the
 //!   older slot is not tried (§3);
 //! * an empty tree's `TreeRef` is zero but for its table's record size (§4);
@@ -286,4 +288,78 @@ fn the_ladder_constant_is_the_correctly_rounded_one_over_root_two() {
             "rung {k}: {want} not in {ladder:?}"
         );
     }
+}
+
+/// Container §3, step 2: a slot 0 that is sealed but invalid names no page size, so the
+/// reader searches every allowed offset for slot 1 rather than trusting the page size it
+/// names. Here slot 0 is resealed naming 8192 with a reserved field set (invalid whatever the
+/// file's length), and slot 1 at 4096 holds txn 10: the file opens at txn 10, and the
+/// validator fails I-4 (the inactive slot is not a valid record) and nothing else.
+#[test]
+fn a_sealed_but_invalid_slot_0_names_no_page_size() {
+    let clean = fresh();
+    let p = u32_at(&clean, 12);
+    assert_eq!(p, 4096);
+    let mut file = clean.clone();
+    put_record(
+        &mut file,
+        p as usize,
+        record_like(&clean, FORMAT_MAJOR, 10, p),
+    );
+    let mut bad = record_like(&clean, FORMAT_MAJOR, 1, 8192);
+    bad[36] = 1; // the reserved word after the flags
+    put_record(&mut file, 0, bad);
+    let store = Store::from_bytes(file.clone()).unwrap();
+    assert_eq!(store.txn_id(), 10);
+    let report = verify(Bytes(&file), VerifyMode::Full).unwrap();
+    let failed: Vec<Invariant> = report
+        .checks
+        .iter()
+        .filter(|c| c.status == CheckStatus::Failed)
+        .map(|c| c.id)
+        .collect();
+    assert_eq!(failed, vec![Invariant::InactiveSlot], "{report:?}");
+}
+
+/// Container §6.1 and I-10: a node's thinning bits (3–6) are reserved in a file whose
+/// dataset header lacks flag 16, even in format 6: the fast validator fails I-10 and a
+/// reader refuses the grid as corrupt. The file keeps its tables in pages (no bundle), so
+/// one node record is changed in place and its page resealed.
+#[test]
+fn thinning_bits_without_the_header_flag_are_reserved() {
+    use fmrh::model::BuildOptions;
+    use fmrh::store::{write_to, WriteOptions};
+    let hf = hills();
+    let model = fmrh::Model::build(hf.clone(), &BuildOptions::default()).unwrap();
+    let mut out = std::io::Cursor::new(Vec::new());
+    let options = WriteOptions {
+        bundle_limit: 0,
+        ..WriteOptions::default()
+    };
+    write_to(&model, &hf.metadata, &options, &mut out).unwrap();
+    let mut file = out.into_inner();
+    let p = u32_at(&file, 12) as usize;
+    assert!(verify(Bytes(&file), VerifyMode::Fast).unwrap().valid);
+    // The node table's first leaf (page tag FMNT at level 0): node 0, the root, has a grid.
+    let page = (2..file.len() / p)
+        .find(|&n| &file[n * p..n * p + 4] == b"FMNT" && u16_at(&file, n * p + 16) == 0)
+        .expect("a node table leaf page");
+    let at = page * p;
+    let flags = at + 24 + 10; // record 0's flags (§6.1, offset 10)
+    let old = u16_at(&file, flags);
+    file[flags..flags + 2].copy_from_slice(&(old | 1 << 3).to_le_bytes());
+    let crc = fmrh::format::crc32(&file[at + 8..at + p]);
+    file[at + 4..at + 8].copy_from_slice(&crc.to_le_bytes());
+    let report = verify(Bytes(&file), VerifyMode::Fast).unwrap();
+    assert_eq!(check(&report, Invariant::NodeTable), CheckStatus::Failed);
+    let store = Store::from_bytes(file).unwrap();
+    let root = store.node(0).unwrap();
+    assert_eq!(root.grid_thin, 1);
+    assert!(matches!(
+        store.grid(&root),
+        Err(Error::Corrupt {
+            invariant: Invariant::NodeTable,
+            ..
+        })
+    ));
 }

@@ -705,15 +705,24 @@ impl<S: Source> Store<S> {
         let dims = payload::grid_dims(d, node.level, node.x, node.y);
         let has_voids = node.grid_has_voids;
         let thin = node.grid_thin;
-        if thin > 0 && (!self.commit.grids_thinned() || (1u32 << thin) >= size) {
+        if thin > 0
+            && (!self.commit.grids_thinned()
+                || !self.header().thinned_by_area
+                || (1u32 << thin) >= size)
+        {
             return Err(self.corrupt(Violation::new(
                 Invariant::NodeTable,
                 at(),
                 format!(
                     "a grid thinned by 2^{thin}, which format {}.{} with {size}-sample grids \
-                     cannot hold",
+                     and a header {} flag 16 cannot hold",
                     self.commit.major.get(),
-                    self.commit.minor.get()
+                    self.commit.minor.get(),
+                    if self.header().thinned_by_area {
+                        "with"
+                    } else {
+                        "without"
+                    }
                 ),
             )));
         }

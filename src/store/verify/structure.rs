@@ -113,7 +113,9 @@ pub(super) fn check_nodes<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut 
         }
         let flags = n.flags.get();
         let record = store.commit_record();
-        let known = if record.grids_thinned() {
+        // Thinning bits only in a 6.x file whose header says its nodes are thinned by area
+        // (§6.1): elsewhere they are reserved.
+        let known = if record.grids_thinned() && store.header().thinned_by_area {
             NODE_GRID_HAS_VOIDS
                 | NODE_GRID_AGAINST_PARENT
                 | NODE_GRID_BITMAP_FLAGGED
