@@ -96,7 +96,7 @@ pub(crate) fn records<S: crate::store::Source>(
 pub fn republish<I: Io>(io: &Arc<I>, pin: StatePin) -> Result<bool> {
     let len = io.len().map_err(|e| Error::io(io.name(), e))?;
     let src = IoSource::new(Arc::new(Arc::clone(io)), len);
-    let slots = crate::store::open::read_slots(&src)?;
+    let slots = crate::store::slots::read_slots(&src)?;
     let valid: Vec<(u64, &crate::format::CommitRecord)> = (0u64..)
         .zip(&slots)
         .filter_map(|(i, s)| match s {
@@ -109,7 +109,7 @@ pub fn republish<I: Io>(io: &Arc<I>, pin: StatePin) -> Result<bool> {
         .filter(|(_, r)| pin.matches(r))
         .max_by_key(|(_, r)| r.txn_id.get())
     else {
-        return Err(crate::store::open::pinned_missing(&src, pin));
+        return Err(crate::store::slots::pinned_missing(&src, pin));
     };
     let latest = valid.iter().map(|(_, r)| r.txn_id.get()).max().unwrap_or(0);
     if latest == pinned.txn_id.get() {

@@ -63,17 +63,10 @@ pub fn choose_state<S: Source + ?Sized>(src: &S) -> Result<(u8, ManifestRecord)>
 }
 
 /// Bytes of `src` that should hold what the state `txn` says and do not (`v`): superseded
-/// when a newer state was published since (its body may lie there now), else corruption.
+/// when a newer state was published since (its body may lie there now), else corruption
+/// (the containers' triage, [`crate::store::slots::triage`], with the manifest's slots).
 fn superseded_or_corrupt<S: Source + ?Sized>(src: &S, txn: u64, v: Violation) -> Error {
-    match latest_txn(src) {
-        Ok(Some(latest)) if latest > txn => Error::Superseded {
-            path: src.name().to_path_buf(),
-            txn,
-            latest,
-            detail: format!("{}: {}", v.location, v.detail),
-        },
-        _ => v.in_file(src.name()),
-    }
+    crate::store::slots::triage(src.name(), txn, latest_txn(src).ok().flatten(), v)
 }
 
 /// Reads `len` bytes at `offset` that the state `txn` names, checking their CRC.

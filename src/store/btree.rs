@@ -257,7 +257,7 @@ impl<'a, S: Source + ?Sized> Pages<'a, S> {
     /// written: a page read now could carry a reused tag.
     #[cold]
     fn check_wrap(&self, pages_txn: u64) -> Result<()> {
-        let latest = super::open::latest_txn(self.src)?.unwrap_or(0);
+        let latest = super::slots::latest_txn(self.src)?.unwrap_or(0);
         if latest.saturating_add(1) >= pages_txn.saturating_add(0xffff) {
             return Err(Error::Superseded {
                 path: self.src.name().to_path_buf(),
@@ -272,7 +272,7 @@ impl<'a, S: Source + ?Sized> Pages<'a, S> {
     #[cold]
     #[inline(never)]
     fn reused_or_corrupt(&self, v: Violation) -> Error {
-        super::open::superseded_or_corrupt(self.src, self.state.txn, v)
+        super::slots::superseded_or_corrupt(self.src, self.state.txn, v)
     }
 
     /// A valid page with another transaction's tag: a later state reused it, or (if the state
@@ -288,7 +288,7 @@ impl<'a, S: Source + ?Sized> Pages<'a, S> {
                 self.state.txn_tag
             ),
         );
-        super::open::superseded_or_corrupt(self.src, self.state.txn, v)
+        super::slots::superseded_or_corrupt(self.src, self.state.txn, v)
     }
 
     // The error paths stay out of line: `get` runs for every page of every lookup.

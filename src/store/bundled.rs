@@ -140,7 +140,7 @@ pub(crate) fn read<S: Source + ?Sized>(src: &S, commit: &CommitRecord) -> Result
             format!("metadata bundle at byte {}", r.offset),
             format!("CRC {:#010x} stored, {crc:#010x} computed", r.crc),
         );
-        return Err(super::open::superseded_or_corrupt(
+        return Err(super::slots::superseded_or_corrupt(
             src,
             commit.txn_id.get(),
             v,

@@ -54,6 +54,7 @@
 #![warn(clippy::cast_possible_truncation)]
 
 mod ahead;
+mod any;
 pub(crate) mod btree;
 mod bundled;
 pub mod io;
@@ -63,6 +64,7 @@ pub mod pagecache;
 mod read;
 #[cfg(feature = "remote")]
 pub mod remote;
+pub(crate) mod slots;
 pub mod source;
 pub mod txn;
 pub mod verify;
@@ -77,9 +79,10 @@ use serde::Serialize;
 
 pub use crate::format::{ClusterInfo, FreePage, PayloadRef, ScanEntry, StoredBlock, StoredNode};
 pub use ahead::Ahead;
+pub use any::{is_url, AnySource};
 pub use pagecache::ReadStats;
 pub use read::{Block, Children, CodeScan, Grid, HilbertScan, Layout, ParentGrid, ANCESTOR_CACHE};
-pub use source::{is_url, AnySource, Bytes, Counted, FileSource, MmapSource, RequestStats, Source};
+pub use source::{Bytes, Counted, FileSource, MmapSource, RequestStats, Source};
 pub use txn::{CommitSummary, Container, Recovery, Snapshot, WriteTxn};
 pub use verify::{
     verify, verify_pinned, verify_with_progress, CheckReport, CheckStatus, VerifyMode, VerifyReport,
@@ -363,7 +366,7 @@ impl<S: Source> Store<S> {
                 Ok(_) | Err(bundled::PageError::Outside) => {}
                 Err(bundled::PageError::Read(e)) => return Err(e),
                 Err(bundled::PageError::Bad(v)) => {
-                    return Err(open::superseded_or_corrupt(&self.src, self.txn_id(), v))
+                    return Err(slots::superseded_or_corrupt(&self.src, self.txn_id(), v))
                 }
             }
         }

@@ -322,7 +322,7 @@ impl<S: Source> Store<S> {
                 format!("payload at byte {}", at.offset),
                 format!("CRC {:#010x} recorded, {actual:#010x} computed", at.crc),
             );
-            return Err(super::open::superseded_or_corrupt(
+            return Err(super::slots::superseded_or_corrupt(
                 &self.src,
                 self.txn_id(),
                 v,

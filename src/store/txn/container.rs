@@ -20,7 +20,7 @@ use crate::format::{
 use crate::heightfield::Heightfield;
 use crate::model::{ModelEditor, SampleRect};
 use crate::store::io::{FileIo, Io};
-use crate::store::{open, Store};
+use crate::store::{slots, Store};
 
 struct Shared<I: Io> {
     io: Arc<I>,
@@ -127,7 +127,7 @@ impl<I: Io> Container<I> {
         let marked = record.has_flag(COMMIT_RECOVERY_NEEDED);
         let inactive = 1 - usize::from(store.commit_slot());
         let torn = matches!(
-            open::read_slots(store.source())?[inactive],
+            slots::read_slots(store.source())?[inactive],
             Slot::Invalid { .. }
         );
         let mut recovery = Recovery {

@@ -21,7 +21,7 @@ mod structure;
 
 use serde::Serialize;
 
-use super::open::{latest_txn, no_state, read_slots};
+use super::slots::{latest_txn, no_state, read_slots};
 use super::{Source, Store};
 use crate::error::{Error, Result};
 use crate::format::commit::{self, Slot};
@@ -299,7 +299,7 @@ fn verify_at<S: Source>(
                 .max_by_key(|(_, r)| r.txn_id.get());
             match found {
                 Some(x) => Ok(x),
-                None => return Err(super::open::pinned_missing(&src, pin)),
+                None => return Err(super::slots::pinned_missing(&src, pin)),
             }
         }
     };
