@@ -34,11 +34,15 @@
 use std::collections::HashMap;
 use std::path::PathBuf;
 
-use fmrh::model::thinning::{cut, thinned_grid, AreaThinning, LatLonSpacing};
+#[path = "common/thinning_study.rs"]
+mod study;
+
+use fmrh::model::thinning::LatLonSpacing;
 use fmrh::model::{BuildOptions, Model, ThinByArea, Thresholds};
 use fmrh::store::{write_to, WriteOptions};
 use fmrh::Heightfield;
 use fmrh::Store;
+use study::{cut, thinned_grid, AreaThinning};
 
 fn bundled(rel: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))

@@ -18,7 +18,7 @@
 mod common;
 
 use fmrh::globe;
-use fmrh::mesh::surface::Surface;
+use fmrh::scene::surface::Surface;
 use fmrh::scene::{Camera, Layers, SceneOptions, Terrain};
 use fmrh::Heightfield;
 use proptest::prelude::*;

@@ -12,7 +12,8 @@ mod common;
 
 use std::path::Path;
 
-use fmrh::mesh::{build, build_in, Cracks, GridBlock};
+use fmrh::mesh::{build, build_in, Cracks};
+use fmrh::scene::surface::GridBlock;
 use fmrh::scene::{
     load_blocks, Camera, SceneOptions, Terrain, TerrainFrame, WorldFrame, PAYLOAD_GAP,
 };

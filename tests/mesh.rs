@@ -14,9 +14,10 @@ mod common;
 
 use std::collections::{BTreeSet, HashMap};
 
-use fmrh::mesh::{build, BlockMesh, Cracks, GridBlock};
-use fmrh::model::measure::surface;
+use fmrh::mesh::{build, BlockMesh, Cracks};
+use fmrh::model::surface::surface;
 use fmrh::model::{BuildOptions, SampleRect};
+use fmrh::scene::surface::GridBlock;
 use fmrh::scene::{
     load_blocks, LoadedBlock, Scene, SceneOptions, Terrain, WorldFrame, PAYLOAD_GAP,
 };

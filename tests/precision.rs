@@ -19,7 +19,7 @@ use proptest::prelude::*;
 use common::fields::{any_field, Rng};
 use common::views;
 use fmrh::codec::Encoding;
-use fmrh::model::measure::surface;
+use fmrh::model::surface::surface;
 use fmrh::model::{BuildOptions, Model, Precision, SampleRect, Thresholds};
 use fmrh::scene::{reconstruct, Camera, Mode, SceneOptions, Terrain};
 use fmrh::store::{write_to, Bytes, WriteOptions};

@@ -13,7 +13,8 @@ use common::quantized_mesh::{decode, oct_decode};
 use std::collections::{BTreeSet, HashMap};
 use std::path::Path;
 
-use fmrh::mesh::{build, Cracks, GridBlock};
+use fmrh::mesh::{build, Cracks};
+use fmrh::scene::surface::GridBlock;
 use fmrh::scene::{load_blocks, Camera, SceneOptions, Terrain, WorldFrame, PAYLOAD_GAP};
 
 fn container(dir: &Path) -> std::path::PathBuf {

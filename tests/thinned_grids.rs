@@ -17,7 +17,8 @@ mod common;
 
 use common::fields::any_field;
 use fmrh::heightfield::{Georeference, Metadata};
-use fmrh::model::measure::{measure_node, surface};
+use fmrh::model::measure::measure_node;
+use fmrh::model::surface::surface;
 use fmrh::model::thinning::{
     candidate_log2, expand_row, keeps_thinned, kept_columns, LatLonSpacing,
 };

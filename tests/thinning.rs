@@ -1,4 +1,4 @@
-//! Thinning by area (`fmrh::model::thinning`): a node's grid thinned `k` times east-west and
+//! Thinning by area (the study of `benches/common/thinning_study.rs`): a node's grid thinned `k` times east-west and
 //! its measured static error. Checked here: with `k = 1` the error is the stored static
 //! error bit for bit; for any `k` it equals a naive recomputation from the thinned grid's own
 //! heights, cell by cell; a plane is reproduced by every thinned grid; the factor follows the
@@ -8,13 +8,15 @@
 
 mod common;
 
+#[path = "../benches/common/thinning_study.rs"]
+mod study;
+
 use common::fields::any_field;
-use fmrh::model::thinning::{
-    cut, rect_surface, thinned_error, thinned_grid, AreaThinning, LatLonSpacing,
-};
+use fmrh::model::thinning::LatLonSpacing;
 use fmrh::model::{BuildOptions, Model, SampleRect, Thresholds};
 use fmrh::Heightfield;
 use proptest::prelude::*;
+use study::{cut, rect_surface, thinned_error, thinned_grid, AreaThinning};
 
 fn build(field: Heightfield, b: u32) -> Model {
     Model::build(
@@ -107,7 +109,7 @@ proptest! {
     ) {
         let (s, k) = (1u64 << log_s, 1u64 << log_k);
         let (u, v) = ((fu * s as f64) as u64, (fv * s as f64) as u64);
-        let square = fmrh::model::measure::surface(c[0], c[1], c[2], c[3], s, u, v);
+        let square = fmrh::model::surface::surface(c[0], c[1], c[2], c[3], s, u, v);
         let stretched = rect_surface(c[0], c[1], c[2], c[3], k * s, s, k * u, v);
         prop_assert!((square - stretched).abs() <= 1e-9 * (1.0 + square.abs()), "{square} against {stretched}");
     }

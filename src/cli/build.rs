@@ -8,10 +8,8 @@ use serde::Serialize;
 
 use fmrh::format::page_size_for;
 use fmrh::ingest;
-use fmrh::model::{
-    precision, BuildOptions, Model, Precision, ThinByArea, Thresholds, DEFAULT_BLOCK_SIZE,
-};
-use fmrh::store::{write_file, WriteOptions, WriteSummary};
+use fmrh::model::{precision, Model, Precision};
+use fmrh::store::{write_file, WriteSummary};
 use fmrh::Error;
 
 #[derive(clap::Args)]
@@ -34,48 +32,14 @@ pub struct BuildArgs {
     /// complete).
     #[arg(long)]
     force: bool,
-    /// Samples along a block side: 2^k + 1, from 9 to 1025.
-    #[arg(long, default_value_t = DEFAULT_BLOCK_SIZE)]
-    block_size: u32,
-    /// Cluster thresholds in height units, comma-separated (e.g. 0,1,5,20). Default: a √2
-    /// ladder from the largest error down, plus 0 (lossless).
-    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
-    thresholds: Option<Vec<f64>>,
-    /// Store heights to the step Q (e.g. 0.1): each within Q/2 of the source, plus f32
-    /// rounding (bounded by Q/16), a bound every node's error includes, so scenes stay true
-    /// to the source. Much smaller files for
-    /// float DEMs measured to a few centimetres. A step that changes no height (integer
-    /// data and --precision 1) is dropped, and the file is lossless. Default: lossless.
-    #[arg(long, value_name = "Q")]
-    precision: Option<f64>,
-    /// Bytes per page of the container: a power of two from 1024 to 65536. Default: 1024
-    /// for data of at most 1024² samples (the two commit slots are two pages, a large share
-    /// of a small file), else 4096.
-    #[arg(long)]
-    page_size: Option<u32>,
-    /// Code every payload (physical blocks and grids) alone, not against its parent's grid
-    /// where that is smaller: a larger file (1.3–1.4x on the Puget Sound DEMs) whose
-    /// payloads decode faster and whose scenes read no ancestor grids.
-    #[arg(long, alias = "blocks-alone")]
-    payloads_alone: bool,
-    /// Keep every node's grid square. By default a longitude-latitude grid's coarse nodes
-    /// are thinned by area: near the poles, where a node's samples are much closer east-west
-    /// than north-south, it stores every k-th column only (k a power of two), wherever that
-    /// does not raise its error (format 6; docs/globe-design.md §4).
-    #[arg(long)]
-    no_thin: bool,
     /// No progress bar.
     #[arg(long, short)]
     quiet: bool,
     /// Print the report as JSON.
     #[arg(long)]
     pub json: bool,
-    /// Ground distance between samples in metres, DX or DX,DY (east, south). Overrides what
-    /// the source says; scenes use it to place the terrain in the world.
-    #[arg(long, value_delimiter = ',')]
-    spacing: Option<Vec<f64>>,
     #[command(flatten)]
-    ingest: super::IngestArgs,
+    model: super::args::ModelArgs,
 }
 
 #[derive(Serialize)]
@@ -147,18 +111,6 @@ fn peak_memory_bytes() -> Option<u64> {
     Some(kb * 1024)
 }
 
-/// `--spacing`: one or two finite positive distances.
-pub fn parse_spacing(values: &[f64]) -> Result<[f64; 2], Error> {
-    let ok = |v: f64| v.is_finite() && v > 0.0;
-    match values {
-        [d] if ok(*d) => Ok([*d, *d]),
-        [dx, dy] if ok(*dx) && ok(*dy) => Ok([*dx, *dy]),
-        _ => Err(Error::InvalidArgument(format!(
-            "--spacing {values:?}: expected DX or DX,DY, finite metres > 0"
-        ))),
-    }
-}
-
 /// Runs `fmrh build`.
 pub fn run(args: &BuildArgs) -> Result<ExitCode, Error> {
     if args.output.as_deref() == Some(std::path::Path::new("-")) {
@@ -180,11 +132,11 @@ pub fn run(args: &BuildArgs) -> Result<ExitCode, Error> {
     if let Some(b) = &bar {
         b.spin(&format!("reading {}", args.input.display()));
     }
-    let loaded = ingest::load(&args.input, &args.ingest.options());
+    let loaded = ingest::load(&args.input, &args.model.ingest.options());
     progress.finish();
     let mut heightfield = loaded?;
-    if let Some(spacing) = &args.spacing {
-        heightfield.metadata.spacing_m = Some(parse_spacing(spacing)?);
+    if let Some(spacing) = args.model.spacing()? {
+        heightfield.metadata.spacing_m = Some(spacing);
     }
     let ingest_time = t0.elapsed();
     if heightfield.metadata.spacing_m.is_none() {
@@ -202,30 +154,18 @@ pub fn run(args: &BuildArgs) -> Result<ExitCode, Error> {
         );
     }
     let metadata = heightfield.metadata.clone();
-    let options = BuildOptions {
-        block_size: args.block_size,
-        thresholds: match &args.thresholds {
-            Some(t) => Thresholds::Explicit(t.clone()),
-            None => Thresholds::Ladder,
-        },
-        precision: match args.precision.map(Precision::new).transpose()? {
-            Some(p) if !precision::changes_any(p, heightfield.samples()) => {
-                eprintln!(
-                    "fmrh: note: every height of {} already lies on the lattice of step {}: \
-                     it is stored bit for bit (lossless), with no storage error",
-                    args.input.display(),
-                    p.step()
-                );
-                None
-            }
-            p => p,
-        },
-        thin: if args.no_thin {
-            ThinByArea::Off
-        } else {
-            ThinByArea::Auto
-        },
-    };
+    let mut options = args.model.build_options()?;
+    if let Some(p) = options.precision {
+        if !precision::changes_any(p, heightfield.samples()) {
+            eprintln!(
+                "fmrh: note: every height of {} already lies on the lattice of step {}: it is \
+                 stored bit for bit (lossless), with no storage error",
+                args.input.display(),
+                p.step()
+            );
+            options.precision = None;
+        }
+    }
     let t1 = Instant::now();
     let model = Model::build_with_progress(heightfield, &options, progress)?;
     let build_time = t1.elapsed();
@@ -233,15 +173,9 @@ pub fn run(args: &BuildArgs) -> Result<ExitCode, Error> {
     let output = match &args.output {
         Some(path) if !args.dry_run => {
             let t2 = Instant::now();
-            let mut options = WriteOptions {
-                page_size: args.page_size.unwrap_or_else(|| {
-                    page_size_for(
-                        u64::from(model.domain().width()) * u64::from(model.domain().height()),
-                    )
-                }),
-                against_parents: !args.payloads_alone,
-                ..WriteOptions::default()
-            };
+            let mut options = args.model.write_options(page_size_for(
+                u64::from(model.domain().width()) * u64::from(model.domain().height()),
+            ));
             if let Some(b) = &bar {
                 options.progress = b.clone();
             }

@@ -6,8 +6,6 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use fmrh::dataset::{self, DatasetOptions, SeamPolicy, TileInput};
-use fmrh::model::{precision::Precision, BuildOptions, ThinByArea, Thresholds, DEFAULT_BLOCK_SIZE};
-use fmrh::store::WriteOptions;
 use fmrh::Error;
 
 #[derive(clap::Subcommand)]
@@ -52,62 +50,22 @@ pub struct AddArgs {
     pub json: bool,
 }
 
-/// How each tile is built: the options `dataset build` and `dataset add` share.
+/// How each tile is built: the model flags `fmrh build` takes too.
 #[derive(clap::Args)]
 pub struct TileOptions {
-    /// Samples along a block side: 2^k + 1, from 9 to 1025.
-    #[arg(long, default_value_t = DEFAULT_BLOCK_SIZE)]
-    block_size: u32,
-    /// Cluster thresholds in height units, comma-separated (default: each tile's √2 ladder).
-    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
-    thresholds: Option<Vec<f64>>,
-    /// Store heights to the step Q (see `fmrh build --precision`).
-    #[arg(long, value_name = "Q")]
-    precision: Option<f64>,
-    /// Bytes per page of each tile (default: by the tile's size, as `fmrh build`).
-    #[arg(long)]
-    page_size: Option<u32>,
-    /// Code every payload alone (see `fmrh build --payloads-alone`).
-    #[arg(long, alias = "blocks-alone")]
-    payloads_alone: bool,
-    /// Keep every node's grid square (see `fmrh build --no-thin`).
-    #[arg(long)]
-    no_thin: bool,
-    /// Ground distance between samples in metres, DX or DX,DY, for every tile.
-    #[arg(long, value_delimiter = ',')]
-    spacing: Option<Vec<f64>>,
     #[command(flatten)]
-    ingest: super::IngestArgs,
+    model: super::args::ModelArgs,
 }
 
 impl TileOptions {
     fn options(&self, seam: SeamPolicy) -> Result<DatasetOptions, Error> {
         Ok(DatasetOptions {
-            ingest: self.ingest.options(),
-            build: BuildOptions {
-                block_size: self.block_size,
-                thresholds: match &self.thresholds {
-                    Some(t) => Thresholds::Explicit(t.clone()),
-                    None => Thresholds::Ladder,
-                },
-                precision: self.precision.map(Precision::new).transpose()?,
-                thin: if self.no_thin {
-                    ThinByArea::Off
-                } else {
-                    ThinByArea::Auto
-                },
-            },
-            write: WriteOptions {
-                page_size: self.page_size.unwrap_or(0),
-                against_parents: !self.payloads_alone,
-                ..WriteOptions::default()
-            },
+            ingest: self.model.ingest.options(),
+            build: self.model.build_options()?,
+            // 0: each tile's page size by its size, as `fmrh build` chooses.
+            write: self.model.write_options(0),
             seam,
-            spacing_m: self
-                .spacing
-                .as_deref()
-                .map(super::build::parse_spacing)
-                .transpose()?,
+            spacing_m: self.model.spacing()?,
         })
     }
 }

@@ -35,7 +35,7 @@ pub fn run(args: &ExtractArgs) -> Result<ExitCode, Error> {
     if super::is_dataset(&args.file)? {
         let ds = fmrh::dataset::Dataset::open(&args.file)?;
         let window = match &args.window {
-            Some(text) => super::parse_window(text)?,
+            Some(text) => super::args::parse_window(text)?,
             None => ds.grid(),
         };
         let out = super::sidecar::RasterOutput::new(&args.output, args.format, args.force)?;
@@ -59,7 +59,7 @@ fn extract<S: fmrh::store::Source>(
 ) -> Result<ExitCode, Error> {
     let data = store.domain().data_rect();
     let window = match &args.window {
-        Some(text) => super::parse_window(text)?,
+        Some(text) => super::args::parse_window(text)?,
         None => data,
     };
     let out = super::sidecar::RasterOutput::new(&args.output, args.format, args.force)?;

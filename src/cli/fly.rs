@@ -11,7 +11,7 @@ use fmrh::scene::{path, Camera, FrameStats, ScheduleOptions, Scheduler};
 use fmrh::store::ReadStats;
 use fmrh::{Error, Store};
 
-use super::scene::ViewArgs;
+use super::args::ViewArgs;
 
 #[derive(clap::Args)]
 pub struct FlyArgs {
@@ -169,7 +169,7 @@ fn replay_dataset(args: &FlyArgs, cameras: &[Camera]) -> Result<ExitCode, Error>
             .view
             .spacing
             .as_deref()
-            .map(super::build::parse_spacing)
+            .map(super::args::parse_spacing)
             .transpose()?,
         globe: args.geo,
         globe_frame: None,

@@ -15,9 +15,9 @@ pub struct RenderArgs {
     /// The container or a dataset's directory (a path or an http(s):// or s3:// URL).
     file: PathBuf,
     #[command(flatten)]
-    camera: super::scene::CameraArgs,
+    camera: super::args::CameraArgs,
     #[command(flatten)]
-    view: super::scene::ViewArgs,
+    view: super::args::ViewArgs,
     /// Draw only this window, inclusive samples c0,r0,c1,r1 (default: what the frustum
     /// sees; with --top, the whole terrain up to 64 Mi samples).
     #[arg(long)]

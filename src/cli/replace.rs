@@ -27,7 +27,7 @@ pub struct ReplaceArgs {
     #[arg(long)]
     pub json: bool,
     #[command(flatten)]
-    ingest: super::IngestArgs,
+    ingest: super::args::IngestArgs,
 }
 
 #[derive(Serialize)]

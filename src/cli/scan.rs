@@ -60,11 +60,11 @@ pub fn run(args: &ScanArgs) -> Result<ExitCode, Error> {
         ))
     })?;
     let found: Vec<_> = match (&args.hilbert, &args.codes) {
-        (Some(h), _) => match super::parse_range(h, "--hilbert")? {
+        (Some(h), _) => match super::args::parse_range(h, "--hilbert")? {
             Some((lo, hi)) => store.scan_hilbert(args.cluster, lo..=hi)?.collect(),
             None => Vec::new(),
         },
-        (None, Some(c)) => match super::parse_range(c, "--codes")? {
+        (None, Some(c)) => match super::args::parse_range(c, "--codes")? {
             Some((a, b)) => store
                 .scan_codes(args.cluster, a..b.saturating_add(1))?
                 .collect(),

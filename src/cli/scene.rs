@@ -6,234 +6,16 @@ use std::process::ExitCode;
 
 use serde::Serialize;
 
-use fmrh::mesh::{fractal, GridBlock};
+use super::args::{CameraArgs, RefineArg, ViewArgs};
+use fmrh::mesh::fractal;
 use fmrh::model::SampleRect;
+use fmrh::scene::surface::GridBlock;
 use fmrh::scene::{
     load_blocks, reconstruct, Camera, LoadedBlock, Mode, Scene, SceneBlock, SceneOptions, Terrain,
-    WorldFrame, DEFAULT_GAP, PAYLOAD_GAP,
+    WorldFrame, PAYLOAD_GAP,
 };
 use fmrh::store::{ReadStats, RequestStats};
 use fmrh::Error;
-
-/// The camera options `scene` and `fly` share.
-#[derive(clap::Args, Clone)]
-pub struct ViewArgs {
-    /// Vertical field of view in degrees (strictly between 0 and 180).
-    #[arg(long, default_value_t = fmrh::scene::camera::DEFAULT_FOV_DEG, allow_negative_numbers = true)]
-    pub fov: f64,
-    /// Viewport in pixels, WIDTHxHEIGHT.
-    #[arg(long, default_value = "1024x768")]
-    pub viewport: String,
-    /// Tolerance in pixels.
-    #[arg(long, allow_negative_numbers = true)]
-    pub tau: f64,
-    /// uniform: one static bound for the whole view (one cluster); view: each block meets
-    /// the tolerance where it is seen.
-    #[arg(long, value_enum, default_value = "view")]
-    pub mode: ModeArg,
-    /// Runs of Hilbert keys separated by at most this many keys are scanned as one.
-    #[arg(long, default_value_t = DEFAULT_GAP)]
-    pub gap: u64,
-    /// Map the file instead of reading it page by page: much faster scheduling. The state
-    /// read is registered (Linux), so fmrh writers in other processes leave its pages alone;
-    /// where readers cannot register, this falls back to page reads. Other tools must not
-    /// modify the file meanwhile. A dataset's tiles are always read page by page.
-    #[arg(long)]
-    pub mmap: bool,
-    /// Ground distance between samples in metres, DX or DX,DY (east, south), where cameras
-    /// are placed. Required when the file does not record it (`info` says "spacing
-    /// unknown"); `--spacing 1` measures the world in samples. Overrides the file's.
-    #[arg(long, value_delimiter = ',')]
-    pub spacing: Option<Vec<f64>>,
-}
-
-/// `--mode`.
-#[derive(clap::ValueEnum, Clone, Copy)]
-pub enum ModeArg {
-    /// One cluster for the whole view.
-    Uniform,
-    /// View-dependent.
-    View,
-}
-
-impl ViewArgs {
-    /// The viewport as `[width, height]`.
-    pub fn viewport(&self) -> Result<[u32; 2], Error> {
-        let bad = || {
-            Error::InvalidArgument(format!(
-                "viewport `{}`: expected WIDTHxHEIGHT in pixels, e.g. 1024x768",
-                self.viewport
-            ))
-        };
-        let (w, h) = self.viewport.split_once(['x', 'X']).ok_or_else(bad)?;
-        Ok([
-            w.trim().parse().map_err(|_| bad())?,
-            h.trim().parse().map_err(|_| bad())?,
-        ])
-    }
-
-    /// The spacing to place `file`'s terrain with: `--spacing`, else the file's own; an error
-    /// when neither is known, since a camera in metres over samples of unknown size sees the
-    /// wrong terrain.
-    pub fn spacing<S: fmrh::store::Source>(
-        &self,
-        store: &fmrh::Store<S>,
-        file: &std::path::Path,
-    ) -> Result<Option<[f64; 2]>, Error> {
-        if let Some(s) = &self.spacing {
-            return super::build::parse_spacing(s).map(Some);
-        }
-        if store.header().metadata.spacing_m.is_none() {
-            return Err(Error::InvalidArgument(format!(
-                "{}: the distance between samples is unknown (its source did not say), so a \
-                 camera in metres cannot be placed; give --spacing DX[,DY] in metres \
-                 (--spacing 1 measures the world in samples), or rebuild with --spacing",
-                file.display()
-            )));
-        }
-        Ok(None)
-    }
-
-    /// The scene options (without a window).
-    /// The spacing `--spacing` gives, if any (a dataset knows its own otherwise).
-    pub fn given_spacing(&self) -> Result<Option<[f64; 2]>, Error> {
-        self.spacing
-            .as_deref()
-            .map(super::build::parse_spacing)
-            .transpose()
-    }
-
-    /// An error when `--spacing` is given for a camera on the globe, where the
-    /// georeference places the samples and a flat spacing means nothing.
-    pub fn flat_spacing_only(&self, globe: bool) -> Result<(), Error> {
-        if globe && self.spacing.is_some() {
-            return Err(Error::InvalidArgument(
-                "--spacing sets the flat frame's spacing; on the globe (--eye-geo, --globe, \
-                 --geo) the georeference places the samples: drop one of them"
-                    .into(),
-            ));
-        }
-        Ok(())
-    }
-
-    /// [`ViewArgs::options`] restricted to `window` (the `--window` text), if given.
-    pub fn options_in(&self, window: Option<&str>) -> Result<SceneOptions, Error> {
-        let mut options = self.options();
-        options.window = window.map(super::parse_window).transpose()?;
-        Ok(options)
-    }
-
-    pub fn options(&self) -> SceneOptions {
-        SceneOptions {
-            tau: self.tau,
-            mode: match self.mode {
-                ModeArg::Uniform => Mode::Uniform,
-                ModeArg::View => Mode::View,
-            },
-            window: None,
-            gap: self.gap,
-        }
-    }
-}
-
-/// Where the camera is and where it looks, in the world frame.
-#[derive(clap::Args, Clone)]
-pub struct CameraArgs {
-    /// Eye position x,y,z in metres (x = col * dx east, y = row * dy south, z height; with
-    /// --globe, Earth-centred Earth-fixed metres).
-    #[arg(
-        long,
-        allow_hyphen_values = true,
-        required_unless_present = "eye_geo",
-        conflicts_with = "eye_geo"
-    )]
-    eye: Option<String>,
-    /// The point looked at, x,y,z (the frame of --eye).
-    #[arg(
-        long,
-        allow_hyphen_values = true,
-        required_unless_present = "eye_geo",
-        conflicts_with = "eye_geo"
-    )]
-    target: Option<String>,
-    /// Up direction on screen, x,y,z.
-    #[arg(long, allow_hyphen_values = true, conflicts_with = "eye_geo")]
-    up: Option<String>,
-    /// --eye, --target and --up in Earth-centred Earth-fixed metres (WGS 84), the terrain
-    /// on the ellipsoid: for geographic grids (latitude and longitude).
-    #[arg(long)]
-    globe: bool,
-    /// The eye on the globe: latitude and longitude in degrees and height above the
-    /// ellipsoid in metres (implies --globe; look with --look).
-    #[arg(long, allow_hyphen_values = true, value_name = "LAT,LON,H")]
-    eye_geo: Option<String>,
-    /// With --eye-geo: heading in degrees clockwise from north and pitch in degrees above
-    /// the horizontal (-90 straight down) [default: 0,-30].
-    #[arg(long, allow_hyphen_values = true, value_name = "HEADING,PITCH")]
-    look: Option<String>,
-}
-
-impl CameraArgs {
-    /// The camera, with `view`'s field of view and viewport.
-    pub fn camera(&self, view: &ViewArgs) -> Result<Camera, Error> {
-        if self.look.is_some() && self.eye_geo.is_none() {
-            return Err(Error::InvalidArgument(
-                "--look takes a heading and pitch for --eye-geo; give --eye-geo too".into(),
-            ));
-        }
-        let (eye, target, up) = match &self.eye_geo {
-            Some(geo) => {
-                let [lat, lon, h] = super::parse_vec3(geo, "--eye-geo")?.to_array();
-                let look = super::parse_list(self.look.as_deref().unwrap_or("0,-30"), 2, "--look")?;
-                if !(-90.0..=90.0).contains(&lat) {
-                    return Err(Error::InvalidArgument(format!(
-                        "--eye-geo: latitude {lat} is not within -90..=90"
-                    )));
-                }
-                fmrh::globe::look(lat, lon, h, look[0], look[1])
-            }
-            None => {
-                let need = |v: &Option<String>, name: &str| {
-                    v.as_deref()
-                        .ok_or_else(|| Error::InvalidArgument(format!("{name} is required")))
-                        .and_then(|s| super::parse_vec3(s, name))
-                };
-                let up = match &self.up {
-                    Some(u) => super::parse_vec3(u, "--up")?,
-                    None => glam::DVec3::Z,
-                };
-                (
-                    need(&self.eye, "--eye")?,
-                    need(&self.target, "--target")?,
-                    up,
-                )
-            }
-        };
-        Ok(Camera {
-            eye,
-            target,
-            up,
-            fov_y_deg: view.fov,
-            viewport: view.viewport()?,
-        })
-    }
-
-    /// Whether the camera is on the globe (ECEF), not in the flat frame.
-    pub fn globe(&self) -> bool {
-        self.globe || self.eye_geo.is_some()
-    }
-
-    /// An error unless the camera is in the flat frame: `what` does not work on the globe
-    /// yet.
-    pub fn flat_only(&self, what: &str) -> Result<(), Error> {
-        if self.globe() {
-            return Err(Error::InvalidArgument(format!(
-                "{what} takes flat-frame cameras only so far (no --globe or --eye-geo)"
-            )));
-        }
-        Ok(())
-    }
-}
 
 #[derive(clap::Args)]
 pub struct SceneArgs {
@@ -265,7 +47,7 @@ pub struct SceneArgs {
     /// Refine past the data where the camera is closer than the data's detail, and report
     /// the synthetic nodes (`fmrh mesh --refine` draws them). Reads the blocks' payloads.
     #[arg(long, value_enum, conflicts_with = "reconstruct")]
-    refine: Option<super::mesh::RefineArg>,
+    refine: Option<RefineArg>,
     /// A geographic container drawn above FILE where it has data, on the globe (repeatable:
     /// each above those before; needs --eye-geo or --globe). FILE is then the base layer,
     /// e.g. a whole-Earth grid, and each block of a lower layer lists the parts the layers

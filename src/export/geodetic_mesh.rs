@@ -42,8 +42,8 @@ use super::quantized_mesh::{self, Header, TileData, QUANTIZED_MAX};
 use crate::crs::{Crs, CrsKind};
 use crate::error::{Error, Result};
 use crate::heightfield::Georeference;
-use crate::mesh::surface::Surface;
 use crate::model::SampleRect;
+use crate::scene::surface::Surface;
 
 /// Vertices along a side of a tile's grid (Cesium's heightmap size).
 pub const GRID: usize = 65;

@@ -5,31 +5,19 @@
 //! page but the last is full, `level` is 0, and the bytes after the content are zero.
 
 use zerocopy::byteorder::little_endian::U64;
-use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
 
 use super::page::{check_page, check_tail, encode_page, PageStamp, PAGE_HEADER_LEN};
 use super::{Invariant, Violation};
 
-/// Where a blob lives: pages `first_page ..` holding `length` content bytes.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    FromBytes,
-    IntoBytes,
-    KnownLayout,
-    Immutable,
-    Unaligned,
-)]
-#[repr(C)]
-pub struct BlobRef {
-    /// First page of the run.
-    pub first_page: U64,
-    /// Content bytes (the pages hold `P - 24` content bytes each).
-    pub length: U64,
+on_disk! {
+    /// Where a blob lives: pages `first_page ..` holding `length` content bytes.
+    #[derive(Default, Eq)]
+    pub struct BlobRef {
+        /// First page of the run.
+        pub first_page: U64,
+        /// Content bytes (the pages hold `P - 24` content bytes each).
+        pub length: U64,
+    }
 }
 
 const _: () = assert!(size_of::<BlobRef>() == 16);

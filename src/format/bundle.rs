@@ -25,7 +25,7 @@
 //! pages and never a file page, so every tree, blob and check works unchanged on both.
 
 use zerocopy::byteorder::little_endian::{U32, U64};
-use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
+use zerocopy::IntoBytes;
 
 use super::page::PageHeader;
 use super::{crc32, tag, Invariant, Violation};
@@ -48,33 +48,22 @@ pub const DEFAULT_BUNDLE_LIMIT: u64 = 32 << 10;
 /// The zstd level a writer compresses a bundle with.
 pub const BUNDLE_ZSTD_LEVEL: i32 = 19;
 
-/// Where a state's bundle lies (commit record bytes 176..200; all zero for no bundle).
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    FromBytes,
-    IntoBytes,
-    KnownLayout,
-    Immutable,
-    Unaligned,
-)]
-#[repr(C)]
-pub struct BundleRef {
-    /// Absolute byte offset of the stored (compressed) bytes.
-    pub offset: U64,
-    /// Stored bytes; 0 for no bundle.
-    pub stored_len: U32,
-    /// CRC of the stored bytes.
-    pub crc: U32,
-    /// Pages the bundle decompresses to.
-    pub pages: U32,
-    /// 5.0: bytes of the stored run's *head*, the frame table and the frames stored first,
-    /// which a reader reads when it opens the state. Zero (reserved) before 5.0.
-    pub head_len: U32,
+on_disk! {
+    /// Where a state's bundle lies (commit record bytes 176..200; all zero for no bundle).
+    #[derive(Default, Eq)]
+    pub struct BundleRef {
+        /// Absolute byte offset of the stored (compressed) bytes.
+        pub offset: U64,
+        /// Stored bytes; 0 for no bundle.
+        pub stored_len: U32,
+        /// CRC of the stored bytes.
+        pub crc: U32,
+        /// Pages the bundle decompresses to.
+        pub pages: U32,
+        /// 5.0: bytes of the stored run's *head*, the frame table and the frames stored first,
+        /// which a reader reads when it opens the state. Zero (reserved) before 5.0.
+        pub head_len: U32,
+    }
 }
 
 const _: () = assert!(size_of::<BundleRef>() == 24);

@@ -22,7 +22,7 @@
 //! major is not this reader's, the file is unsupported, whatever the other slot holds.
 
 use zerocopy::byteorder::little_endian::{U16, U32, U64};
-use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
+use zerocopy::{FromBytes, IntoBytes};
 
 use super::blob::BlobRef;
 use super::bundle::BundleRef;
@@ -54,72 +54,60 @@ pub const COMMIT_PAYLOAD_SLACK: u32 = 2;
 /// Every commit record flag this reader knows.
 pub const COMMIT_FLAGS_KNOWN: u32 = COMMIT_RECOVERY_NEEDED | COMMIT_PAYLOAD_SLACK;
 
-/// A commit record: the first [`COMMIT_RECORD_LEN`] bytes of page 0 or page 1.
-#[derive(
-    Clone, Copy, Debug, PartialEq, Eq, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned,
-)]
-#[repr(C)]
-pub struct CommitRecord {
-    /// [`MAGIC`].
-    pub magic: [u8; 8],
-    /// [`FORMAT_MAJOR`] of the writer.
-    pub major: U16,
-    /// [`FORMAT_MINOR`] of the writer.
-    pub minor: U16,
-    /// Bytes per page.
-    pub page_size: U32,
-    /// Transaction id: the valid record with the higher id is the current state.
-    pub txn_id: U64,
-    /// The file's length in bytes when this record was written.
-    pub file_length: U64,
-    /// [`COMMIT_RECOVERY_NEEDED`], [`COMMIT_PAYLOAD_SLACK`].
-    pub flags: U32,
-    /// Zero.
-    pub reserved0: U32,
-    /// The roots of the state's sections (bytes 40..168).
-    pub roots: StateRoots,
-    /// The transaction that wrote every structured page this state reaches (1.2). Zero in
-    /// older files, whose pages carry no txn tag.
-    pub pages_txn: U64,
-    /// The metadata bundle (3.0; zero before, and when the state has none).
-    pub bundle: BundleRef,
-    /// Zero.
-    pub reserved: [u8; 52],
-    /// CRC-32 of bytes `0..COMMIT_CRC_SPAN` of the record.
-    pub crc: U32,
+on_disk! {
+    /// A commit record: the first [`COMMIT_RECORD_LEN`] bytes of page 0 or page 1.
+    #[derive(Eq)]
+    pub struct CommitRecord {
+        /// [`MAGIC`].
+        pub magic: [u8; 8],
+        /// [`FORMAT_MAJOR`] of the writer.
+        pub major: U16,
+        /// [`FORMAT_MINOR`] of the writer.
+        pub minor: U16,
+        /// Bytes per page.
+        pub page_size: U32,
+        /// Transaction id: the valid record with the higher id is the current state.
+        pub txn_id: U64,
+        /// The file's length in bytes when this record was written.
+        pub file_length: U64,
+        /// [`COMMIT_RECOVERY_NEEDED`], [`COMMIT_PAYLOAD_SLACK`].
+        pub flags: U32,
+        /// Zero.
+        pub reserved0: U32,
+        /// The roots of the state's sections (bytes 40..168).
+        pub roots: StateRoots,
+        /// The transaction that wrote every structured page this state reaches (1.2). Zero in
+        /// older files, whose pages carry no txn tag.
+        pub pages_txn: U64,
+        /// The metadata bundle (3.0; zero before, and when the state has none).
+        pub bundle: BundleRef,
+        /// Zero.
+        pub reserved: [u8; 52],
+        /// CRC-32 of bytes `0..COMMIT_CRC_SPAN` of the record.
+        pub crc: U32,
+    }
 }
 
 const _: () = assert!(size_of::<CommitRecord>() == COMMIT_RECORD_LEN);
 
-/// The roots of every section of a state: what a commit record points to.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    FromBytes,
-    IntoBytes,
-    KnownLayout,
-    Immutable,
-    Unaligned,
-)]
-#[repr(C)]
-pub struct StateRoots {
-    /// The dataset header blob.
-    pub dataset_header: BlobRef,
-    /// The cluster directory blob.
-    pub cluster_directory: BlobRef,
-    /// The node table.
-    pub node_table: TreeRef,
-    /// The block table.
-    pub block_table: TreeRef,
-    /// The free list; empty in a freshly built file.
-    pub free_list: TreeRef,
-    /// The adjacency table: every cluster's edge lists, back to back in the order the
-    /// cluster directory's runs give.
-    pub adjacency: TreeRef,
+on_disk! {
+    /// The roots of every section of a state: what a commit record points to.
+    #[derive(Default, Eq)]
+    pub struct StateRoots {
+        /// The dataset header blob.
+        pub dataset_header: BlobRef,
+        /// The cluster directory blob.
+        pub cluster_directory: BlobRef,
+        /// The node table.
+        pub node_table: TreeRef,
+        /// The block table.
+        pub block_table: TreeRef,
+        /// The free list; empty in a freshly built file.
+        pub free_list: TreeRef,
+        /// The adjacency table: every cluster's edge lists, back to back in the order the
+        /// cluster directory's runs give.
+        pub adjacency: TreeRef,
+    }
 }
 
 const _: () = assert!(size_of::<StateRoots>() == 128);

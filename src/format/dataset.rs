@@ -5,7 +5,7 @@
 //! format) whose lengths the fixed part gives. `format-spec/container.md` §5 tabulates it.
 
 use zerocopy::byteorder::little_endian::{F64, U16, U32, U64};
-use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
+use zerocopy::{FromBytes, IntoBytes};
 
 use super::{Invariant, Violation, MAX_STRING_LEN, VOID_BITS};
 use crate::heightfield::{Georeference, Metadata};
@@ -30,33 +30,33 @@ pub const HAS_UNITS: u16 = 8;
 pub const THINNED_BY_AREA: u16 = 16;
 const KNOWN_FLAGS: u16 = HAS_SPACING | HAS_GEOREFERENCE | HAS_CRS | HAS_UNITS | THINNED_BY_AREA;
 
-#[derive(Clone, Copy, Debug, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
-#[repr(C)]
-struct Fixed {
-    width: U32,
-    height: U32,
-    block_size: U32,
-    finest_level: u8,
-    levels: u8,
-    flags: U16,
-    padded_side: U64,
-    padding_samples: U64,
-    valid_samples: U64,
-    void_samples: U64,
-    spacing: [F64; 2],
-    origin: [F64; 2],
-    step: [F64; 2],
-    delta_min: F64,
-    max_error: F64,
-    node_count: U64,
-    block_count: U64,
-    cluster_count: U32,
-    void_bits: U32,
-    crs_len: U32,
-    units_len: U32,
-    source_format_len: U32,
-    precision: F64,
-    reserved: [u8; 4],
+on_disk! {
+    struct Fixed {
+        width: U32,
+        height: U32,
+        block_size: U32,
+        finest_level: u8,
+        levels: u8,
+        flags: U16,
+        padded_side: U64,
+        padding_samples: U64,
+        valid_samples: U64,
+        void_samples: U64,
+        spacing: [F64; 2],
+        origin: [F64; 2],
+        step: [F64; 2],
+        delta_min: F64,
+        max_error: F64,
+        node_count: U64,
+        block_count: U64,
+        cluster_count: U32,
+        void_bits: U32,
+        crs_len: U32,
+        units_len: U32,
+        source_format_len: U32,
+        precision: F64,
+        reserved: [u8; 4],
+    }
 }
 
 const _: () = assert!(size_of::<Fixed>() == DATASET_FIXED_LEN);

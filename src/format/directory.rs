@@ -11,59 +11,46 @@
 //! order north, east, south, west.
 
 use zerocopy::byteorder::little_endian::{F64, U32, U64};
-use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
+use zerocopy::{FromBytes, IntoBytes};
 
 use super::tree::TreeRef;
 use super::{DatasetHeader, Invariant, Violation};
 use crate::model::MAX_CLUSTERS;
 
-/// The directory's fixed prefix.
-#[derive(Clone, Copy, Debug, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
-#[repr(C)]
-pub struct DirectoryPrefix {
-    /// Clusters that follow (equal to the dataset header's `cluster_count`).
-    pub count: U32,
-    /// Zero.
-    pub reserved: U32,
+on_disk! {
+    /// The directory's fixed prefix.
+    pub struct DirectoryPrefix {
+        /// Clusters that follow (equal to the dataset header's `cluster_count`).
+        pub count: U32,
+        /// Zero.
+        pub reserved: U32,
+    }
 }
 
-/// One cluster in the cluster directory.
-#[derive(
-    Clone, Copy, Debug, PartialEq, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned,
-)]
-#[repr(C)]
-pub struct ClusterRecord {
-    /// δ.
-    pub threshold: F64,
-    /// The largest `e*` in the cut.
-    pub max_error: F64,
-    /// The index: [`super::IndexEntry`]s keyed by Hilbert key.
-    pub index: TreeRef,
-    /// Where this cluster's north, east, south and west edge lists lie in the adjacency
-    /// table.
-    pub adjacency: [EdgeRange; 4],
+on_disk! {
+    /// One cluster in the cluster directory.
+    pub struct ClusterRecord {
+        /// δ.
+        pub threshold: F64,
+        /// The largest `e*` in the cut.
+        pub max_error: F64,
+        /// The index: [`super::IndexEntry`]s keyed by Hilbert key.
+        pub index: TreeRef,
+        /// Where this cluster's north, east, south and west edge lists lie in the adjacency
+        /// table.
+        pub adjacency: [EdgeRange; 4],
+    }
 }
 
-/// A run of the adjacency table: records `first .. first + count`.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    FromBytes,
-    IntoBytes,
-    KnownLayout,
-    Immutable,
-    Unaligned,
-)]
-#[repr(C)]
-pub struct EdgeRange {
-    /// Ordinal of the first record (a record count, not a byte offset).
-    pub first: U64,
-    /// Records in the run.
-    pub count: U64,
+on_disk! {
+    /// A run of the adjacency table: records `first .. first + count`.
+    #[derive(Default, Eq)]
+    pub struct EdgeRange {
+        /// Ordinal of the first record (a record count, not a byte offset).
+        pub first: U64,
+        /// Records in the run.
+        pub count: U64,
+    }
 }
 
 /// Bytes of the directory's prefix.

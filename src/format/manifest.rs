@@ -18,7 +18,7 @@
 //! its record into the other slot: the container's copy-on-write commit, on a smaller file.
 
 use zerocopy::byteorder::little_endian::{F32, F64, U16, U32, U64};
-use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
+use zerocopy::{FromBytes, IntoBytes};
 
 use super::{crc32, is_zero, CommitRecord, Invariant, Violation, COMMIT_RECORD_LEN};
 use crate::model::SampleRect;
@@ -78,51 +78,50 @@ pub const SEAM_FIRST: u8 = 1;
 /// Both tiles take the mean.
 pub const SEAM_MEAN: u8 = 2;
 
-/// A manifest commit record: the first [`MANIFEST_RECORD_LEN`] bytes of page 0 or page 1.
-#[derive(
-    Clone, Copy, Debug, PartialEq, Eq, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned,
-)]
-#[repr(C)]
-pub struct ManifestRecord {
-    /// [`MANIFEST_MAGIC`].
-    pub magic: [u8; 8],
-    /// [`MANIFEST_MAJOR`].
-    pub major: U16,
-    /// [`MANIFEST_MINOR`].
-    pub minor: U16,
-    /// [`MANIFEST_PAGE`].
-    pub page_size: U32,
-    /// Transaction id (≥ 1): the valid record with the higher one is the dataset's state.
-    pub txn_id: U64,
-    /// Bytes of the file this state needs: the end of its body.
-    pub file_length: U64,
-    /// Byte offset of the head: a multiple of the page size, ≥ two pages.
-    pub head_offset: U64,
-    /// Bytes of the head.
-    pub head_len: U32,
-    /// CRC-32 of the head.
-    pub head_crc: U32,
-    /// Tiles.
-    pub tile_count: U64,
-    /// Columns of the dataset grid: one past the easternmost tile's last column.
-    pub columns: U64,
-    /// Rows of the dataset grid.
-    pub rows: U64,
-    /// Metres from one column to the next (east), 0 when unknown.
-    pub spacing_x: F64,
-    /// Metres from one row to the next (south), 0 when unknown.
-    pub spacing_y: F64,
-    /// How shared edges were settled: [`SEAM_STRICT`], [`SEAM_FIRST`], [`SEAM_MEAN`].
-    pub seam: u8,
-    /// Zero.
-    pub reserved0: [u8; 7],
-    /// Bytes of the adjacency area between the tile pages and the head: a multiple of the
-    /// page size.
-    pub adjacency_len: U64,
-    /// Zero.
-    pub reserved: [u8; 148],
-    /// CRC-32 of bytes `0..252`.
-    pub crc: U32,
+on_disk! {
+    /// A manifest commit record: the first [`MANIFEST_RECORD_LEN`] bytes of page 0 or page 1.
+    #[derive(Eq)]
+    pub struct ManifestRecord {
+        /// [`MANIFEST_MAGIC`].
+        pub magic: [u8; 8],
+        /// [`MANIFEST_MAJOR`].
+        pub major: U16,
+        /// [`MANIFEST_MINOR`].
+        pub minor: U16,
+        /// [`MANIFEST_PAGE`].
+        pub page_size: U32,
+        /// Transaction id (≥ 1): the valid record with the higher one is the dataset's state.
+        pub txn_id: U64,
+        /// Bytes of the file this state needs: the end of its body.
+        pub file_length: U64,
+        /// Byte offset of the head: a multiple of the page size, ≥ two pages.
+        pub head_offset: U64,
+        /// Bytes of the head.
+        pub head_len: U32,
+        /// CRC-32 of the head.
+        pub head_crc: U32,
+        /// Tiles.
+        pub tile_count: U64,
+        /// Columns of the dataset grid: one past the easternmost tile's last column.
+        pub columns: U64,
+        /// Rows of the dataset grid.
+        pub rows: U64,
+        /// Metres from one column to the next (east), 0 when unknown.
+        pub spacing_x: F64,
+        /// Metres from one row to the next (south), 0 when unknown.
+        pub spacing_y: F64,
+        /// How shared edges were settled: [`SEAM_STRICT`], [`SEAM_FIRST`], [`SEAM_MEAN`].
+        pub seam: u8,
+        /// Zero.
+        pub reserved0: [u8; 7],
+        /// Bytes of the adjacency area between the tile pages and the head: a multiple of the
+        /// page size.
+        pub adjacency_len: U64,
+        /// Zero.
+        pub reserved: [u8; 148],
+        /// CRC-32 of bytes `0..252`.
+        pub crc: U32,
+    }
 }
 
 const _: () = assert!(size_of::<ManifestRecord>() == MANIFEST_RECORD_LEN);
@@ -366,56 +365,54 @@ pub fn head_len_for(pages: u64) -> u64 {
     HEAD_FIXED_LEN as u64 + pages * PAGE_ENTRY_LEN as u64
 }
 
-/// The head's fixed part.
-#[derive(
-    Clone, Copy, Debug, PartialEq, Eq, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned,
-)]
-#[repr(C)]
-pub struct HeadFixed {
-    /// [`HEAD_MAGIC`].
-    pub magic: [u8; 4],
-    /// Tile pages.
-    pub page_count: U32,
-    /// Tiles (the record's count).
-    pub tile_count: U64,
-    /// [`HEAD_HAS_GEOREFERENCE`].
-    pub flags: U32,
-    /// Zero.
-    pub reserved0: U32,
-    /// CRS coordinates of the centre of dataset sample (0, 0).
-    pub origin: [F64; 2],
-    /// CRS units from one column to the next and one row to the next.
-    pub step: [F64; 2],
-    /// The CRS's name, UTF-8, zero-padded (all zero: none).
-    pub crs: [u8; CRS_LEN],
-    /// Zero.
-    pub reserved: [u8; 72],
+on_disk! {
+    /// The head's fixed part.
+    #[derive(Eq)]
+    pub struct HeadFixed {
+        /// [`HEAD_MAGIC`].
+        pub magic: [u8; 4],
+        /// Tile pages.
+        pub page_count: U32,
+        /// Tiles (the record's count).
+        pub tile_count: U64,
+        /// [`HEAD_HAS_GEOREFERENCE`].
+        pub flags: U32,
+        /// Zero.
+        pub reserved0: U32,
+        /// CRS coordinates of the centre of dataset sample (0, 0).
+        pub origin: [F64; 2],
+        /// CRS units from one column to the next and one row to the next.
+        pub step: [F64; 2],
+        /// The CRS's name, UTF-8, zero-padded (all zero: none).
+        pub crs: [u8; CRS_LEN],
+        /// Zero.
+        pub reserved: [u8; 72],
+    }
 }
 
 const _: () = assert!(size_of::<HeadFixed>() == HEAD_FIXED_LEN);
 
-/// One tile page, as the head names it.
-#[derive(
-    Clone, Copy, Debug, PartialEq, Eq, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned,
-)]
-#[repr(C)]
-pub struct PageEntry {
-    /// Byte offset of the page.
-    pub offset: U64,
-    /// Bytes of its records (`count × 128`).
-    pub length: U32,
-    /// CRC-32 of those bytes.
-    pub crc: U32,
-    /// Index of its first tile.
-    pub first_tile: U32,
-    /// Its tiles (32, fewer in the last page).
-    pub count: U32,
-    /// The rectangle its tiles span: first column, first row, last column, last row.
-    pub bounds: [U64; 4],
-    /// The least height of its tiles (+inf when every one is void).
-    pub min_height: F32,
-    /// The greatest height of its tiles (-inf when every one is void).
-    pub max_height: F32,
+on_disk! {
+    /// One tile page, as the head names it.
+    #[derive(Eq)]
+    pub struct PageEntry {
+        /// Byte offset of the page.
+        pub offset: U64,
+        /// Bytes of its records (`count × 128`).
+        pub length: U32,
+        /// CRC-32 of those bytes.
+        pub crc: U32,
+        /// Index of its first tile.
+        pub first_tile: U32,
+        /// Its tiles (32, fewer in the last page).
+        pub count: U32,
+        /// The rectangle its tiles span: first column, first row, last column, last row.
+        pub bounds: [U64; 4],
+        /// The least height of its tiles (+inf when every one is void).
+        pub min_height: F32,
+        /// The greatest height of its tiles (-inf when every one is void).
+        pub max_height: F32,
+    }
 }
 
 const _: () = assert!(size_of::<PageEntry>() == PAGE_ENTRY_LEN);
@@ -606,41 +603,40 @@ impl StatePin {
     }
 }
 
-/// A tile record: where a tile lies, its file, and its pinned state.
-#[derive(
-    Clone, Copy, Debug, PartialEq, Eq, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned,
-)]
-#[repr(C)]
-pub struct TileRecord {
-    /// First column in dataset samples.
-    pub col0: U64,
-    /// First row.
-    pub row0: U64,
-    /// Columns.
-    pub width: U32,
-    /// Rows.
-    pub height: U32,
-    /// The pin's `pages_txn`.
-    pub pages_txn: U64,
-    /// The pin's CRC.
-    pub state_crc: U32,
-    /// Zero.
-    pub flags: U32,
-    /// The least height of the tile (its root node's), for culling without opening it.
-    pub min_height: F32,
-    /// The greatest height.
-    pub max_height: F32,
-    /// Byte offset of the tile's adjacent-cluster tables in the adjacency area (0 with a
-    /// length of 0: none).
-    pub adjacency_offset: U64,
-    /// Their bytes.
-    pub adjacency_len: U32,
-    /// Their CRC-32.
-    pub adjacency_crc: U32,
-    /// Zero.
-    pub reserved: [u8; 8],
-    /// The tile's file name in the dataset's directory, UTF-8, zero-padded.
-    pub name: [u8; TILE_NAME_LEN],
+on_disk! {
+    /// A tile record: where a tile lies, its file, and its pinned state.
+    #[derive(Eq)]
+    pub struct TileRecord {
+        /// First column in dataset samples.
+        pub col0: U64,
+        /// First row.
+        pub row0: U64,
+        /// Columns.
+        pub width: U32,
+        /// Rows.
+        pub height: U32,
+        /// The pin's `pages_txn`.
+        pub pages_txn: U64,
+        /// The pin's CRC.
+        pub state_crc: U32,
+        /// Zero.
+        pub flags: U32,
+        /// The least height of the tile (its root node's), for culling without opening it.
+        pub min_height: F32,
+        /// The greatest height.
+        pub max_height: F32,
+        /// Byte offset of the tile's adjacent-cluster tables in the adjacency area (0 with a
+        /// length of 0: none).
+        pub adjacency_offset: U64,
+        /// Their bytes.
+        pub adjacency_len: U32,
+        /// Their CRC-32.
+        pub adjacency_crc: U32,
+        /// Zero.
+        pub reserved: [u8; 8],
+        /// The tile's file name in the dataset's directory, UTF-8, zero-padded.
+        pub name: [u8; TILE_NAME_LEN],
+    }
 }
 
 const _: () = assert!(size_of::<TileRecord>() == TILE_RECORD_LEN);

@@ -53,6 +53,30 @@
 // Values read from a file are converted with checks, never truncated by `as`.
 #![warn(clippy::cast_possible_truncation)]
 
+/// Declares an on-disk structure of `format-spec/container.md` §3–§6 (and `dataset.md`):
+/// `#[repr(C)]` with fixed-width little-endian fields and no padding (`Unaligned`), read and
+/// written in place by zerocopy. Every such structure is declared through this one macro, so
+/// all have the same derives; a structure that needs more (`Default`, `Eq`) says so above its
+/// name.
+macro_rules! on_disk {
+    ($(#[$attr:meta])* $vis:vis struct $name:ident $body:tt) => {
+        $(#[$attr])*
+        #[derive(
+            Clone,
+            Copy,
+            Debug,
+            PartialEq,
+            zerocopy::FromBytes,
+            zerocopy::IntoBytes,
+            zerocopy::KnownLayout,
+            zerocopy::Immutable,
+            zerocopy::Unaligned,
+        )]
+        #[repr(C)]
+        $vis struct $name $body
+    };
+}
+
 pub mod blob;
 pub mod bundle;
 pub mod commit;

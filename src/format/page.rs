@@ -15,7 +15,7 @@
 //! page's own CRC (`format-spec/container.md` §4, §11.6). Files before 1.2 hold zero there.
 
 use zerocopy::byteorder::little_endian::{U16, U32, U64};
-use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
+use zerocopy::{FromBytes, IntoBytes};
 
 use super::{crc32, is_zero, Invariant, Violation};
 
@@ -43,22 +43,22 @@ pub mod tag {
     pub const FREE_LIST: [u8; 4] = *b"FMFL";
 }
 
-/// The header that opens every structured page.
-#[derive(Clone, Copy, Debug, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
-#[repr(C)]
-pub struct PageHeader {
-    /// What the page is (see [`tag`]).
-    pub tag: [u8; 4],
-    /// CRC-32 of bytes `8..P` of the page.
-    pub crc: U32,
-    /// The page's own number: a page written to the wrong place is caught.
-    pub page_no: U64,
-    /// Tree pages: 0 for a leaf, else the height above the leaves. Blob pages: 0.
-    pub level: U16,
-    /// [`txn_tag`] of the transaction that wrote the page (1.2); zero in older files.
-    pub txn_tag: U16,
-    /// Tree pages: records or branch entries in the page. Blob pages: content bytes.
-    pub count: U32,
+on_disk! {
+    /// The header that opens every structured page.
+    pub struct PageHeader {
+        /// What the page is (see [`tag`]).
+        pub tag: [u8; 4],
+        /// CRC-32 of bytes `8..P` of the page.
+        pub crc: U32,
+        /// The page's own number: a page written to the wrong place is caught.
+        pub page_no: U64,
+        /// Tree pages: 0 for a leaf, else the height above the leaves. Blob pages: 0.
+        pub level: U16,
+        /// [`txn_tag`] of the transaction that wrote the page (1.2); zero in older files.
+        pub txn_tag: U16,
+        /// Tree pages: records or branch entries in the page. Blob pages: content bytes.
+        pub count: U32,
+    }
 }
 
 const _: () = assert!(size_of::<PageHeader>() == PAGE_HEADER_LEN);

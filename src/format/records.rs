@@ -9,7 +9,6 @@
 //! store's API hands out; the conversions both ways live here and nowhere else.
 
 use zerocopy::byteorder::little_endian::{F32, F64, U16, U32, U64};
-use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout, Unaligned};
 
 use super::payload::PayloadRef;
 use crate::curve::HilbertKey;
@@ -37,50 +36,48 @@ pub const NODE_GRID_THIN_MASK: u16 = 0x78;
 /// The shift of [`NODE_GRID_THIN_MASK`].
 pub const NODE_GRID_THIN_SHIFT: u32 = 3;
 
-/// One node of the FMRH.
-#[derive(
-    Clone, Copy, Debug, PartialEq, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned,
-)]
-#[repr(C)]
-pub struct NodeRecord {
-    /// The node's [`HilbertKey`].
-    pub key: U64,
-    /// 0 = root, `L` = physical blocks.
-    pub level: u8,
-    /// Kept children: bit `dy * 2 + dx`.
-    pub child_mask: u8,
-    /// Bit 0 ([`NODE_GRID_HAS_VOIDS`]): the coarse grid has void or padding samples, and its
-    /// payload carries the void bitmap. Bit 1 ([`NODE_GRID_AGAINST_PARENT`], format 5): the
-    /// grid is coded against its parent's. Bit 2 ([`NODE_GRID_BITMAP_FLAGGED`], format 5):
-    /// the bitmap follows a void flag. Bits 3 to 6 ([`NODE_GRID_THIN_MASK`], format 6):
-    /// `log₂` of the grid's thinning factor.
-    pub flags: U16,
-    /// Column among the level's nodes.
-    pub x: U32,
-    /// Row among the level's nodes, from the north.
-    pub y: U32,
-    /// Index of the parent; [`ROOT_PARENT`] for the root.
-    pub parent: U32,
-    /// Nodes in the subtree, itself included.
-    pub subtree_len: U32,
-    /// CRC-32 of the payload.
-    pub payload_crc: U32,
-    /// The node's own measured static error.
-    pub static_error: F64,
-    /// `e*`: the largest static error in the node's subtree of the full quadtree.
-    pub monotone_error: F64,
-    /// Least mended height over the footprint.
-    pub min_height: F32,
-    /// Greatest mended height over the footprint.
-    pub max_height: F32,
-    /// Valid samples in the footprint.
-    pub valid_samples: U64,
-    /// Byte offset of the payload: the coarse grid, or at level `L` the physical block.
-    pub payload_offset: U64,
-    /// Payload bytes.
-    pub payload_len: U32,
-    /// Zero.
-    pub reserved: U32,
+on_disk! {
+    /// One node of the FMRH.
+    pub struct NodeRecord {
+        /// The node's [`HilbertKey`].
+        pub key: U64,
+        /// 0 = root, `L` = physical blocks.
+        pub level: u8,
+        /// Kept children: bit `dy * 2 + dx`.
+        pub child_mask: u8,
+        /// Bit 0 ([`NODE_GRID_HAS_VOIDS`]): the coarse grid has void or padding samples, and its
+        /// payload carries the void bitmap. Bit 1 ([`NODE_GRID_AGAINST_PARENT`], format 5): the
+        /// grid is coded against its parent's. Bit 2 ([`NODE_GRID_BITMAP_FLAGGED`], format 5):
+        /// the bitmap follows a void flag. Bits 3 to 6 ([`NODE_GRID_THIN_MASK`], format 6):
+        /// `log₂` of the grid's thinning factor.
+        pub flags: U16,
+        /// Column among the level's nodes.
+        pub x: U32,
+        /// Row among the level's nodes, from the north.
+        pub y: U32,
+        /// Index of the parent; [`ROOT_PARENT`] for the root.
+        pub parent: U32,
+        /// Nodes in the subtree, itself included.
+        pub subtree_len: U32,
+        /// CRC-32 of the payload.
+        pub payload_crc: U32,
+        /// The node's own measured static error.
+        pub static_error: F64,
+        /// `e*`: the largest static error in the node's subtree of the full quadtree.
+        pub monotone_error: F64,
+        /// Least mended height over the footprint.
+        pub min_height: F32,
+        /// Greatest mended height over the footprint.
+        pub max_height: F32,
+        /// Valid samples in the footprint.
+        pub valid_samples: U64,
+        /// Byte offset of the payload: the coarse grid, or at level `L` the physical block.
+        pub payload_offset: U64,
+        /// Payload bytes.
+        pub payload_len: U32,
+        /// Zero.
+        pub reserved: U32,
+    }
 }
 
 /// A node of the FMRH as a store holds it: the tree node, and where its payload is.
@@ -197,28 +194,26 @@ impl NodeRecord {
     }
 }
 
-/// One physical block: the full-resolution samples of a finest-level footprint, clipped to
-/// the data rectangle.
-#[derive(
-    Clone, Copy, Debug, PartialEq, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned,
-)]
-#[repr(C)]
-pub struct BlockRecord {
-    /// Byte offset of the payload.
-    pub payload_offset: U64,
-    /// Payload bytes: `4 * (width * height + void_count)`.
-    pub payload_len: U32,
-    /// CRC-32 of the payload.
-    pub payload_crc: U32,
-    /// Samples along a row (the footprint clipped to the data).
-    pub width: U32,
-    /// Samples down a column.
-    pub height: U32,
-    /// Void samples; their mended stand-ins follow the samples.
-    pub void_count: U32,
-    /// Format 4: the node whose coarse grid the samples are coded against, as its index in
-    /// the node table plus one; 0 when the block is coded alone. Zero (reserved) before 4.0.
-    pub against: U32,
+on_disk! {
+    /// One physical block: the full-resolution samples of a finest-level footprint, clipped to
+    /// the data rectangle.
+    pub struct BlockRecord {
+        /// Byte offset of the payload.
+        pub payload_offset: U64,
+        /// Payload bytes: `4 * (width * height + void_count)`.
+        pub payload_len: U32,
+        /// CRC-32 of the payload.
+        pub payload_crc: U32,
+        /// Samples along a row (the footprint clipped to the data).
+        pub width: U32,
+        /// Samples down a column.
+        pub height: U32,
+        /// Void samples; their mended stand-ins follow the samples.
+        pub void_count: U32,
+        /// Format 4: the node whose coarse grid the samples are coded against, as its index in
+        /// the node table plus one; 0 when the block is coded alone. Zero (reserved) before 4.0.
+        pub against: U32,
+    }
 }
 
 /// A physical block as the block table describes it.
@@ -275,20 +270,18 @@ impl BlockRecord {
     }
 }
 
-/// One node of a cluster, in the cluster's index.
-#[derive(
-    Clone, Copy, Debug, PartialEq, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned,
-)]
-#[repr(C)]
-pub struct IndexEntry {
-    /// The node's Hilbert key (the index's sort key; unique within a cut).
-    pub key: U64,
-    /// The node's index in the node table.
-    pub node: U32,
-    /// The node's level.
-    pub level: u8,
-    /// Zero.
-    pub reserved: [u8; 3],
+on_disk! {
+    /// One node of a cluster, in the cluster's index.
+    pub struct IndexEntry {
+        /// The node's Hilbert key (the index's sort key; unique within a cut).
+        pub key: U64,
+        /// The node's index in the node table.
+        pub node: U32,
+        /// The node's level.
+        pub level: u8,
+        /// Zero.
+        pub reserved: [u8; 3],
+    }
 }
 
 /// An entry of a cluster index, as a scan returns it.
@@ -324,26 +317,22 @@ impl IndexEntry {
     }
 }
 
-/// One node touching an edge of the data, in the adjacency table.
-#[derive(
-    Clone, Copy, Debug, PartialEq, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned,
-)]
-#[repr(C)]
-pub struct AdjacencyEntry {
-    /// The node's index in the node table.
-    pub node: U32,
+on_disk! {
+    /// One node touching an edge of the data, in the adjacency table.
+    pub struct AdjacencyEntry {
+        /// The node's index in the node table.
+        pub node: U32,
+    }
 }
 
-/// One free page.
-#[derive(
-    Clone, Copy, Debug, PartialEq, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned,
-)]
-#[repr(C)]
-pub struct FreeEntry {
-    /// The page.
-    pub page: U64,
-    /// The transaction that freed it: reusable once no reader holds an older snapshot.
-    pub freed_txn: U64,
+on_disk! {
+    /// One free page.
+    pub struct FreeEntry {
+        /// The page.
+        pub page: U64,
+        /// The transaction that freed it: reusable once no reader holds an older snapshot.
+        pub freed_txn: U64,
+    }
 }
 
 /// A page no structure of a state uses, and the first state that stopped using it.

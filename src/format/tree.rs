@@ -12,7 +12,7 @@
 //! (`store/btree.rs`).
 
 use zerocopy::byteorder::little_endian::{U16, U32, U64};
-use zerocopy::{FromBytes, FromZeros, Immutable, IntoBytes, KnownLayout, Unaligned};
+use zerocopy::{FromBytes, FromZeros, IntoBytes};
 
 use super::page::{check_page, check_tail, encode_page, PageHeader, PageStamp, PAGE_HEADER_LEN};
 use super::{Invariant, Violation};
@@ -21,45 +21,34 @@ use super::{Invariant, Violation};
 /// 41^7 ≈ 2·10^11 leaves, more than any dataset within the size limits needs.
 pub const MAX_TREE_DEPTH: u16 = 8;
 
-/// Where a B+-tree lives. An empty tree has root, records and depth zero, and still names its
-/// table's record size.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    FromBytes,
-    IntoBytes,
-    KnownLayout,
-    Immutable,
-    Unaligned,
-)]
-#[repr(C)]
-pub struct TreeRef {
-    /// The root page; 0 for an empty tree.
-    pub root_page: U64,
-    /// Records in the leaves.
-    pub records: U64,
-    /// Page levels: 1 when the root is a leaf, 0 for an empty tree.
-    pub depth: U16,
-    /// Bytes per leaf record (pins the record layout the writer used).
-    pub record_size: U16,
-    /// Zero.
-    pub reserved: U32,
+on_disk! {
+    /// Where a B+-tree lives. An empty tree has root, records and depth zero, and still names its
+    /// table's record size.
+    #[derive(Default, Eq)]
+    pub struct TreeRef {
+        /// The root page; 0 for an empty tree.
+        pub root_page: U64,
+        /// Records in the leaves.
+        pub records: U64,
+        /// Page levels: 1 when the root is a leaf, 0 for an empty tree.
+        pub depth: U16,
+        /// Bytes per leaf record (pins the record layout the writer used).
+        pub record_size: U16,
+        /// Zero.
+        pub reserved: U32,
+    }
 }
 
-/// One child of a B+-tree branch page.
-#[derive(Clone, Copy, Debug, FromBytes, IntoBytes, KnownLayout, Immutable, Unaligned)]
-#[repr(C)]
-pub struct BranchEntry {
-    /// The key of the first record under the child (the ordinal, for unkeyed tables).
-    pub first_key: U64,
-    /// The ordinal of the first record under the child.
-    pub first_ordinal: U64,
-    /// The child page.
-    pub child: U64,
+on_disk! {
+    /// One child of a B+-tree branch page.
+    pub struct BranchEntry {
+        /// The key of the first record under the child (the ordinal, for unkeyed tables).
+        pub first_key: U64,
+        /// The ordinal of the first record under the child.
+        pub first_ordinal: U64,
+        /// The child page.
+        pub child: U64,
+    }
 }
 
 /// Bytes of a branch entry.

@@ -31,30 +31,41 @@ use std::path::Path;
 use crate::error::{Error, Result};
 use crate::heightfield::{Georeference, Heightfield, Metadata};
 
-/// The input formats fmrh reads.
+/// The input formats fmrh reads ([`Format::about`] says what each takes).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Format {
-    /// Raw little-endian `f32` + `.json` sidecar, the form of `../shared/data` (either file).
+    /// Raw `f32` with a `.json` sidecar.
     F32,
-    /// SRTM `.hgt` or `.hgt.gz`: 1201² or 3601² big-endian `i16`, -32768 void.
+    /// SRTM `.hgt`.
     Hgt,
-    /// GeoTIFF, one band of 8/16/32-bit integers or 32/64-bit floats, uncompressed, deflate,
-    /// LZW, PackBits or ZSTD, GDAL_NODATA honoured.
+    /// GeoTIFF.
     Geotiff,
-    /// PNG: 8/16-bit grey or grey palette, or Terrain-RGB / Terrarium colour.
+    /// PNG.
     Png,
-    /// Baseline JPEG, grey or R=G=B colour (lossy: for throughput tests, not precision).
+    /// Baseline JPEG.
     Jpeg,
-    /// ESRI ASCII grid (`.asc`).
+    /// ESRI ASCII grid.
     Asc,
-    /// USGS ASCII DEM (`.dem`), 1024-byte records, UTM or geographic profiles.
+    /// USGS ASCII DEM.
     UsgsDem,
-    /// DTED levels 0–2 (`.dt0`, `.dt1`, `.dt2`): WGS 84 grids, signed-magnitude `i16`.
+    /// DTED.
     Dted,
 }
 
 impl Format {
-    /// The name used in output.
+    /// Every format, in the order `--format` lists them.
+    pub const ALL: [Format; 8] = [
+        Format::F32,
+        Format::Hgt,
+        Format::Geotiff,
+        Format::Png,
+        Format::Jpeg,
+        Format::Asc,
+        Format::UsgsDem,
+        Format::Dted,
+    ];
+
+    /// The name used in output (a built file's `source_format`).
     pub fn name(self) -> &'static str {
         match self {
             Format::F32 => "f32",
@@ -67,6 +78,50 @@ impl Format {
             Format::Dted => "dted",
         }
     }
+
+    /// The name the command line's `--format` takes.
+    pub fn flag(self) -> &'static str {
+        match self {
+            Format::F32 => "f32",
+            Format::Hgt => "hgt",
+            Format::Geotiff => "geotiff",
+            Format::Png => "png",
+            Format::Jpeg => "jpeg",
+            Format::Asc => "asc",
+            Format::UsgsDem => "usgs-dem",
+            Format::Dted => "dted",
+        }
+    }
+
+    /// The format `--format NAME` names.
+    pub fn from_flag(name: &str) -> Option<Format> {
+        Format::ALL.into_iter().find(|f| f.flag() == name)
+    }
+
+    /// What it reads, in one line (the command line's help says the same).
+    pub fn about(self) -> &'static str {
+        match self {
+            Format::F32 => {
+                "Raw little-endian f32 + .json sidecar, the form of ../shared/data (either file)"
+            }
+            Format::Hgt => "SRTM .hgt or .hgt.gz: 1201² or 3601² big-endian i16, -32768 void",
+            Format::Geotiff => {
+                "GeoTIFF, one band of 8/16/32-bit integers or 32/64-bit floats, uncompressed, \
+                 deflate, LZW, PackBits or ZSTD, GDAL_NODATA honoured"
+            }
+            Format::Png => "PNG: 8/16-bit grey or grey palette, or Terrain-RGB / Terrarium colour",
+            Format::Jpeg => {
+                "Baseline JPEG, grey or R=G=B colour (lossy: for throughput tests, not precision)"
+            }
+            Format::Asc => "ESRI ASCII grid (.asc), with its .prj",
+            Format::UsgsDem => {
+                "USGS ASCII DEM (.dem), 1024-byte records, UTM or geographic profiles"
+            }
+            Format::Dted => {
+                "DTED levels 0–2 (.dt0, .dt1, .dt2): WGS 84 grids, signed-magnitude i16"
+            }
+        }
+    }
 }
 
 /// How the colour channels of an 8-bit RGB(A) PNG encode height.
@@ -76,6 +131,34 @@ pub enum ColorEncoding {
     TerrainRgb,
     /// Terrarium: `h = R·256 + G + B/256 - 32768`.
     Terrarium,
+}
+
+impl ColorEncoding {
+    /// Every encoding, in the order `--color-encoding` lists them.
+    pub const ALL: [ColorEncoding; 2] = [ColorEncoding::TerrainRgb, ColorEncoding::Terrarium];
+
+    /// The name the command line's `--color-encoding` takes.
+    pub fn flag(self) -> &'static str {
+        match self {
+            ColorEncoding::TerrainRgb => "terrain-rgb",
+            ColorEncoding::Terrarium => "terrarium",
+        }
+    }
+
+    /// The encoding `--color-encoding NAME` names.
+    pub fn from_flag(name: &str) -> Option<ColorEncoding> {
+        ColorEncoding::ALL.into_iter().find(|c| c.flag() == name)
+    }
+
+    /// Its formula, in one line.
+    pub fn about(self) -> &'static str {
+        match self {
+            ColorEncoding::TerrainRgb => {
+                "Mapbox Terrain-RGB: h = -10000 + (R·65536 + G·256 + B) · 0.1"
+            }
+            ColorEncoding::Terrarium => "Terrarium: h = R·256 + G + B/256 - 32768",
+        }
+    }
 }
 
 /// Options that say how to read an input.

@@ -27,7 +27,7 @@
 //! of `2^-MAX_DEPTH` samples ([`SCALE`]), every block's rectangle and stride multiplied by
 //! it, and drawn in a frame whose spacing is divided by it.
 
-use crate::model::measure::surface;
+use crate::model::surface::surface;
 use crate::model::SampleRect;
 
 /// The most depths generated below a physical block.
@@ -277,7 +277,7 @@ pub fn refine_for_view(
 /// surface to displace) is drawn as it is.
 pub fn refine_block(
     key: u64,
-    grid: &super::GridBlock<'_>,
+    grid: &crate::scene::surface::GridBlock<'_>,
     view: &crate::scene::View,
     frame: &crate::scene::WorldFrame,
     tau: f64,

@@ -41,7 +41,6 @@
 
 pub mod fractal;
 mod lines;
-pub mod surface;
 mod triangulate;
 
 use std::collections::HashMap;
@@ -49,10 +48,10 @@ use std::collections::HashMap;
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::error::{Error, Result};
-use crate::model::measure::surface;
+use crate::error::Result;
 use crate::model::SampleRect;
-use crate::scene::{LoadedBlock, SceneBlock, TerrainFrame, WorldFrame};
+use crate::scene::surface::GridBlock;
+use crate::scene::{TerrainFrame, WorldFrame};
 
 use lines::Lines;
 use triangulate::Triangles;
@@ -66,90 +65,6 @@ pub enum Cracks {
     Stitch,
     /// Every block its own surface, with a curtain below each edge that meets a block.
     Skirts,
-}
-
-/// A block to mesh: its footprint and the grid its surface is drawn over.
-#[derive(Clone, Copy, Debug)]
-pub struct GridBlock<'a> {
-    /// The footprint, inclusive samples, clipped to the data (`col0 < col1`, `row0 < row1`
-    /// for a block with area; a block without one is given no triangles).
-    pub rect: SampleRect,
-    /// Samples between grid points.
-    pub stride: u64,
-    /// Grid points along a row of `heights`; the grid starts at the footprint's north-west
-    /// corner and may reach past the data (padding, mended).
-    pub grid_width: u32,
-    /// Rows of `heights`.
-    pub grid_height: u32,
-    /// The grid's heights, row-major from the north-west.
-    pub heights: &'a [f32],
-    /// The block's `e*`, in metres.
-    pub error: f64,
-}
-
-impl<'a> GridBlock<'a> {
-    /// Scene block `b` as the mesh takes it: its footprint and `e*`, and the grid `loaded`
-    /// holds for it, `stride` samples apart (its level's).
-    pub fn of(b: &SceneBlock, loaded: &'a LoadedBlock, stride: u64) -> GridBlock<'a> {
-        GridBlock {
-            rect: b.rect(),
-            stride,
-            grid_width: loaded.width,
-            grid_height: loaded.height,
-            heights: &loaded.heights,
-            error: b.error,
-        }
-    }
-
-    /// The height the block's surface draws at sample `(col, row)` of its footprint.
-    fn height_at(&self, col: u64, row: u64) -> f64 {
-        let (u, v, s) = (col - self.rect.col0, row - self.rect.row0, self.stride);
-        let w = u64::from(self.grid_width);
-        let at = |i: u64, j: u64| self.heights[(j * w + i) as usize];
-        if u % s == 0 && v % s == 0 {
-            return f64::from(at(u / s, v / s));
-        }
-        let i = (u / s).min(w - 2);
-        let j = (v / s).min(u64::from(self.grid_height) - 2);
-        surface(
-            at(i, j),
-            at(i + 1, j),
-            at(i, j + 1),
-            at(i + 1, j + 1),
-            s,
-            u - i * s,
-            v - j * s,
-        )
-    }
-
-    /// Whether the block has area.
-    fn has_area(&self) -> bool {
-        self.rect.col0 < self.rect.col1 && self.rect.row0 < self.rect.row1
-    }
-
-    fn check(&self, index: usize) -> Result<()> {
-        let r = &self.rect;
-        let (w, h) = (u64::from(self.grid_width), u64::from(self.grid_height));
-        let ok = self.stride >= 1
-            && r.col0 <= r.col1
-            && r.row0 <= r.row1
-            && w >= 1
-            && h >= 1
-            && self.heights.len() as u64 == w * h
-            && (w - 1) * self.stride >= r.col1 - r.col0
-            && (h - 1) * self.stride >= r.row1 - r.row0
-            && (self.stride == 1 || (w >= 2 && h >= 2))
-            && self.heights.iter().all(|v| v.is_finite());
-        if ok {
-            Ok(())
-        } else {
-            Err(Error::InvalidArgument(format!(
-                "block {index}: a {w}x{h} grid at stride {} does not cover samples \
-                 {},{}..{},{} with finite heights",
-                self.stride, r.col0, r.row0, r.col1, r.row1
-            )))
-        }
-    }
 }
 
 /// A vertex of a block's mesh.

@@ -2,9 +2,10 @@
 //! grouped into error clusters in multiresolution Hilbert order.
 //!
 //! Read the submodules in order: [`domain`] (blocks, levels, padding), [`raster`] (voids
-//! mended), [`measure`] (the static error), [`tree`] (monotone errors, pruning, Hilbert
-//! pre-order), [`cluster`] (cuts). [`Model::build`] runs them all. [`thinning`] measures what
-//! coarsening a geographic grid's polar nodes east-west would save; nothing stores it yet.
+//! mended), [`surface`] (what a grid draws), [`measure`] (the static error), [`thinning`]
+//! (a geographic grid's nodes coarsened east-west by area, format 6), [`tree`] (monotone
+//! errors, pruning, Hilbert pre-order), [`cluster`] (cuts). [`Model::build`] runs them all;
+//! [`edit`] brings a built model up to date with new samples, as a rebuild would.
 
 pub mod cluster;
 pub mod domain;
@@ -12,6 +13,7 @@ pub mod edit;
 pub mod measure;
 pub mod precision;
 pub mod raster;
+pub mod surface;
 pub mod thinning;
 pub mod tree;
 

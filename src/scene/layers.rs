@@ -38,10 +38,9 @@ use serde::Serialize;
 use super::camera::{Camera, GlobeFrame, TerrainFrame};
 use super::load::{load_blocks, PAYLOAD_GAP};
 use super::result::{SceneBlock, SceneOptions, SceneStats};
+use super::surface::{GridBlock, Surface};
 use super::terrain::Terrain;
 use crate::error::{Error, Result};
-use crate::mesh::surface::Surface;
-use crate::mesh::GridBlock;
 use crate::model::SampleRect;
 use crate::store::Source;
 
@@ -396,7 +395,7 @@ impl<'s, S: Source> Layers<'s, S> {
                 for t in ts {
                     let (lon, lat) = seam.point(t);
                     let (c, w) = self.layers[j].sample_of(lon, lat);
-                    let own = crate::mesh::surface::height_at(&grids[k], c, w);
+                    let own = super::surface::height_at(&grids[k], c, w);
                     // Across the seam: every other layer drawing there (at a footprint's
                     // corner several meet; where a layer is cut out on both sides this only
                     // deepens a skirt, which never opens a crack).
@@ -608,7 +607,7 @@ mod tests {
                 ts.dedup();
                 let at = |t: f64| {
                     let (c, r) = if along_row { (t, line) } else { (line, t) };
-                    crate::mesh::surface::height_at(&g, c, r)
+                    crate::scene::surface::height_at(&g, c, r)
                 };
                 for p in ts.windows(2) {
                     for f in [0.25, 0.5, 0.75] {

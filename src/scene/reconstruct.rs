@@ -11,7 +11,7 @@
 
 use crate::error::Result;
 use crate::heightfield::{Heightfield, Metadata};
-use crate::model::measure::surface;
+use crate::model::surface::surface;
 use crate::model::SampleRect;
 use crate::store::{Source, Store};
 

@@ -9,10 +9,12 @@ use std::sync::Arc;
 
 use serde_json::{json, Value};
 
+use super::args::RefineArg;
 use fmrh::export::gltf::{glb_in, GltfBlock, GltfFrame};
 use fmrh::heightfield::Georeference;
-use fmrh::mesh::{build_in, fractal, BlockMesh, Cracks, GridBlock};
+use fmrh::mesh::{build_in, fractal, BlockMesh, Cracks};
 use fmrh::model::SampleRect;
+use fmrh::scene::surface::GridBlock;
 use fmrh::scene::{load_blocks, LoadedBlock, SceneBlock, Terrain, WorldFrame, PAYLOAD_GAP};
 use fmrh::Error;
 
@@ -27,14 +29,6 @@ pub enum CracksArg {
     /// Every block keeps its own surface and hangs a curtain below edges that meet
     /// another block, as deep as both blocks' errors.
     Skirts,
-}
-
-/// Refinement past the data, as `--refine` names it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum RefineArg {
-    /// Seed 004's fractal nodes: noise seeded by the block's key, amplitude from its
-    /// roughness, each depth's error half the one above.
-    Fractal,
 }
 
 /// What `fmrh mesh` writes, as `--format` names it.
@@ -65,9 +59,9 @@ pub struct MeshArgs {
     /// The container or a dataset's directory (a path or an http(s):// or s3:// URL).
     file: PathBuf,
     #[command(flatten)]
-    camera: super::scene::CameraArgs,
+    camera: super::args::CameraArgs,
     #[command(flatten)]
-    view: super::scene::ViewArgs,
+    view: super::args::ViewArgs,
     /// Mesh only this window, inclusive samples c0,r0,c1,r1 (default: what the frustum
     /// sees).
     #[arg(long)]
@@ -335,7 +329,7 @@ impl Meshed {
 /// the camera sees no terrain.
 pub fn mesh_scene(
     file: &std::path::Path,
-    view: &super::scene::ViewArgs,
+    view: &super::args::ViewArgs,
     camera: &fmrh::scene::Camera,
     options: &fmrh::scene::SceneOptions,
     cracks: Cracks,
@@ -416,7 +410,7 @@ fn block_extras(p: &Part, m: &BlockMesh, units: u64) -> Value {
 /// ([`cover_options`]), which answers where the camera's scene is silent.
 fn scene_parts(
     file: &std::path::Path,
-    view: &super::scene::ViewArgs,
+    view: &super::args::ViewArgs,
     camera: &fmrh::scene::Camera,
     options: &fmrh::scene::SceneOptions,
     cover: impl Fn(Option<&Georeference>) -> bool,
@@ -523,7 +517,7 @@ fn cover_options(
 /// georeference the scene of all its data from the same camera.
 fn tile_parts<S: fmrh::store::Source>(
     file: &std::path::Path,
-    view: &super::scene::ViewArgs,
+    view: &super::args::ViewArgs,
     store: &fmrh::Store<S>,
     camera: &fmrh::scene::Camera,
     options: &fmrh::scene::SceneOptions,

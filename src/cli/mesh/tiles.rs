@@ -20,17 +20,18 @@ use std::process::ExitCode;
 use rayon::prelude::*;
 use serde_json::{json, Value};
 
+use super::super::args::RefineArg;
 use fmrh::export::geodetic::{self, GeodeticTile};
 use fmrh::export::geodetic_mesh::{self, Placement, GRID};
 use fmrh::export::quantized_mesh::{self, QuantizedTile};
-use fmrh::mesh::surface::Surface;
-use fmrh::mesh::{BlockMesh, Cracks, GridBlock};
+use fmrh::mesh::{BlockMesh, Cracks};
 use fmrh::model::SampleRect;
+use fmrh::scene::surface::{GridBlock, Surface};
 use fmrh::Error;
 
 use super::{
     block_extras, finish_meshes, refine_fractal, scene_parts, Context, CracksArg, MeshArgs, Part,
-    RefineArg, TilingArg,
+    TilingArg,
 };
 
 /// The most tiles a geodetic tileset is written with: past it, the scene asks for more

@@ -34,8 +34,8 @@ use fmrh::mesh::Cracks;
 use fmrh::scene::{Camera, SceneStats, Terrain, DEFAULT_GAP};
 use fmrh::Error;
 
-use super::mesh::RefineArg;
-use super::scene::{ModeArg, ViewArgs};
+use super::args::RefineArg;
+use super::args::{ModeArg, ViewArgs};
 use http::{Body, Request, Response};
 
 /// The viewer page and its script, served at `/` and `/viewer.js`.
@@ -480,9 +480,9 @@ fn parse_view<'a>(items: &'a [Item], query: &str) -> Result<ViewQuery<'a>, Error
         spacing: None,
     };
     let camera = Camera {
-        eye: super::parse_vec3(need("eye")?, "eye")?,
-        target: super::parse_vec3(need("target")?, "target")?,
-        up: super::parse_vec3(params.get("up").map_or("0,0,1", String::as_str), "up")?,
+        eye: super::args::parse_vec3(need("eye")?, "eye")?,
+        target: super::args::parse_vec3(need("target")?, "target")?,
+        up: super::args::parse_vec3(params.get("up").map_or("0,0,1", String::as_str), "up")?,
         fov_y_deg: fov,
         viewport: view.viewport()?,
     };

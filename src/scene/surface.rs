@@ -1,7 +1,8 @@
 //! The surface a set of blocks draws, as a function of position: the height at any point of
 //! the sample plane, integer or not, from the block that owns it.
 //!
-//! A mesh ([`super::build`]) puts vertices at the blocks' own grid points. A resampler
+//! [`GridBlock`] is a block as it draws: its footprint, stride and grid, in samples. A mesh
+//! (`crate::mesh::build`) puts vertices at the blocks' own grid points. A resampler
 //! that puts vertices elsewhere (a tile of another pyramid, whose grid follows longitude and
 //! latitude rather than samples) needs the surface between them: inside a grid cell, the
 //! triangulation of `format-spec/model.md` §4, split along the north-west to south-east
@@ -17,8 +18,94 @@
 //! Lookup is through a grid of buckets as small as the smallest block (capped in number),
 //! each listing the blocks that meet it, in priority order.
 
-use super::GridBlock;
+use crate::error::{Error, Result};
+use crate::model::surface::surface;
 use crate::model::SampleRect;
+use crate::scene::{LoadedBlock, SceneBlock};
+
+/// A block to mesh: its footprint and the grid its surface is drawn over.
+#[derive(Clone, Copy, Debug)]
+pub struct GridBlock<'a> {
+    /// The footprint, inclusive samples, clipped to the data (`col0 < col1`, `row0 < row1`
+    /// for a block with area; a block without one is given no triangles).
+    pub rect: SampleRect,
+    /// Samples between grid points.
+    pub stride: u64,
+    /// Grid points along a row of `heights`; the grid starts at the footprint's north-west
+    /// corner and may reach past the data (padding, mended).
+    pub grid_width: u32,
+    /// Rows of `heights`.
+    pub grid_height: u32,
+    /// The grid's heights, row-major from the north-west.
+    pub heights: &'a [f32],
+    /// The block's `e*`, in metres.
+    pub error: f64,
+}
+
+impl<'a> GridBlock<'a> {
+    /// Scene block `b` as the mesh takes it: its footprint and `e*`, and the grid `loaded`
+    /// holds for it, `stride` samples apart (its level's).
+    pub fn of(b: &SceneBlock, loaded: &'a LoadedBlock, stride: u64) -> GridBlock<'a> {
+        GridBlock {
+            rect: b.rect(),
+            stride,
+            grid_width: loaded.width,
+            grid_height: loaded.height,
+            heights: &loaded.heights,
+            error: b.error,
+        }
+    }
+
+    /// The height the block's surface draws at sample `(col, row)` of its footprint.
+    pub(crate) fn height_at(&self, col: u64, row: u64) -> f64 {
+        let (u, v, s) = (col - self.rect.col0, row - self.rect.row0, self.stride);
+        let w = u64::from(self.grid_width);
+        let at = |i: u64, j: u64| self.heights[(j * w + i) as usize];
+        if u % s == 0 && v % s == 0 {
+            return f64::from(at(u / s, v / s));
+        }
+        let i = (u / s).min(w - 2);
+        let j = (v / s).min(u64::from(self.grid_height) - 2);
+        surface(
+            at(i, j),
+            at(i + 1, j),
+            at(i, j + 1),
+            at(i + 1, j + 1),
+            s,
+            u - i * s,
+            v - j * s,
+        )
+    }
+
+    /// Whether the block has area.
+    pub(crate) fn has_area(&self) -> bool {
+        self.rect.col0 < self.rect.col1 && self.rect.row0 < self.rect.row1
+    }
+
+    pub(crate) fn check(&self, index: usize) -> Result<()> {
+        let r = &self.rect;
+        let (w, h) = (u64::from(self.grid_width), u64::from(self.grid_height));
+        let ok = self.stride >= 1
+            && r.col0 <= r.col1
+            && r.row0 <= r.row1
+            && w >= 1
+            && h >= 1
+            && self.heights.len() as u64 == w * h
+            && (w - 1) * self.stride >= r.col1 - r.col0
+            && (h - 1) * self.stride >= r.row1 - r.row0
+            && (self.stride == 1 || (w >= 2 && h >= 2))
+            && self.heights.iter().all(|v| v.is_finite());
+        if ok {
+            Ok(())
+        } else {
+            Err(Error::InvalidArgument(format!(
+                "block {index}: a {w}x{h} grid at stride {} does not cover samples \
+                 {},{}..{},{} with finite heights",
+                self.stride, r.col0, r.row0, r.col1, r.row1
+            )))
+        }
+    }
+}
 
 /// The most buckets an index keeps (about 32 MiB of lists at worst).
 const MAX_BUCKETS: u64 = 1 << 22;
