@@ -226,18 +226,7 @@ impl<'d> DatasetScheduler<'d> {
                 None => super::scene::in_tile(camera, r, &self.frame),
             };
             let f = s.frame(&local)?;
-            let x = f.stats;
-            stats.visible += x.visible;
-            stats.loaded += x.loaded;
-            stats.loaded_triangles += x.loaded_triangles;
-            stats.loaded_bytes += x.loaded_bytes;
-            stats.prefetch_hits += x.prefetch_hits;
-            stats.evicted += x.evicted;
-            stats.resident += x.resident;
-            stats.resident_bytes += x.resident_bytes;
-            stats.schedule_ns += x.schedule_ns;
-            stats.load_ns += x.load_ns;
-            stats.max_screen_error = stats.max_screen_error.max(x.max_screen_error);
+            stats.merge(&f.stats);
             tiles += 1;
         }
         stats.schedule_ns += choose_ns;

@@ -386,15 +386,7 @@ impl Dataset {
     /// metadata carries the window's georeference and the dataset's spacing.
     pub fn read_window(&self, window: SampleRect) -> Result<Heightfield> {
         let grid = self.grid();
-        if window.col0 > window.col1
-            || window.row0 > window.row1
-            || window.intersect(&grid) != Some(window)
-        {
-            return Err(Error::InvalidArgument(format!(
-                "window {},{},{},{} is not inside the dataset 0,0,{},{}",
-                window.col0, window.row0, window.col1, window.row1, grid.col1, grid.row1
-            )));
-        }
+        window.check_inside(&grid, "dataset")?;
         let (w, h) = (window.col1 - window.col0 + 1, window.row1 - window.row0 + 1);
         crate::heightfield::check_dimensions(w, h)?;
         let mut samples = vec![f32::NAN; (w * h) as usize];

@@ -222,12 +222,7 @@ impl Dataset {
         let view = camera.view()?;
         if let Some(w) = options.window {
             let grid = self.grid();
-            if w.col0 > w.col1 || w.row0 > w.row1 || w.intersect(&grid) != Some(w) {
-                return Err(Error::InvalidArgument(format!(
-                    "window {},{},{},{} is not inside the dataset 0,0,{},{}",
-                    w.col0, w.row0, w.col1, w.row1, grid.col1, grid.row1
-                )));
-            }
+            w.check_inside(&grid, "dataset")?;
         }
         let tiles = self.tiles_seen(camera, options.window, &world)?;
         // Uniform mode: one static bound over the view, from the nearest tile part.
@@ -299,21 +294,7 @@ impl Dataset {
             };
             let r = tile.rect();
             let s = &scene.stats;
-            stats.blocks += s.blocks;
-            stats.samples += s.samples;
-            stats.triangles += s.triangles;
-            stats.bytes += s.bytes;
-            stats.quadrants += s.quadrants;
-            stats.ranges += s.ranges;
-            stats.index_pages += s.index_pages;
-            stats.node_reads += s.node_reads;
-            stats.max_error = stats.max_error.max(s.max_error);
-            stats.max_screen_error = stats.max_screen_error.max(s.max_screen_error);
-            if let Some(t) = s.threshold {
-                stats.threshold = Some(stats.threshold.map_or(t, |m: f64| m.max(t)));
-            }
-            stats.p_min = s.p_min.or(stats.p_min);
-            stats.allowed_error = s.allowed_error.or(stats.allowed_error);
+            stats.merge(s);
             parts.push(TilePart {
                 tile: tile.index,
                 name: tile.name().to_string(),
@@ -578,15 +559,7 @@ impl Dataset {
         window: SampleRect,
     ) -> Result<crate::scene::Reconstruction> {
         let grid = self.grid();
-        if window.col0 > window.col1
-            || window.row0 > window.row1
-            || window.intersect(&grid) != Some(window)
-        {
-            return Err(Error::InvalidArgument(format!(
-                "window {},{},{},{} is not inside the dataset 0,0,{},{}",
-                window.col0, window.row0, window.col1, window.row1, grid.col1, grid.row1
-            )));
-        }
+        window.check_inside(&grid, "dataset")?;
         let w = (window.col1 - window.col0 + 1) as usize;
         let h = (window.row1 - window.row0 + 1) as usize;
         let mut values = vec![f64::NAN; w * h];

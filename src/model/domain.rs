@@ -61,6 +61,26 @@ impl SampleRect {
     pub fn samples(&self) -> u64 {
         (self.col1 - self.col0 + 1) * (self.row1 - self.row0 + 1)
     }
+
+    /// `Ok` when this window lies wholly inside `outer` (the data, a dataset's grid), else
+    /// the invalid-argument error every reader of a window gives, naming `outer` as `what`.
+    pub fn check_inside(&self, outer: &SampleRect, what: &str) -> Result<()> {
+        if self.col0 <= self.col1 && self.row0 <= self.row1 && self.intersect(outer) == Some(*self)
+        {
+            return Ok(());
+        }
+        Err(Error::InvalidArgument(format!(
+            "window {},{},{},{} is not inside the {what} {},{},{},{}",
+            self.col0,
+            self.row0,
+            self.col1,
+            self.row1,
+            outer.col0,
+            outer.row0,
+            outer.col1,
+            outer.row1
+        )))
+    }
 }
 
 /// The quadtree's geometry for one data grid and block size.

@@ -263,24 +263,15 @@ impl<'s, S: Source> Layers<'s, S> {
                     hidden += 1;
                     continue;
                 }
-                stats.blocks += 1;
-                stats.samples += side * side;
-                stats.triangles += 2 * (side - 1) * (side - 1);
-                stats.bytes += u64::from(b.payload.len);
-                stats.max_error = stats.max_error.max(b.error);
-                stats.max_screen_error = stats.max_screen_error.max(b.screen_error);
+                stats.add_block(&b, side);
                 blocks.push(LayerBlock {
                     layer: i,
                     block: b,
                     cutouts,
                 });
             }
-            let s = scene.stats;
-            stats.quadrants += s.quadrants;
-            stats.ranges += s.ranges;
-            stats.index_pages += s.index_pages;
-            stats.node_reads += s.node_reads;
-            per_layer.push(s);
+            stats.add_search(&scene.stats);
+            per_layer.push(scene.stats);
         }
         stats.schedule_ns = started.elapsed().as_nanos() as u64;
         Ok(LayeredScene {

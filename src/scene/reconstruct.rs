@@ -60,15 +60,7 @@ pub fn reconstruct<S: Source>(
 ) -> Result<Reconstruction> {
     let d = *store.domain();
     let data = d.data_rect();
-    if window.col0 > window.col1
-        || window.row0 > window.row1
-        || window.intersect(&data) != Some(window)
-    {
-        return Err(crate::Error::InvalidArgument(format!(
-            "window {},{},{},{} is not inside the data 0,0,{},{}",
-            window.col0, window.row0, window.col1, window.row1, data.col1, data.row1
-        )));
-    }
+    window.check_inside(&data, "data")?;
     let w = (window.col1 - window.col0 + 1) as usize;
     let h = (window.row1 - window.row0 + 1) as usize;
     let mut values = vec![f64::NAN; w * h];

@@ -147,6 +147,46 @@ pub struct SceneStats {
     pub max_screen_error: f64,
 }
 
+impl SceneStats {
+    /// Counts `block`, drawn with `side`-sample grids, among the answer: its grid's samples
+    /// and triangles, its payload bytes, and its errors if they are the largest so far.
+    pub fn add_block(&mut self, block: &SceneBlock, side: u64) {
+        self.blocks += 1;
+        self.samples += side * side;
+        self.triangles += 2 * (side - 1) * (side - 1);
+        self.bytes += u64::from(block.payload.len);
+        self.max_error = self.max_error.max(block.error);
+        self.max_screen_error = self.max_screen_error.max(block.screen_error);
+    }
+
+    /// Adds what searching cost another selection (a layer's): its quadrants, range scans,
+    /// index pages and node reads.
+    pub fn add_search(&mut self, other: &SceneStats) {
+        self.quadrants += other.quadrants;
+        self.ranges += other.ranges;
+        self.index_pages += other.index_pages;
+        self.node_reads += other.node_reads;
+    }
+
+    /// Adds another selection (a tile's) whole: every count summed, the largest errors and
+    /// uniform threshold kept, the first nearest distance and allowed error taken. The time
+    /// is not added: selections may run side by side, so the caller times the whole.
+    pub fn merge(&mut self, other: &SceneStats) {
+        self.blocks += other.blocks;
+        self.samples += other.samples;
+        self.triangles += other.triangles;
+        self.bytes += other.bytes;
+        self.add_search(other);
+        self.max_error = self.max_error.max(other.max_error);
+        self.max_screen_error = self.max_screen_error.max(other.max_screen_error);
+        if let Some(t) = other.threshold {
+            self.threshold = Some(self.threshold.map_or(t, |m: f64| m.max(t)));
+        }
+        self.p_min = other.p_min.or(self.p_min);
+        self.allowed_error = other.allowed_error.or(self.allowed_error);
+    }
+}
+
 /// The answer to one view.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Scene {

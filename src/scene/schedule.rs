@@ -160,6 +160,24 @@ pub struct FrameStats {
     pub max_screen_error: f64,
 }
 
+impl FrameStats {
+    /// Adds another frame's (a tile's, in a dataset's frame): every count and time summed,
+    /// the largest screen-space error kept.
+    pub fn merge(&mut self, other: &FrameStats) {
+        self.visible += other.visible;
+        self.loaded += other.loaded;
+        self.loaded_triangles += other.loaded_triangles;
+        self.loaded_bytes += other.loaded_bytes;
+        self.prefetch_hits += other.prefetch_hits;
+        self.evicted += other.evicted;
+        self.resident += other.resident;
+        self.resident_bytes += other.resident_bytes;
+        self.schedule_ns += other.schedule_ns;
+        self.load_ns += other.load_ns;
+        self.max_screen_error = self.max_screen_error.max(other.max_screen_error);
+    }
+}
+
 struct Resident {
     block: SceneBlock,
     loaded: LoadedBlock,

@@ -68,13 +68,10 @@ impl<S: Source> Terrain<'_, S> {
             mut out, mut stats, ..
         } = search;
         self.finish(&view, options.window, &mut out);
-        let b = u64::from(d.block_size());
-        stats.blocks = out.len() as u64;
-        stats.samples = stats.blocks * b * b;
-        stats.triangles = stats.blocks * 2 * (b - 1) * (b - 1);
-        stats.bytes = out.iter().map(|b| u64::from(b.payload.len)).sum();
-        stats.max_error = out.iter().map(|b| b.error).fold(0.0, f64::max);
-        stats.max_screen_error = out.iter().map(|b| b.screen_error).fold(0.0, f64::max);
+        let side = u64::from(d.block_size());
+        for block in &out {
+            stats.add_block(block, side);
+        }
         stats.schedule_ns = started.elapsed().as_nanos() as u64;
         Ok(Scene {
             mode: options.mode,

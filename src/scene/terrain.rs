@@ -168,12 +168,7 @@ impl<'s, S: Source> Terrain<'s, S> {
         let data = d.data_rect();
         let quadrants = match window {
             Some(w) => {
-                if w.col0 > w.col1 || w.row0 > w.row1 || w.intersect(&data) != Some(w) {
-                    return Err(Error::InvalidArgument(format!(
-                        "window {},{},{},{} is not inside the data 0,0,{},{}",
-                        w.col0, w.row0, w.col1, w.row1, data.col1, data.row1
-                    )));
-                }
+                w.check_inside(&data, "data")?;
                 let blocks = ranges::window_blocks(&d, &w);
                 ranges::decompose(&d, ranges::window_classifier(&d, blocks))
             }

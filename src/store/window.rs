@@ -56,15 +56,7 @@ impl<S: Source> Store<S> {
     ) -> Result<Vec<f32>> {
         let d = *self.domain();
         let data = d.data_rect();
-        if window.col0 > window.col1
-            || window.row0 > window.row1
-            || window.intersect(&data) != Some(window)
-        {
-            return Err(Error::InvalidArgument(format!(
-                "window {},{},{},{} is not inside the data 0,0,{},{}",
-                window.col0, window.row0, window.col1, window.row1, data.col1, data.row1
-            )));
-        }
+        window.check_inside(&data, "data")?;
         // Refuse to allocate more than the file could back. A 1.x file holds four bytes per
         // data sample. A 2.x or 3.x file codes its payloads and shares identical ones (a
         // thousand sea blocks may name one constant payload of nine bytes), so the bound is
