@@ -19,7 +19,7 @@
 //! | [`directory`] | the cluster directory | §6.5 |
 //! | [`tables`] | the list of a state's tables | §6 |
 //! | [`payload`] | physical blocks and coarse grids | §7 |
-//! | [`invariant`] | the numbered invariants | §9 |
+//! | [`Invariant`] (in `crate::error`) | the numbered invariants | §9 |
 //! | [`manifest`] | a dataset's manifest | `dataset.md` |
 //!
 //! Adding a section means one file here, one entry in [`tables`] (for a table) or a root in
@@ -82,7 +82,6 @@ pub mod bundle;
 pub mod commit;
 pub mod dataset;
 pub mod directory;
-pub mod invariant;
 pub mod manifest;
 pub mod page;
 pub mod payload;
@@ -90,6 +89,7 @@ pub mod records;
 pub mod tables;
 pub mod tree;
 
+pub use crate::error::{Invariant, Violation};
 pub use blob::BlobRef;
 pub use commit::{
     CommitRecord, StateRoots, COMMIT_FLAGS_KNOWN, COMMIT_PAYLOAD_SLACK, COMMIT_RECORD_LEN,
@@ -97,7 +97,6 @@ pub use commit::{
 };
 pub use dataset::DatasetHeader;
 pub use directory::{ClusterInfo, ClusterRecord, EdgeRange};
-pub use invariant::{Invariant, Violation};
 pub use page::{tag, PageHeader, PAGE_HEADER_LEN};
 pub use payload::PayloadRef;
 pub use records::{

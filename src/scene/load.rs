@@ -118,7 +118,9 @@ pub fn load_blocks_reusing<S: Source>(
             nodes.push(None);
         } else {
             let index = block.node.ok_or_else(|| {
-                crate::Error::Internal("a block above the finest level without a node".into())
+                crate::error::Error::Internal(
+                    "a block above the finest level without a node".into(),
+                )
             })?;
             records.push(None);
             nodes.push(Some(store.node(index)?));
@@ -255,7 +257,9 @@ pub fn load_blocks_reusing<S: Source>(
             })
         } else {
             let node = node.as_ref().ok_or_else(|| {
-                crate::Error::Internal("a block above the finest level without a node".into())
+                crate::error::Error::Internal(
+                    "a block above the finest level without a node".into(),
+                )
             })?;
             let parent = node
                 .grid_against_parent

@@ -209,7 +209,7 @@ impl<S: Source + 'static> Scheduler<S> {
             ("cache radius", options.cache_radius),
         ] {
             if !(v.is_finite() && v >= 0.0) {
-                return Err(crate::Error::InvalidArgument(format!(
+                return Err(crate::error::Error::InvalidArgument(format!(
                     "{what} {v}: must be finite and >= 0"
                 )));
             }

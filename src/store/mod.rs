@@ -29,7 +29,7 @@
 //!   reuses a page of it while the store lives: it reads exactly its state while writers
 //!   commit. Where it cannot register ([`Store::is_registered`] is false), it is still safe:
 //!   a page a later state reused fails its binding (format §4) and the read returns
-//!   [`crate::Error::Superseded`] (open again), never another state's bytes.
+//!   [`crate::error::Error::Superseded`] (open again), never another state's bytes.
 //! * [`Store::open_mapped`] maps the file and registers like [`Store::open`]. It is `unsafe`
 //!   because a mapping turns someone else's writes into undefined behaviour: fmrh's writers
 //!   leave a registered state's pages alone, but a tool that ignores the registration, or a
@@ -39,8 +39,8 @@
 //!   while transactions commit.
 //!
 //! All of them give the same API, because everything above the [`Source`] works on `&[u8]`.
-//! Errors name the file: [`crate::Error::Corrupt`] for a broken invariant, `Io` when the
-//! operating system fails a read, [`crate::Error::Superseded`] when an unregistered reader's
+//! Errors name the file: [`crate::error::Error::Corrupt`] for a broken invariant, `Io` when the
+//! operating system fails a read, [`crate::error::Error::Superseded`] when an unregistered reader's
 //! state was reused by a later commit.
 //!
 //! # Rooms
@@ -205,7 +205,7 @@ impl Store<MmapSource> {
     /// registered, that no writer has the file open. Use [`Store::open`] when this cannot be
     /// promised.
     pub unsafe fn open_mapped(path: &Path) -> Result<Self> {
-        let file = File::open(path).map_err(|e| crate::Error::io(path, e))?;
+        let file = File::open(path).map_err(|e| crate::error::Error::io(path, e))?;
         let mut attempts = 0;
         loop {
             // SAFETY: our caller upholds the no-modification contract stated above.
@@ -214,13 +214,13 @@ impl Store<MmapSource> {
             match Store::from_source(src) {
                 // A writer grew the file and published a state past the mapping's end after
                 // it was made: map again. A file truly shorter than its state keeps its length.
-                Err(crate::Error::Corrupt {
-                    invariant: crate::format::Invariant::FileLength,
+                Err(crate::error::Error::Corrupt {
+                    invariant: crate::error::Invariant::FileLength,
                     ..
                 }) if attempts < 100
                     && file
                         .metadata()
-                        .map_err(|e| crate::Error::io(path, e))?
+                        .map_err(|e| crate::error::Error::io(path, e))?
                         .len()
                         > mapped =>
                 {
@@ -410,8 +410,8 @@ impl<S: Source> Store<S> {
             btree::walk(&pages, &tree, spec, &mut seen, &mut |_, _| Ok(()))?;
         }
         let _ = self.metadata_pages.set(seen);
-        self.metadata_pages
-            .get()
-            .ok_or_else(|| crate::Error::Internal("the metadata page set was not kept".into()))
+        self.metadata_pages.get().ok_or_else(|| {
+            crate::error::Error::Internal("the metadata page set was not kept".into())
+        })
     }
 }
