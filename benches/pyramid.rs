@@ -55,7 +55,7 @@ fn grid_samples(model: &Model, level: u8, x: u32, y: u32) -> Samples {
     let d = model.domain();
     let fp = d.footprint(level, x, y);
     let s = d.stride(level);
-    let (gw, gh) = fmrh::format::payload::grid_dims(d, level, x, y);
+    let (gw, gh) = d.grid_dims(level, x, y);
     let data = d.data_rect();
     Samples {
         cols: (0..u64::from(gw))

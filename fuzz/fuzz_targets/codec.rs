@@ -10,6 +10,7 @@
 #![no_main]
 
 use fmrh::codec::parent::{decode_against, encode_against, Axes, Parent};
+use fmrh::format::payload::{self, ParentGrid, Placement};
 use libfuzzer_sys::fuzz_target;
 
 /// Every other coordinate of `0..n`, and the last (a parent's axis, clamped at the edge).
@@ -48,10 +49,29 @@ fuzz_target!(|data: &[u8]| {
         // The stored payload forms around the codes (format 2.0, container.md §7).
         let (w, h) = (width as u32, rows as u32);
         let voids = u32::from(mode >> 2) % (w * h + 1);
-        let _ = fmrh::format::payload::load_block(rest, w, h, voids);
-        // Format 6: grids thinned by up to 2^7 (the decoder refuses what a grid cannot hold).
+        let rect = fmrh::model::SampleRect {
+            col0: 0,
+            row0: 0,
+            col1: u64::from(w) - 1,
+            row1: u64::from(h) - 1,
+        };
+        let block = Placement::block(rect, voids);
+        let _ = payload::decode(rest, &block, None);
+        // Format 6: grids thinned by up to 2^7 (the decoder refuses what a grid cannot hold):
+        // the root of a w x h grid in blocks of 65.
         let thin = (mode >> 3) & 7;
-        let _ = fmrh::format::payload::load_grid(rest, (w, h), (mode & 2 != 0, mode & 4 != 0), thin);
+        if let Ok(domain) = fmrh::model::Domain::new(w, h, 65) {
+            let grid = Placement::Grid {
+                domain,
+                level: 0,
+                x: 0,
+                y: 0,
+                has_voids: mode & 2 != 0,
+                flagged_bitmap: mode & 4 != 0,
+                thin,
+            };
+            let _ = payload::decode(rest, &grid, None);
+        }
         let (cols, rows_at): (Vec<u64>, Vec<u64>) =
             ((0..width as u64).collect(), (0..rows as u64).collect());
         let (pc, pr) = (parent_axis(width), parent_axis(rows));
@@ -61,7 +81,9 @@ fuzz_target!(|data: &[u8]| {
         let at = Axes { cols: &cols, rows: &rows_at };
         let parent = Parent { at: Axes { cols: &pc, rows: &pr }, heights: &heights };
         let _ = decode_against(rest, at, parent, &mut out);
-        let _ = fmrh::format::payload::load_block_against(rest, (w, h, voids), at, parent);
+        if let Some(p) = ParentGrid::from_parts(pc.clone(), pr.clone(), heights.clone()) {
+            let _ = payload::decode(rest, &block, Some(&p));
+        }
         return;
     }
     let n = width * rows;

@@ -131,7 +131,7 @@ pub const MAGIC: [u8; 8] = *b"FMRH\r\n\x1a\n";
 /// 3.0 may keep a small state's structured pages in a compressed *metadata bundle*
 /// ([`bundle`]) that the commit record names: a 2.x reader would find the tables missing.
 /// Everything else is as in 2.1, so a 2.x file is read as it is and a transaction on it
-/// writes a 3.0 state. 2.0 stored payloads coded ([`payload::store_block`],
+/// writes a 3.0 state. 2.0 stored payloads coded ([`payload::encode`],
 /// [`crate::codec`]) where 1.x stored raw `f32`: a 1.x file is read as it is, and refused
 /// for writing (it would mix raw and coded payloads): rebuild it with `fmrh build`.
 pub const FORMAT_MAJOR: u16 = 6;

@@ -45,10 +45,13 @@
 //!
 //! # Rooms
 //!
-//! `open` (slot choice, and the walk for writers), `pagecache` (checked pages kept, reads
-//! counted), `read` (records, payloads, scans), `window`
-//! (assembling samples from blocks), `btree` (following tree pages), `verify` (the validator),
-//! `write` (fresh files), `txn` (transactions), `io` and `source` (where bytes come from).
+//! `open` (slot choice, and the walk for writers), `slots` (the commit slots as the source
+//! holds them now, and the superseded-or-corrupt triage), `pagecache` (checked pages kept,
+//! reads counted), `btree` (following tree pages), `read` (records, payload reads, scans),
+//! `decode` (payloads decoded with the ancestors they are coded against), `window`
+//! (assembling samples from blocks), `verify` (the validator), `write` (fresh files), `txn`
+//! (transactions), and where bytes come from: `io`, `source`, `any` (a file or a URL),
+//! `remote` (HTTP and S3).
 
 // Values read from a file are converted with checks, never truncated by `as`.
 #![warn(clippy::cast_possible_truncation)]
@@ -57,6 +60,7 @@ mod ahead;
 mod any;
 pub(crate) mod btree;
 mod bundled;
+mod decode;
 pub mod io;
 pub mod lock;
 pub(crate) mod open;
@@ -77,11 +81,13 @@ use std::path::Path;
 
 use serde::Serialize;
 
+pub use crate::format::payload::ParentGrid;
 pub use crate::format::{ClusterInfo, FreePage, PayloadRef, ScanEntry, StoredBlock, StoredNode};
 pub use ahead::Ahead;
 pub use any::{is_url, AnySource};
+pub use decode::{Block, Grid, HeldGrid, LoadedBlock, Wanted, ANCESTOR_CACHE};
 pub use pagecache::ReadStats;
-pub use read::{Block, Children, CodeScan, Grid, HilbertScan, Layout, ParentGrid, ANCESTOR_CACHE};
+pub use read::{Children, CodeScan, HilbertScan, Layout};
 pub use source::{Bytes, Counted, FileSource, MmapSource, RequestStats, Source};
 pub use txn::{CommitSummary, Container, Recovery, Snapshot, WriteTxn};
 pub use verify::{

@@ -223,7 +223,7 @@ pub(super) fn check_nodes<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut 
                 }
             }
         } else {
-            let (gw, gh) = payload::grid_dims(d, level, x, y);
+            let (gw, gh) = d.grid_dims(level, x, y);
             let raw = payload::grid_len(gw, gh, flags & NODE_GRID_HAS_VOIDS != 0);
             let len = u64::from(n.payload_len.get());
             // 1.x stores the layout as it is; 2.x codes it, within the stored form's bound.

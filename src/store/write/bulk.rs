@@ -199,7 +199,7 @@ fn write_payloads<W: Write>(
     let raw_len = |item: &Item| match *item {
         Item::Grid { node } => {
             let n = tree.node(node);
-            let (gw, gh) = payload::grid_dims(&domain, n.level, n.x, n.y);
+            let (gw, gh) = domain.grid_dims(n.level, n.x, n.y);
             payload::grid_len(gw, gh, grid_voids[node as usize])
         }
         Item::Block { x, y, .. } => shapes[block_index(x, y, cols)].raw_len(),

@@ -7,13 +7,12 @@
 
 use rayon::prelude::*;
 
-use crate::codec::parent::{Axes, Parent};
 use zerocopy::IntoBytes;
 
 use crate::error::{Error, Result};
 use crate::format::bundle;
 use crate::format::directory::{self, ClusterInfo, EdgeRange};
-use crate::format::payload::{self, PayloadRef};
+use crate::format::payload::{self, ParentGrid, PayloadRef, Placement};
 use crate::format::tables;
 use crate::format::{
     tag, AdjacencyEntry, BlobRef, BlockRecord, IndexEntry, NodeRecord, ScanEntry, StoredBlock,
@@ -369,7 +368,7 @@ pub(crate) fn grid_void_flags(model: &Model) -> Vec<bool> {
                 return false;
             }
             let s = d.stride(n.level);
-            let (gw, gh) = payload::grid_dims(d, n.level, n.x, n.y);
+            let (gw, gh) = d.grid_dims(n.level, n.x, n.y);
             (0..u64::from(gh)).any(|j| {
                 (0..u64::from(gw))
                     .any(|k| !model.raster().is_valid(fp.col0 + k * s, fp.row0 + j * s))
@@ -395,25 +394,19 @@ pub(crate) fn encode_grid(
     against_parent: bool,
     quick: bool,
 ) -> (Vec<u8>, bool) {
-    let (g, gw, gh) = clipped_grid(model, node);
+    let (g, _, _) = clipped_grid(model, node);
     let layout = payload::encode_grid(&g.heights, &g.void, has_voids);
     let coding = coding(model, raw, quick);
     let n = model.tree().node(node);
-    let alone = payload::store_grid(&layout, (gw, gh), n.thin, coding);
+    let placement = Placement::node_grid(model.domain(), (n.level, n.x, n.y), has_voids, n.thin);
+    let alone = payload::encode(&layout, &placement, coding, None).unwrap_or_default();
     let against = (against_parent && !raw && n.parent != NO_PARENT)
         .then(|| {
-            let p = ParentOf::new(model, n.parent);
-            let (cols, rows) = payload::stored_grid_axes(model.domain(), n.level, n.x, n.y, n.thin);
-            payload::store_grid_against(
+            payload::encode(
                 &layout,
-                (gw, gh),
-                n.thin,
+                &placement,
                 coding,
-                Axes {
-                    cols: &cols,
-                    rows: &rows,
-                },
-                p.parent(),
+                Some(&parent_grid(model, n.parent)),
             )
         })
         .flatten();
@@ -437,39 +430,18 @@ fn coding(model: &Model, raw: bool, quick: bool) -> payload::Coding {
 /// A node's grid as a payload coded against it sees it: its stored heights (the model's,
 /// which its payload decodes to, whether written now or kept; only the kept columns of a
 /// grid stored thinned, format 6) and where they lie.
-struct ParentOf {
-    heights: Vec<f32>,
-    cols: Vec<u64>,
-    rows: Vec<u64>,
+fn parent_grid(model: &Model, node: u32) -> ParentGrid {
+    let n = model.tree().node(node);
+    let (g, _, _) = clipped_grid(model, node);
+    // Whether it has voids does not change where its heights lie.
+    let placement = Placement::node_grid(model.domain(), (n.level, n.x, n.y), false, n.thin);
+    ParentGrid::new(node, PayloadRef::default(), &placement, &g.heights)
 }
 
-impl ParentOf {
-    fn new(model: &Model, node: u32) -> ParentOf {
-        let n = model.tree().node(node);
-        let (g, gw, _) = clipped_grid(model, node);
-        let (cols, rows) = payload::stored_grid_axes(model.domain(), n.level, n.x, n.y, n.thin);
-        ParentOf {
-            heights: payload::kept_heights(&g.heights, gw, n.thin),
-            cols,
-            rows,
-        }
-    }
-
-    fn parent(&self) -> Parent<'_> {
-        Parent {
-            at: Axes {
-                cols: &self.cols,
-                rows: &self.rows,
-            },
-            heights: &self.heights,
-        }
-    }
-}
-
-/// The grid of `node` clipped to its stored `gw × gh` (see [`payload::grid_dims`]).
+/// The grid of `node` clipped to its stored `gw × gh` (see [`crate::model::Domain::grid_dims`]).
 pub(crate) fn clipped_grid(model: &Model, node: u32) -> (NodeGrid, u32, u32) {
     let n = model.tree().node(node);
-    let (gw, gh) = payload::grid_dims(model.domain(), n.level, n.x, n.y);
+    let (gw, gh) = model.domain().grid_dims(n.level, n.x, n.y);
     let mut g = model.node_grid(node);
     let b = g.size as usize;
     let (w, h) = (gw as usize, gh as usize);
@@ -502,21 +474,11 @@ pub(crate) fn encode_block(
         (r.col0..=r.col1).map(move |col| (raster.value(col, row), raster.is_valid(col, row)))
     });
     let raw = payload::encode_block(samples, usize::try_from(r.samples()).unwrap_or(0));
-    let (w, h) = shape.size();
     let coding = coding(model, raw_codes, quick);
-    let alone = payload::store_block(&raw, w, h, shape.void_count, coding);
+    let placement = Placement::block(r, shape.void_count);
+    let alone = payload::encode(&raw, &placement, coding, None).unwrap_or_default();
     let against = parent.filter(|_| !raw_codes).and_then(|p| {
-        let (cols, rows) = payload::block_axes(&r);
-        let bytes = payload::store_block_against(
-            &raw,
-            (w, h, shape.void_count),
-            coding,
-            Axes {
-                cols: &cols,
-                rows: &rows,
-            },
-            ParentOf::new(model, p).parent(),
-        )?;
+        let bytes = payload::encode(&raw, &placement, coding, Some(&parent_grid(model, p)))?;
         Some((bytes, p))
     });
     match against {
