@@ -47,7 +47,8 @@
 //!
 //! `open` (slot choice, and the walk for writers), `slots` (the commit slots as the source
 //! holds them now, and the superseded-or-corrupt triage), `pagecache` (checked pages kept,
-//! reads counted), `btree` (following tree pages), `read` (records, payload reads, scans),
+//! reads counted), `pages` (a checked page, from the file, the bundle or the cache), `btree`
+//! (following tree pages), `read` (records, payload reads, scans),
 //! `decode` (payloads decoded with the ancestors they are coded against), `window`
 //! (assembling samples from blocks), `verify` (the validator), `write` (fresh files), `txn`
 //! (transactions), and where bytes come from: `io`, `source`, `any` (a file or a URL),
@@ -65,6 +66,7 @@ pub mod io;
 pub mod lock;
 pub(crate) mod open;
 pub mod pagecache;
+pub(crate) mod pages;
 mod read;
 #[cfg(feature = "remote")]
 pub mod remote;
@@ -116,11 +118,11 @@ pub struct Store<S: Source = FileSource> {
     clusters: Vec<ClusterInfo>,
     /// Every metadata page of the state, once walked (at open for writers and the
     /// validator, on demand otherwise).
-    metadata_pages: std::sync::OnceLock<btree::PageSet>,
+    metadata_pages: std::sync::OnceLock<pages::PageSet>,
     registered: bool,
     /// Checked pages, and what the store read.
     cache: pagecache::PageCache,
-    /// See [`btree::Pages::wrap_guard`].
+    /// See [`pages::Pages::wrap_guard`].
     wrap_guard: Option<u64>,
     /// What opening read.
     open_reads: ReadStats,
@@ -343,8 +345,8 @@ impl<S: Source> Store<S> {
     }
 
     /// What binds pages to this store's state.
-    pub(crate) fn binding(&self) -> btree::Binding {
-        btree::Binding {
+    pub(crate) fn binding(&self) -> pages::Binding {
+        pages::Binding {
             txn: self.txn_id(),
             txn_tag: self.commit.page_txn_tag(),
         }
@@ -388,16 +390,16 @@ impl<S: Source> Store<S> {
     /// Every metadata page of the state (blobs and every table page), walked and checked
     /// the first time it is asked for: the tree shapes (I-7) and no page reached twice
     /// (I-8). Writers rely on it to know which pages a state owns.
-    pub(crate) fn metadata_pages(&self) -> Result<&btree::PageSet> {
+    pub(crate) fn metadata_pages(&self) -> Result<&pages::PageSet> {
         if let Some(set) = self.metadata_pages.get() {
             return Ok(set);
         }
-        let pages = btree::Pages {
+        let pages = pages::Pages {
             check: true,
             cache: None,
             ..self.pages()
         };
-        let mut seen = btree::PageSet::with_bundle(self.page_count, self.bundle_pages());
+        let mut seen = pages::PageSet::with_bundle(self.page_count, self.bundle_pages());
         let roots = &self.commit.roots;
         for blob in [&roots.dataset_header, &roots.cluster_directory] {
             let count = crate::format::blob::blob_pages(blob.length.get(), self.page_size);

@@ -24,8 +24,9 @@
 
 use std::sync::Arc;
 
-use super::btree::{self, Binding, PageSet, Pages};
+use super::btree;
 use super::pagecache::{PageCache, ReadStats, DEFAULT_CACHED_PAGES};
+use super::pages::{Binding, PageSet, Pages};
 use super::slots::{latest_txn, no_state, pinned_missing, read_slots};
 use super::source::{Counted, Source};
 use super::Store;

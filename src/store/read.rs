@@ -12,7 +12,8 @@ use std::ops::{Range, RangeInclusive};
 use serde::Serialize;
 use zerocopy::FromBytes;
 
-use super::btree::{self, PageSet, Pages, Seek};
+use super::btree::{self, Seek};
+use super::pages::{PageSet, Pages};
 use super::source::{self, Source};
 use super::Store;
 use crate::curve::HilbertKey;

@@ -8,7 +8,7 @@ use crate::format::{
     is_zero, payload_align, Invariant, PayloadRef, COMMIT_PAYLOAD_SLACK, VOID_BITS,
 };
 use crate::progress::{Phase, Progress, Unit};
-use crate::store::btree::PageSet;
+use crate::store::pages::PageSet;
 use crate::store::{Source, Store};
 
 /// Checks every payload (I-9): in the file, aligned, disjoint, CRC, zero gaps, block

@@ -9,7 +9,7 @@ use crate::format::{
     NODE_GRID_THIN_MASK, NODE_GRID_THIN_SHIFT,
 };
 use crate::model::{cluster, NO_PARENT};
-use crate::store::btree::PageSet;
+use crate::store::pages::PageSet;
 use crate::store::{Source, Store};
 
 pub(super) fn check_free_list<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Checks) {
