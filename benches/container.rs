@@ -9,8 +9,8 @@ use criterion::{criterion_group, criterion_main, BatchSize, Criterion, Throughpu
 use fmrh::curve::HilbertKey;
 use fmrh::ingest::{load, IngestOptions};
 use fmrh::model::{BuildOptions, Model};
+use fmrh::store::Store;
 use fmrh::store::{write_file, WriteOptions};
-use fmrh::Store;
 
 fn data(rel: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))

@@ -37,7 +37,7 @@ use std::time::Instant;
 use fmrh::scene::{
     Camera, GlobeFrame, LayeredScene, Layers, LonLatRect, SceneOptions, Terrain, TerrainFrame,
 };
-use fmrh::{Heightfield, Store};
+use fmrh::{store::Store, Heightfield};
 
 /// Frames on the path.
 const FRAMES: usize = 160;

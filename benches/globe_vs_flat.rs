@@ -29,7 +29,7 @@ fn main() {
     let field = fmrh::ingest::load(&dem, &fmrh::ingest::IngestOptions::default()).expect("N43E006");
     let file = dir.path().join("n43.fmrh");
     fmrh::create(&file, field, &fmrh::CreateOptions::default()).expect("build");
-    let store = fmrh::Store::open(&file).expect("open");
+    let store = fmrh::store::Store::open(&file).expect("open");
     let flat = Terrain::new(&store).expect("flat");
     let on_globe = Terrain::on_globe(&store).expect("globe");
     let fr = flat.frame();

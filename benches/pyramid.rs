@@ -600,7 +600,7 @@ fn scenes() {
             &mut bytes,
         )
         .expect("writes");
-        let store = fmrh::Store::from_bytes(bytes.into_inner()).expect("opens");
+        let store = fmrh::store::Store::from_bytes(bytes.into_inner()).expect("opens");
         let terrain = fmrh::scene::Terrain::new(&store).expect("terrain");
         let nodes = model.tree().nodes();
         for (cam_name, cam) in dem.cameras() {

@@ -40,7 +40,7 @@ use std::time::{Duration, Instant};
 use cog::{cog_scene, make_cog};
 use fmrh::scene::{load_blocks, Camera, SceneOptions, Terrain, TerrainFrame, WorldFrame};
 use fmrh::store::RequestStats;
-use fmrh::Store;
+use fmrh::store::Store;
 
 /// A TCP proxy in front of `upstream` that waits `latency` before passing on each chunk a
 /// client sends (a request), as a round trip to a distant server would.

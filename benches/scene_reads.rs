@@ -25,7 +25,7 @@ mod dems;
 
 use fmrh::scene::{load_blocks, Camera, SceneOptions, Terrain};
 use fmrh::store::ReadStats;
-use fmrh::Store;
+use fmrh::store::Store;
 
 /// Drops the file's pages from the page cache (a cold read), as far as the kernel obliges.
 fn evict(path: &Path) {

@@ -14,8 +14,8 @@ use glam::DVec3;
 use fmrh::ingest::{load, IngestOptions};
 use fmrh::model::{BuildOptions, Model};
 use fmrh::scene::{baseline, Camera, Mode, SceneBlock, SceneOptions, Terrain};
+use fmrh::store::Store;
 use fmrh::store::{write_file, Source, WriteOptions};
-use fmrh::Store;
 
 fn data(rel: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))

@@ -34,7 +34,7 @@ use std::time::Instant;
 
 use cog::{cog_decode, cog_reads, cog_scene, make_cog};
 use fmrh::scene::{load_blocks, SceneOptions, Terrain, TerrainFrame, WorldFrame};
-use fmrh::Store;
+use fmrh::store::Store;
 
 fn main() {
     let dir = tempfile::tempdir().expect("temp dir");

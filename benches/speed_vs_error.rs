@@ -33,7 +33,7 @@ use fmrh::scene::{
     TerrainFrame, View, WorldFrame,
 };
 use fmrh::store::FileSource;
-use fmrh::{Heightfield, Store};
+use fmrh::{store::Store, Heightfield};
 
 const METHODS: [&str; 5] = [
     "fmrh view",

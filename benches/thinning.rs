@@ -39,9 +39,9 @@ mod study;
 
 use fmrh::model::thinning::LatLonSpacing;
 use fmrh::model::{BuildOptions, Model, ThinByArea, Thresholds};
+use fmrh::store::Store;
 use fmrh::store::{write_to, WriteOptions};
 use fmrh::Heightfield;
-use fmrh::Store;
 use study::{cut, thinned_grid, AreaThinning};
 
 fn bundled(rel: &str) -> PathBuf {

@@ -1,6 +1,8 @@
-//! What a terrain application does with fmrh, start to finish: create a container from a DEM,
-//! open it, ask for the blocks one camera needs at a 1-pixel tolerance and load them, then
-//! replace a patch of terrain in a transaction while a reader keeps its snapshot.
+//! What a terrain application does with fmrh, start to finish, through the crate root only:
+//! create a container from a DEM, open it, ask for the blocks one camera needs at a 1-pixel
+//! tolerance with their decoded heights, then replace a patch of terrain atomically while the
+//! terrain opened before keeps reading its state. CI builds and runs this file as an outside
+//! crate would, with fmrh's default features, so it cannot lean on anything internal.
 //!
 //! ```sh
 //! cargo run --release --example terrain_app                 # a synthetic 1025 x 1025 terrain
@@ -8,80 +10,82 @@
 //! ```
 
 use std::error::Error;
-use std::path::PathBuf;
+use std::path::Path;
 
-use fmrh::scene::{Camera, Scene, SceneOptions, Terrain};
-use fmrh::store::Source;
-use fmrh::{Container, CreateOptions, Heightfield, Store};
-use glam::DVec3;
+use fmrh::glam::DVec3;
+use fmrh::types::IngestOptions;
+use fmrh::{Camera, CreateOptions, Heightfield, Scene, SceneOptions, Terrain};
 
 fn main() -> Result<(), Box<dyn Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let mut dem = match args.first() {
-        Some(path) => fmrh::ingest::load(&PathBuf::from(path), &Default::default())?,
-        None => synthetic(1025)?,
-    };
-    if let Some(dx) = args.get(1) {
-        let dx: f64 = dx.parse()?;
-        dem.metadata.spacing_m = Some([dx, dx]);
-    }
     let dir = tempfile::tempdir()?;
     let path = dir.path().join("terrain.fmrh");
 
-    // 1. Create: blocks, measured errors, clusters, one checksummed file, written atomically.
-    let written = fmrh::create(&path, dem, &CreateOptions::default())?;
-    println!("created {} ({} bytes)", path.display(), written.file_length);
+    // 1. Create: blocks, measured errors, error levels, one checksummed file, atomically.
+    let created = match args.first() {
+        Some(dem) => fmrh::build(
+            Path::new(dem),
+            &path,
+            &IngestOptions::default(),
+            &CreateOptions::default(),
+        )?,
+        None => fmrh::create(&path, synthetic(1025)?, &CreateOptions::default())?,
+    };
+    println!("created {} ({} bytes)", path.display(), created.file_length);
 
-    // 2. Read: the blocks one camera needs, each within 1 pixel of screen-space error.
-    let store = Store::open(&path)?;
-    let d = *store.domain();
-    let spacing = store.header().metadata.spacing_m.unwrap_or([1.0, 1.0]);
+    // 2. Read: the blocks one camera needs, each within 1 pixel, with their heights.
+    let mut terrain = Terrain::open(&path)?;
+    if let Some(dx) = args.get(1) {
+        let dx: f64 = dx.parse()?;
+        terrain.set_spacing(Some([dx, dx]))?;
+    }
+    let info = terrain.info()?;
+    let spacing = info.spacing_m.unwrap_or([1.0, 1.0]);
+    if info.spacing_m.is_none() {
+        terrain.set_spacing(Some(spacing))?;
+    }
     let (w, h) = (
-        f64::from(d.width()) * spacing[0],
-        f64::from(d.height()) * spacing[1],
+        info.width as f64 * spacing[0],
+        info.height as f64 * spacing[1],
     );
-    let (lo, hi) = Terrain::new(&store)?.height_range();
+    let [lo, hi] = info.height_range.unwrap_or([0.0, 0.0]);
     // A low pass over the south edge, looking north across the terrain.
     let camera = Camera::looking_at(
         DVec3::new(0.4 * w, -0.02 * h, f64::from(hi) + 100.0),
         DVec3::new(0.5 * w, 0.6 * h, f64::from(lo)),
     );
-    let scene = Terrain::new(&store)?.scene(&camera, &SceneOptions::new(1.0))?;
-    let loaded = load_blocks(&store, &scene)?;
+    let scene = terrain.scene(&camera, &SceneOptions::new(1.0))?;
     println!(
-        "scene: {} blocks, {} heights loaded, largest error {:.3} m ({:.2} px), scheduled in {} µs",
+        "scene: {} blocks, {} heights decoded, largest error {:.3} m ({:.2} px), selected in {} µs",
         scene.blocks.len(),
-        loaded.len(),
+        scene.blocks.iter().map(|b| b.heights.len()).sum::<usize>(),
         scene.stats.max_error,
         scene.stats.max_screen_error,
         scene.stats.schedule_ns / 1000
     );
 
-    // 3. Write while reading: a snapshot keeps its state while a transaction commits.
-    let container = Container::open(&path)?;
-    let before = container.read()?;
-    let before_sum = checksum(&load_blocks(&*before, &scene)?);
+    // 3. Write while reading: an edit commits atomically; the terrain opened before keeps
+    //    reading the state it opened.
+    let before = checksum(&scene);
+    let mut edit = terrain.edit()?;
     let pad = Heightfield::from_fn(64, 64, |_, _| lo)?; // a flat pad at the lowest height
-    let mut txn = container.begin_write()?;
-    txn.replace_region(u64::from(d.width()) / 2, u64::from(d.height()) / 2, &pad)?;
-    let summary = txn.commit()?;
+    edit.replace(info.width / 2, info.height / 2, pad)?;
+    let committed = edit.commit()?;
     println!(
-        "committed txn {}: {} blocks and {} grids rewritten, {} nodes changed",
-        summary.txn_id, summary.blocks, summary.grids, summary.nodes_changed
+        "committed txn {}: {} blocks and {} grids rewritten",
+        committed.txn_id, committed.blocks, committed.grids
     );
-    let after = container.read()?;
-    let after_scene = Terrain::new(&*after)?.scene(&camera, &SceneOptions::new(1.0))?;
-    let after_sum = checksum(&load_blocks(&*after, &after_scene)?);
-    let still = checksum(&load_blocks(&*before, &scene)?);
+    let still = checksum(&terrain.scene(&camera, &SceneOptions::new(1.0))?);
+    let mut after = Terrain::open(&path)?;
+    after.set_spacing(Some(spacing))?;
+    let changed = checksum(&after.scene(&camera, &SceneOptions::new(1.0))?);
     println!(
-        "the old snapshot (txn {}) still reads the same heights: {}; the new state (txn {}) differs: {}",
-        before.txn_id(),
-        still == before_sum,
-        after.txn_id(),
-        after_sum != before_sum
+        "the terrain opened before (txn {}) still draws the same heights: {}; reopened (txn {}) it draws the pad: {}",
+        info.txn_id,
+        still == before,
+        after.info()?.txn_id,
+        changed != before
     );
-    drop((before, after));
-    container.close()?;
     Ok(())
 }
 
@@ -98,23 +102,12 @@ fn synthetic(n: u32) -> fmrh::Result<Heightfield> {
     Ok(hf)
 }
 
-/// Every height the scene's blocks draw: coarse grids at their level, physical blocks at full
-/// resolution (voids replaced by their stand-ins). Each payload is CRC-checked as it is read.
-fn load_blocks<S: Source>(store: &Store<S>, scene: &Scene) -> fmrh::Result<Vec<f32>> {
-    let finest = store.domain().finest_level();
-    let mut heights = Vec::new();
-    for b in &scene.blocks {
-        if b.level == finest {
-            heights.extend(store.block(b.x, b.y)?.view().mended());
-        } else if let Some(i) = b.node {
-            heights.extend(store.grid(&store.node(i)?)?.view().expanded());
-        }
-    }
-    Ok(heights)
-}
-
-fn checksum(heights: &[f32]) -> u64 {
-    heights.iter().fold(0xcbf2_9ce4_8422_2325, |h, v| {
-        (h ^ u64::from(v.to_bits())).wrapping_mul(0x100_0000_01b3)
+/// Every height a scene's blocks draw, with where they draw it, folded into one number.
+fn checksum(scene: &Scene) -> u64 {
+    scene.blocks.iter().fold(0xcbf2_9ce4_8422_2325, |h, b| {
+        let place = b.rect.col0 ^ b.rect.row0 << 20 ^ u64::from(b.level) << 40;
+        b.heights.iter().fold(h ^ place, |h, v| {
+            (h ^ u64::from(v.to_bits())).wrapping_mul(0x100_0000_01b3)
+        })
     })
 }

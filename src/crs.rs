@@ -178,6 +178,7 @@ impl Crs {
     }
 
     /// Metres per coordinate unit of a projected CRS, when known.
+    #[cfg(any(test, feature = "testing"))]
     pub fn metres_per_unit(&self) -> Option<f64> {
         match self.kind {
             CrsKind::Projected { metres_per_unit } => metres_per_unit,
@@ -222,7 +223,7 @@ impl Crs {
     /// The CRS coordinates of each WGS 84 longitude and latitude in `points` (degrees): the
     /// inverse of [`Crs::to_lon_lat_all`], with the same datum caveat. `None` if any point
     /// has no answer (outside the projection's domain) or the CRS has no PROJ string.
-    pub fn from_lon_lat_all(&self, points: &[[f64; 2]]) -> Option<Vec<[f64; 2]>> {
+    pub fn lon_lat_to_crs_all(&self, points: &[[f64; 2]]) -> Option<Vec<[f64; 2]>> {
         match self.kind {
             CrsKind::Geographic => Some(points.to_vec()),
             CrsKind::Projected { .. } => {
@@ -646,14 +647,14 @@ mod tests {
             lon in -124.5f64..-119.5, lat in 44.0f64..49.0, code_at in 0usize..2,
         ) {
             let crs = Crs::from_epsg([32610, 2927][code_at]).expect("in the registry");
-            let xy = crs.from_lon_lat_all(&[[lon, lat]]).expect("forward");
+            let xy = crs.lon_lat_to_crs_all(&[[lon, lat]]).expect("forward");
             let back = crs.to_lon_lat_all(&xy).expect("inverse");
             proptest::prop_assert!(
                 (back[0][0] - lon).abs() < 1e-7 && (back[0][1] - lat).abs() < 1e-7,
                 "{lon} {lat} -> {xy:?} -> {back:?}"
             );
             let geographic = Crs::from_epsg(4326).expect("4326");
-            proptest::prop_assert_eq!(geographic.from_lon_lat_all(&[[lon, lat]]), Some(vec![[lon, lat]]));
+            proptest::prop_assert_eq!(geographic.lon_lat_to_crs_all(&[[lon, lat]]), Some(vec![[lon, lat]]));
         }
     }
 
@@ -662,7 +663,7 @@ mod tests {
     #[test]
     fn forward_projection_of_a_known_point() {
         let crs = Crs::from_epsg(32610).expect("UTM 10N");
-        let [[x, y]] = crs.from_lon_lat_all(&[[-123.0, 0.0]]).expect("forward")[..] else {
+        let [[x, y]] = crs.lon_lat_to_crs_all(&[[-123.0, 0.0]]).expect("forward")[..] else {
             panic!("one point");
         };
         assert!((x - 500_000.0).abs() < 1e-6 && y.abs() < 1e-6, "{x} {y}");

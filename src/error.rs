@@ -21,6 +21,15 @@ use std::path::{Path, PathBuf};
 use serde::Serialize;
 
 /// Everything that can go wrong in fmrh.
+///
+/// ```
+/// use fmrh::Error;
+///
+/// let damaged = fmrh::Terrain::open("/no/such/file.fmrh").unwrap_err();
+/// assert!(matches!(damaged, Error::Io { .. }));
+/// let not_a_dem = fmrh::Heightfield::new(2, 2, vec![0.0; 3]).unwrap_err();
+/// assert_eq!(not_a_dem.kind(), "invalid_argument");
+/// ```
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
     /// Reading or writing a file failed at the operating-system level.

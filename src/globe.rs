@@ -326,6 +326,7 @@ pub fn horizon_occlusion_point(direction: [f64; 3], points: &[[f64; 3]]) -> [f64
 
 /// Whether the ellipsoid-scaled point `point` is above the horizon seen from the camera at
 /// `camera` (scaled frame): Cesium's `EllipsoidalOccluder.isScaledSpacePointVisible`.
+#[cfg(any(test, feature = "testing"))]
 pub fn scaled_point_visible(camera: [f64; 3], point: [f64; 3]) -> bool {
     let (c, p) = (DVec3::from(camera), DVec3::from(point));
     let vh2 = c.length_squared() - 1.0;

@@ -15,7 +15,7 @@ pub const MAX_SIDE: u64 = 1 << 20;
 pub const MAX_SAMPLES: u64 = 1 << 32;
 
 /// Where the grid lies in a coordinate reference system.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct Georeference {
     /// The coordinate reference system, as the source named it (e.g. `EPSG:4326`).
     pub crs: Option<String>,
@@ -40,7 +40,27 @@ pub struct Metadata {
     pub source_format: String,
 }
 
-/// A grid of heights with voids.
+/// A grid of heights with voids (NaN), row-major from the north-west corner, and what is
+/// known of where it lies ([`crate::types::Metadata`]).
+///
+/// ```
+/// use fmrh::types::{Georeference, Metadata};
+/// use fmrh::Heightfield;
+///
+/// # fn main() -> fmrh::Result<()> {
+/// let mut dem = Heightfield::new(3, 2, vec![1.0, 2.0, f32::NAN, 4.0, 5.0, 6.0])?;
+/// assert_eq!((dem.get(1, 1), dem.get(2, 0), dem.void_count()), (Some(5.0), None, 1));
+/// dem.metadata = Metadata {
+///     spacing_m: Some([30.0, 30.0]),
+///     georeference: Some(Georeference {
+///         crs: Some("EPSG:32610".into()),
+///         origin: [500_000.0, 5_200_000.0],
+///         step: [30.0, -30.0],
+///     }),
+///     ..Metadata::default()
+/// };
+/// # Ok(()) }
+/// ```
 #[derive(Clone, Debug, PartialEq)]
 pub struct Heightfield {
     width: u32,

@@ -1,109 +1,203 @@
 //! # fmrh — an embedded storage engine for multiresolution terrain
 //!
 //! fmrh keeps a digital elevation model (a grid of heights) so that a terrain application can
-//! ask, every frame, for exactly the blocks a view needs, each exact to a known error.
+//! ask, every frame, for exactly the blocks a view needs, each exact to a known error, and
+//! change heights atomically while others read.
 //!
 //! ## The data structure, before the API
 //!
 //! **Blocks.** The grid is cut into square blocks of `b = 2^k + 1` samples a side (65 by
-//! default). Neighbouring blocks share their edge row and column. The domain is squared up to
-//! `2^L · (b - 1) + 1` samples, and the padding is void and never reported as terrain.
+//! default); neighbouring blocks share their edge row and column.
 //!
-//! **FMRH** (seed 000 §3). A quadtree over the blocks. Level `L` holds the blocks themselves, at
-//! full resolution. Each level up halves the resolution, and the root covers everything with
-//! one `b × b` grid. Every node carries its *measured static error*: the largest vertical
-//! distance between a real sample in its footprint and the surface its grid draws (cells split
-//! NW–SE). It also carries the *monotone error* `e*`, the largest error in its subtree, which
-//! never grows from parent to child. The tree is cut short where `e*` is already within the
-//! finest threshold, so flat ground costs one node.
+//! **The FMRH** (seed 000 §3). A quadtree over the blocks: the finest level holds the blocks
+//! at full resolution, each level up halves the resolution, the root covers everything with
+//! one `b × b` grid. Every node carries its *measured* error: the largest vertical distance
+//! between a real sample under it and the surface its grid draws. The tree is cut short where
+//! the error is already within the finest threshold, so flat ground costs one node.
 //!
-//! **Clusters** (seed 000 §3.2, corrected). For a threshold δ, the cluster `C(δ)` is the set of
-//! nodes with `e* <= δ` whose parent has `e* > δ`. It covers the terrain exactly once and every
-//! node in it is exact to δ. A ladder of thresholds gives a ladder of clusters, from one coarse
-//! root down to the lossless blocks.
+//! **Error levels** (seed 000's clusters, corrected). For a threshold δ, the level is the cut
+//! of the tree whose nodes are all within δ: it covers the terrain exactly once. A ladder of
+//! thresholds gives a ladder of levels, from one coarse root down to the lossless blocks.
 //!
-//! **Order** (seed 000 §4). Inside a cluster the nodes are sorted by [`curve::HilbertKey`]: the
-//! position of their first finest block on the Hilbert curve. A square window of the terrain
-//! is then a few contiguous runs of a cluster, which a store scans instead of walking the tree.
+//! **Hilbert order** (seed 000 §4). Inside a level, nodes are sorted along a multiresolution
+//! Hilbert curve, so a view's window is a few contiguous runs: a scene is a few range scans.
 //!
-//! ## The API
+//! **Transactions.** Replacing samples rewrites every block, error, level and table they touch,
+//! copy-on-write, published by one commit record: readers keep the state they opened, and a
+//! crash at any instant leaves the old state or the new one (`format-spec/container.md` §11).
 //!
-//! Three calls cover a terrain application's life, all at the crate root:
+//! ## The door
 //!
-//! * [`create`] turns a [`Heightfield`] into a container file, atomically;
-//! * [`Store::open`] opens a file for reading: nodes, blocks, range scans;
-//! * [`Container::open`] opens it for writing: [`Container::read`] takes a snapshot that
-//!   keeps its state while [`Container::begin_write`]'s transaction replaces samples and
-//!   commits, all at once or not at all, and crash-safe.
+//! | type | what for |
+//! |---|---|
+//! | [`Terrain`] | anything fmrh opens: a container file, a dataset directory, or a URL of either |
+//! | [`Info`] | what a terrain is: size, georeference, heights, error levels |
+//! | [`Camera`], [`SceneOptions`] | a view (glam's `DVec3`, re-exported as [`glam`]) and its tolerance in pixels |
+//! | [`Scene`], [`Block`] | the blocks a view needs, each with its decoded heights, rectangle, level, stride and error |
+//! | [`Edit`] | replacements of samples, committed atomically |
+//! | [`Heightfield`], [`CreateOptions`] | heights in memory, and how [`create`] (or [`build`], from a DEM file) makes a container |
+//! | [`Verification`] | every numbered invariant checked |
+//! | [`Error`] | what went wrong, and whose fault it is |
 //!
-//! A [`scene::Terrain`] over a store answers a camera and a tolerance in pixels with the
-//! blocks the view needs; a [`scene::Scheduler`] does it frame after frame.
+//! The values these take and give (rectangles, georeferences, modes, reports) are in
+//! [`types`]. Which grid a block is coded against, read coalescing and the caches are inside.
 //!
 //! ```
-//! use fmrh::scene::{Camera, SceneOptions, Terrain};
-//! use glam::DVec3;
+//! use fmrh::glam::DVec3;
+//! use fmrh::{Camera, CreateOptions, Heightfield, SceneOptions, Terrain};
 //!
 //! # fn main() -> fmrh::Result<()> {
 //! # let dir = tempfile::tempdir().unwrap();
-//! let path = dir.path().join("hills.fmrh");
-//! // Any DEM: `fmrh::ingest::load` reads GeoTIFF, SRTM, PNG, ASCII grids and more.
-//! let hills = fmrh::Heightfield::from_fn(257, 257, |x, y| {
-//!     let (x, y) = (x as f32 * 0.05, y as f32 * 0.07);
-//!     40.0 * x.sin() * y.cos() + 3.0 * (5.0 * x).sin()
+//! # let path = dir.path().join("hills.fmrh");
+//! let hills = Heightfield::from_fn(257, 257, |x, y| {
+//!     40.0 * (x as f32 * 0.05).sin() * (y as f32 * 0.07).cos() // or fmrh::build from a DEM file
 //! })?;
-//! fmrh::create(&path, hills, &fmrh::CreateOptions::default())?;
-//!
-//! // Read: the blocks a camera needs at 1 pixel of screen-space error, and their samples.
-//! let store = fmrh::Store::open(&path)?;
-//! let camera = Camera::looking_at(DVec3::new(-50.0, -50.0, 120.0), DVec3::new(128.0, 128.0, 0.0));
-//! let scene = Terrain::new(&store)?.scene(&camera, &SceneOptions::new(1.0))?;
-//! assert!(!scene.blocks.is_empty() && scene.stats.max_screen_error <= 1.0);
+//! fmrh::create(&path, hills, &CreateOptions::default())?;
+//! let mut terrain = Terrain::open(&path)?; // a file, a dataset directory, or a URL
+//! terrain.set_spacing(Some([10.0, 10.0]))?; // metres between samples (a georeferenced DEM says)
+//! let camera = Camera::looking_at(DVec3::new(-500.0, -500.0, 900.0), DVec3::new(1280.0, 1280.0, 0.0));
+//! let scene = terrain.scene(&camera, &SceneOptions::new(1.0))?; // at most 1 pixel of error
 //! for block in &scene.blocks {
-//!     let bytes = store.payload(block.payload)?; // CRC-checked
-//!     assert_eq!(bytes.len() as u32, block.payload.len);
+//!     // `width × height` heights, `stride` samples apart from the corner of `rect`.
+//!     assert_eq!(block.heights.len(), (block.width * block.height) as usize);
+//!     assert!(block.screen_error <= 1.0);
 //! }
-//!
-//! // Write: dig a pit; a snapshot taken before keeps seeing the hills.
-//! let container = fmrh::Container::open(&path)?;
-//! let before = container.read()?;
-//! let mut txn = container.begin_write()?;
-//! txn.replace_region(100, 100, &fmrh::Heightfield::from_fn(20, 20, |_, _| -10.0)?)?;
-//! let summary = txn.commit()?;
-//! assert!(summary.blocks >= 1 && before.txn_id() < summary.txn_id);
-//! # drop(before);
-//! container.close()?;
 //! # Ok(()) }
 //! ```
 //!
-//! Underneath: [`ingest`] reads DEMs, [`export`] writes them as GeoTIFF and meshes as glTF,
-//! [`model`] builds the FMRH and its clusters, [`mod@format`] is every byte of the file
-//! format, [`store`] reads, writes and verifies files, [`scene`] selects blocks for cameras,
-//! [`mesh`] turns them into crack-free triangles, [`render`] draws them, and [`curve`] knows
-//! Hilbert and Morton keys and nothing of terrain. Errors say whose
-//! fault they are ([`Error`]).
+//! ## Going lower
+//!
+//! [`raw`] is the format itself, for a tool: a container's nodes, blocks and error levels
+//! (clusters), Hilbert range scans, payloads as stored, transactions with snapshots, the
+//! validator, and the format's version ([`raw::FORMAT_MAJOR`], [`raw::FORMAT_MINOR`]: a
+//! major changes when an older reader would misread a file, and readers refuse newer majors;
+//! a minor adds what older readers may ignore; `format-spec/container.md` §8).
+//!
+//! ## Cargo features
+//!
+//! * `remote` (default): reading containers and datasets over HTTP(S) range requests and
+//!   from S3 (`Terrain::open("https://…")`).
+//! * `testing`: fmrh's own tests, benches and fuzz targets: it makes the crate's internal
+//!   rooms public (hidden from these docs) and adds a simulated crashing disk. No stability
+//!   is promised for anything it exposes.
 
-pub mod codec;
-pub mod crs;
-pub mod curve;
-pub mod dataset;
-pub mod error;
-pub mod export;
-pub mod format;
-pub mod globe;
-pub mod heightfield;
-pub mod ingest;
-pub mod mesh;
-pub mod model;
-pub mod progress;
-pub mod render;
-pub mod scene;
-pub mod store;
+/// Declares the crate's rooms: crate-private, so that the public API is only what this file
+/// exports; with the `testing` feature (fmrh's own tests, benches and fuzz targets) they are
+/// public and hidden from the docs, so those can test each room directly. Nothing outside
+/// fmrh may rely on them.
+macro_rules! rooms {
+    ($($name:ident),* $(,)?) => {$(
+        #[cfg(feature = "testing")]
+        #[doc(hidden)]
+        pub mod $name;
+        #[cfg(not(feature = "testing"))]
+        pub(crate) mod $name;
+    )*};
+}
+
+mod cli;
+rooms!(
+    codec,
+    crs,
+    curve,
+    dataset,
+    error,
+    export,
+    format,
+    globe,
+    heightfield,
+    ingest,
+    mesh,
+    model,
+    progress,
+    render,
+    scene,
+    store,
+);
+
+mod terrain;
 
 pub use error::{Error, Result};
-pub use format::Invariant;
 pub use heightfield::Heightfield;
-pub use model::{BuildOptions, Model, Thresholds};
-pub use store::{
-    create, verify, CommitSummary, Container, CreateOptions, Snapshot, Store, VerifyMode,
-    VerifyReport, WriteTxn,
-};
+pub use scene::{Camera, SceneOptions};
+pub use terrain::{build, create, Block, CreateOptions, Edit, Info, Scene, Terrain, Verification};
+
+/// glam, whose `DVec3` places cameras ([`Camera`]): re-exported so that a caller needs no
+/// second dependency, and gets the version fmrh was built with.
+pub use glam;
+
+/// The values the door's types take and give: options, rectangles, georeferences, reports.
+///
+/// ```
+/// use fmrh::types::{Kind, SampleRect};
+///
+/// # fn main() -> fmrh::Result<()> {
+/// # let dir = tempfile::tempdir().unwrap();
+/// # let path = dir.path().join("t.fmrh");
+/// # fmrh::create(&path, fmrh::Heightfield::from_fn(90, 60, |x, _| x as f32)?, &Default::default())?;
+/// let terrain = fmrh::Terrain::open(&path)?;
+/// let info = terrain.info()?;
+/// assert_eq!(info.kind, Kind::Container);
+/// let all = SampleRect { col0: 0, row0: 0, col1: info.width - 1, row1: info.height - 1 };
+/// assert_eq!(all.samples(), 90 * 60);
+/// # Ok(()) }
+/// ```
+pub mod types {
+    pub use crate::dataset::{DatasetReport, TileReport};
+    pub use crate::error::Invariant;
+    pub use crate::heightfield::{Georeference, Metadata};
+    pub use crate::ingest::{ColorEncoding, Format, IngestOptions};
+    pub use crate::model::{SampleRect, ThinByArea, Thresholds};
+    pub use crate::scene::{Mode, NeighbourLevels, SceneStats};
+    pub use crate::store::{CheckReport, CheckStatus, VerifyMode, VerifyReport};
+    pub use crate::terrain::{Committed, Created, ErrorLevel, Kind};
+}
+
+/// The `fmrh` command line, run on this process's arguments: the binary's `main` is this one
+/// call. Not an API: the command line is the interface it offers.
+#[doc(hidden)]
+pub fn run_cli() -> std::process::ExitCode {
+    cli::main()
+}
+
+/// The low level, for format tools: a container's records, nodes and blocks, its error levels
+/// as clusters, Hilbert range scans over them, payloads as stored, transactions, and the
+/// validator. Nothing here is needed to draw terrain (the crate root is); everything here is
+/// the format of `format-spec/container.md`, read and written exactly.
+///
+/// ```
+/// use fmrh::raw::{HilbertKey, Store};
+///
+/// # fn main() -> fmrh::Result<()> {
+/// # let dir = tempfile::tempdir().unwrap();
+/// # let path = dir.path().join("t.fmrh");
+/// # let dem = fmrh::Heightfield::from_fn(257, 257, |x, y| ((x * 7 + y * 3) % 50) as f32)?;
+/// # fmrh::create(&path, dem, &fmrh::CreateOptions { block_size: 33, ..Default::default() })?;
+/// let store = Store::open(&path)?;
+/// // The lossless level (clusters ascend by threshold: the first, at 0): its nodes whose
+/// // footprints meet the first quarter of the finest Hilbert curve, in one seek and one
+/// // contiguous run.
+/// let lossless = 0;
+/// assert_eq!(store.clusters()[lossless].threshold, 0.0);
+/// let finest = store.domain().finest_level();
+/// let quarter = HilbertKey::span(finest, 1);
+/// for entry in store.scan_hilbert(lossless, 0..=quarter - 1)? {
+///     let node = store.node_of(lossless, &entry?)?;
+///     assert!(node.key.0 < quarter && node.monotone_error == 0.0);
+/// }
+/// # Ok(()) }
+/// ```
+pub mod raw {
+    pub use crate::curve::{hilbert_decode, hilbert_encode, HilbertKey, HilbertType};
+    pub use crate::format::{
+        ClusterInfo, DatasetHeader, FreePage, PayloadRef, ScanEntry, StoredBlock, StoredNode,
+        FORMAT_MAJOR, FORMAT_MINOR,
+    };
+    pub use crate::model::Domain;
+    pub use crate::store::verify::verify;
+    pub use crate::store::{
+        AnySource, Block, Bytes, Children, CodeScan, CommitSummary, Container, FileSource, Grid,
+        HeldGrid, HilbertScan, Layout, LoadedBlock, MmapSource, ReadStats, Snapshot, Source,
+        StateInfo, Store, Wanted, WriteTxn,
+    };
+}

@@ -13,8 +13,9 @@ use proptest::prelude::*;
 
 use common::bytes_of;
 use fmrh::model::SampleRect;
-use fmrh::store::{Container, CreateOptions, FileSource, WriteOptions};
-use fmrh::{Error, Heightfield, Invariant, Store, VerifyMode};
+use fmrh::store::{Container, FileSource, WriteOptions};
+use fmrh::CreateOptions;
+use fmrh::{store::Store, store::VerifyMode, types::Invariant, Error, Heightfield};
 
 /// Every block coded alone, as format 3 coded them.
 fn alone_options() -> WriteOptions {
@@ -44,8 +45,8 @@ fn hills(w: u32, h: u32) -> Heightfield {
     .unwrap()
 }
 
-fn verify_full(bytes: Vec<u8>) -> fmrh::VerifyReport {
-    fmrh::verify(fmrh::store::Bytes(bytes), VerifyMode::Full).unwrap()
+fn verify_full(bytes: Vec<u8>) -> fmrh::store::VerifyReport {
+    fmrh::store::verify(fmrh::store::Bytes(bytes), VerifyMode::Full).unwrap()
 }
 
 #[test]
@@ -128,7 +129,7 @@ fn a_commit_codes_again_the_siblings_of_a_rewritten_grid() {
         }
     }
     drop(store);
-    let report = fmrh::verify(FileSource::open(&path).unwrap(), VerifyMode::Full).unwrap();
+    let report = fmrh::store::verify(FileSource::open(&path).unwrap(), VerifyMode::Full).unwrap();
     assert!(report.valid, "{report:#?}");
     // Block (0, 0) holds the patch; each sibling that was coded against the old grid is
     // written again.
@@ -294,7 +295,8 @@ fn the_cli_picks_small_pages_and_codes_against_parents_unless_told() {
         "the variants read the same"
     );
     for path in [&default, &paged, &alone] {
-        let report = fmrh::verify(FileSource::open(path).unwrap(), VerifyMode::Full).unwrap();
+        let report =
+            fmrh::store::verify(FileSource::open(path).unwrap(), VerifyMode::Full).unwrap();
         assert!(report.valid, "{}: {report:#?}", path.display());
     }
     let bad = common::fmrh(&[

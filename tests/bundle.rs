@@ -17,7 +17,7 @@ use proptest::prelude::*;
 use fmrh::model::{BuildOptions, Model, SampleRect, Thresholds};
 use fmrh::store::io::SimDisk;
 use fmrh::store::{verify, write_to, Bytes, Container, WriteOptions};
-use fmrh::{Error, Heightfield, Invariant, Store, VerifyMode};
+use fmrh::{store::Store, store::VerifyMode, types::Invariant, Error, Heightfield};
 
 fn write(hf: &Heightfield, block: u32, bundle_limit: u64) -> Vec<u8> {
     let options = WriteOptions {
@@ -260,7 +260,7 @@ fn bytes_that_are_not_zstd_are_refused() {
 }
 
 /// Whether `report` fails I-5 naming bundle page `i`.
-fn names_page(report: &fmrh::VerifyReport, i: usize) -> bool {
+fn names_page(report: &fmrh::store::VerifyReport, i: usize) -> bool {
     let name = format!("page {}", (1u64 << 40) + i as u64);
     report
         .checks

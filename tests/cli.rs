@@ -42,7 +42,7 @@ fn build_dry_run_json_on_a_real_dem() {
 
     // The same numbers as the library.
     let hf = fmrh::ingest::load(&input, &Default::default()).unwrap();
-    let model = fmrh::Model::build(hf, &Default::default()).unwrap();
+    let model = fmrh::model::Model::build(hf, &Default::default()).unwrap();
     assert_eq!(report["nodes"], model.tree().nodes().len());
     assert_eq!(report["max_error"].as_f64().unwrap(), model.max_error());
     for (c, m) in clusters.iter().zip(model.clusters()) {

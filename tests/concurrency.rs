@@ -21,7 +21,7 @@ use fmrh::ingest::{self, IngestOptions};
 use fmrh::model::{BuildOptions, Model, Thresholds};
 use fmrh::scene::{Camera, Mode, SceneOptions, Terrain};
 use fmrh::store::{Container, Source};
-use fmrh::{Heightfield, Store};
+use fmrh::{store::Store, Heightfield};
 
 /// Folds every scene block of every camera, and the payload bytes it references, into a
 /// checksum of what a renderer would draw.
@@ -177,6 +177,7 @@ fn readers_running_scenes_see_only_whole_snapshots() {
     );
     container.close().unwrap();
     let bytes = std::fs::read(&path).unwrap();
-    let report = fmrh::store::verify(fmrh::store::Bytes(bytes), fmrh::VerifyMode::Full).unwrap();
+    let report =
+        fmrh::store::verify(fmrh::store::Bytes(bytes), fmrh::store::VerifyMode::Full).unwrap();
     assert!(report.valid, "{report:#?}");
 }

@@ -16,7 +16,7 @@ use common::fields::any_field;
 use fmrh::curve::HilbertKey;
 use fmrh::model::{BuildOptions, Model, Thresholds};
 use fmrh::store::{verify, write_to, Bytes, ScanEntry, Source, WriteOptions};
-use fmrh::{Heightfield, Store};
+use fmrh::{store::Store, Heightfield};
 use proptest::prelude::*;
 
 fn write(field: &Heightfield, block_size: u32, page_size: u32) -> (Model, Vec<u8>) {
@@ -184,7 +184,7 @@ proptest! {
         ranges in prop::collection::vec((any::<u64>(), any::<u64>()), 6),
     ) {
         let (model, bytes) = write_as(&field, b, p, layout);
-        let report = verify(Bytes(&bytes), fmrh::VerifyMode::Full).unwrap();
+        let report = verify(Bytes(&bytes), fmrh::store::VerifyMode::Full).unwrap();
         prop_assert!(report.valid, "{:#?}", report.checks);
         let store = Store::from_bytes(&bytes).unwrap();
         check_store(&store, &model, &field, &ranges);

@@ -89,7 +89,7 @@ fn build_info_verify_extract_scan() {
     ]));
     let entries = s["entries"].as_array().unwrap();
     assert_eq!(entries.len(), 15);
-    let store = fmrh::Store::open(&out).unwrap();
+    let store = fmrh::store::Store::open(&out).unwrap();
     let lib: Vec<u32> = store
         .scan_codes(0, 10..25)
         .unwrap()

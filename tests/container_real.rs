@@ -8,8 +8,8 @@ mod common;
 use std::path::Path;
 
 use fmrh::model::{BuildOptions, Model};
+use fmrh::store::Store;
 use fmrh::store::{verify, write_file, FileSource, WriteOptions};
-use fmrh::Store;
 
 fn datasets() -> Vec<std::path::PathBuf> {
     let mut out = Vec::new();
@@ -54,7 +54,7 @@ fn roundtrip(source: &Path, dir: &Path) {
     let file = std::fs::File::open(&path).unwrap();
     let report = verify(
         FileSource::new(file, &path).unwrap(),
-        fmrh::VerifyMode::Full,
+        fmrh::store::VerifyMode::Full,
     )
     .unwrap();
     assert!(report.valid, "{}: {:#?}", source.display(), report.checks);

@@ -9,8 +9,8 @@ mod common;
 use std::io::Cursor;
 
 use fmrh::model::{BuildOptions, Model, Thresholds};
+use fmrh::store::Store;
 use fmrh::store::{verify, write_to, Bytes, WriteOptions};
-use fmrh::Store;
 
 fn small_container() -> Vec<u8> {
     // Voids, padding on both axes, three levels, 1024-byte pages: every kind of page.
@@ -37,9 +37,9 @@ fn small_container() -> Vec<u8> {
 /// Whether `verify` (fast or full) rejects `bytes`.
 fn rejected(bytes: &[u8], full: bool) -> bool {
     let mode = if full {
-        fmrh::VerifyMode::Full
+        fmrh::store::VerifyMode::Full
     } else {
-        fmrh::VerifyMode::Fast
+        fmrh::store::VerifyMode::Fast
     };
     match verify(Bytes(bytes), mode) {
         Ok(report) => !report.valid,
@@ -103,7 +103,7 @@ fn truncation_at_every_page_boundary_is_detected() {
 #[test]
 fn bytes_that_are_not_a_container_are_unusable() {
     for bytes in [&b""[..], b"hello", &[0u8; 5000], &[0xffu8; 4096]] {
-        assert!(verify(Bytes(bytes), fmrh::VerifyMode::Full).is_err());
+        assert!(verify(Bytes(bytes), fmrh::store::VerifyMode::Full).is_err());
         assert!(Store::from_bytes(bytes).is_err());
     }
 }

@@ -25,7 +25,7 @@ use fmrh::ingest::{self, IngestOptions};
 use fmrh::model::Thresholds;
 use fmrh::store::io::{Damage, SimDisk};
 use fmrh::store::{verify, Bytes, Container};
-use fmrh::{Heightfield, Store};
+use fmrh::{store::Store, Heightfield};
 use rayon::prelude::*;
 use std::collections::HashMap;
 use std::hash::{BuildHasher, RandomState};
@@ -138,7 +138,7 @@ impl States {
     fn check_afresh(&self, image: Vec<u8>, allowed: &[usize], what: &str) -> usize {
         let disk = SimDisk::new(image);
         let (c, _) = Container::open_io(disk.clone()).unwrap_or_else(|e| panic!("{what}: {e}"));
-        let report = verify(Bytes(disk.current()), fmrh::VerifyMode::Full).unwrap();
+        let report = verify(Bytes(disk.current()), fmrh::store::VerifyMode::Full).unwrap();
         assert!(report.valid, "{what}: {report:#?}");
         let s = c.read().unwrap();
         let digest = samples_digest(&s);
@@ -313,7 +313,8 @@ fn crash_anywhere(paged: bool) {
                     w.commit()
                         .unwrap_or_else(|e| panic!("{what}: commit after recovery: {e}"));
                     drop(c);
-                    let report = verify(Bytes(disk.current()), fmrh::VerifyMode::Full).unwrap();
+                    let report =
+                        verify(Bytes(disk.current()), fmrh::store::VerifyMode::Full).unwrap();
                     assert!(report.valid, "{what}: after a further commit: {report:#?}");
                 }
             }

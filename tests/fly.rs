@@ -18,7 +18,7 @@ use fmrh::model::BuildOptions;
 use fmrh::scene::path::{self, Ground};
 use fmrh::scene::{BlockId, Camera, ScheduleOptions, Scheduler, Terrain};
 use fmrh::store::Bytes;
-use fmrh::Store;
+use fmrh::store::Store;
 
 struct Shipped {
     name: &'static str,

@@ -50,16 +50,16 @@ fn built() -> &'static Built {
 }
 
 /// The built files, opened.
-fn stores() -> Vec<fmrh::Store> {
+fn stores() -> Vec<fmrh::store::Store> {
     built()
         .files
         .iter()
-        .map(|f| fmrh::Store::open(f).unwrap())
+        .map(|f| fmrh::store::Store::open(f).unwrap())
         .collect()
 }
 
 /// The stores as layers on the globe, the base first.
-fn layers_of(stores: &[fmrh::Store]) -> Layers<'_, fmrh::store::FileSource> {
+fn layers_of(stores: &[fmrh::store::Store]) -> Layers<'_, fmrh::store::FileSource> {
     Layers::new(
         stores
             .iter()
@@ -354,8 +354,8 @@ fn misaligned_layers_are_refused() {
     g.origin[0] += 0.1; // 6.1° E: not on ETOPO1's half degrees
     let file = dir.path().join("moved.fmrh");
     fmrh::create(&file, f, &fmrh::CreateOptions::default()).unwrap();
-    let base = fmrh::Store::open(&b.files[0]).unwrap();
-    let moved = fmrh::Store::open(&file).unwrap();
+    let base = fmrh::store::Store::open(&b.files[0]).unwrap();
+    let moved = fmrh::store::Store::open(&file).unwrap();
     let r = Layers::new(vec![
         Terrain::on_globe(&base).unwrap(),
         Terrain::on_globe(&moved).unwrap(),

@@ -128,7 +128,7 @@ proptest! {
         let dir = tempfile::tempdir().unwrap();
         let file = dir.path().join("g.fmrh");
         fmrh::create(&file, field.clone(), &fmrh::CreateOptions { block_size: 17, ..fmrh::CreateOptions::default() }).unwrap();
-        let store = fmrh::Store::open(&file).unwrap();
+        let store = fmrh::store::Store::open(&file).unwrap();
         let terrain = Terrain::on_globe(&store).unwrap();
         let h = 10f64.powf(cam.log_h);
         let cam_lat = (lat + cam.dlat).clamp(-89.9, 89.9);
@@ -191,7 +191,7 @@ proptest! {
         tau in 0.5f64..4.0,
     ) {
         let (_, file, field) = whole_earth();
-        let store = fmrh::Store::open(file).unwrap();
+        let store = fmrh::store::Store::open(file).unwrap();
         let terrain = Terrain::on_globe(&store).unwrap();
         let h = 10f64.powf(log_h);
         let lat_eye = lat.clamp(-89.999, 89.999);
@@ -223,7 +223,7 @@ proptest! {
 #[test]
 fn whole_earth_over_the_pole_and_the_antimeridian() {
     let (_, file, field) = whole_earth();
-    let store = fmrh::Store::open(file).unwrap();
+    let store = fmrh::store::Store::open(file).unwrap();
     let terrain = Terrain::on_globe(&store).unwrap();
     let down = |lat: f64, lon: f64, h: f64| Camera::on_globe(lat, lon, h, 0.0, -90.0);
     let owner = |scene: &fmrh::scene::Scene, col: u64, row: u64| {
@@ -265,7 +265,7 @@ fn whole_earth_over_the_pole_and_the_antimeridian() {
 /// from `field`); returns how many of the samples it looked at are seen.
 fn check_scene(
     field: &Heightfield,
-    store: &fmrh::Store,
+    store: &fmrh::store::Store,
     terrain: &Terrain<'_, fmrh::store::FileSource>,
     camera: &Camera,
     tau: f64,
@@ -392,7 +392,7 @@ fn n43(dir: &std::path::Path) -> std::path::PathBuf {
 #[test]
 fn orbit_and_ground_views_of_a_real_tile() {
     let dir = tempfile::tempdir().unwrap();
-    let store = fmrh::Store::open(&n43(dir.path())).unwrap();
+    let store = fmrh::store::Store::open(&n43(dir.path())).unwrap();
     let terrain = Terrain::on_globe(&store).unwrap();
     let scene_at = |lat, lon, h, heading, pitch| {
         let c = Camera::on_globe(lat, lon, h, heading, pitch);
@@ -419,7 +419,7 @@ fn orbit_and_ground_views_of_a_real_tile() {
 #[test]
 fn flat_and_globe_scenes_agree_nearby() {
     let dir = tempfile::tempdir().unwrap();
-    let store = fmrh::Store::open(&n43(dir.path())).unwrap();
+    let store = fmrh::store::Store::open(&n43(dir.path())).unwrap();
     let flat = Terrain::new(&store).unwrap();
     let on_globe = Terrain::on_globe(&store).unwrap();
     let fr = flat.frame();
@@ -503,7 +503,7 @@ fn the_cli_takes_cameras_on_the_globe() {
         "--json",
     ]));
     let (eye, target, up) = globe::look(43.1, 6.5, 2500.0, 0.0, -10.0);
-    let store = fmrh::Store::open(&file).unwrap();
+    let store = fmrh::store::Store::open(&file).unwrap();
     let mut c = Camera::looking_at(eye, target);
     c.up = up;
     let scene = Terrain::on_globe(&store)
@@ -629,7 +629,7 @@ fn a_geographic_path_flies_from_orbit_to_the_ground() {
     let frames = out["frames"].as_array().unwrap();
     assert_eq!(frames.len(), heights.len());
     // The library's scheduler and scenes, frame by frame.
-    let store = std::sync::Arc::new(fmrh::Store::open(&file).unwrap());
+    let store = std::sync::Arc::new(fmrh::store::Store::open(&file).unwrap());
     let options = fmrh::scene::ScheduleOptions {
         globe: true,
         ..fmrh::scene::ScheduleOptions::new(1.0)

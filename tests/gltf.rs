@@ -118,7 +118,7 @@ fn mesh_cli(file: &Path, out: &Path, extra: &[&str]) -> std::process::Output {
 fn the_glb_is_the_scene_mesh_in_the_documented_axes() {
     let dir = tempfile::tempdir().unwrap();
     let file = container(dir.path());
-    let store = fmrh::Store::open(&file).unwrap();
+    let store = fmrh::store::Store::open(&file).unwrap();
     let camera = Camera::looking_at(
         glam::DVec3::new(-2000.0, 4000.0, 2500.0),
         glam::DVec3::new(1000.0, 700.0, 0.0),
@@ -216,7 +216,7 @@ fn the_glb_is_the_scene_mesh_in_the_documented_axes() {
 fn a_globe_glb_is_the_scene_mesh_on_the_ellipsoid() {
     let dir = tempfile::tempdir().unwrap();
     let (file, _) = common::globe::container(dir.path(), "n6", "srtm3-pyhgtmap/N43E006.hgt.gz");
-    let store = fmrh::Store::open(&file).unwrap();
+    let store = fmrh::store::Store::open(&file).unwrap();
     let terrain = Terrain::on_globe(&store).unwrap();
     let TerrainFrame::Globe(g) = terrain.world() else {
         panic!("a geographic grid is on the globe")
@@ -381,7 +381,7 @@ fn refine_fractal_marks_the_same_synthetic_nodes_in_scene_and_mesh() {
     assert_eq!(plain["blocks"], report["blocks"]);
 
     // The library's refinement of the same scene.
-    let store = fmrh::Store::open(&file).unwrap();
+    let store = fmrh::store::Store::open(&file).unwrap();
     let scene = Terrain::new(&store)
         .unwrap()
         .scene(&camera, &SceneOptions::new(tau))

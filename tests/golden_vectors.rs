@@ -241,7 +241,7 @@ fn vectors_are_byte_exact_and_read_as_recorded() {
 fn vectors_pin_blocks_coded_against_their_parents() {
     let mut seen = std::collections::BTreeSet::new();
     for v in vectors() {
-        let store = fmrh::Store::open(&dir().join(format!("{}.fmrh", v.name))).unwrap();
+        let store = fmrh::store::Store::open(&dir().join(format!("{}.fmrh", v.name))).unwrap();
         let d = *store.domain();
         let (cols, rows) = d.nodes_across(d.finest_level());
         let mut against = 0;
@@ -283,7 +283,7 @@ fn vectors_pin_blocks_coded_against_their_parents() {
 fn vectors_pin_grids_coded_against_their_parents_and_flagged_bitmaps() {
     let (mut against, mut flagged, mut runs) = (0, 0, 0);
     for v in vectors() {
-        let store = fmrh::Store::open(&dir().join(format!("{}.fmrh", v.name))).unwrap();
+        let store = fmrh::store::Store::open(&dir().join(format!("{}.fmrh", v.name))).unwrap();
         let finest = store.domain().finest_level();
         for n in store.nodes().unwrap().iter().filter(|n| n.level < finest) {
             let bytes = store.payload(n.payload).unwrap();
@@ -410,7 +410,7 @@ fn format_1_vectors_read_verify_and_refuse_writes() {
     for (minor, folder) in [(1u16, "v1.1"), (2, "v1.2")] {
         for v in lossless_vectors() {
             let old = dir().join(folder).join(format!("{}.fmrh", v.name));
-            let store = fmrh::Store::open(&old).unwrap();
+            let store = fmrh::store::Store::open(&old).unwrap();
             assert_eq!(store.state().format_version, (1, minor), "{}", v.name);
             let all = store.domain().data_rect();
             let samples = store.read_window(all).unwrap();
@@ -423,9 +423,9 @@ fn format_1_vectors_read_verify_and_refuse_writes() {
                     v.name
                 );
             }
-            let report = fmrh::verify(
+            let report = fmrh::store::verify(
                 fmrh::store::FileSource::open(&old).unwrap(),
-                fmrh::VerifyMode::Full,
+                fmrh::store::VerifyMode::Full,
             )
             .unwrap();
             assert!(report.valid, "{}: {report:?}", v.name);
@@ -435,7 +435,7 @@ fn format_1_vectors_read_verify_and_refuse_writes() {
             let copy = dir.path().join("old.fmrh");
             std::fs::copy(&old, &copy).unwrap();
             let before = std::fs::read(&copy).unwrap();
-            let err = fmrh::Container::open(&copy)
+            let err = fmrh::store::Container::open(&copy)
                 .err()
                 .expect("a 1.x file is read-only");
             assert!(
@@ -471,7 +471,7 @@ fn format_2_to_5_vectors_read_verify_and_take_a_transaction() {
         let old = dir()
             .join(format!("v{major}.{minor}"))
             .join(format!("{}.fmrh", v.name));
-        let store = fmrh::Store::open(&old).unwrap();
+        let store = fmrh::store::Store::open(&old).unwrap();
         assert_eq!(store.state().format_version, (major, minor), "{}", v.name);
         assert_eq!(
             store.header().precision.map(|p| p.step()),
@@ -487,9 +487,9 @@ fn format_2_to_5_vectors_read_verify_and_take_a_transaction() {
             );
         }
         drop(store);
-        let report = fmrh::verify(
+        let report = fmrh::store::verify(
             fmrh::store::FileSource::open(&old).unwrap(),
-            fmrh::VerifyMode::Full,
+            fmrh::store::VerifyMode::Full,
         )
         .unwrap();
         assert!(report.valid, "{}: {report:?}", v.name);
@@ -498,12 +498,12 @@ fn format_2_to_5_vectors_read_verify_and_take_a_transaction() {
         let copy = dir.path().join("old.fmrh");
         std::fs::copy(&old, &copy).unwrap();
         let patch = Heightfield::from_fn(3, 2, |x, y| 1000.0 + (x + y) as f32).unwrap();
-        let c = fmrh::Container::open(&copy).unwrap();
+        let c = fmrh::store::Container::open(&copy).unwrap();
         let mut txn = c.begin_write().unwrap();
         txn.replace_region(1, 1, &patch).unwrap();
         txn.commit().unwrap();
         drop(c);
-        let store = fmrh::Store::open(&copy).unwrap();
+        let store = fmrh::store::Store::open(&copy).unwrap();
         assert_eq!(store.state().format_version, (6, 0), "{}", v.name);
         assert!(store.layout().unwrap().bundle_bytes > 0, "{}", v.name);
         let got = store
@@ -517,9 +517,9 @@ fn format_2_to_5_vectors_read_verify_and_take_a_transaction() {
         for (a, b) in got.samples().iter().zip(patch.samples()) {
             assert!((f64::from(*a) - f64::from(*b)).abs() <= bound, "{a} vs {b}");
         }
-        let report = fmrh::verify(
+        let report = fmrh::store::verify(
             fmrh::store::FileSource::open(&copy).unwrap(),
-            fmrh::VerifyMode::Full,
+            fmrh::store::VerifyMode::Full,
         )
         .unwrap();
         assert!(report.valid, "{}: {report:?}", v.name);
@@ -542,7 +542,7 @@ fn precision_field_sits_where_the_spec_says() {
         0.3
     );
     assert!(raw[h + 156..h + 160].iter().all(|&b| b == 0));
-    let store = fmrh::Store::from_bytes(bytes).unwrap();
+    let store = fmrh::store::Store::from_bytes(bytes).unwrap();
     let got = store.read_window(store.domain().data_rect()).unwrap();
     for (a, b) in got.samples().iter().zip(v.field.samples()) {
         assert!(
@@ -565,7 +565,7 @@ fn the_polar_vector_pins_thinned_grids() {
     let h = 24;
     let flags = u16::from_le_bytes(raw[h + 14..h + 16].try_into().unwrap());
     assert_eq!(flags & 16, 16, "the dataset header's thinned flag");
-    let store = fmrh::Store::from_bytes(bytes).unwrap();
+    let store = fmrh::store::Store::from_bytes(bytes).unwrap();
     let d = *store.domain();
     let b = d.block_size();
     let (mut thinned, mut alone) = (0, 0);
@@ -673,20 +673,24 @@ fn the_slot_vector_pins_where_slot_1_lies() {
     let stored = std::fs::read(&file)
         .unwrap_or_else(|e| panic!("{}: {e} (bless to create)", file.display()));
     assert!(stored == bytes, "the slot vector drifted");
-    let store = fmrh::Store::open(&file).unwrap();
+    let store = fmrh::store::Store::open(&file).unwrap();
     assert_eq!(store.txn_id(), 10, "the state is slot 1's");
-    let report = fmrh::verify(
+    let report = fmrh::store::verify(
         fmrh::store::FileSource::open(&file).unwrap(),
-        fmrh::VerifyMode::Full,
+        fmrh::store::VerifyMode::Full,
     )
     .unwrap();
-    let failed: Vec<fmrh::Invariant> = report
+    let failed: Vec<fmrh::types::Invariant> = report
         .checks
         .iter()
         .filter(|c| c.status == fmrh::store::CheckStatus::Failed)
         .map(|c| c.id)
         .collect();
-    assert_eq!(failed, vec![fmrh::Invariant::InactiveSlot], "{report:?}");
+    assert_eq!(
+        failed,
+        vec![fmrh::types::Invariant::InactiveSlot],
+        "{report:?}"
+    );
 }
 
 /// Every `.info.json` under `format-spec/vectors/` (the current vectors, every older
@@ -810,7 +814,7 @@ fn the_spec_states_the_codes_format_version() {
 /// height. A reader that let the held value win would read that height there.
 #[test]
 fn the_voids_vector_pins_a_void_at_a_held_position() {
-    let store = fmrh::Store::open(&dir().join("hills-20x13-voids.fmrh")).unwrap();
+    let store = fmrh::store::Store::open(&dir().join("hills-20x13-voids.fmrh")).unwrap();
     let d = *store.domain();
     let (c, r) = (19u32, 12u32);
     let side = d.block_size() - 1;

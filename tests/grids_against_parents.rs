@@ -14,8 +14,9 @@ use std::collections::{BTreeMap, HashSet};
 
 use common::bytes_of;
 use fmrh::scene::{load_blocks, Camera, SceneOptions, Terrain};
-use fmrh::store::{Container, CreateOptions, FileSource, WriteOptions};
-use fmrh::{Error, Heightfield, Invariant, Store, VerifyMode};
+use fmrh::store::{Container, FileSource, WriteOptions};
+use fmrh::CreateOptions;
+use fmrh::{store::Store, store::VerifyMode, types::Invariant, Error, Heightfield};
 
 fn alone() -> WriteOptions {
     WriteOptions {
@@ -42,8 +43,8 @@ fn float_hills(w: u32, h: u32) -> Heightfield {
     .unwrap()
 }
 
-fn verify_full(bytes: Vec<u8>) -> fmrh::VerifyReport {
-    fmrh::verify(fmrh::store::Bytes(bytes), VerifyMode::Full).unwrap()
+fn verify_full(bytes: Vec<u8>) -> fmrh::store::VerifyReport {
+    fmrh::store::verify(fmrh::store::Bytes(bytes), VerifyMode::Full).unwrap()
 }
 
 #[test]
@@ -250,7 +251,8 @@ fn commits_on(field: Heightfield) -> usize {
             }
         }
         drop(store);
-        let report = fmrh::verify(FileSource::open(&path).unwrap(), VerifyMode::Full).unwrap();
+        let report =
+            fmrh::store::verify(FileSource::open(&path).unwrap(), VerifyMode::Full).unwrap();
         assert!(report.valid, "{report:#?}");
     }
     kept_planar

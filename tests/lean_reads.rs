@@ -19,7 +19,7 @@ use common::views;
 use fmrh::model::BuildOptions;
 use fmrh::scene::{load_blocks, Camera, SceneOptions, ScheduleOptions, Scheduler, Terrain};
 use fmrh::store::{Bytes, FileSource, PayloadRef};
-use fmrh::{Error, Store};
+use fmrh::{store::Store, Error};
 
 /// Puget Sound 1k with every table in pages of its own (no metadata bundle): the layout of
 /// a file whose metadata is too large to bundle, whose pages are read as lookups reach them.
@@ -324,7 +324,9 @@ fn a_node_below_the_finest_level_is_corruption_not_a_panic() {
     page[4..8].copy_from_slice(&crc.to_le_bytes());
     let store = Store::from_bytes(&bytes[..]).unwrap();
     match store.node(1) {
-        Err(Error::Corrupt { invariant, .. }) => assert_eq!(invariant, fmrh::Invariant::NodeTable),
+        Err(Error::Corrupt { invariant, .. }) => {
+            assert_eq!(invariant, fmrh::types::Invariant::NodeTable)
+        }
         other => panic!("{other:?}"),
     }
     assert!(store.nodes().is_err());
@@ -467,7 +469,7 @@ fn a_cached_page_of_another_table_is_refused() {
         Err(Error::Corrupt {
             invariant, detail, ..
         }) => {
-            assert_eq!(invariant, fmrh::Invariant::Page);
+            assert_eq!(invariant, fmrh::types::Invariant::Page);
             assert!(detail.contains("FMBT"), "{detail}");
         }
         other => panic!("{other:?}"),

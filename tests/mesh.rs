@@ -22,7 +22,7 @@ use fmrh::scene::{
     load_blocks, LoadedBlock, Scene, SceneOptions, Terrain, WorldFrame, PAYLOAD_GAP,
 };
 use fmrh::store::Source;
-use fmrh::Store;
+use fmrh::store::Store;
 use proptest::prelude::*;
 
 use common::fields::{self, Rng};

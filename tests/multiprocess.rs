@@ -28,7 +28,7 @@ use std::sync::{Arc, Mutex};
 use common::data;
 use common::fields::Rng;
 use fmrh::ingest::{load, IngestOptions};
-use fmrh::{Container, CreateOptions, Heightfield};
+use fmrh::{store::Container, CreateOptions, Heightfield};
 
 fn fmrh_bin() -> &'static str {
     env!("CARGO_BIN_EXE_fmrh")
@@ -169,7 +169,7 @@ fn readers_in_other_processes_see_only_committed_states() {
         let refs = Arc::clone(&refs);
         std::thread::spawn(move || {
             for copy in copied {
-                let store = fmrh::Store::open(&copy).unwrap();
+                let store = fmrh::store::Store::open(&copy).unwrap();
                 let all = store.read_window(store.domain().data_rect()).unwrap();
                 let out = scene_cmd(&copy, false).output().unwrap();
                 assert!(
@@ -382,9 +382,9 @@ fn verify_while_a_writer_commits_is_busy_never_invalid() {
     assert_eq!(out.status.code(), Some(75), "{text}");
     assert!(text.contains("BUSY") && !text.contains("INVALID"), "{text}");
     assert!(!text.contains("interrupted"), "{text}");
-    let report = fmrh::verify(
+    let report = fmrh::store::verify(
         fmrh::store::FileSource::open(&file).unwrap(),
-        fmrh::VerifyMode::Fast,
+        fmrh::store::VerifyMode::Fast,
     )
     .unwrap();
     assert!(report.busy && !report.valid);

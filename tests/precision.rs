@@ -23,7 +23,7 @@ use fmrh::model::surface::surface;
 use fmrh::model::{BuildOptions, Model, Precision, SampleRect, Thresholds};
 use fmrh::scene::{reconstruct, Camera, Mode, SceneOptions, Terrain};
 use fmrh::store::{write_to, Bytes, WriteOptions};
-use fmrh::{Heightfield, Store};
+use fmrh::{store::Store, Heightfield};
 
 fn with_precision(q: f64) -> BuildOptions {
     BuildOptions {
@@ -139,7 +139,7 @@ proptest! {
         }
         let store = store_of(&model, &field);
         prop_assert_eq!(store.header().precision, Some(Precision::new(q).unwrap()));
-        let report = fmrh::verify(Bytes(store.source().0.clone()), fmrh::VerifyMode::Full).unwrap();
+        let report = fmrh::store::verify(Bytes(store.source().0.clone()), fmrh::store::VerifyMode::Full).unwrap();
         prop_assert!(report.valid, "{:?}", report);
     }
 }
@@ -419,7 +419,7 @@ fn patches_keep_the_precision_and_change_the_best_codec() {
         field.clone(),
         &fmrh::CreateOptions {
             block_size: 33,
-            precision: Some(Precision::new(0.01).unwrap()),
+            precision: Some(0.01),
             ..Default::default()
         },
     )
@@ -428,7 +428,7 @@ fn patches_keep_the_precision_and_change_the_best_codec() {
         let mut rng = Rng::new(9);
         Heightfield::from_fn(33, 33, |_, _| (rng.unit() * 1000.0) as f32).unwrap()
     };
-    let c = fmrh::Container::open(&path).unwrap();
+    let c = fmrh::store::Container::open(&path).unwrap();
     let mut txn = c.begin_write().unwrap();
     txn.replace_region(0, 0, &noisy).unwrap();
     txn.commit().unwrap();
@@ -451,9 +451,9 @@ fn patches_keep_the_precision_and_change_the_best_codec() {
     }
     assert!(on_lattice(encoding_of(&store, 0, 0)));
     drop(store);
-    let report = fmrh::verify(
+    let report = fmrh::store::verify(
         fmrh::store::FileSource::open(&path).unwrap(),
-        fmrh::VerifyMode::Full,
+        fmrh::store::VerifyMode::Full,
     )
     .unwrap();
     assert!(report.valid, "{report:?}");
@@ -470,7 +470,7 @@ fn patches_keep_the_precision_and_change_the_best_codec() {
     )
     .unwrap();
     assert!(on_lattice(encoding_of(&Store::open(&path).unwrap(), 1, 1)));
-    let c = fmrh::Container::open(&path).unwrap();
+    let c = fmrh::store::Container::open(&path).unwrap();
     let mut txn = c.begin_write().unwrap();
     txn.replace_region(32, 32, &noisy).unwrap();
     txn.commit().unwrap();

@@ -111,7 +111,7 @@ fn every_phase_finishes_and_adds_up() {
         ["checking payloads", "assembling blocks", "measuring levels"]
     );
 
-    let store = fmrh::Store::open(&path).unwrap();
+    let store = fmrh::store::Store::open(&path).unwrap();
     let rec = Recorder::default();
     let window = fmrh::model::SampleRect {
         col0: 10,

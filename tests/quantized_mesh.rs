@@ -58,7 +58,7 @@ fn tiles_decode_to_the_stitched_mesh() {
         String::from_utf8_lossy(&run.stderr)
     );
 
-    let store = fmrh::Store::open(&file).unwrap();
+    let store = fmrh::store::Store::open(&file).unwrap();
     let camera = Camera::looking_at(
         glam::DVec3::new(-2000.0, 4000.0, 2500.0),
         glam::DVec3::new(1000.0, 700.0, 0.0),

@@ -16,7 +16,7 @@ use std::sync::Mutex;
 use common::txn::{build_bytes, build_bytes_paged};
 use fmrh::model::Thresholds;
 use fmrh::store::{verify, Source};
-use fmrh::{Error, Heightfield, Invariant, Store, VerifyMode};
+use fmrh::{store::Store, store::VerifyMode, types::Invariant, Error, Heightfield};
 
 /// Bytes that fail (with `EIO`) every read touching `bad`, once `armed_after` reads have
 /// passed. Its length is the bytes' length when made: cutting the bytes later is a file
@@ -322,9 +322,9 @@ fn every_error_names_its_file() {
     assert!(e.to_string().contains(&*path.to_string_lossy()), "{e}");
     assert!(matches!(e, Error::Corrupt { .. }), "{e}");
     drop(store);
-    let report = fmrh::verify(
+    let report = fmrh::store::verify(
         fmrh::store::FileSource::open(&path).unwrap(),
-        fmrh::VerifyMode::Fast,
+        fmrh::store::VerifyMode::Fast,
     )
     .unwrap();
     assert!(!report.valid);

@@ -13,8 +13,9 @@ use std::io;
 use std::path::Path;
 
 use fmrh::model::SampleRect;
+use fmrh::store::{Container, Store};
 use fmrh::store::{FileSource, Source};
-use fmrh::{Container, CreateOptions, Error, Heightfield, Store};
+use fmrh::{Error, Heightfield};
 
 /// A file source that does not register its state: what a reader on a system without
 /// open-file-description locks, or a tool that bypasses them, is.
@@ -44,11 +45,13 @@ fn field() -> Heightfield {
 
 /// Creates the test file, its metadata bundled or in pages of its own.
 fn create(path: &Path, paged: bool) {
-    let mut options = CreateOptions::default();
+    let field = field();
+    let model = fmrh::model::Model::build(field.clone(), &Default::default()).unwrap();
+    let mut options = fmrh::store::WriteOptions::default();
     if paged {
-        options.write.bundle_limit = 0;
+        options.bundle_limit = 0;
     }
-    fmrh::create(path, field(), &options).unwrap();
+    fmrh::store::write_file(&model, &field.metadata, path, &options, false).unwrap();
 }
 
 /// Commits four replacements and returns each commit's (reuse limit, pages reused).
@@ -224,13 +227,14 @@ fn assert_wrong_tag(result: Result<(), Error>, bytes: &[u8]) {
         Err(Error::Corrupt {
             invariant, detail, ..
         }) => {
-            assert_eq!(invariant, fmrh::Invariant::Page);
+            assert_eq!(invariant, fmrh::types::Invariant::Page);
             assert!(detail.contains("txn tag"), "{detail}");
         }
         Err(e) => panic!("expected I-5, got {e}"),
         Ok(()) => panic!("a page of another transaction was accepted"),
     }
-    let report = fmrh::verify(fmrh::store::Bytes(bytes), fmrh::VerifyMode::Fast).unwrap();
+    let report =
+        fmrh::store::verify(fmrh::store::Bytes(bytes), fmrh::store::VerifyMode::Fast).unwrap();
     assert!(!report.valid && !report.busy);
 }
 

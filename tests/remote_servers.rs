@@ -214,17 +214,17 @@ fn containers_and_a_dataset_in_an_s3_bucket_read_exactly_as_the_local_ones() {
         // Only this test reads these variables (through the library's S3 client).
         std::env::set_var(k, v);
     }
-    let before = fmrh::Store::open_url("s3://terrain/ps1k-paged.fmrh").expect("opens");
+    let before = fmrh::store::Store::open_url("s3://terrain/ps1k-paged.fmrh").expect("opens");
     moto.put("terrain", "ps1k-paged.fmrh", &root.path().join("ps1k.fmrh"));
     let err = before
         .read_window(before.domain().data_rect())
         .unwrap_err()
         .to_string();
     assert!(err.contains("changed underneath"), "{err}");
-    let after = fmrh::Store::open_url("s3://terrain/ps1k-paged.fmrh").expect("opens again");
+    let after = fmrh::store::Store::open_url("s3://terrain/ps1k-paged.fmrh").expect("opens again");
     assert_eq!(
         after.pin(),
-        fmrh::Store::open(&root.path().join("ps1k.fmrh"))
+        fmrh::store::Store::open(&root.path().join("ps1k.fmrh"))
             .unwrap()
             .pin()
     );
@@ -241,8 +241,8 @@ fn a_replace_on_the_origin_is_changed_underneath_for_an_open_reader() {
     let nginx = Nginx::start(root.path());
     let file = root.path().join("ps1k-paged.fmrh");
     let url = nginx.url("ps1k-paged.fmrh");
-    let before = fmrh::Store::open_url(&url).expect("opens");
-    let old = fmrh::Store::open(&file).unwrap().pin();
+    let before = fmrh::store::Store::open_url(&url).expect("opens");
+    let old = fmrh::store::Store::open(&file).unwrap().pin();
     // The origin commits a change to the file nginx serves: a 40 x 30 patch.
     let patch = fmrh::Heightfield::from_fn(40, 30, |x, y| 100.0 + (x * y) as f32).unwrap();
     let patch_path = common::tiles::write_f32(root.path(), "patch", &patch, 160.0);
@@ -260,7 +260,7 @@ fn a_replace_on_the_origin_is_changed_underneath_for_an_open_reader() {
         .to_string();
     assert!(err.contains("changed underneath"), "{err}");
     // A fresh open reads the new state, and its samples are the patch's.
-    let after = fmrh::Store::open_url(&url).expect("opens again");
+    let after = fmrh::store::Store::open_url(&url).expect("opens again");
     assert_ne!(after.pin(), old);
     let window = fmrh::model::SampleRect {
         col0: 200,

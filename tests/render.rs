@@ -11,8 +11,8 @@ use fmrh::render::{
     perspective, top, Image, Surface, FRUSTUM_COLOUR, LEGEND_MARGIN, LEGEND_SWATCH,
 };
 use fmrh::scene::{reconstruct, Camera, SceneOptions, Terrain, WorldFrame};
+use fmrh::store::Store;
 use fmrh::store::WriteOptions;
-use fmrh::Store;
 use glam::DVec3;
 
 /// A container of `field` (blocks of 17 samples) in memory.

@@ -6,8 +6,9 @@
 
 use std::collections::HashSet;
 
-use fmrh::store::{Container, CreateOptions};
-use fmrh::{Heightfield, Store, VerifyMode};
+use fmrh::store::Container;
+use fmrh::CreateOptions;
+use fmrh::{store::Store, store::VerifyMode, Heightfield};
 
 /// Sea (height 0) with one island in the middle.
 fn island() -> Heightfield {
@@ -19,7 +20,7 @@ fn island() -> Heightfield {
 }
 
 fn verify_full(path: &std::path::Path) {
-    let report = fmrh::verify(
+    let report = fmrh::store::verify(
         fmrh::store::FileSource::open(path).unwrap(),
         VerifyMode::Full,
     )

@@ -20,7 +20,7 @@ use fmrh::format::FORMAT_MAJOR;
 use fmrh::model::{cluster, Thresholds};
 use fmrh::store::io::SimDisk;
 use fmrh::store::{verify, Bytes, CheckStatus, Container};
-use fmrh::{Error, Heightfield, Invariant, Store, VerifyMode};
+use fmrh::{store::Store, store::VerifyMode, types::Invariant, Error, Heightfield};
 
 fn u16_at(b: &[u8], at: usize) -> u16 {
     u16::from_le_bytes(b[at..at + 2].try_into().unwrap())
@@ -59,7 +59,7 @@ fn fresh() -> Vec<u8> {
     build_bytes(&hills(), 17, &Thresholds::Ladder)
 }
 
-fn check(report: &fmrh::VerifyReport, id: Invariant) -> CheckStatus {
+fn check(report: &fmrh::store::VerifyReport, id: Invariant) -> CheckStatus {
     report.checks.iter().find(|c| c.id == id).unwrap().status
 }
 
@@ -330,7 +330,7 @@ fn thinning_bits_without_the_header_flag_are_reserved() {
     use fmrh::model::BuildOptions;
     use fmrh::store::{write_to, WriteOptions};
     let hf = hills();
-    let model = fmrh::Model::build(hf.clone(), &BuildOptions::default()).unwrap();
+    let model = fmrh::model::Model::build(hf.clone(), &BuildOptions::default()).unwrap();
     let mut out = std::io::Cursor::new(Vec::new());
     let options = WriteOptions {
         bundle_limit: 0,

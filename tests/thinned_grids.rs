@@ -24,7 +24,7 @@ use fmrh::model::thinning::{
 };
 use fmrh::model::{BuildOptions, Model, Thresholds};
 use fmrh::store::Source;
-use fmrh::{Heightfield, Store};
+use fmrh::{store::Store, Heightfield};
 use proptest::prelude::*;
 
 /// `field` placed at longitude 20°, its first row at `lat0`, rows 0.01° apart southwards
@@ -171,9 +171,9 @@ fn check_thinned(file: &std::path::Path, field: &Heightfield) -> Result<usize, T
         );
         thinned += usize::from(want > 0);
     }
-    let report = fmrh::verify(
+    let report = fmrh::store::verify(
         fmrh::store::FileSource::open(file).unwrap(),
-        fmrh::VerifyMode::Full,
+        fmrh::store::VerifyMode::Full,
     )
     .unwrap();
     prop_assert!(report.valid, "{:?}", report);
@@ -214,7 +214,7 @@ proptest! {
         let (c0, r0) = (((w - pw) as f64 * at.0) as u32, ((h - ph) as f64 * at.1) as u32);
         let patch = common::fields::make(pw, ph, common::fields::Character::Hills, 0.1, seed);
         let thresholds: Vec<f64> = Store::open(&file).unwrap().clusters().iter().map(|c| c.threshold).collect();
-        let c = fmrh::Container::open(&file).unwrap();
+        let c = fmrh::store::Container::open(&file).unwrap();
         let mut txn = c.begin_write().unwrap();
         txn.replace_region(u64::from(c0), u64::from(r0), &patch).unwrap();
         txn.commit().unwrap();
@@ -376,7 +376,11 @@ fn thinned_grids_in_a_file_that_says_format_5_are_corruption() {
     bytes[8..10].copy_from_slice(&5u16.to_le_bytes());
     let crc = crc32fast::hash(&bytes[..252]);
     bytes[252..256].copy_from_slice(&crc.to_le_bytes());
-    let report = fmrh::verify(fmrh::store::Bytes(bytes.clone()), fmrh::VerifyMode::Fast).unwrap();
+    let report = fmrh::store::verify(
+        fmrh::store::Bytes(bytes.clone()),
+        fmrh::store::VerifyMode::Fast,
+    )
+    .unwrap();
     assert!(!report.valid, "{report:?}");
     let store = Store::from_bytes(bytes).unwrap();
     let n = store

@@ -13,7 +13,7 @@ use std::sync::{Arc, Condvar, Mutex};
 
 use fmrh::store::io::{Io, SimDisk};
 use fmrh::store::{verify, Bytes, Container};
-use fmrh::{Heightfield, Store};
+use fmrh::{store::Store, Heightfield};
 
 fn terrain(w: u32, h: u32) -> Heightfield {
     Heightfield::from_fn(w, h, |x, y| {
@@ -73,7 +73,7 @@ fn replacement_commits_equal_a_fresh_build() {
         assert_eq!(before.txn_id(), before_txn);
         assert_eq!(described(&before), before_model);
         drop(before);
-        let report = verify(Bytes(disk.current()), fmrh::VerifyMode::Full).unwrap();
+        let report = verify(Bytes(disk.current()), fmrh::store::VerifyMode::Full).unwrap();
         assert!(report.valid, "edit {i}: {report:#?}");
     }
 }
@@ -133,7 +133,7 @@ fn crash_at_every_operation_recovers_old_or_new() {
             let after = SimDisk::new(image);
             let (c2, _) = Container::open_io(after.clone())
                 .unwrap_or_else(|e| panic!("at {at} {damage:?}: {e}"));
-            let report = verify(Bytes(after.current()), fmrh::VerifyMode::Full).unwrap();
+            let report = verify(Bytes(after.current()), fmrh::store::VerifyMode::Full).unwrap();
             assert!(report.valid, "at {at} {damage:?}: {report:#?}");
             let got = samples_digest(&c2.read().unwrap());
             if got == old {

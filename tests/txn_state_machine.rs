@@ -178,7 +178,7 @@ proptest! {
         use fmrh::model::Thresholds;
         use fmrh::store::io::SimDisk;
         use fmrh::store::Container;
-        use fmrh::Store;
+        use fmrh::store::Store;
 
         let bytes = build_bytes(&field, block, &Thresholds::Ladder);
         let thresholds = common::txn::thresholds(&Store::from_bytes(bytes.clone()).unwrap());

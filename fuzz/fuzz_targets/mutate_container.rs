@@ -31,13 +31,13 @@ fuzz_target!(|data: &[u8]| {
             bytes[i] = e[3];
         }
     }
-    let verdict = fmrh::store::verify(fmrh::store::Bytes(&bytes), fmrh::VerifyMode::Full);
+    let verdict = fmrh::store::verify(fmrh::store::Bytes(&bytes), fmrh::store::VerifyMode::Full);
     if bytes != original {
         if let Ok(report) = &verdict {
             assert!(!report.valid, "a damaged container verified as valid");
         }
     }
-    if let Ok(store) = fmrh::Store::from_bytes(&bytes[..]) {
+    if let Ok(store) = fmrh::store::Store::from_bytes(&bytes[..]) {
         let _ = store.read_window(store.domain().data_rect());
         for c in 0..store.clusters().len() {
             let _ = store.scan_hilbert(c, 0..=u64::MAX).map(|s| s.count());

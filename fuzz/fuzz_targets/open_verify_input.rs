@@ -128,9 +128,9 @@ fn bundle_pages(bytes: &[u8]) -> Option<Vec<u8>> {
 }
 
 pub fn check(bytes: &[u8]) {
-    let full = fmrh::store::verify(fmrh::store::Bytes(bytes), fmrh::VerifyMode::Full);
-    let _ = fmrh::store::verify(fmrh::store::Bytes(bytes), fmrh::VerifyMode::Fast);
-    match fmrh::Store::from_bytes(bytes) {
+    let full = fmrh::store::verify(fmrh::store::Bytes(bytes), fmrh::store::VerifyMode::Full);
+    let _ = fmrh::store::verify(fmrh::store::Bytes(bytes), fmrh::store::VerifyMode::Fast);
+    match fmrh::store::Store::from_bytes(bytes) {
         Ok(store) => {
             let whole = store.read_window(store.domain().data_rect());
             if full.as_ref().is_ok_and(|r| r.valid) {
@@ -148,7 +148,7 @@ pub fn check(bytes: &[u8]) {
     }
 }
 
-fn exercise<S: fmrh::store::Source>(store: &fmrh::Store<S>) {
+fn exercise<S: fmrh::store::Source>(store: &fmrh::store::Store<S>) {
     let _ = store.layout();
     for c in 0..store.clusters().len() {
         let _ = store

@@ -3,15 +3,15 @@
 //! ([`ModelArgs`], for `build` and `dataset build|add`), where the camera is and what the view
 //! asks ([`CameraArgs`], [`ViewArgs`], for `scene`, `fly`, `render`, `mesh`, `serve`), and
 //! the parsers of the values they take. The names and help of `--format` and
-//! `--color-encoding` come from `fmrh::ingest` itself, so the two cannot drift apart.
+//! `--color-encoding` come from `crate::ingest` itself, so the two cannot drift apart.
 
 use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
 
-use fmrh::ingest::{ColorEncoding, Format, IngestOptions};
-use fmrh::model::{BuildOptions, Precision, ThinByArea, Thresholds, DEFAULT_BLOCK_SIZE};
-use fmrh::scene::{Camera, Mode, SceneOptions, DEFAULT_GAP};
-use fmrh::store::WriteOptions;
-use fmrh::Error;
+use crate::ingest::{ColorEncoding, Format, IngestOptions};
+use crate::model::{BuildOptions, Precision, ThinByArea, Thresholds, DEFAULT_BLOCK_SIZE};
+use crate::scene::{Camera, Mode, SceneOptions, DEFAULT_GAP};
+use crate::store::WriteOptions;
+use crate::Error;
 
 /// `--format`: the names and one-line help of [`Format::ALL`].
 fn format_parser() -> impl TypedValueParser<Value = Format> {
@@ -150,7 +150,7 @@ impl ModelArgs {
 #[derive(clap::Args, Clone)]
 pub struct ViewArgs {
     /// Vertical field of view in degrees (strictly between 0 and 180).
-    #[arg(long, default_value_t = fmrh::scene::camera::DEFAULT_FOV_DEG, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = crate::scene::camera::DEFAULT_FOV_DEG, allow_negative_numbers = true)]
     pub fov: f64,
     /// Viewport in pixels, WIDTHxHEIGHT.
     #[arg(long, default_value = "1024x768")]
@@ -206,9 +206,9 @@ impl ViewArgs {
     /// The spacing to place `file`'s terrain with: `--spacing`, else the file's own; an error
     /// when neither is known, since a camera in metres over samples of unknown size sees the
     /// wrong terrain.
-    pub fn spacing<S: fmrh::store::Source>(
+    pub fn spacing<S: crate::store::Source>(
         &self,
-        store: &fmrh::Store<S>,
+        store: &crate::store::Store<S>,
         file: &std::path::Path,
     ) -> Result<Option<[f64; 2]>, Error> {
         if let Some(s) = &self.spacing {
@@ -318,7 +318,7 @@ impl CameraArgs {
                         "--eye-geo: latitude {lat} is not within -90..=90"
                     )));
                 }
-                fmrh::globe::look(lat, lon, h, look[0], look[1])
+                crate::globe::look(lat, lon, h, look[0], look[1])
             }
             None => {
                 let need = |v: &Option<String>, name: &str| {
@@ -384,9 +384,9 @@ pub fn parse_quad(text: &str, what: &str) -> Result<[u64; 4], Error> {
 }
 
 /// Parses an inclusive window `c0,r0,c1,r1`.
-pub fn parse_window(text: &str) -> Result<fmrh::model::SampleRect, Error> {
+pub fn parse_window(text: &str) -> Result<crate::model::SampleRect, Error> {
     let [col0, row0, col1, row1] = parse_quad(text, "window")?;
-    Ok(fmrh::model::SampleRect {
+    Ok(crate::model::SampleRect {
         col0,
         row0,
         col1,

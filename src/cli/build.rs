@@ -6,11 +6,11 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use fmrh::format::page_size_for;
-use fmrh::ingest;
-use fmrh::model::{precision, Model, Precision};
-use fmrh::store::{write_file, WriteSummary};
-use fmrh::Error;
+use crate::format::page_size_for;
+use crate::ingest;
+use crate::model::{precision, Model, Precision};
+use crate::store::{write_file, WriteSummary};
+use crate::Error;
 
 #[derive(clap::Args)]
 pub struct BuildArgs {
@@ -123,8 +123,8 @@ pub fn run(args: &BuildArgs) -> Result<ExitCode, Error> {
     // One bar for every phase, unless told to be quiet or writing JSON; it draws only on a
     // terminal.
     let bar = (!args.quiet && !args.json).then(|| std::sync::Arc::new(super::progress::Bar::new()));
-    let silent = fmrh::progress::Silent;
-    let progress: &dyn fmrh::progress::Progress = match &bar {
+    let silent = crate::progress::Silent;
+    let progress: &dyn crate::progress::Progress = match &bar {
         Some(b) => &**b,
         None => &silent,
     };
@@ -210,7 +210,7 @@ pub fn run(args: &BuildArgs) -> Result<ExitCode, Error> {
         nodes_per_level: model.tree().nodes_per_level(),
         max_error: model.max_error(),
         precision: model.precision().map(Precision::step),
-        thinned_nodes: (1..=fmrh::model::thinning::MAX_THIN_LOG2)
+        thinned_nodes: (1..=crate::model::thinning::MAX_THIN_LOG2)
             .map(|t| ThinnedCount {
                 factor: 1 << t,
                 nodes: model.tree().nodes().iter().filter(|n| n.thin == t).count(),

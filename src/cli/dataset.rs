@@ -5,8 +5,8 @@
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use fmrh::dataset::{self, DatasetOptions, SeamPolicy, TileInput};
-use fmrh::Error;
+use crate::dataset::{self, DatasetOptions, SeamPolicy, TileInput};
+use crate::Error;
 
 #[derive(clap::Subcommand)]
 pub enum DatasetCommand {
@@ -144,8 +144,8 @@ fn build(args: &BuildArgs) -> Result<ExitCode, Error> {
     let options = args.tile_options.options(args.seam)?;
     let quiet = args.quiet || args.json;
     let bar = (!quiet).then(super::progress::Bar::new);
-    let silent = fmrh::progress::Silent;
-    let progress: &dyn fmrh::progress::Progress = match &bar {
+    let silent = crate::progress::Silent;
+    let progress: &dyn crate::progress::Progress = match &bar {
         Some(b) => b,
         None => &silent,
     };
@@ -230,8 +230,13 @@ fn add(args: &AddArgs) -> Result<ExitCode, Error> {
     } else {
         dataset::add
     };
-    let (commit, record, shift) =
-        run(&args.dir, &args.tile, at, &options, &fmrh::progress::Silent)?;
+    let (commit, record, shift) = run(
+        &args.dir,
+        &args.tile,
+        at,
+        &options,
+        &crate::progress::Silent,
+    )?;
     let r = record.rect();
     if args.json {
         #[derive(serde::Serialize)]
@@ -239,7 +244,7 @@ fn add(args: &AddArgs) -> Result<ExitCode, Error> {
             dataset: String,
             tile: String,
             name: &'a str,
-            rect: fmrh::model::SampleRect,
+            rect: crate::model::SampleRect,
             /// How far every other tile's dataset coordinates moved (the new tile lies west
             /// or north of the old grid).
             origin_shift: [u64; 2],

@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use fmrh::Error;
+use crate::Error;
 
 #[derive(clap::Args)]
 pub struct ExtractArgs {
@@ -33,7 +33,7 @@ pub struct ExtractArgs {
 /// Runs `fmrh extract`.
 pub fn run(args: &ExtractArgs) -> Result<ExitCode, Error> {
     if super::is_dataset(&args.file)? {
-        let ds = fmrh::dataset::Dataset::open(&args.file)?;
+        let ds = crate::dataset::Dataset::open(&args.file)?;
         let window = match &args.window {
             Some(text) => super::args::parse_window(text)?,
             None => ds.grid(),
@@ -45,7 +45,7 @@ pub fn run(args: &ExtractArgs) -> Result<ExitCode, Error> {
     }
     if let Some(url) = super::url_of(&args.file) {
         #[cfg(feature = "remote")]
-        return extract(args, &fmrh::Store::open_url(url)?);
+        return extract(args, &crate::store::Store::open_url(url)?);
         #[cfg(not(feature = "remote"))]
         return Err(super::no_remote(url));
     }
@@ -53,9 +53,9 @@ pub fn run(args: &ExtractArgs) -> Result<ExitCode, Error> {
 }
 
 /// Extracts from `store`.
-fn extract<S: fmrh::store::Source>(
+fn extract<S: crate::store::Source>(
     args: &ExtractArgs,
-    store: &fmrh::Store<S>,
+    store: &crate::store::Store<S>,
 ) -> Result<ExitCode, Error> {
     let data = store.domain().data_rect();
     let window = match &args.window {

@@ -7,9 +7,10 @@ use std::sync::Arc;
 
 use serde::Serialize;
 
-use fmrh::scene::{path, Camera, FrameStats, ScheduleOptions, Scheduler};
-use fmrh::store::ReadStats;
-use fmrh::{Error, Store};
+use crate::scene::{path, Camera, FrameStats, ScheduleOptions, Scheduler};
+use crate::store::ReadStats;
+use crate::store::Store;
+use crate::Error;
 
 use super::args::ViewArgs;
 
@@ -62,7 +63,7 @@ struct Report {
     reads: Reads,
     /// A remote container: what the whole path asked its server for, opening included.
     #[serde(skip_serializing_if = "Option::is_none")]
-    requests: Option<fmrh::store::RequestStats>,
+    requests: Option<crate::store::RequestStats>,
 }
 
 #[derive(Serialize)]
@@ -94,7 +95,7 @@ pub fn run(args: &FlyArgs) -> Result<ExitCode, Error> {
         #[cfg(not(feature = "remote"))]
         return Err(super::no_remote(url));
     }
-    if args.view.mmap && fmrh::store::lock::SUPPORTED {
+    if args.view.mmap && crate::store::lock::SUPPORTED {
         // SAFETY: the --mmap contract, stated in its help: the state is registered, so fmrh
         // writers leave its pages alone, and no other tool modifies the file meanwhile.
         let store = unsafe { Store::open_mapped(&args.file) }?;
@@ -104,7 +105,7 @@ pub fn run(args: &FlyArgs) -> Result<ExitCode, Error> {
     }
 }
 
-fn replay<S: fmrh::store::Source + 'static>(
+fn replay<S: crate::store::Source + 'static>(
     args: &FlyArgs,
     store: Arc<Store<S>>,
     cameras: &[Camera],
@@ -158,7 +159,7 @@ fn replay<S: fmrh::store::Source + 'static>(
 
 /// `fmrh fly DIR`: the frames across tiles.
 fn replay_dataset(args: &FlyArgs, cameras: &[Camera]) -> Result<ExitCode, Error> {
-    let ds = fmrh::dataset::Dataset::open(&args.file)?;
+    let ds = crate::dataset::Dataset::open(&args.file)?;
     let options = ScheduleOptions {
         scene: args.view.options(),
         memory_radius: args.memory_radius,
@@ -174,7 +175,7 @@ fn replay_dataset(args: &FlyArgs, cameras: &[Camera]) -> Result<ExitCode, Error>
         globe: args.geo,
         globe_frame: None,
     };
-    let mut scheduler = fmrh::dataset::DatasetScheduler::new(&ds, options)?;
+    let mut scheduler = crate::dataset::DatasetScheduler::new(&ds, options)?;
     let mut frames = Vec::with_capacity(cameras.len());
     for cam in cameras {
         let f = scheduler.frame(cam)?;

@@ -3,12 +3,12 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use fmrh::crs::Crs;
+use crate::crs::Crs;
 use serde::Serialize;
 
-use fmrh::heightfield::Georeference;
-use fmrh::store::Layout;
-use fmrh::Error;
+use crate::heightfield::Georeference;
+use crate::store::Layout;
+use crate::Error;
 
 #[derive(clap::Args)]
 pub struct InfoArgs {
@@ -237,13 +237,13 @@ struct TileInfo {
     width: u32,
     height: u32,
     height_range: [f32; 2],
-    pin: fmrh::format::manifest::StatePin,
+    pin: crate::format::manifest::StatePin,
     file_bytes: Option<u64>,
 }
 
 fn run_dataset(args: &InfoArgs) -> Result<ExitCode, Error> {
-    use fmrh::format::manifest::{MANIFEST_MAJOR, SEAM_FIRST, SEAM_MEAN};
-    let ds = fmrh::dataset::Dataset::open(&args.file)?;
+    use crate::format::manifest::{MANIFEST_MAJOR, SEAM_FIRST, SEAM_MEAN};
+    let ds = crate::dataset::Dataset::open(&args.file)?;
     let open = ds.open_reads();
     let tiles = ds.tiles()?;
     let record = ds.state().record;
@@ -358,7 +358,7 @@ pub fn run(args: &InfoArgs) -> Result<ExitCode, Error> {
     }
     if let Some(url) = super::url_of(&args.file) {
         #[cfg(feature = "remote")]
-        return report(args, &fmrh::Store::open_url(url)?);
+        return report(args, &crate::store::Store::open_url(url)?);
         #[cfg(not(feature = "remote"))]
         return Err(super::no_remote(url));
     }
@@ -366,9 +366,9 @@ pub fn run(args: &InfoArgs) -> Result<ExitCode, Error> {
 }
 
 /// Reports on `store`.
-fn report<S: fmrh::store::Source>(
+fn report<S: crate::store::Source>(
     args: &InfoArgs,
-    store: &fmrh::Store<S>,
+    store: &crate::store::Store<S>,
 ) -> Result<ExitCode, Error> {
     let h = store.header();
     let d = h.domain;

@@ -1,10 +1,10 @@
-//! The progress bar: `fmrh::progress::Progress` drawn with indicatif on stderr, and only when
+//! The progress bar: `crate::progress::Progress` drawn with indicatif on stderr, and only when
 //! stderr is a terminal (indicatif hides itself otherwise). Phases whose work is not known
 //! ahead (reading an input) get a spinner with the elapsed time.
 
 use std::time::Duration;
 
-use fmrh::progress::Unit;
+use crate::progress::Unit;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 /// A progress bar for long phases (one at a time).
@@ -19,7 +19,7 @@ impl Bar {
         ))
     }
 
-    /// A spinner for `phase`, ticking on its own until [`fmrh::progress::Progress::finish`].
+    /// A spinner for `phase`, ticking on its own until [`crate::progress::Progress::finish`].
     pub fn spin(&self, phase: &str) {
         let bar = &self.0;
         bar.reset();
@@ -31,7 +31,7 @@ impl Bar {
     }
 }
 
-impl fmrh::progress::Progress for Bar {
+impl crate::progress::Progress for Bar {
     fn start(&self, phase: &str, total: u64, unit: Unit) {
         let bar = &self.0;
         bar.disable_steady_tick();

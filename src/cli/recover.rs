@@ -6,8 +6,8 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use fmrh::store::Container;
-use fmrh::Error;
+use crate::store::Container;
+use crate::Error;
 
 #[derive(clap::Args)]
 pub struct RecoverArgs {
@@ -22,7 +22,7 @@ pub struct RecoverArgs {
 /// Runs `fmrh recover`.
 pub fn run(args: &RecoverArgs) -> Result<ExitCode, Error> {
     if super::is_dataset(&args.file)? {
-        let r = fmrh::dataset::recover(&fmrh::dataset::Dir(args.file.clone()))?;
+        let r = crate::dataset::recover(&crate::dataset::Dir(args.file.clone()))?;
         if args.json {
             super::print_json(&r)?;
         } else if r.republished.is_empty() && r.recovered.is_empty() {

@@ -1,14 +1,14 @@
-//! `fmrh render`: a picture of a scene, drawn on the CPU (`fmrh::render`): the surface its
+//! `fmrh render`: a picture of a scene, drawn on the CPU (`crate::render`): the surface its
 //! blocks draw through the camera, or from overhead (`--top`) with the camera's view on the
 //! ground. The README's pictures are made with it.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use fmrh::model::SampleRect;
-use fmrh::render::{perspective, top, Surface};
-use fmrh::scene::{reconstruct, Camera, SceneBlock, Terrain, WorldFrame};
-use fmrh::Error;
+use crate::model::SampleRect;
+use crate::render::{perspective, top, Surface};
+use crate::scene::{reconstruct, Camera, SceneBlock, Terrain, WorldFrame};
+use crate::Error;
 
 #[derive(clap::Args)]
 pub struct RenderArgs {
@@ -50,7 +50,7 @@ pub fn run(args: &RenderArgs) -> Result<ExitCode, Error> {
     }
     if let Some(url) = super::url_of(&args.file) {
         #[cfg(feature = "remote")]
-        return render(args, &fmrh::Store::open_url(url)?);
+        return render(args, &crate::store::Store::open_url(url)?);
         #[cfg(not(feature = "remote"))]
         return Err(super::no_remote(url));
     }
@@ -77,9 +77,9 @@ fn window_to_draw(
     }
 }
 
-fn render<S: fmrh::store::Source>(
+fn render<S: crate::store::Source>(
     args: &RenderArgs,
-    store: &fmrh::Store<S>,
+    store: &crate::store::Store<S>,
 ) -> Result<ExitCode, Error> {
     let camera = args.camera.camera(&args.view)?;
     args.camera.flat_only("fmrh render")?;
@@ -108,7 +108,7 @@ fn render_dataset(args: &RenderArgs) -> Result<ExitCode, Error> {
     let camera = args.camera.camera(&args.view)?;
     args.camera.flat_only("fmrh render")?;
     let options = args.view.options_in(args.window.as_deref())?;
-    let ds = fmrh::dataset::Dataset::open(&args.file)?;
+    let ds = crate::dataset::Dataset::open(&args.file)?;
     let spacing = args.view.given_spacing()?;
     let scene = ds.scene(&camera, &options, spacing)?;
     let window = window_to_draw(args, options.window, scene.window, ds.grid())?;

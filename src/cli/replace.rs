@@ -9,9 +9,9 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use fmrh::ingest;
-use fmrh::store::{CommitSummary, Container, Recovery};
-use fmrh::Error;
+use crate::ingest;
+use crate::store::{CommitSummary, Container, Recovery};
+use crate::Error;
 
 #[derive(clap::Args)]
 pub struct ReplaceArgs {
@@ -66,7 +66,8 @@ pub fn run(args: &ReplaceArgs) -> Result<ExitCode, Error> {
     let patch = ingest::load(&args.patch, &args.ingest.options())?;
     if super::is_dataset(&args.file)? {
         let started = Instant::now();
-        let r = fmrh::dataset::replace(&fmrh::dataset::Dir(args.file.clone()), col0, row0, &patch)?;
+        let r =
+            crate::dataset::replace(&crate::dataset::Dir(args.file.clone()), col0, row0, &patch)?;
         let ms = started.elapsed().as_secs_f64() * 1e3;
         if args.json {
             #[derive(Serialize)]
@@ -77,7 +78,7 @@ pub fn run(args: &ReplaceArgs) -> Result<ExitCode, Error> {
                 width: u32,
                 height: u32,
                 #[serde(flatten)]
-                commit: &'a fmrh::dataset::DatasetCommit,
+                commit: &'a crate::dataset::DatasetCommit,
                 commit_time_ms: f64,
             }
             super::print_json(&Report {

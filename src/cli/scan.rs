@@ -5,7 +5,7 @@ use std::process::ExitCode;
 
 use serde::Serialize;
 
-use fmrh::Error;
+use crate::Error;
 
 #[derive(clap::Args)]
 #[command(group(clap::ArgGroup::new("range").required(true).args(["hilbert", "codes"])))]

@@ -1,16 +1,17 @@
 //! The raster output of `extract` and `scene --reconstruct`: `.f32` + `.json`, the form of
 //! `../shared/data`, so `fmrh build` reads it back and anyone can diff it against a source;
-//! or a GeoTIFF (`fmrh::export::geotiff`) that GIS tools open as they are.
+//! or a GeoTIFF (`crate::export::geotiff`) that GIS tools open as they are.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 
-use fmrh::heightfield::Heightfield;
-use fmrh::model::SampleRect;
-use fmrh::store::{write_atomically, Source as StoreSource};
-use fmrh::{Error, Store};
+use crate::heightfield::Heightfield;
+use crate::model::SampleRect;
+use crate::store::Store;
+use crate::store::{write_atomically, Source as StoreSource};
+use crate::Error;
 
 /// The sidecar, with the keys `../shared/data/README.md` promises.
 #[derive(Serialize)]
@@ -247,7 +248,7 @@ impl RasterOutput {
     /// Writes `hf` as a GeoTIFF, atomically (or to standard output).
     fn write_tif(&self, hf: &Heightfield) -> Result<(), Error> {
         let mut bytes = std::io::Cursor::new(Vec::new());
-        let written = fmrh::export::geotiff::write(hf, &mut bytes)?;
+        let written = crate::export::geotiff::write(hf, &mut bytes)?;
         let bytes = bytes.into_inner();
         let path = &self.f32_path;
         if path == Path::new("-") {

@@ -4,8 +4,8 @@ use std::fs::File;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use fmrh::store::{verify_with_progress, CheckStatus, FileSource, VerifyMode};
-use fmrh::Error;
+use crate::store::{verify_with_progress, CheckStatus, FileSource, VerifyMode};
+use crate::Error;
 
 #[derive(clap::Args)]
 pub struct VerifyArgs {
@@ -35,7 +35,7 @@ pub fn run(args: &VerifyArgs) -> Result<ExitCode, Error> {
     let path = &args.file;
     if let Some(url) = super::url_of(path) {
         #[cfg(feature = "remote")]
-        return check(args, fmrh::store::remote::HttpSource::open(url)?);
+        return check(args, crate::store::remote::HttpSource::open(url)?);
         #[cfg(not(feature = "remote"))]
         return Err(super::no_remote(url));
     }
@@ -44,7 +44,7 @@ pub fn run(args: &VerifyArgs) -> Result<ExitCode, Error> {
 }
 
 /// Verifies the container `src` holds and reports.
-fn check<S: fmrh::store::Source>(args: &VerifyArgs, src: S) -> Result<ExitCode, Error> {
+fn check<S: crate::store::Source>(args: &VerifyArgs, src: S) -> Result<ExitCode, Error> {
     let path = &args.file;
     let mode = if args.full {
         VerifyMode::Full
@@ -52,7 +52,7 @@ fn check<S: fmrh::store::Source>(args: &VerifyArgs, src: S) -> Result<ExitCode, 
         VerifyMode::Fast
     };
     let report = if args.quiet || args.json {
-        verify_with_progress(src, mode, &fmrh::progress::Silent)?
+        verify_with_progress(src, mode, &crate::progress::Silent)?
     } else {
         verify_with_progress(src, mode, &super::progress::Bar::new())?
     };
@@ -100,7 +100,7 @@ fn check<S: fmrh::store::Source>(args: &VerifyArgs, src: S) -> Result<ExitCode, 
 }
 
 /// Prints one check's line and its first failures.
-fn print_check(c: &fmrh::store::CheckReport) {
+fn print_check(c: &crate::store::CheckReport) {
     let status = match c.status {
         CheckStatus::Passed => "ok",
         CheckStatus::Failed => "FAILED",
@@ -127,9 +127,9 @@ fn run_dataset(args: &VerifyArgs) -> Result<ExitCode, Error> {
         VerifyMode::Fast
     };
     let report = if args.quiet || args.json {
-        fmrh::dataset::verify(&args.file, mode, &fmrh::progress::Silent)?
+        crate::dataset::verify(&args.file, mode, &crate::progress::Silent)?
     } else {
-        fmrh::dataset::verify(&args.file, mode, &super::progress::Bar::new())?
+        crate::dataset::verify(&args.file, mode, &super::progress::Bar::new())?
     };
     if args.json {
         super::print_json(&report)?;

@@ -134,6 +134,7 @@ pub enum DecodeError {
 ///
 /// # Panics
 /// If `samples.len()` is not a multiple of a non-zero `width` (a caller's bug).
+#[cfg(any(test, feature = "testing"))]
 pub fn encode(samples: &[f32], width: usize) -> Vec<u8> {
     encode_on(samples, width, None)
 }

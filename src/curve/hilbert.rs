@@ -163,7 +163,7 @@ fn chunks_and_start(order: u32) -> (u32, usize) {
 
 /// The Hilbert index of cell `(x, y)` on a `2^order × 2^order` grid (root of type I).
 ///
-/// `order` must be at most [`MAX_ORDER`]; bits of `x` and `y` above `order` are ignored.
+/// `order` must be at most 32; bits of `x` and `y` above `order` are ignored.
 #[inline]
 pub fn hilbert_encode(order: u32, x: u32, y: u32) -> u64 {
     debug_assert!(order <= MAX_ORDER);

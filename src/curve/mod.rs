@@ -7,9 +7,13 @@
 //! south, row 0 at the north edge). [`MortonKey`] converts to seed 001's south-up frame itself.
 
 pub mod hilbert;
+#[cfg(any(test, feature = "testing"))]
 pub mod morton;
+#[cfg(any(test, feature = "testing"))]
 pub mod qtm;
 
 pub use hilbert::{hilbert_decode, hilbert_encode, HilbertKey, HilbertType};
+#[cfg(any(test, feature = "testing"))]
 pub use morton::{MortonBounds, MortonKey};
+#[cfg(any(test, feature = "testing"))]
 pub use qtm::{QtmCell, QtmCode};

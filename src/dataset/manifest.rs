@@ -206,6 +206,7 @@ impl ManifestState {
     }
 
     /// Tile pages read so far.
+    #[cfg(any(test, feature = "testing"))]
     pub fn pages_read(&self) -> usize {
         self.pages.iter().filter(|p| p.get().is_some()).count()
     }

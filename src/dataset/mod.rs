@@ -25,10 +25,20 @@ pub mod seams;
 pub mod verify;
 
 pub use add::{add, replace_tile};
-pub use build::{build, BuiltTile, DatasetOptions, DatasetSummary, TileInput};
-pub use commit::{recover, replace, DatasetCommit, DatasetRecovery, Dir, Files, TileCommit};
-pub use fly::{DatasetFrame, DatasetScheduler};
-pub use reader::{is_dataset, Dataset, Tile, OPEN_TILES};
-pub use scene::{DatasetBlock, DatasetScene, TilePart};
+pub use build::{build, DatasetOptions, DatasetSummary, TileInput};
+#[cfg(any(test, feature = "testing"))]
+pub use build::BuiltTile;
+pub use commit::{recover, replace, DatasetCommit, Dir};
+#[cfg(any(test, feature = "testing"))]
+pub use commit::{DatasetRecovery, Files, TileCommit};
+pub use fly::DatasetScheduler;
+#[cfg(any(test, feature = "testing"))]
+pub use fly::DatasetFrame;
+pub use reader::{is_dataset, Dataset};
+#[cfg(any(test, feature = "testing"))]
+pub use reader::{Tile, OPEN_TILES};
+pub use scene::{DatasetBlock, TilePart};
+#[cfg(any(test, feature = "testing"))]
+pub use scene::DatasetScene;
 pub use seams::SeamPolicy;
 pub use verify::{verify, DatasetReport, TileReport};

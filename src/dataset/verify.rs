@@ -32,7 +32,7 @@ pub struct TileReport {
     pub failures: Vec<String>,
 }
 
-/// The result of [`verify`].
+/// The result of the dataset validator (`fmrh verify DIR`, `Terrain::verify`).
 #[derive(Clone, Debug, Serialize)]
 pub struct DatasetReport {
     /// Fast or full (the mode each tile was verified in).

@@ -16,10 +16,9 @@
 //! the unit sphere) that is below the horizon only when the whole tile is, following
 //! Cesium's "Horizon culling" (Ring, 2013) as its `EllipsoidalOccluder` computes it.
 
-pub use crate::globe::{
-    ecef, horizon_occlusion_point, scaled, scaled_point_visible, up, FAR_OCCLUSION_RADII, WGS84_A,
-    WGS84_B, WGS84_E2,
-};
+pub use crate::globe::{ecef, horizon_occlusion_point, up, WGS84_A};
+#[cfg(any(test, feature = "testing"))]
+pub use crate::globe::{scaled, scaled_point_visible, FAR_OCCLUSION_RADII, WGS84_B, WGS84_E2};
 
 /// Samples along a side of the heightmap Cesium sizes its level-0 error by.
 pub const HEIGHTMAP_WIDTH: f64 = 65.0;
@@ -62,6 +61,7 @@ impl GeodeticTile {
     }
 
     /// The four tiles one level down (south-west, south-east, north-west, north-east).
+    #[cfg(any(test, feature = "testing"))]
     pub fn children(&self) -> [GeodeticTile; 4] {
         let (z, x, y) = (self.z + 1, self.x * 2, self.y * 2);
         [

@@ -135,13 +135,13 @@ impl Placement {
             ];
             (p[0].is_finite() && p[1].is_finite()).then_some(p)
         };
-        match self.crs.from_lon_lat_all(lon_lat) {
+        match self.crs.lon_lat_to_crs_all(lon_lat) {
             Some(v) => v.into_iter().map(to_position).collect(),
             None => lon_lat
                 .iter()
                 .map(|&p| {
                     self.crs
-                        .from_lon_lat_all(&[p])
+                        .lon_lat_to_crs_all(&[p])
                         .and_then(|v| v.first().copied())
                         .and_then(to_position)
                 })
@@ -222,11 +222,13 @@ fn grid_code(i: usize) -> u16 {
 /// A tile sampled from a surface, ready to write, with what it draws from.
 pub struct SampledTile {
     /// The tile.
+    #[cfg_attr(not(any(test, feature = "testing")), allow(dead_code))] // read by the tests
     pub tile: GeodeticTile,
     /// Its quantized mesh (the metadata left empty for the caller).
     pub data: TileData,
     /// The height of each vertex as a decoder reads it, row-major from the south-west
     /// (`v` then `u`).
+    #[cfg_attr(not(any(test, feature = "testing")), allow(dead_code))] // read by the tests
     pub heights: Vec<f64>,
     /// Whether each vertex is inside the data.
     pub inside: Vec<bool>,

@@ -125,6 +125,7 @@ impl GltfFrame {
 /// The GLB of `blocks` in `frame`, positions from `origin` (world metres, `[x, y]`), with
 /// `scene_extras` on the scene. Blocks without triangles are left out; there must be one
 /// with.
+#[cfg(any(test, feature = "testing"))]
 pub fn glb(
     blocks: &[GltfBlock<'_>],
     frame: &WorldFrame,

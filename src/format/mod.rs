@@ -91,19 +91,20 @@ pub mod tree;
 
 pub use crate::error::{Invariant, Violation};
 pub use blob::BlobRef;
-pub use commit::{
-    CommitRecord, StateRoots, COMMIT_FLAGS_KNOWN, COMMIT_PAYLOAD_SLACK, COMMIT_RECORD_LEN,
-    COMMIT_RECOVERY_NEEDED,
-};
+pub use commit::{CommitRecord, StateRoots, COMMIT_PAYLOAD_SLACK, COMMIT_RECORD_LEN, COMMIT_RECOVERY_NEEDED};
+#[cfg(any(test, feature = "testing"))]
+pub use commit::COMMIT_FLAGS_KNOWN;
 pub use dataset::DatasetHeader;
-pub use directory::{ClusterInfo, ClusterRecord, EdgeRange};
-pub use page::{tag, PageHeader, PAGE_HEADER_LEN};
+pub use directory::ClusterInfo;
+#[cfg(any(test, feature = "testing"))]
+pub use directory::{ClusterRecord, EdgeRange};
+pub use page::tag;
+#[cfg(any(test, feature = "testing"))]
+pub use page::{PageHeader, PAGE_HEADER_LEN};
 pub use payload::PayloadRef;
-pub use records::{
-    AdjacencyEntry, BlockRecord, FreeEntry, FreePage, IndexEntry, NodeRecord, ScanEntry,
-    StoredBlock, StoredNode, NODE_GRID_AGAINST_PARENT, NODE_GRID_BITMAP_FLAGGED,
-    NODE_GRID_HAS_VOIDS, NODE_GRID_THIN_MASK, NODE_GRID_THIN_SHIFT, ROOT_PARENT,
-};
+pub use records::{AdjacencyEntry, BlockRecord, FreeEntry, FreePage, IndexEntry, NodeRecord, ScanEntry, StoredBlock, StoredNode, NODE_GRID_AGAINST_PARENT, NODE_GRID_BITMAP_FLAGGED, NODE_GRID_HAS_VOIDS, NODE_GRID_THIN_MASK, NODE_GRID_THIN_SHIFT};
+#[cfg(any(test, feature = "testing"))]
+pub use records::ROOT_PARENT;
 pub use tree::{TreeRef, TreeSpec, MAX_TREE_DEPTH};
 
 /// The first eight bytes of a commit record. The `\r\n\x1a\n` tail catches text-mode
@@ -113,12 +114,12 @@ pub const MAGIC: [u8; 8] = *b"FMRH\r\n\x1a\n";
 /// Incompatible revisions of the format. Writers write 6; readers read 1 to 6.
 ///
 /// 6.0 may store a node's coarse grid *thinned by area* (the node record's flag bits 3 to 6,
-/// [`records::NODE_GRID_THIN_MASK`]): only every `k`-th column and the last, which a reader
+/// `NODE_GRID_THIN_MASK`): only every `k`-th column and the last, which a reader
 /// expands back (§7). A 5.x reader would take such a grid for a corrupt one. Everything else
 /// is as in 5.0, so a 5.x file is read as it is and a transaction on it writes a 6.0 state.
 ///
 /// 5.0 may code a node's coarse grid *against its parent's grid* as 4.0 codes physical
-/// blocks (the node record's flag [`records::NODE_GRID_AGAINST_PARENT`]): decoding a grid may
+/// blocks (the node record's flag `NODE_GRID_AGAINST_PARENT`): decoding a grid may
 /// then need its ancestors' grids, up to one coded alone. A 4.x reader would take such a grid
 /// for a corrupt one. Everything else is as in 4.0, so a 4.x file is read as it is and a
 /// transaction on it writes a 5.0 state.
@@ -129,10 +130,9 @@ pub const MAGIC: [u8; 8] = *b"FMRH\r\n\x1a\n";
 /// and a transaction on it writes a 4.0 state.
 ///
 /// 3.0 may keep a small state's structured pages in a compressed *metadata bundle*
-/// ([`bundle`]) that the commit record names: a 2.x reader would find the tables missing.
+/// (§6.7) that the commit record names: a 2.x reader would find the tables missing.
 /// Everything else is as in 2.1, so a 2.x file is read as it is and a transaction on it
-/// writes a 3.0 state. 2.0 stored payloads coded ([`payload::encode`],
-/// [`crate::codec`]) where 1.x stored raw `f32`: a 1.x file is read as it is, and refused
+/// writes a 3.0 state. 2.0 stored payloads coded (§7) where 1.x stored raw `f32`: a 1.x file is read as it is, and refused
 /// for writing (it would mix raw and coded payloads): rebuild it with `fmrh build`.
 pub const FORMAT_MAJOR: u16 = 6;
 

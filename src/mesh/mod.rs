@@ -51,7 +51,9 @@ use rayon::prelude::*;
 use crate::error::Result;
 use crate::model::SampleRect;
 use crate::scene::surface::GridBlock;
-use crate::scene::{TerrainFrame, WorldFrame};
+use crate::scene::TerrainFrame;
+#[cfg(any(test, feature = "testing"))]
+use crate::scene::WorldFrame;
 
 use lines::Lines;
 use triangulate::Triangles;
@@ -102,6 +104,7 @@ pub struct BlockMesh {
 
 /// The meshes of `blocks` (disjoint, meeting only along edges) in the world frame `frame`,
 /// their cracks closed as `cracks` says; a block without area has none.
+#[cfg(any(test, feature = "testing"))]
 pub fn build(
     blocks: &[GridBlock<'_>],
     frame: &WorldFrame,

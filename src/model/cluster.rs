@@ -109,6 +109,7 @@ pub fn default_ladder(root_error: f64, min_positive_error: Option<f64>) -> Vec<f
 /// The cut `C(delta)` straight from its definition: the nodes with `e* <= delta` whose parent
 /// has `e* > delta`, in tree order. For tests and single queries; [`build_clusters`] makes all
 /// cuts at once.
+#[cfg(any(test, feature = "testing"))]
 pub fn cut(tree: &Fmrh, delta: f64) -> Vec<u32> {
     let nodes = tree.nodes();
     (0..nodes.len() as u32)

@@ -94,7 +94,7 @@ pub struct Domain {
 
 impl Domain {
     /// The domain of a `width × height` data grid cut into blocks of `block_size` samples.
-    /// `block_size` must be `2^k + 1` within [`MIN_BLOCK_SIZE`]`..=`[`MAX_BLOCK_SIZE`].
+    /// `block_size` must be `2^k + 1` within 9 ..= 1025.
     pub fn new(width: u32, height: u32, block_size: u32) -> Result<Domain> {
         check_dimensions(u64::from(width), u64::from(height))?;
         if !(MIN_BLOCK_SIZE..=MAX_BLOCK_SIZE).contains(&block_size)

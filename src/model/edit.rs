@@ -166,6 +166,7 @@ impl ModelEditor {
     }
 
     /// The cluster thresholds, ascending.
+    #[cfg(any(test, feature = "testing"))]
     pub fn thresholds(&self) -> &[f64] {
         &self.thresholds
     }

@@ -18,13 +18,18 @@ pub mod thinning;
 pub mod tree;
 
 pub use cluster::{Cluster, MAX_CLUSTERS};
-pub use domain::{Domain, SampleRect, DEFAULT_BLOCK_SIZE, MAX_BLOCK_SIZE, MIN_BLOCK_SIZE};
+pub use domain::{Domain, SampleRect, DEFAULT_BLOCK_SIZE};
+#[cfg(any(test, feature = "testing"))]
+pub use domain::{MAX_BLOCK_SIZE, MIN_BLOCK_SIZE};
 pub use edit::ModelEditor;
+#[cfg(any(test, feature = "testing"))]
 pub use measure::NodeStats;
 pub use precision::Precision;
 pub use raster::MendedRaster;
 pub use thinning::{LatLonSpacing, ThinByArea};
-pub use tree::{Fmrh, Measurements, Node, NO_PARENT};
+pub use tree::{Fmrh, Measurements, NO_PARENT};
+#[cfg(any(test, feature = "testing"))]
+pub use tree::Node;
 
 use crate::error::Result;
 use crate::heightfield::Heightfield;
@@ -32,7 +37,7 @@ use crate::heightfield::Heightfield;
 /// Which cluster thresholds to build.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub enum Thresholds {
-    /// The default √2 ladder from the root's error down, plus 0 (see [`cluster`]).
+    /// The default √2 ladder from the root's error down, plus 0 (model §6).
     #[default]
     Ladder,
     /// Exactly these thresholds (any order; duplicates are dropped).

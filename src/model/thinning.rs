@@ -99,7 +99,7 @@ pub enum ThinByArea {
     /// Never: every grid is square.
     Off,
     /// Where the heightfield's georeference is geographic, by its spacing
-    /// ([`LatLonSpacing::of_georeference`]); elsewhere never.
+    /// (model §4a); elsewhere never.
     #[default]
     Auto,
     /// By this spacing, whatever the heightfield says.

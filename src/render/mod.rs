@@ -90,6 +90,7 @@ impl Image {
     }
 
     /// Pixel `(x, y)`.
+    #[cfg(any(test, feature = "testing"))]
     pub fn pixel(&self, x: u32, y: u32) -> [u8; 3] {
         let i = (y as usize * self.width as usize + x as usize) * 3;
         [self.rgb[i], self.rgb[i + 1], self.rgb[i + 2]]

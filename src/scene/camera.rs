@@ -32,6 +32,22 @@ pub const DEFAULT_VIEWPORT: [u32; 2] = [1024, 768];
 pub const MAX_VIEWPORT: u32 = 1 << 16;
 
 /// A pinhole camera in the world frame.
+///
+/// ```
+/// use fmrh::glam::DVec3;
+/// use fmrh::Camera;
+///
+/// // 2 km south-west of the data's north-west corner, 900 m up, looking at a point 5 km in.
+/// let camera = Camera {
+///     viewport: [1920, 1080],
+///     fov_y_deg: 45.0,
+///     ..Camera::looking_at(DVec3::new(-2000.0, -2000.0, 900.0), DVec3::new(5000.0, 5000.0, 0.0))
+/// };
+/// assert!(camera.view().is_ok());
+/// // On the globe: 45° N, 7° E, 3 km above the ellipsoid, looking east and 20° down.
+/// let on_globe = Camera::on_globe(45.0, 7.0, 3000.0, 90.0, -20.0);
+/// assert!(on_globe.eye.length() > 6.3e6);
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Camera {
     /// Where the eye is.
@@ -60,7 +76,7 @@ impl Camera {
         }
     }
 
-    /// A camera on the globe ([`crate::globe::look`]): the eye at latitude `lat` and
+    /// A camera on the globe: the eye at latitude `lat` and
     /// longitude `lon` (degrees), `h` metres above the WGS 84 ellipsoid, looking along
     /// `heading` (degrees clockwise from north) and `pitch` (degrees above the horizontal), in
     /// ECEF metres; 60° vertical field of view, 1024 × 768.

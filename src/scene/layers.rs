@@ -235,6 +235,7 @@ impl<'s, S: Source> Layers<'s, S> {
     }
 
     /// The layers, the base first.
+    #[cfg(any(test, feature = "testing"))]
     pub fn layers(&self) -> &[Layer<'s, S>] {
         &self.layers
     }

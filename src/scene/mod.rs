@@ -16,6 +16,7 @@
 //! metres; in view-dependent mode every block is within the tolerance in pixels where it is
 //! seen, and no block could be replaced by its parent without breaking that.
 
+#[cfg(any(test, feature = "testing"))]
 pub mod baseline;
 pub mod camera;
 pub mod layers;
@@ -33,11 +34,20 @@ mod terrain;
 mod uniform;
 mod view_dependent;
 
+#[cfg(any(test, feature = "testing"))]
 pub use crate::format::PayloadRef;
-pub use camera::{Aabb, Camera, Coverage, GlobeFrame, TerrainFrame, View, WorldFrame};
-pub use layers::{LayerBlock, LayeredScene, Layers, LonLatRect};
-pub use load::{load_blocks, load_blocks_reusing, HeldGrid, LoadedBlock, PAYLOAD_GAP};
+pub use camera::{Aabb, Camera, GlobeFrame, TerrainFrame, View, WorldFrame};
+#[cfg(any(test, feature = "testing"))]
+pub use camera::Coverage;
+pub use layers::{LayerBlock, Layers};
+#[cfg(any(test, feature = "testing"))]
+pub use layers::{LayeredScene, LonLatRect};
+pub use load::{load_blocks, LoadedBlock, PAYLOAD_GAP};
+#[cfg(any(test, feature = "testing"))]
+pub use load::{load_blocks_reusing, HeldGrid};
 pub use reconstruct::{reconstruct, Reconstruction};
 pub use result::{Mode, NeighbourLevels, Scene, SceneBlock, SceneOptions, SceneStats, DEFAULT_GAP};
-pub use schedule::{BlockId, Frame, FrameStats, ScheduleOptions, Scheduler};
+pub use schedule::{FrameStats, ScheduleOptions, Scheduler};
+#[cfg(any(test, feature = "testing"))]
+pub use schedule::{BlockId, Frame};
 pub use terrain::Terrain;

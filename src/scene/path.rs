@@ -83,6 +83,7 @@ fn parse_lines(
 }
 
 /// Writes cameras as CSV (with [`HEADER`]), numbers rounded to centimetres.
+#[cfg(any(test, feature = "testing"))]
 pub fn to_csv(cameras: &[Camera]) -> String {
     let mut s = format!("{HEADER}\n");
     for c in cameras {
@@ -95,6 +96,7 @@ pub fn to_csv(cameras: &[Camera]) -> String {
 
 /// The terrain a path is laid over: its extent in metres and a way to ask for the highest
 /// ground near a point.
+#[cfg(any(test, feature = "testing"))]
 pub struct Ground<'a> {
     /// East extent in metres.
     pub width: f64,
@@ -106,6 +108,7 @@ pub struct Ground<'a> {
 
 /// A straight, level flight across the terrain from the south-west to the north-east at
 /// `altitude` metres above the highest ground, looking ahead and down, `frames` cameras.
+#[cfg(any(test, feature = "testing"))]
 pub fn straight(ground: &Ground<'_>, altitude: f64, frames: usize) -> Vec<Camera> {
     let top = (ground.highest)(
         ground.width / 2.0,
@@ -133,6 +136,7 @@ pub fn straight(ground: &Ground<'_>, altitude: f64, frames: usize) -> Vec<Camera
 
 /// An orbit around the centre at `radius_frac` of the extent, `altitude` above the highest
 /// ground, always looking at the centre, one full turn in `frames` cameras.
+#[cfg(any(test, feature = "testing"))]
 pub fn orbit(ground: &Ground<'_>, radius_frac: f64, altitude: f64, frames: usize) -> Vec<Camera> {
     let (cx, cy) = (ground.width / 2.0, ground.height / 2.0);
     let r = radius_frac * ground.width.max(ground.height);
@@ -151,6 +155,7 @@ pub fn orbit(ground: &Ground<'_>, radius_frac: f64, altitude: f64, frames: usize
 /// `clearance` metres above the highest ground within `lookahead` metres, looking
 /// `lookahead` ahead at ground level, `frames` cameras. Over rough ground the eye rides up
 /// and down with the terrain.
+#[cfg(any(test, feature = "testing"))]
 pub fn low_pass(
     ground: &Ground<'_>,
     row_frac: f64,

@@ -141,6 +141,7 @@ pub fn window_blocks(domain: &Domain, window: &SampleRect) -> [u32; 4] {
 }
 
 /// The finest block that owns sample `(col, row)` (see [`window_blocks`]).
+#[cfg(any(test, feature = "testing"))]
 pub fn owner_block(domain: &Domain, col: u64, row: u64) -> (u32, u32) {
     let [x, y, _, _] = window_blocks(
         domain,

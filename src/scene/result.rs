@@ -23,6 +23,19 @@ pub enum Mode {
 }
 
 /// What a scene asks for besides the camera.
+///
+/// ```
+/// use fmrh::types::{Mode, SampleRect};
+/// use fmrh::SceneOptions;
+///
+/// // One static bound over a given window, at 2 pixels.
+/// let options = SceneOptions {
+///     mode: Mode::Uniform,
+///     window: Some(SampleRect { col0: 0, row0: 0, col1: 511, row1: 255 }),
+///     ..SceneOptions::new(2.0)
+/// };
+/// assert_eq!(options.tau, 2.0);
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SceneOptions {
     /// Tolerance in pixels (finite, `>= 0`).
@@ -37,7 +50,7 @@ pub struct SceneOptions {
 }
 
 impl SceneOptions {
-    /// View-dependent, no window, [`DEFAULT_GAP`].
+    /// View-dependent, no window, runs of keys at most 4 apart scanned as one.
     pub fn new(tau: f64) -> SceneOptions {
         SceneOptions {
             tau,

@@ -90,6 +90,7 @@ pub struct ScheduleOptions {
 
 impl ScheduleOptions {
     /// View-dependent scenes at `tau`, no memory ring, no prefetch, 256 MiB budget.
+    #[cfg(any(test, feature = "testing"))]
     pub fn new(tau: f64) -> ScheduleOptions {
         ScheduleOptions {
             scene: SceneOptions::new(tau),
@@ -236,12 +237,14 @@ impl<S: Source + 'static> Scheduler<S> {
     }
 
     /// The stored (coded) payload of a resident block.
+    #[cfg(any(test, feature = "testing"))]
     pub fn payload(&self, id: &BlockId) -> Option<&[u8]> {
         self.resident.get(id).map(|r| &*r.loaded.stored)
     }
 
     /// A resident block, decoded: the heights it draws. Each block is decoded once, when
     /// it is loaded (or prefetched), and kept while it stays resident.
+    #[cfg(any(test, feature = "testing"))]
     pub fn block(&self, id: &BlockId) -> Option<&LoadedBlock> {
         self.resident.get(id).map(|r| &r.loaded)
     }
@@ -260,6 +263,7 @@ impl<S: Source + 'static> Scheduler<S> {
     }
 
     /// The scene of the last frame.
+    #[cfg(any(test, feature = "testing"))]
     pub fn last_scene(&self) -> Option<&Scene> {
         self.last_scene.as_ref()
     }

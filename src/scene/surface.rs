@@ -239,6 +239,7 @@ impl<'a> Surface<'a> {
 
     /// Whether some block's footprint meets the closed rectangle `[col0, col1] x [row0,
     /// row1]`.
+    #[cfg(any(test, feature = "testing"))]
     pub fn meets(&self, col0: f64, row0: f64, col1: f64, row1: f64) -> bool {
         self.blocks.iter().any(|b| {
             let r = &b.rect;

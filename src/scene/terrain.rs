@@ -24,6 +24,7 @@ use crate::store::{Ahead, Source, Store};
 pub struct Terrain<'s, S: Source> {
     pub(super) store: &'s Store<S>,
     domain: Domain,
+    #[cfg_attr(not(any(test, feature = "testing")), allow(dead_code))] // read by the tests
     frame: WorldFrame,
     /// Where the samples are in the world frame cameras are given in.
     world: TerrainFrame,
@@ -40,6 +41,7 @@ impl<'s, S: Source> Terrain<'s, S> {
     /// CRS), samples are taken as 1 m apart, and a camera placed in metres sees the wrong
     /// terrain. Check, and use [`Terrain::with_spacing`]; the CLI refuses such scenes
     /// without `--spacing`.
+    #[cfg(any(test, feature = "testing"))]
     pub fn new(store: &'s Store<S>) -> Result<Self> {
         Terrain::with_spacing(store, None)
     }
@@ -112,6 +114,7 @@ impl<'s, S: Source> Terrain<'s, S> {
     }
 
     /// The flat frame of the store's spacing (the world frame unless on the globe).
+    #[cfg(any(test, feature = "testing"))]
     pub fn frame(&self) -> WorldFrame {
         self.frame
     }

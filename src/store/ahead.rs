@@ -105,7 +105,7 @@ impl Ahead {
 
 impl<S: Source> Store<S> {
     /// Whether reading ahead is worth planning: the source fetches ahead
-    /// ([`Source::prefetches`], a remote object). A caller skips building its [`Ahead`]
+    /// ([`Source::prefetches`], a remote object). A caller skips naming its lookups ahead
     /// when not.
     pub fn prefetches(&self) -> bool {
         self.src.prefetches()

@@ -140,7 +140,7 @@ impl<S: Source> Store<S> {
     /// coded against it decode with. Decoding a grid coded against its parent's (format 5)
     /// needs that grid first, and so on up to one coded alone; readers that walk the tree
     /// (windows, `extract`, the validator) ask for the same ancestors again and again, so the
-    /// last [`ANCESTOR_CACHE`] decoded are kept.
+    /// last 32 decoded are kept.
     pub fn parent_grid(&self, index: u32, node: &StoredNode) -> Result<Arc<ParentGrid>> {
         if let Some(g) = self.cached_parent_grid(index, node) {
             return Ok(g);

@@ -189,6 +189,7 @@ pub fn oldest_reader(file: &File, up_to: u64) -> io::Result<Option<u64>> {
 }
 
 /// Every txn id `<= up_to` that readers have registered, ascending (for `fmrh info`).
+#[cfg(any(test, feature = "testing"))]
 pub fn registered_readers(file: &File, up_to: u64) -> io::Result<Vec<u64>> {
     let mut out = Vec::new();
     let mut lo = 1;

@@ -84,10 +84,14 @@ use std::path::Path;
 use serde::Serialize;
 
 pub use crate::format::payload::ParentGrid;
-pub use crate::format::{ClusterInfo, FreePage, PayloadRef, ScanEntry, StoredBlock, StoredNode};
+pub use crate::format::ClusterInfo;
+#[cfg(any(test, feature = "testing"))]
+pub use crate::format::{FreePage, PayloadRef, ScanEntry, StoredBlock, StoredNode};
 pub use ahead::Ahead;
 pub use any::{is_url, AnySource};
-pub use decode::{Block, Grid, HeldGrid, LoadedBlock, Wanted, ANCESTOR_CACHE};
+pub use decode::{Block, Grid, HeldGrid, LoadedBlock, Wanted};
+#[cfg(any(test, feature = "testing"))]
+pub use decode::ANCESTOR_CACHE;
 pub use pagecache::ReadStats;
 pub use read::{Children, CodeScan, HilbertScan, Layout};
 pub use source::{Bytes, Counted, FileSource, MmapSource, RequestStats, Source};
@@ -95,10 +99,9 @@ pub use txn::{CommitSummary, Container, Recovery, Snapshot, WriteTxn};
 pub use verify::{
     verify, verify_pinned, verify_with_progress, CheckReport, CheckStatus, VerifyMode, VerifyReport,
 };
-pub use write::{
-    create, write_atomically, write_file, write_to, CreateOptions, Progress, SectionBytes,
-    WriteOptions, WriteSummary,
-};
+pub use write::{write_atomically, write_file, Progress, WriteOptions, WriteSummary};
+#[cfg(any(test, feature = "testing"))]
+pub use write::{write_to, SectionBytes};
 
 use crate::error::Result;
 use crate::format::{CommitRecord, DatasetHeader, COMMIT_PAYLOAD_SLACK, COMMIT_RECOVERY_NEEDED};
@@ -161,7 +164,7 @@ impl Store<FileSource> {
     /// # let path = dir.path().join("hill.fmrh");
     /// # let hill = fmrh::Heightfield::from_fn(100, 80, |x, y| (x * y) as f32 * 0.1)?;
     /// # fmrh::create(&path, hill, &fmrh::CreateOptions::default())?;
-    /// let store = fmrh::Store::open(&path)?;
+    /// let store = fmrh::raw::Store::open(&path)?;
     /// assert_eq!(store.domain().width(), 100);
     /// let root = store.node(0)?;
     /// assert_eq!(root.level, 0);

@@ -5,7 +5,7 @@
 #![allow(dead_code, unused_imports)]
 
 use fmrh::store::Source;
-use fmrh::{Heightfield, Store};
+use fmrh::{store::Store, Heightfield};
 
 pub use super::txn_driver::{build_bytes, build_bytes_paged, described, Described};
 

@@ -23,7 +23,7 @@ use std::io::Cursor;
 use fmrh::model::{BuildOptions, Model, Thresholds};
 use fmrh::store::io::{Damage, Fault, OpKind, SimDisk};
 use fmrh::store::{verify, write_to, Bytes, Container, Snapshot, Source, WriteOptions};
-use fmrh::{Error, Heightfield, Store};
+use fmrh::{store::Store, Error, Heightfield};
 
 /// One step of a workload.
 #[derive(Clone, Debug)]
@@ -308,7 +308,7 @@ impl Driver {
     /// The expensive check: the file verifies and describes the model a fresh build gives.
     pub fn check_full(&self) {
         let report =
-            verify(Bytes(self.disk.current()), fmrh::VerifyMode::Full).expect("verify runs");
+            verify(Bytes(self.disk.current()), fmrh::store::VerifyMode::Full).expect("verify runs");
         assert!(report.valid, "verify --full: {report:#?}");
         let now = self.container().read().expect("a snapshot");
         let hf = Heightfield::new(self.width, self.height, self.committed.clone())

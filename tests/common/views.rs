@@ -10,8 +10,8 @@ use std::io::Cursor;
 use fmrh::heightfield::Heightfield;
 use fmrh::model::{BuildOptions, Model, SampleRect};
 use fmrh::scene::{Aabb, View, WorldFrame};
+use fmrh::store::Store;
 use fmrh::store::{write_to, Bytes, WriteOptions};
-use fmrh::Store;
 
 use super::fields::Rng;
 

@@ -1,5 +1,5 @@
-//! `fmrh mesh`: a scene as triangles (`fmrh::mesh`), crack-free, written as one glTF 2.0
-//! binary (`fmrh::export::gltf`): one node per block, with its level, error and key; or as
+//! `fmrh mesh`: a scene as triangles (`crate::mesh`), crack-free, written as one glTF 2.0
+//! binary (`crate::export::gltf`): one node per block, with its level, error and key; or as
 //! a directory of Cesium quantized-mesh tiles and their `layer.json` ([`tiles`]): the
 //! global-geodetic pyramid over georeferenced data, or one tile per block.
 
@@ -10,13 +10,13 @@ use std::sync::Arc;
 use serde_json::{json, Value};
 
 use super::args::RefineArg;
-use fmrh::export::gltf::{glb_in, GltfBlock, GltfFrame};
-use fmrh::heightfield::Georeference;
-use fmrh::mesh::{build_in, fractal, BlockMesh, Cracks};
-use fmrh::model::SampleRect;
-use fmrh::scene::surface::GridBlock;
-use fmrh::scene::{load_blocks, LoadedBlock, SceneBlock, Terrain, WorldFrame, PAYLOAD_GAP};
-use fmrh::Error;
+use crate::export::gltf::{glb_in, GltfBlock, GltfFrame};
+use crate::heightfield::Georeference;
+use crate::mesh::{build_in, fractal, BlockMesh, Cracks};
+use crate::model::SampleRect;
+use crate::scene::surface::GridBlock;
+use crate::scene::{load_blocks, LoadedBlock, SceneBlock, Terrain, WorldFrame, PAYLOAD_GAP};
+use crate::Error;
 
 mod tiles;
 
@@ -162,10 +162,10 @@ struct Context {
     frame: WorldFrame,
     /// With a camera on the globe: where the samples are on it (the meshes' vertices then
     /// go into a local east-north-up frame).
-    globe: Option<fmrh::scene::GlobeFrame>,
+    globe: Option<crate::scene::GlobeFrame>,
     georeference: Option<Georeference>,
     tau: f64,
-    mode: fmrh::scene::Mode,
+    mode: crate::scene::Mode,
     /// Mesh units a sample: 1, or `fractal::SCALE` when refined past the data.
     units: u64,
 }
@@ -182,10 +182,10 @@ impl Context {
 }
 
 /// Replaces each physical block that the camera sees closer than its data's detail with
-/// synthetic nodes (`fmrh::mesh::fractal`), and puts every part in mesh units.
+/// synthetic nodes (`crate::mesh::fractal`), and puts every part in mesh units.
 fn refine_fractal(
     parts: Vec<Part>,
-    camera: &fmrh::scene::Camera,
+    camera: &crate::scene::Camera,
     context: &mut Context,
 ) -> Result<Vec<Part>, Error> {
     let view = camera.view()?;
@@ -330,8 +330,8 @@ impl Meshed {
 pub fn mesh_scene(
     file: &std::path::Path,
     view: &super::args::ViewArgs,
-    camera: &fmrh::scene::Camera,
-    options: &fmrh::scene::SceneOptions,
+    camera: &crate::scene::Camera,
+    options: &crate::scene::SceneOptions,
     cracks: Cracks,
     refine: Option<RefineArg>,
     globe: bool,
@@ -345,7 +345,7 @@ pub fn mesh_scene(
 fn finish_meshes(
     parts: Vec<Part>,
     mut context: Context,
-    camera: &fmrh::scene::Camera,
+    camera: &crate::scene::Camera,
     cracks: Cracks,
     refine: Option<RefineArg>,
 ) -> Result<Meshed, Error> {
@@ -360,13 +360,13 @@ fn finish_meshes(
     };
     let grids: Vec<GridBlock<'_>> = parts.iter().map(Part::grid).collect();
     let frame = match context.globe {
-        Some(g) if context.units == 1 => fmrh::scene::TerrainFrame::Globe(g),
+        Some(g) if context.units == 1 => crate::scene::TerrainFrame::Globe(g),
         Some(_) => {
             return Err(Error::Internal(
                 "a refined mesh on the globe (refinement is refused there)".into(),
             ))
         }
-        None => fmrh::scene::TerrainFrame::Flat(context.mesh_frame()),
+        None => crate::scene::TerrainFrame::Flat(context.mesh_frame()),
     };
     let meshes = build_in(&grids, &frame, cracks)?;
     Ok(Meshed {
@@ -411,17 +411,17 @@ fn block_extras(p: &Part, m: &BlockMesh, units: u64) -> Value {
 fn scene_parts(
     file: &std::path::Path,
     view: &super::args::ViewArgs,
-    camera: &fmrh::scene::Camera,
-    options: &fmrh::scene::SceneOptions,
+    camera: &crate::scene::Camera,
+    options: &crate::scene::SceneOptions,
     cover: impl Fn(Option<&Georeference>) -> bool,
     globe: bool,
 ) -> Result<(Vec<Part>, Vec<Part>, Context), Error> {
     if super::is_dataset(file)? {
-        let ds = fmrh::dataset::Dataset::open(file)?;
+        let ds = crate::dataset::Dataset::open(file)?;
         let spacing = view.given_spacing()?;
         let frame = WorldFrame::new(spacing.or(ds.spacing_m()));
         let on_globe = globe.then(|| ds.globe_frame()).transpose()?;
-        let parts_of = |camera: &fmrh::scene::Camera, options: &fmrh::scene::SceneOptions| {
+        let parts_of = |camera: &crate::scene::Camera, options: &crate::scene::SceneOptions| {
             let scene = if globe {
                 ds.scene_on_globe(camera, options)?
             } else {
@@ -457,7 +457,7 @@ fn scene_parts(
             tile_parts(
                 file,
                 view,
-                &fmrh::Store::open_url(url)?,
+                &crate::store::Store::open_url(url)?,
                 camera,
                 options,
                 cover,
@@ -480,17 +480,17 @@ fn scene_parts(
 }
 
 /// A scene's parts, with its tolerance and mode.
-type SceneParts = (Vec<Part>, f64, fmrh::scene::Mode);
+type SceneParts = (Vec<Part>, f64, crate::scene::Mode);
 
 /// The scene `parts_of` gives for `camera` and `options`, its tolerance and mode, and with
 /// `cover` the cover of `data` ([`cover_options`]) too.
 fn with_cover(
-    parts_of: impl Fn(&fmrh::scene::Camera, &fmrh::scene::SceneOptions) -> Result<SceneParts, Error>,
-    camera: &fmrh::scene::Camera,
-    options: &fmrh::scene::SceneOptions,
+    parts_of: impl Fn(&crate::scene::Camera, &crate::scene::SceneOptions) -> Result<SceneParts, Error>,
+    camera: &crate::scene::Camera,
+    options: &crate::scene::SceneOptions,
     data: SampleRect,
     cover: bool,
-) -> Result<(Vec<Part>, Vec<Part>, f64, fmrh::scene::Mode), Error> {
+) -> Result<(Vec<Part>, Vec<Part>, f64, crate::scene::Mode), Error> {
     let (parts, tau, mode) = parts_of(camera, options)?;
     let covering = if cover {
         parts_of(camera, &cover_options(options, data))?.0
@@ -505,9 +505,9 @@ fn with_cover(
 /// meeting the tolerance as if they were in it. Where the camera's own scene stops, its
 /// blocks are the camera's scene's neighbours in resolution.
 fn cover_options(
-    options: &fmrh::scene::SceneOptions,
+    options: &crate::scene::SceneOptions,
     data: SampleRect,
-) -> fmrh::scene::SceneOptions {
+) -> crate::scene::SceneOptions {
     let mut cover = *options;
     cover.window = Some(data);
     cover
@@ -515,12 +515,12 @@ fn cover_options(
 
 /// The scene of one container, its blocks read and decoded, and when `cover` says so of its
 /// georeference the scene of all its data from the same camera.
-fn tile_parts<S: fmrh::store::Source>(
+fn tile_parts<S: crate::store::Source>(
     file: &std::path::Path,
     view: &super::args::ViewArgs,
-    store: &fmrh::Store<S>,
-    camera: &fmrh::scene::Camera,
-    options: &fmrh::scene::SceneOptions,
+    store: &crate::store::Store<S>,
+    camera: &crate::scene::Camera,
+    options: &crate::scene::SceneOptions,
     cover: impl Fn(Option<&Georeference>) -> bool,
     globe: bool,
 ) -> Result<(Vec<Part>, Vec<Part>, Context), Error> {
@@ -531,13 +531,13 @@ fn tile_parts<S: fmrh::store::Source>(
         (spacing, Terrain::with_spacing(store, spacing)?)
     };
     let on_globe = match terrain.world() {
-        fmrh::scene::TerrainFrame::Globe(g) => Some(g),
-        fmrh::scene::TerrainFrame::Flat(_) => None,
+        crate::scene::TerrainFrame::Globe(g) => Some(g),
+        crate::scene::TerrainFrame::Flat(_) => None,
     };
     let d = *store.domain();
     let metadata = &store.header().metadata;
     let frame = WorldFrame::new(spacing.or(metadata.spacing_m));
-    let parts_of = |camera: &fmrh::scene::Camera, options: &fmrh::scene::SceneOptions| {
+    let parts_of = |camera: &crate::scene::Camera, options: &crate::scene::SceneOptions| {
         let scene = terrain.scene(camera, options)?;
         let loaded = load_blocks(store, &scene.blocks, PAYLOAD_GAP)?;
         let parts: Vec<Part> = scene
@@ -645,7 +645,7 @@ fn encode(
         GltfFrame::Globe { lon, lat, .. } => {
             origin_extras = json!({
                 "lon_lat_h": [lon, lat, 0.0],
-                "ecef": fmrh::globe::ecef(lon, lat, 0.0),
+                "ecef": crate::globe::ecef(lon, lat, 0.0),
             });
             "WGS 84: X east, Y up, Z south at the origin (a local east-north-up frame, height 0), in metres"
         }

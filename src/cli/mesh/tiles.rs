@@ -3,12 +3,12 @@
 //!
 //! * **geodetic** (the default for georeferenced data): Cesium's global-geodetic pyramid,
 //!   every tile a 65² grid in longitude and latitude sampled from the scene's surface
-//!   (`fmrh::export::geodetic_mesh`), down to the level each scene block's resolution maps
+//!   (`crate::export::geodetic_mesh`), down to the level each scene block's resolution maps
 //!   to, with every ancestor; a tileset `Cesium.CesiumTerrainProvider` loads as it is. The
 //!   surface is the scene's blocks where the camera looks, and the coarsest cover of the
 //!   data elsewhere; the ellipsoid (height 0) away from the data.
 //! * **nodes**: one tile per scene block, addressed by its fmrh node, its stitched mesh in
-//!   a local frame (`fmrh::export::quantized_mesh::encode`).
+//!   a local frame (`crate::export::quantized_mesh::encode`).
 //!
 //! Either way the directory is written beside the output under a temporary name and
 //! renamed into place, so a failure leaves no half-written tileset.
@@ -21,13 +21,13 @@ use rayon::prelude::*;
 use serde_json::{json, Value};
 
 use super::super::args::RefineArg;
-use fmrh::export::geodetic::{self, GeodeticTile};
-use fmrh::export::geodetic_mesh::{self, Placement, GRID};
-use fmrh::export::quantized_mesh::{self, QuantizedTile};
-use fmrh::mesh::{BlockMesh, Cracks};
-use fmrh::model::SampleRect;
-use fmrh::scene::surface::{GridBlock, Surface};
-use fmrh::Error;
+use crate::export::geodetic::{self, GeodeticTile};
+use crate::export::geodetic_mesh::{self, Placement, GRID};
+use crate::export::quantized_mesh::{self, QuantizedTile};
+use crate::mesh::{BlockMesh, Cracks};
+use crate::model::SampleRect;
+use crate::scene::surface::{GridBlock, Surface};
+use crate::Error;
 
 use super::{
     block_extras, finish_meshes, refine_fractal, scene_parts, Context, CracksArg, MeshArgs, Part,
@@ -41,11 +41,11 @@ const MAX_TILES: usize = 200_000;
 /// Runs `fmrh mesh --format quantized-mesh`.
 pub(super) fn run_tiles(
     args: &MeshArgs,
-    camera: &fmrh::scene::Camera,
-    options: &fmrh::scene::SceneOptions,
+    camera: &crate::scene::Camera,
+    options: &crate::scene::SceneOptions,
 ) -> Result<ExitCode, Error> {
     // The cover is for geodetic tiles only: a scene over the whole data, not made for nothing.
-    let geodetic_wanted = |g: Option<&fmrh::heightfield::Georeference>| {
+    let geodetic_wanted = |g: Option<&crate::heightfield::Georeference>| {
         args.tiling != TilingArg::Nodes && g.is_some_and(|g| Placement::new(g, 1.0).is_ok())
     };
     let (parts, cover, context) = scene_parts(
@@ -318,7 +318,7 @@ struct TileSummary {
 /// every tile the scene's blocks map to, with their ancestors.
 fn run_geodetic(
     args: &MeshArgs,
-    camera: &fmrh::scene::Camera,
+    camera: &crate::scene::Camera,
     parts: Vec<Part>,
     cover: Vec<Part>,
     mut context: Context,
@@ -472,7 +472,7 @@ fn geodetic_layer_json(
     summaries: &[TileSummary],
     block_levels: &BTreeMap<(u8, bool), (u64, u64, u8, u8)>,
     context: &Context,
-    georeference: &fmrh::heightfield::Georeference,
+    georeference: &crate::heightfield::Georeference,
     data_box: [f64; 4],
 ) -> Value {
     let mut levels: BTreeMap<u8, Vec<(u32, u32)>> = BTreeMap::new();

@@ -6,12 +6,12 @@ use serde::Serialize;
 
 use super::{print_text, Reads, SceneArgs};
 
-use fmrh::model::SampleRect;
-use fmrh::scene::{
+use crate::model::SampleRect;
+use crate::scene::{
     load_blocks, reconstruct, Camera, Mode, SceneOptions, Terrain, WorldFrame, PAYLOAD_GAP,
 };
-use fmrh::store::RequestStats;
-use fmrh::Error;
+use crate::store::RequestStats;
+use crate::Error;
 
 /// The JSON report.
 #[derive(Serialize)]
@@ -21,8 +21,8 @@ struct Report<'a> {
     /// Uniform mode: the chosen static bound in metres.
     threshold: Option<f64>,
     window: Option<SampleRect>,
-    blocks: &'a [fmrh::scene::SceneBlock],
-    stats: &'a fmrh::scene::SceneStats,
+    blocks: &'a [crate::scene::SceneBlock],
+    stats: &'a crate::scene::SceneStats,
     /// --reconstruct: samples of the window no block owns (written as NaN).
     uncovered_samples: Option<u64>,
     /// What was read, by phase.
@@ -48,9 +48,9 @@ struct RequestPlan {
     scene: RequestStats,
 }
 
-pub(super) fn run<S: fmrh::store::Source>(
+pub(super) fn run<S: crate::store::Source>(
     args: &SceneArgs,
-    store: &fmrh::Store<S>,
+    store: &crate::store::Store<S>,
     camera: Camera,
     options: SceneOptions,
     output: Option<crate::cli::sidecar::RasterOutput>,

@@ -6,10 +6,10 @@ use serde::Serialize;
 
 use super::{print_text, Reads, SceneArgs};
 
-use fmrh::model::SampleRect;
-use fmrh::scene::{Camera, Mode, Scene, SceneOptions, WorldFrame};
-use fmrh::store::{ReadStats, RequestStats};
-use fmrh::Error;
+use crate::model::SampleRect;
+use crate::scene::{Camera, Mode, Scene, SceneOptions, WorldFrame};
+use crate::store::{ReadStats, RequestStats};
+use crate::Error;
 
 /// The JSON report of a dataset scene: a container's, with each block's tile, and each
 /// tile's part and reads.
@@ -19,10 +19,10 @@ struct DatasetReport<'a> {
     tau: f64,
     threshold: Option<f64>,
     window: Option<SampleRect>,
-    blocks: &'a [fmrh::dataset::DatasetBlock],
-    stats: &'a fmrh::scene::SceneStats,
+    blocks: &'a [crate::dataset::DatasetBlock],
+    stats: &'a crate::scene::SceneStats,
     uncovered_samples: Option<u64>,
-    tiles: &'a [fmrh::dataset::TilePart],
+    tiles: &'a [crate::dataset::TilePart],
     reads: DatasetReads,
     /// --refine fractal: the synthetic nodes.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -64,7 +64,7 @@ pub(super) fn run(
     options: SceneOptions,
     output: Option<crate::cli::sidecar::RasterOutput>,
 ) -> Result<ExitCode, Error> {
-    let ds = fmrh::dataset::Dataset::open(&args.file)?;
+    let ds = crate::dataset::Dataset::open(&args.file)?;
     let asked = ds.request_stats();
     let spacing = args.view.given_spacing()?;
     let scene = if args.camera.globe() {
@@ -107,7 +107,7 @@ pub(super) fn run(
         })?;
         let rec = ds.reconstruct(&scene, window)?;
         uncovered = Some(rec.uncovered);
-        let metadata = fmrh::heightfield::Metadata {
+        let metadata = crate::heightfield::Metadata {
             spacing_m: spacing.or(ds.spacing_m()),
             georeference: ds.georeference(),
             units: None,

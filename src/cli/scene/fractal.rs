@@ -2,13 +2,13 @@
 
 use serde::Serialize;
 
-use fmrh::mesh::fractal;
-use fmrh::scene::surface::GridBlock;
-use fmrh::scene::{Camera, LoadedBlock, SceneBlock, WorldFrame};
-use fmrh::Error;
+use crate::mesh::fractal;
+use crate::scene::surface::GridBlock;
+use crate::scene::{Camera, LoadedBlock, SceneBlock, WorldFrame};
+use crate::Error;
 
 /// `--refine fractal`: the synthetic nodes that replace the physical blocks the camera sees
-/// closer than their data's detail (`fmrh::mesh::fractal`). Generated, never stored.
+/// closer than their data's detail (`crate::mesh::fractal`). Generated, never stored.
 #[derive(Serialize)]
 pub(super) struct FractalReport {
     /// A synthetic grid's units a sample (`fractal::SCALE`).

@@ -6,8 +6,8 @@ use serde::Serialize;
 
 use super::SceneArgs;
 
-use fmrh::scene::{Camera, SceneOptions, Terrain};
-use fmrh::Error;
+use crate::scene::{Camera, SceneOptions, Terrain};
+use crate::Error;
 
 /// The JSON report of a layered scene.
 #[derive(Serialize)]
@@ -15,13 +15,13 @@ struct LayersReport<'a> {
     tau: f64,
     /// The layers' files, the base first.
     layers: Vec<String>,
-    blocks: &'a [fmrh::scene::LayerBlock],
+    blocks: &'a [crate::scene::LayerBlock],
     /// With --load: each block's skirt depth along the seams, metres, in block order.
     #[serde(skip_serializing_if = "Option::is_none")]
     skirts: Option<Vec<f64>>,
     hidden_by_layers: u64,
-    stats: &'a fmrh::scene::SceneStats,
-    layer_stats: &'a [fmrh::scene::SceneStats],
+    stats: &'a crate::scene::SceneStats,
+    layer_stats: &'a [crate::scene::SceneStats],
 }
 
 /// `--layer`: FILE as the base, each --layer above it, all on the globe.
@@ -46,7 +46,7 @@ pub(super) fn run(
         .iter()
         .map(Terrain::on_globe)
         .collect::<Result<Vec<_>, Error>>()?;
-    let layers = fmrh::scene::Layers::new(terrains)?;
+    let layers = crate::scene::Layers::new(terrains)?;
     let scene = layers.scene(camera, options)?;
     let skirts = if args.load {
         let loaded = layers.load(&scene)?;

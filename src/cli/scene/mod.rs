@@ -14,9 +14,9 @@ use std::process::ExitCode;
 use serde::Serialize;
 
 use super::args::{CameraArgs, RefineArg, ViewArgs};
-use fmrh::scene::{Mode, Scene};
-use fmrh::store::ReadStats;
-use fmrh::Error;
+use crate::scene::{Mode, Scene};
+use crate::store::ReadStats;
+use crate::Error;
 
 #[derive(clap::Args)]
 pub struct SceneArgs {
@@ -94,14 +94,20 @@ pub fn run(args: &SceneArgs) -> Result<ExitCode, Error> {
     }
     if let Some(url) = super::url_of(&args.file) {
         #[cfg(feature = "remote")]
-        return container::run(args, &fmrh::Store::open_url(url)?, camera, options, output);
+        return container::run(
+            args,
+            &crate::store::Store::open_url(url)?,
+            camera,
+            options,
+            output,
+        );
         #[cfg(not(feature = "remote"))]
         return Err(super::no_remote(url));
     }
-    if args.view.mmap && fmrh::store::lock::SUPPORTED {
+    if args.view.mmap && crate::store::lock::SUPPORTED {
         // SAFETY: the --mmap contract, stated in its help: the state is registered, so fmrh
         // writers leave its pages alone, and no other tool modifies the file meanwhile.
-        let store = unsafe { fmrh::Store::open_mapped(&args.file) }?;
+        let store = unsafe { crate::store::Store::open_mapped(&args.file) }?;
         container::run(args, &store, camera, options, output)
     } else {
         container::run(args, &super::open(&args.file)?, camera, options, output)
@@ -163,7 +169,7 @@ fn print_text(scene: &Scene, uncovered: Option<u64>, reads: &Reads) {
         "  {:>5} {:>6} {:>6}  {:>23}  {:>12} {:>9}  neighbours N/E/S/W",
         "level", "x", "y", "col0,row0..col1,row1", "error m", "px"
     );
-    let nb = |n: Option<fmrh::scene::NeighbourLevels>| match n {
+    let nb = |n: Option<crate::scene::NeighbourLevels>| match n {
         None => "-".to_string(),
         Some(n) if n.coarsest == n.finest => n.coarsest.to_string(),
         Some(n) => format!("{}-{}", n.coarsest, n.finest),

@@ -4,7 +4,7 @@
 //!
 //! * `/files/NAME` (a container) and `/files/NAME/FILE` (a dataset's `MANIFEST` and tiles):
 //!   the raw bytes, with single and multiple byte ranges, a strong `ETag` and `If-Match`
-//!   ([`ranges`]), which is all the remote reader (`fmrh::store::remote`) needs: `fmrh
+//!   ([`ranges`]), which is all the remote reader (`crate::store::remote`) needs: `fmrh
 //!   scene http://HOST/files/NAME` reads a served container as it would one in a bucket.
 //! * `/api/items`, `/api/scene?…` and `/api/mesh?…`: what is served, the scene a camera
 //!   sees (JSON: the blocks, their levels, the payload bytes, the schedule time and the
@@ -30,9 +30,9 @@ use std::time::Instant;
 use serde::Serialize;
 use serde_json::{json, Value};
 
-use fmrh::mesh::Cracks;
-use fmrh::scene::{Camera, SceneStats, Terrain, DEFAULT_GAP};
-use fmrh::Error;
+use crate::mesh::Cracks;
+use crate::scene::{Camera, SceneStats, Terrain, DEFAULT_GAP};
+use crate::Error;
 
 use super::args::RefineArg;
 use super::args::{ModeArg, ViewArgs};
@@ -77,7 +77,7 @@ pub fn run(args: &ServeArgs) -> Result<ExitCode, Error> {
         let dataset = super::is_dataset(path)?;
         // Refuse what does not open now, rather than on the first request.
         if dataset {
-            fmrh::dataset::Dataset::open(path)?;
+            crate::dataset::Dataset::open(path)?;
         } else {
             super::open(path)?;
         }
@@ -344,7 +344,7 @@ fn list(items: &[Item]) -> Result<Value, Error> {
     let mut out = Vec::new();
     for item in items {
         let (width, height, spacing, range, levels) = if item.dataset {
-            let ds = fmrh::dataset::Dataset::open(&item.path)?;
+            let ds = crate::dataset::Dataset::open(&item.path)?;
             let grid = ds.grid();
             let range = ds.tiles()?.iter().fold(None, |r: Option<[f32; 2]>, t| {
                 let (lo, hi) = (t.record.min_height.get(), t.record.max_height.get());
@@ -389,7 +389,7 @@ fn list(items: &[Item]) -> Result<Value, Error> {
         }));
     }
     // The hues `fmrh render` tints levels with, so the page and the pictures agree.
-    let colours: Vec<[u8; 3]> = (0..=u8::MAX).map(fmrh::render::level_colour).collect();
+    let colours: Vec<[u8; 3]> = (0..=u8::MAX).map(crate::render::level_colour).collect();
     Ok(json!({ "items": out, "level_colours": colours }))
 }
 
@@ -438,7 +438,7 @@ fn parse_view<'a>(items: &'a [Item], query: &str) -> Result<ViewQuery<'a>, Error
         Some(f) => f
             .parse()
             .map_err(|_| Error::InvalidArgument("`fov`: expected degrees".into()))?,
-        None => fmrh::scene::camera::DEFAULT_FOV_DEG,
+        None => crate::scene::camera::DEFAULT_FOV_DEG,
     };
     let mode = match params.get("mode").map(String::as_str) {
         None | Some("view") => ModeArg::View,
@@ -514,7 +514,7 @@ fn scene(q: &ViewQuery<'_>) -> Result<Value, Error> {
     let started = Instant::now();
     let options = q.view.options();
     let (stats, blocks): (SceneStats, Vec<BlockAnswer>) = if q.item.dataset {
-        let ds = fmrh::dataset::Dataset::open(&q.item.path)?;
+        let ds = crate::dataset::Dataset::open(&q.item.path)?;
         let s = ds.scene(&q.camera, &options, None)?;
         let blocks = s
             .blocks
@@ -550,7 +550,7 @@ fn scene(q: &ViewQuery<'_>) -> Result<Value, Error> {
     }))
 }
 
-fn block_answer(tile: Option<u64>, b: &fmrh::scene::SceneBlock) -> BlockAnswer {
+fn block_answer(tile: Option<u64>, b: &crate::scene::SceneBlock) -> BlockAnswer {
     BlockAnswer {
         tile,
         level: b.level,

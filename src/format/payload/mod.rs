@@ -38,7 +38,9 @@ use zerocopy::byteorder::little_endian::F32;
 use zerocopy::FromBytes;
 
 pub use coding::{decode, encode, max_stored_len, Coding};
-pub use place::{block_axes, grid_axes, kept_heights, kept_width, ParentGrid, Placement};
+pub use place::{ParentGrid, Placement};
+#[cfg(any(test, feature = "testing"))]
+pub use place::{block_axes, grid_axes, kept_heights, kept_width};
 
 use super::VOID_BITS;
 

@@ -81,6 +81,7 @@ pub const MAX_PARTS: usize = 128;
 /// part's own boundary and headers cost.
 const MULTI_RANGE_GAP: u64 = 160;
 
+#[cfg(any(test, feature = "testing"))]
 pub use super::any::is_url;
 
 /// How a [`HttpSource`] spends requests.

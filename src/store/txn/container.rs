@@ -50,7 +50,7 @@ struct WriterCache {
 /// # let path = dir.path().join("t.fmrh");
 /// # let ramp = fmrh::Heightfield::from_fn(130, 130, |x, _| x as f32)?;
 /// # fmrh::create(&path, ramp, &fmrh::CreateOptions::default())?;
-/// let container = fmrh::Container::open(&path)?;
+/// let container = fmrh::raw::Container::open(&path)?;
 /// let before = container.read()?; // a snapshot: it keeps reading this state
 /// let mut txn = container.begin_write()?;
 /// let pit = fmrh::Heightfield::from_fn(10, 10, |_, _| -5.0)?;
@@ -58,8 +58,8 @@ struct WriterCache {
 /// let summary = txn.commit()?; // durable and visible, all at once
 /// assert!(summary.blocks > 0);
 /// let after = container.read()?;
-/// assert_eq!(after.read_window(fmrh::model::SampleRect { col0: 60, row0: 60, col1: 60, row1: 60 })?.samples(), &[-5.0]);
-/// assert_eq!(before.read_window(fmrh::model::SampleRect { col0: 60, row0: 60, col1: 60, row1: 60 })?.samples(), &[60.0]);
+/// assert_eq!(after.read_window(fmrh::types::SampleRect { col0: 60, row0: 60, col1: 60, row1: 60 })?.samples(), &[-5.0]);
+/// assert_eq!(before.read_window(fmrh::types::SampleRect { col0: 60, row0: 60, col1: 60, row1: 60 })?.samples(), &[60.0]);
 /// drop((before, after));
 /// container.close()?;
 /// # Ok(()) }
@@ -180,7 +180,7 @@ impl<I: Io> Container<I> {
     }
 
     /// Sets the most stored bytes later commits give the metadata bundle (format §6.7;
-    /// [`crate::format::bundle::DEFAULT_BUNDLE_LIMIT`] unless set). Larger metadata, or any
+    /// 32 KiB unless set). Larger metadata, or any
     /// with 0, is written in pages of its own. Either way the commit is the same
     /// copy-on-write protocol: this changes bytes, not atomicity or durability.
     pub fn set_bundle_limit(&self, bytes: u64) {

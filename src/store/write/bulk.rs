@@ -51,6 +51,7 @@ enum Item {
 
 /// Writes the whole container to `w`, which must start empty (positioned at 0). A failed
 /// write is an I/O error about `<writer>`; [`super::write_file`] names the file.
+#[cfg(any(test, feature = "testing"))]
 pub fn write_to<W: Write + Seek>(
     model: &Model,
     metadata: &Metadata,

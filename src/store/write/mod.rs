@@ -5,7 +5,8 @@
 //! * `bulk`: a whole model, front to back ([`write_to`]).
 //! * `tables`: a state's tables and blobs into any page sink, and the payload encoders.
 //!
-//! [`create`] is the one call an application needs: heightfield in, container out.
+//! The door's `fmrh::create` is the one call an application needs: heightfield in,
+//! container out.
 
 mod atomic;
 mod bulk;
@@ -18,12 +19,13 @@ use std::sync::Arc;
 use serde::Serialize;
 
 pub use atomic::{remove_temporary_files, write_atomically};
+#[cfg(any(test, feature = "testing"))]
 pub use bulk::write_to;
 
 use crate::error::Result;
 use crate::format::DEFAULT_PAGE_SIZE;
-use crate::heightfield::{Heightfield, Metadata};
-use crate::model::{BuildOptions, Model, Thresholds, DEFAULT_BLOCK_SIZE};
+use crate::heightfield::Metadata;
+use crate::model::Model;
 
 pub use crate::progress::{Progress, Silent, Unit};
 
@@ -125,68 +127,3 @@ pub fn write_file(
     })
 }
 
-/// How [`create`] builds and writes a container.
-#[derive(Clone, Debug)]
-pub struct CreateOptions {
-    /// Samples along a block side: `2^k + 1`, 9 to 1025.
-    pub block_size: u32,
-    /// Cluster thresholds: the default √2 ladder, or given ones.
-    pub thresholds: Thresholds,
-    /// Store heights to this step, within half of it (see [`crate::model::precision`]);
-    /// `None` keeps them bit for bit.
-    pub precision: Option<crate::model::Precision>,
-    /// Thin nodes by area (format 6): by default where the heightfield is a
-    /// longitude-latitude grid ([`crate::model::thinning`]).
-    pub thin: crate::model::ThinByArea,
-    /// Page size and progress.
-    pub write: WriteOptions,
-    /// Replace an existing file (atomically) instead of refusing.
-    pub overwrite: bool,
-}
-
-impl Default for CreateOptions {
-    fn default() -> Self {
-        CreateOptions {
-            block_size: DEFAULT_BLOCK_SIZE,
-            thresholds: Thresholds::Ladder,
-            precision: None,
-            thin: crate::model::ThinByArea::Auto,
-            write: WriteOptions::default(),
-            overwrite: false,
-        }
-    }
-}
-
-/// Creates the container at `path` from `heightfield`: cuts it into blocks, measures every
-/// node, builds the clusters, and writes the file atomically (it appears complete or not at
-/// all). This is [`Model::build`] followed by [`write_file`].
-///
-/// ```
-/// # fn main() -> fmrh::Result<()> {
-/// # let dir = tempfile::tempdir().unwrap();
-/// let path = dir.path().join("dome.fmrh");
-/// let dome = fmrh::Heightfield::from_fn(200, 150, |x, y| {
-///     let (dx, dy) = (x as f32 - 100.0, y as f32 - 75.0);
-///     (4000.0 - dx * dx - dy * dy).max(0.0) * 0.05
-/// })?;
-/// let summary = fmrh::create(&path, dome, &fmrh::CreateOptions::default())?;
-/// assert_eq!(summary.file_length, std::fs::metadata(&path).unwrap().len());
-/// # Ok(()) }
-/// ```
-pub fn create(
-    path: &Path,
-    heightfield: Heightfield,
-    options: &CreateOptions,
-) -> Result<WriteSummary> {
-    let metadata = heightfield.metadata.clone();
-    let model = Model::build(
-        heightfield,
-        &BuildOptions {
-            block_size: options.block_size,
-            thresholds: options.thresholds.clone(),
-            precision: options.precision,
-            thin: options.thin,
-        },
-    )?;
-    write_file(&model, &metadata, path, &options.write, options.overwrite)
-}
