@@ -201,3 +201,9 @@ pub mod raw {
         StateInfo, Store, Wanted, WriteTxn,
     };
 }
+
+/// README.md's Rust example, compiled with the doctests (it is `no_run`: it opens the file the
+/// README's first command builds).
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDoctests;

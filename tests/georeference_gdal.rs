@@ -5,7 +5,7 @@
 //! samples must equal GDAL's own decoding (`gdal_translate -of ENVI`) sample for sample, with
 //! a south-up file's rows reversed.
 //!
-//! Part of the large-data suite (README, Testing): it needs gdal-bin, which `.ci/run`
+//! Part of the large-data suite (docs/testing.md): it needs gdal-bin, which `.ci/run`
 //! installs. Without it the test fails and says so.
 
 #[path = "common/georef.rs"]

@@ -1,6 +1,6 @@
 //! `fmrh render`: a picture of a scene, drawn on the CPU (`crate::render`): the surface its
 //! blocks draw through the camera, or from overhead (`--top`) with the camera's view on the
-//! ground. The README's pictures are made with it.
+//! ground. The pictures in docs/scenes.md are made with it.
 
 use std::path::PathBuf;
 use std::process::ExitCode;

@@ -183,7 +183,7 @@ pub fn encode_on(samples: &[f32], width: usize, step: Option<f64>) -> Vec<u8> {
 }
 
 /// The raw encoding of `samples` (encoding 0): what a writer stores when told not to
-/// compress (see [`crate::format::payload::Coding`]).
+/// compress (the format's payload `Coding`).
 pub fn encode_raw(samples: &[f32]) -> Vec<u8> {
     raw(samples)
 }

@@ -1,6 +1,6 @@
 //! A dataset's `MANIFEST` (`format-spec/dataset.md`): where each tile lies, which state of
 //! each tile file belongs to the dataset, and the commit records that switch the dataset from
-//! one state to the next. Byte layouts and checks only; `crate::dataset` reads and writes.
+//! one state to the next. Byte layouts and checks only; `src/dataset/` reads and writes.
 //!
 //! ```text
 //!  page 0: slot 0 (256-byte record)     page 1: slot 1           pages 2..: bodies

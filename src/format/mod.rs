@@ -5,7 +5,7 @@
 //! where a byte of a container goes. It says what the bytes mean and nothing about where they
 //! come from: each on-disk structure is encoded and decoded in one file here, on plain byte
 //! slices, and every decoder returns either a typed value or a [`Violation`] naming the
-//! invariant it broke. The store ([`crate::store`]) decides which bytes to read and write.
+//! invariant it broke. The store (`src/store/`) decides which bytes to read and write.
 //!
 //! | file | structure | spec |
 //! |---|---|---|

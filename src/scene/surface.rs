@@ -2,7 +2,7 @@
 //! the sample plane, integer or not, from the block that owns it.
 //!
 //! [`GridBlock`] is a block as it draws: its footprint, stride and grid, in samples. A mesh
-//! (`crate::mesh::build`) puts vertices at the blocks' own grid points. A resampler
+//! (`src/mesh/`) puts vertices at the blocks' own grid points. A resampler
 //! that puts vertices elsewhere (a tile of another pyramid, whose grid follows longitude and
 //! latitude rather than samples) needs the surface between them: inside a grid cell, the
 //! triangulation of `format-spec/model.md` §4, split along the north-west to south-east
