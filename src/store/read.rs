@@ -470,6 +470,9 @@ pub struct Children<'s, S: Source> {
 impl<S: Source> Iterator for Children<'_, S> {
     type Item = Result<(u32, StoredNode)>;
 
+    // Inline: a scene's descent calls this once per child; left to the partitioner, it
+    // landed in another codegen unit and selection ran ~10% slower (issue 38's bench).
+    #[inline]
     fn next(&mut self) -> Option<Self::Item> {
         if self.next >= self.end {
             return None;
