@@ -222,8 +222,9 @@ struct DatasetInfo {
     spacing_m: Option<[f64; 2]>,
     georeference: Option<GeoInfo>,
     seam: &'static str,
-    /// The manifest and every tile file, as the file system says; `None` for a remote
-    /// dataset, whose tiles' sizes would cost a request each.
+    /// The manifest and every tile file, as the file system says now (a commit in progress
+    /// may have appended to them); `None` for a remote dataset, whose tiles' sizes would
+    /// cost a request each.
     total_bytes: Option<u64>,
     tiles: Vec<TileInfo>,
 }
@@ -248,7 +249,9 @@ fn run_dataset(args: &InfoArgs) -> Result<ExitCode, Error> {
     let tiles = ds.tiles()?;
     let record = ds.state().record;
     let grid = ds.grid();
-    let manifest_bytes = ds.manifest_len();
+    // The state's manifest length, not the file's: a commit in progress appends pages that
+    // belong to no published state yet, and `info` describes one state.
+    let manifest_bytes = record.file_length.get();
     let tiles: Vec<TileInfo> = tiles
         .iter()
         .map(|t| TileInfo {
@@ -289,7 +292,7 @@ fn run_dataset(args: &InfoArgs) -> Result<ExitCode, Error> {
             .iter()
             .map(|t| t.file_bytes)
             .sum::<Option<u64>>()
-            .map(|t| t + manifest_bytes),
+            .map(|t| t + ds.manifest_len()),
         tiles,
     };
     if args.json {

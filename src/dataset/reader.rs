@@ -366,8 +366,14 @@ impl Dataset {
         Ok(store)
     }
 
+    /// The txn id of the manifest's latest state, when it is newer than the state this
+    /// dataset opened (a writer has published since).
+    pub(crate) fn newer_state(&self) -> Result<Option<u64>> {
+        Ok(super::manifest::latest_txn(&self.src)?.filter(|&latest| latest > self.txn_id()))
+    }
+
     /// `e`, or `Superseded` when a newer dataset state has been published since this one.
-    fn moved_on(&self, e: Error) -> Error {
+    pub(crate) fn moved_on(&self, e: Error) -> Error {
         match super::manifest::latest_txn(&self.src) {
             // A remote manifest replaced on the server: the reader's version is gone.
             Err(changed @ Error::Io { .. }) if self.is_remote() => changed,

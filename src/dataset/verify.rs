@@ -100,6 +100,43 @@ pub fn verify(
         }
     };
     checks.pass(Invariant::ManifestRecord);
+    let checked = check_state(dir, &dataset, mode, progress, checks, &mut report);
+    // A finding, or an error, about a state the manifest has moved on from since it was
+    // opened is no finding about the dataset: a writer's next commit may reuse what the
+    // state pinned (a tile overwrites the slot of the state before the one the manifest
+    // pins now). The reader's state was superseded: say so (exit 75, try again), as a
+    // container's reader does; a retry checks the new state and finds any real damage.
+    if let Err(e) = checked {
+        return Err(dataset.moved_on(e));
+    }
+    if !report.valid {
+        let first = report
+            .checks
+            .iter()
+            .find(|c| c.status == CheckStatus::Failed)
+            .and_then(|c| c.failures.first().map(|f| format!("{}: {f}", c.id)))
+            .unwrap_or_default();
+        if let Some(latest) = dataset.newer_state()? {
+            return Err(Error::Superseded {
+                path: dir.to_path_buf(),
+                txn: dataset.txn_id(),
+                latest,
+                detail: format!("the check found {first} while a writer committed"),
+            });
+        }
+    }
+    Ok(report)
+}
+
+/// Every check of the state `dataset` opened, into `report`.
+fn check_state(
+    dir: &std::path::Path,
+    dataset: &Dataset,
+    mode: VerifyMode,
+    progress: &dyn crate::progress::Progress,
+    mut checks: Checks,
+    report: &mut DatasetReport,
+) -> Result<()> {
     let slots = read_slots(dataset.manifest_source())?;
     let txn = dataset.txn_id();
     report.txn_id = Some(txn);
@@ -121,9 +158,9 @@ pub fn verify(
     // Every tile page (D-2), then the records as a whole (D-3).
     let Some(tiles) = absorb(&mut checks, "", dataset.tiles())? else {
         report.checks = checks.into_reports();
-        return Ok(report);
+        return Ok(());
     };
-    check_records(&dataset, &tiles, &mut checks);
+    check_records(dataset, &tiles, &mut checks);
     // D-4: every tile at its pin.
     let mut open: Vec<Option<std::sync::Arc<crate::store::Store<AnySource>>>> =
         Vec::with_capacity(tiles.len());
@@ -294,7 +331,7 @@ pub fn verify(
         .checks
         .iter()
         .all(|c| c.status == CheckStatus::Passed);
-    Ok(report)
+    Ok(())
 }
 
 /// D-3 over all records: unique names, the manifest's order, the grid's extent, the tiling.
