@@ -110,11 +110,36 @@ pub enum Error {
         /// What the reader found: which page or payload no longer holds its state's bytes.
         detail: String,
     },
+    /// The file or object no longer holds the state this reader opened, and no newer state
+    /// of it took that one's place: it was replaced underneath the reader (an object
+    /// re-uploaded, a file copied over in place). Nothing of the other version was returned
+    /// as data; open it again.
+    #[error("{}: changed underneath this reader ({detail}); open it again", path.display())]
+    Changed {
+        /// The file, object or dataset.
+        path: PathBuf,
+        /// How the change was seen.
+        detail: String,
+    },
     /// A state fmrh's own code should never reach: a bug, to be reported, never a property of
     /// the input.
     #[error("internal error (a bug in fmrh): {0}")]
     Internal(String),
 }
+
+/// The payload of an [`std::io::Error`] that a source returns when the object it reads is no
+/// longer the version it opened (an ETag that no longer matches, another length):
+/// [`Error::io`] turns it into [`Error::Changed`].
+#[derive(Debug)]
+pub(crate) struct ObjectChanged(pub String);
+
+impl fmt::Display for ObjectChanged {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for ObjectChanged {}
 
 impl Error {
     /// A malformed-input error about `path`.
@@ -135,7 +160,7 @@ impl Error {
 
     /// What kind of error this is, as a stable lowercase word for machine-readable output
     /// (`fmrh --json`): `io`, `input`, `unsupported`, `too_large`, `invalid_argument`,
-    /// `corrupt`, `poisoned`, `superseded` or `internal`.
+    /// `corrupt`, `poisoned`, `superseded`, `changed` or `internal`.
     pub fn kind(&self) -> &'static str {
         match self {
             Error::Io { .. } => "io",
@@ -146,12 +171,23 @@ impl Error {
             Error::Corrupt { .. } => "corrupt",
             Error::Poisoned { .. } => "poisoned",
             Error::Superseded { .. } => "superseded",
+            Error::Changed { .. } => "changed",
             Error::Internal(_) => "internal",
         }
     }
 
-    /// An I/O error about `path`.
+    /// An I/O error about `path`; [`Error::Changed`] when the source said the object it reads
+    /// changed underneath.
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        if let Some(changed) = source
+            .get_ref()
+            .and_then(|e| e.downcast_ref::<ObjectChanged>())
+        {
+            return Error::Changed {
+                path: path.into(),
+                detail: changed.0.clone(),
+            };
+        }
         Error::Io {
             path: path.into(),
             source,

@@ -191,7 +191,7 @@ pub mod raw {
     pub use crate::curve::{hilbert_decode, hilbert_encode, HilbertKey, HilbertType};
     pub use crate::format::{
         ClusterInfo, DatasetHeader, FreePage, PayloadRef, ScanEntry, StoredBlock, StoredNode,
-        FORMAT_MAJOR, FORMAT_MINOR,
+        FORMAT_MAJOR, FORMAT_MINOR, MAX_TXN_ID,
     };
     pub use crate::model::Domain;
     pub use crate::store::verify::verify;

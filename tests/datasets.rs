@@ -383,6 +383,57 @@ fn failed(report: &fmrh::dataset::DatasetReport) -> Vec<Invariant> {
         .collect()
 }
 
+/// Issue 39: a head without the georeference flag but with an origin of (NaN, 1e300) and a
+/// step of (inf, 0), CRCs fixed, passed `verify --full`; `dataset.md` §3.1 requires zeros
+/// there. It is a D-2 failure, and opening the dataset refuses it as corrupt.
+#[test]
+fn a_head_without_georeference_must_hold_zeros_where_it_would_be() {
+    let field = fields::make(33, 33, Character::Hills, 0.0, 9);
+    let dir = tempfile::tempdir().unwrap();
+    let rects = tiles::split(&field, &[16], &[], &[]);
+    let ds_dir = tiles::build(dir.path(), &field, &rects, &tiles::options(None));
+    let manifest = ds_dir.join("MANIFEST");
+    let original = std::fs::read(&manifest).unwrap();
+    let state =
+        fmrh::dataset::manifest::ManifestState::read(&fmrh::store::Bytes(&original[..])).unwrap();
+    let head = state.record.head_offset.get() as usize;
+    let head_len = state.record.head_len.get() as usize;
+    assert_eq!(
+        u32::from_le_bytes(original[head + 16..head + 20].try_into().unwrap()),
+        0
+    );
+    assert!(original[head + 24..head + 56].iter().all(|&b| b == 0));
+    let slot = usize::from(state.slot) * fmrh::format::manifest::MANIFEST_PAGE as usize;
+    let with = |values: [f64; 4]| {
+        let mut bytes = original.clone();
+        for (i, v) in values.iter().enumerate() {
+            bytes[head + 24 + 8 * i..head + 32 + 8 * i].copy_from_slice(&v.to_le_bytes());
+        }
+        // The head's CRC in the record (offset 44), then the record's own (offset 252).
+        let crc = fmrh::format::crc32(&bytes[head..head + head_len]);
+        bytes[slot + 44..slot + 48].copy_from_slice(&crc.to_le_bytes());
+        let crc = fmrh::format::crc32(&bytes[slot..slot + 252]);
+        bytes[slot + 252..slot + 256].copy_from_slice(&crc.to_le_bytes());
+        bytes
+    };
+    // The CRCs are placed right: the same zeros, resealed, are still valid.
+    std::fs::write(&manifest, with([0.0; 4])).unwrap();
+    assert!(tiles::verify(&ds_dir, fmrh::store::VerifyMode::Full).valid);
+    for values in [
+        [f64::NAN, 1e300, f64::INFINITY, 0.0],
+        [0.0, 0.0, 0.0, -0.0],
+        [1.0, 0.0, 0.0, 0.0],
+    ] {
+        std::fs::write(&manifest, with(values)).unwrap();
+        let r = tiles::verify(&ds_dir, fmrh::store::VerifyMode::Full);
+        assert_eq!(failed(&r), vec![Invariant::ManifestPages], "{values:?}");
+        assert!(
+            matches!(Dataset::open(&ds_dir), Err(fmrh::Error::Corrupt { .. })),
+            "{values:?}"
+        );
+    }
+}
+
 #[test]
 fn damage_to_the_manifest_or_a_tile_is_reported_located() {
     let field = fields::make(33, 33, Character::Hills, 0.0, 9);

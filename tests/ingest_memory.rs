@@ -122,6 +122,129 @@ fn jpeg_claiming(w: u16, h: u16) -> Vec<u8> {
     j
 }
 
+/// Issue 39's three bombs: files whose data really decodes to what their headers declare,
+/// out of all proportion to their bytes. Each is refused from its header (an error, exit 2,
+/// no decoding: the peak heap stays under 64 MiB), by the proportion of samples to bytes or
+/// by the memory budget, and the error says which limit and how to raise it.
+#[test]
+fn decompression_bombs_are_refused_from_their_headers() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let deflate = |bytes: &[u8], repeat: usize| {
+        let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::best());
+        for _ in 0..repeat {
+            z.write_all(bytes).unwrap();
+        }
+        z.finish().unwrap()
+    };
+    // 1. A tiled GeoTIFF of 65536² f32 (16 GiB) in 256² tiles whose 65,536 offsets all point
+    //    at one deflate stream of one zero tile (~525 KB in all). It aborted the process
+    //    ("memory allocation of 17179869184 bytes failed").
+    let tile = deflate(&[0u8; 256 * 4], 256);
+    let n_tiles = (65536 / 256) * (65536 / 256);
+    let shared_tiles = tiff::tiff_raw(
+        vec![
+            (256, Value::Long(vec![65536])),
+            (257, Value::Long(vec![65536])),
+            (258, Value::Short(vec![32])),
+            (259, Value::Short(vec![8])),
+            (262, Value::Short(vec![1])),
+            (277, Value::Short(vec![1])),
+            (322, Value::Long(vec![256])),
+            (323, Value::Long(vec![256])),
+            (324, Value::Long(vec![8; n_tiles])),
+            (325, Value::Long(vec![tile.len() as u32; n_tiles])),
+            (339, Value::Short(vec![3])),
+        ],
+        &tile,
+    );
+    // 2. A striped GeoTIFF of 32768 x 16384 f32 (2 GiB) whose 16,384 one-row strips share one
+    //    deflate stream of a zero row (~66 KB in all). It built at 2.1 GB RSS.
+    let row = deflate(&[0u8; 32768 * 4], 1);
+    let shared_strips = tiff::tiff_raw(
+        vec![
+            (256, Value::Long(vec![32768])),
+            (257, Value::Long(vec![16384])),
+            (258, Value::Short(vec![32])),
+            (259, Value::Short(vec![8])),
+            (262, Value::Short(vec![1])),
+            (273, Value::Long(vec![8; 16384])),
+            (277, Value::Short(vec![1])),
+            (278, Value::Long(vec![1])),
+            (279, Value::Long(vec![row.len() as u32; 16384])),
+            (339, Value::Short(vec![3])),
+        ],
+        &row,
+    );
+    // 3. An 8-bit grey PNG of 30000² whose rows are all zero (~0.9 MB). It took 106 s and
+    //    5.2 GB.
+    let mut ihdr = 30_000u32.to_be_bytes().to_vec();
+    ihdr.extend(30_000u32.to_be_bytes());
+    ihdr.extend([8, 0, 0, 0, 0]);
+    let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
+    png.extend(hostile::png_chunk(b"IHDR", &ihdr));
+    png.extend(hostile::png_chunk(
+        b"IDAT",
+        &deflate(&[0u8; 30_001], 30_000),
+    ));
+    png.extend(hostile::png_chunk(b"IEND", &[]));
+    for (name, bytes, limit) in [
+        ("shared-tiles.tif", &shared_tiles, "--max-memory"),
+        (
+            "shared-strips.tif",
+            &shared_strips,
+            "--max-samples-per-byte",
+        ),
+        ("zeros.png", &png, "--max-samples-per-byte"),
+    ] {
+        assert!(bytes.len() <= 2 * MIB, "{name}: {} bytes", bytes.len());
+        let path = d.join(name);
+        std::fs::write(&path, bytes).unwrap();
+        let (result, peak) = peak_of(&path);
+        let err = match result {
+            Err(e) => e,
+            Ok(hf) => panic!("{name}: a bomb loaded ({} x {})", hf.width(), hf.height()),
+        };
+        assert!(
+            matches!(
+                err,
+                fmrh::Error::Input { .. } | fmrh::Error::TooLarge { .. }
+            ),
+            "{name}: {err}"
+        );
+        // The first bomb is past both limits; the proportion needs only the header.
+        assert!(
+            err.to_string().contains(limit) || err.to_string().contains("--max-"),
+            "{name}: {err}"
+        );
+        assert!(peak <= 64 * MIB, "{name}: peak heap {} MiB", peak / MIB);
+        eprintln!("bomb {name:<18} {:>8} bytes refused: {err}", bytes.len());
+        // The command line: exit 2, the same message.
+        let out = common::fmrh(&[
+            "build",
+            path.to_str().unwrap(),
+            "-o",
+            d.join("x.fmrh").to_str().unwrap(),
+        ]);
+        assert_eq!(out.status.code(), Some(2), "{name}");
+        assert!(!d.join("x.fmrh").exists());
+    }
+    // Raised explicitly, the proportion lets the second through to the memory budget, and a
+    // budget of 1 GiB refuses it there (2 GiB of f32 needs 12 GiB to build).
+    let path = d.join("shared-strips.tif");
+    let raised = IngestOptions {
+        limits: fmrh::ingest::IngestLimits {
+            max_memory: Some(1 << 30),
+            max_samples_per_byte: Some(0.0),
+        },
+        ..IngestOptions::default()
+    };
+    match load(&path, &raised) {
+        Err(fmrh::Error::TooLarge { detail, .. }) => assert!(detail.contains("--max-memory")),
+        other => panic!("{:?}", other.map(|h| h.width())),
+    }
+}
+
 #[test]
 fn ingest_memory_follows_the_data_not_the_header() {
     let dir = tempfile::tempdir().unwrap();

@@ -304,6 +304,24 @@ fn a_fault_on_every_try_is_an_io_error_not_corruption() {
     }
 }
 
+/// Issue 39: `verify` by URL exited 1 when the network failed, the code of INVALID. A failed
+/// read decides nothing: exit 74, and no verdict printed.
+#[test]
+fn verify_by_url_exits_74_when_the_network_fails_not_1() {
+    let origin = Origin::start();
+    let url = origin.put("/t.fmrh", container(true), "v1");
+    origin.state.lock().unwrap().always = Some(Fault::Reset);
+    let out = common::fmrh(&["verify", url.as_str()]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(74), "{text}");
+    assert!(!text.contains("INVALID"), "{text}");
+    origin.state.lock().unwrap().always = None;
+    assert_eq!(
+        common::fmrh(&["verify", url.as_str()]).status.code(),
+        Some(0)
+    );
+}
+
 #[test]
 fn a_server_that_ignores_ranges_is_refused_without_its_body_being_read() {
     // 64 MiB: a reader that downloaded it would take all of it.
@@ -338,6 +356,110 @@ fn an_object_replaced_on_the_server_is_changed_underneath_not_mixed() {
     let fresh = Store::open_url(&url).unwrap();
     let local = Store::from_bytes(container(false)).unwrap();
     assert_eq!(fresh.pin(), local.pin());
+}
+
+/// The bundled Puget Sound 1k with a 4 x 4 patch raised by 1 m: another file of the same
+/// length (the lengths are whole pages), for servers that give no ETag.
+fn container_edited() -> Vec<u8> {
+    let mut hf = common::views::puget_1k();
+    let w = hf.width() as usize;
+    let mut samples = hf.samples().to_vec();
+    for y in 500..504 {
+        for x in 300..304 {
+            samples[y * w + x] += 1.0;
+        }
+    }
+    let metadata = hf.metadata.clone();
+    hf = fmrh::Heightfield::new(hf.width(), hf.height(), samples)
+        .unwrap()
+        .with_metadata(metadata);
+    let model = Model::build(hf.clone(), &BuildOptions::default()).unwrap();
+    let mut out = std::io::Cursor::new(Vec::new());
+    fmrh::store::write_to(&model, &hf.metadata, &WriteOptions::default(), &mut out).unwrap();
+    out.into_inner()
+}
+
+/// Issue 39: without a usable ETag, a re-upload of another file of the same length was
+/// reported as corruption (I-9 or I-5, exit 2). The reader's state is no longer published
+/// and no newer one took its place: the object changed underneath (`Error::Changed`, exit
+/// 75), as with an ETag.
+#[test]
+fn a_same_length_re_upload_without_an_etag_is_changed_not_corrupt() {
+    let (a, b) = (container(false), container_edited());
+    assert_eq!(a.len(), b.len(), "the test needs two files of one length");
+    assert_ne!(a, b);
+    let origin = Origin::start();
+    let url = origin.put("/t.fmrh", a, "");
+    let remote = Store::open_url(&url).unwrap();
+    assert_eq!(remote.source().etag(), None);
+    origin.put("/t.fmrh", b.clone(), "");
+    let err = remote.read_window(remote.domain().data_rect()).unwrap_err();
+    assert!(matches!(err, fmrh::Error::Changed { .. }), "{err}");
+    assert_eq!(err.kind(), "changed");
+    // A fresh open reads the new file whole.
+    let fresh = Store::open_url(&url).unwrap();
+    assert_eq!(fresh.pin(), Store::from_bytes(b).unwrap().pin());
+}
+
+/// The same for a dataset whose files are all re-uploaded (no ETags): the manifest's pins
+/// then name states the tiles no longer hold, which is a change underneath (exit 75), not a
+/// D-4 corruption (exit 2).
+#[test]
+fn a_re_uploaded_dataset_without_etags_is_changed_not_corrupt() {
+    let build = |bump: f32| {
+        let field = common::fields::make(65, 33, common::fields::Character::Hills, 0.0, 5);
+        let mut samples = field.samples().to_vec();
+        samples[20 * 65 + 50] += bump;
+        let field = fmrh::Heightfield::new(65, 33, samples).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let rects = common::tiles::split(&field, &[32], &[], &[]);
+        let ds = common::tiles::build(dir.path(), &field, &rects, &common::tiles::options(None));
+        let files: Vec<(String, Vec<u8>)> = std::fs::read_dir(&ds)
+            .unwrap()
+            .map(|e| e.unwrap())
+            .map(|e| {
+                (
+                    e.file_name().to_string_lossy().into_owned(),
+                    std::fs::read(e.path()).unwrap(),
+                )
+            })
+            .collect();
+        (dir, ds, files)
+    };
+    let (_da, local_a, a) = build(0.0);
+    let (_db, _, b) = build(1.0);
+    let lengths = |f: &[(String, Vec<u8>)]| {
+        f.iter()
+            .map(|(n, b)| (n.clone(), b.len()))
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(
+        lengths(&a),
+        lengths(&b),
+        "the test needs files of the same lengths"
+    );
+    assert_ne!(a, b);
+    let origin = Origin::start();
+    for (name, bytes) in &a {
+        origin.put(&format!("/ds/{name}"), bytes.clone(), "");
+    }
+    let url = format!("{}/ds/", origin.base);
+    let before = common::fmrh(&["info", "--json", url.as_str()]);
+    assert!(
+        before.status.success(),
+        "{}",
+        String::from_utf8_lossy(&before.stderr)
+    );
+    let terrain = fmrh::Terrain::open(&url).unwrap();
+    for (name, bytes) in &b {
+        origin.put(&format!("/ds/{name}"), bytes.clone(), "");
+    }
+    let err = terrain.read(None).unwrap_err();
+    assert!(matches!(err, fmrh::Error::Changed { .. }), "{err}");
+    // Read whole again, the new files are a sound dataset.
+    let now = fmrh::Terrain::open(&url).unwrap().read(None).unwrap();
+    let local = fmrh::Terrain::open(&local_a).unwrap().read(None).unwrap();
+    assert_ne!(now.samples(), local.samples());
 }
 
 #[test]

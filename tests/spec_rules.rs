@@ -6,6 +6,7 @@
 //! * a slot-1 record whose page size is not slot 0's is invalid, not a second geometry (§3);
 //! * a slot 0 that is sealed but invalid names no page size: slot 1 is searched for (§3);
 //! * a node's thinning bits are reserved where the dataset header lacks flag 16 (§6.1, I-10);
+//! * transaction ids stop at `2^62 - 1`: a larger one is an invalid record (§2, I-1);
 //! * a file shorter than the newest valid record's `file_length` is corrupt (I-3), and the
 //!   older slot is not tried (§3);
 //! * an empty tree's `TreeRef` is zero but for its table's record size (§4);
@@ -362,4 +363,51 @@ fn thinning_bits_without_the_header_flag_are_reserved() {
             ..
         })
     ));
+}
+
+/// Issue 39: a sealed record with `txn_id = 2^62` made every command exit 75, "superseded by
+/// txn 2^62", naming its own state, so a retry looped forever. Ids stop at `2^62 - 1` (§2):
+/// such a record is invalid (I-1, corrupt, exit 1); the last id opens, reads, and a commit on
+/// it is refused without touching the file.
+#[test]
+fn transaction_ids_stop_below_two_to_the_62() {
+    let built = fresh();
+    let p = u32_at(&built, 12);
+    let limit = fmrh::raw::MAX_TXN_ID;
+    assert_eq!(limit, (1 << 62) - 1);
+    for txn in [limit + 1, u64::MAX] {
+        let mut file = built.clone();
+        put_record(&mut file, 0, record_like(&built, FORMAT_MAJOR, txn, p));
+        match Store::from_bytes(file.clone()) {
+            Err(Error::Corrupt { invariant, .. }) => {
+                assert_eq!(invariant, Invariant::CommitRecord, "txn {txn}")
+            }
+            other => panic!("txn {txn}: {:?}", other.map(|s| s.txn_id())),
+        }
+        let report = verify(Bytes(&file), VerifyMode::Fast).unwrap();
+        assert_eq!(check(&report, Invariant::CommitRecord), CheckStatus::Failed);
+        assert!(!report.valid && !report.busy);
+    }
+    let mut file = built.clone();
+    put_record(&mut file, 0, record_like(&built, FORMAT_MAJOR, limit, p));
+    let store = Store::from_bytes(file.clone()).unwrap();
+    assert_eq!(store.txn_id(), limit);
+    assert!(verify(Bytes(&file), VerifyMode::Full).unwrap().valid);
+    let disk = SimDisk::new(file.clone());
+    match Container::open_io(disk.clone()) {
+        // Opening a container marks the state (a commit of its own): refused.
+        Err(Error::Unsupported { reason, .. }) => assert!(reason.contains("last"), "{reason}"),
+        Ok((container, _)) => {
+            let mut txn = container.begin_write().unwrap();
+            txn.replace_region(10, 10, &patch(4, 4, 3.0)).unwrap();
+            match txn.commit() {
+                Err(Error::Unsupported { reason, .. }) => {
+                    assert!(reason.contains("last"), "{reason}")
+                }
+                other => panic!("a commit past the last txn id: {other:?}"),
+            }
+        }
+        Err(e) => panic!("{e}"),
+    }
+    assert_eq!(disk.current(), file, "the refused commit changed the file");
 }

@@ -53,6 +53,14 @@ pub struct IngestArgs {
     /// file's name does not say: it places the tile and gives its spacing in metres.
     #[arg(long, value_name = "NAME")]
     tile: Option<String>,
+    /// The memory a build may take (e.g. 12G, 512M): an input whose grid needs more is
+    /// refused before it is read. Default: half of this machine's memory.
+    #[arg(long, value_name = "SIZE", value_parser = crate::ingest::limits::parse_size)]
+    max_memory: Option<u64>,
+    /// The samples a byte of input may declare, past 2^24 samples (default 256; 0: no
+    /// ceiling). A header that claims far more than its bytes could be a decompression bomb.
+    #[arg(long, value_name = "N")]
+    max_samples_per_byte: Option<f64>,
 }
 
 impl IngestArgs {
@@ -65,6 +73,10 @@ impl IngestArgs {
             z_offset: self.z_offset,
             nodata: self.nodata,
             tile: self.tile.clone(),
+            limits: crate::ingest::IngestLimits {
+                max_memory: self.max_memory,
+                max_samples_per_byte: self.max_samples_per_byte,
+            },
         }
     }
 }

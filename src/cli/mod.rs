@@ -142,7 +142,8 @@ enum Command {
     /// page ownership and every payload's checksum. --full also recomputes every error
     /// from the physical blocks and checks every cluster's cover, bound and minimality and
     /// the adjacency lists. Exit status: 0 valid, 1 invalid (each failed check named and
-    /// located), 2 not a usable container.
+    /// located), 2 not a usable container, 74 a read failed (a network or disk error: nothing
+    /// was decided), 75 busy or superseded (a writer was committing: run again).
     Verify(self::verify::VerifyArgs),
     /// Write full-resolution samples of a window exactly as stored (.f32 + .json sidecar).
     Extract(self::extract::ExtractArgs),
@@ -290,8 +291,13 @@ pub fn main() -> ExitCode {
                 println!("{out}");
             }
             match e {
+                // `verify` exits 1 for INVALID: a failed read (a network gone, a disk error)
+                // must not look like a finding about the data.
+                Error::Io { .. } if matches!(cli.command, Command::Verify(_)) => {
+                    ExitCode::from(self::verify::EXIT_IO)
+                }
                 Error::Io { .. } | Error::Poisoned { .. } => ExitCode::from(1),
-                Error::Superseded { .. } => ExitCode::from(EXIT_RETRY),
+                Error::Superseded { .. } | Error::Changed { .. } => ExitCode::from(EXIT_RETRY),
                 _ => ExitCode::from(2),
             }
         }

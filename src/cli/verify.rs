@@ -26,8 +26,12 @@ pub struct VerifyArgs {
 /// Exit status when a writer was committing and some check could not be decided.
 const EXIT_BUSY: u8 = 75;
 
-/// Runs `fmrh verify`: exit 0 valid, 1 invalid, 2 unusable, 75 busy (a writer was
-/// committing: run again).
+/// Exit status when the check could not read what it checks (sysexits' `EX_IOERR`): the
+/// network or the disk failed, which says nothing about the data.
+pub(super) const EXIT_IO: u8 = 74;
+
+/// Runs `fmrh verify`: exit 0 valid, 1 invalid, 2 unusable, 74 a read failed (nothing was
+/// decided), 75 busy or superseded (a writer was committing: run again).
 pub fn run(args: &VerifyArgs) -> Result<ExitCode, Error> {
     if super::is_dataset(&args.file)? {
         return run_dataset(args);

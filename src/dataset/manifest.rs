@@ -18,6 +18,7 @@ use crate::format::{crc32, Invariant, Violation};
 use crate::heightfield::Georeference;
 use crate::model::SampleRect;
 use crate::store::io::Io;
+use crate::store::slots::SlotsNow;
 use crate::store::Source;
 
 /// The manifest's file name inside a dataset's directory.
@@ -30,21 +31,26 @@ fn slot_offset(i: u8) -> u64 {
 
 /// Reads and classifies both slots.
 pub fn read_slots<S: Source + ?Sized>(src: &S) -> Result<[ManifestSlot; 2]> {
+    read_slots_from(src, false)
+}
+
+/// [`read_slots`], reading past what the source keeps in memory when `fresh`.
+fn read_slots_from<S: Source + ?Sized>(src: &S, fresh: bool) -> Result<[ManifestSlot; 2]> {
     let one = |i: u8| -> Result<ManifestSlot> {
         let at = slot_offset(i);
         let len = src.len().saturating_sub(at).min(MANIFEST_RECORD_LEN as u64) as usize;
         if len == 0 {
             return Ok(ManifestSlot::Empty);
         }
-        let bytes = src.read_at(at, len).map_err(|e| Error::io(src.name(), e))?;
+        let read = if fresh {
+            src.read_fresh(at, len)
+        } else {
+            src.read_at(at, len)
+        };
+        let bytes = read.map_err(|e| Error::io(src.name(), e))?;
         Ok(ManifestRecord::classify(&bytes, i))
     };
     Ok([one(0)?, one(1)?])
-}
-
-/// The txn id of the state a reader would take now, if any.
-pub fn latest_txn<S: Source + ?Sized>(src: &S) -> Result<Option<u64>> {
-    Ok(choose(&read_slots(src)?).ok().map(|(_, r)| r.txn_id.get()))
 }
 
 /// The state a reader takes, or why there is none.
@@ -62,17 +68,39 @@ pub fn choose_state<S: Source + ?Sized>(src: &S) -> Result<(u8, ManifestRecord)>
     })
 }
 
-/// Bytes of `src` that should hold what the state `txn` says and do not (`v`): superseded
-/// when a newer state was published since (its body may lie there now), else corruption
-/// (the containers' triage, [`crate::store::slots::triage`], with the manifest's slots).
-fn superseded_or_corrupt<S: Source + ?Sized>(src: &S, txn: u64, v: Violation) -> Error {
-    crate::store::slots::triage(src.name(), txn, latest_txn(src).ok().flatten(), v)
+/// Bytes of `src` that should hold what the state `held` says and do not (`v`): superseded
+/// when a newer state was published since (its body may lie there now), changed underneath
+/// when no slot publishes `held` any more and none newer does, else corruption (the
+/// containers' triage, [`crate::store::slots::triage`], with the manifest's slots).
+fn superseded_or_corrupt<S: Source + ?Sized>(
+    src: &S,
+    held: &ManifestRecord,
+    v: Violation,
+) -> Error {
+    let now = slots_now(src, held).unwrap_or(SlotsNow::Unknown);
+    crate::store::slots::triage(src.name(), held.txn_id.get(), now, v)
+}
+
+/// What the manifest's slots say now about the state `held`: the latest state's id, and
+/// whether a slot still publishes `held`. `Err` only when the slots cannot be read.
+pub(crate) fn slots_now<S: Source + ?Sized>(src: &S, held: &ManifestRecord) -> Result<SlotsNow> {
+    let slots = read_slots_from(src, true)?;
+    Ok(match choose(&slots) {
+        Ok((_, latest)) => SlotsNow::Latest {
+            txn: latest.txn_id.get(),
+            still_published: slots.iter().any(|s| {
+                matches!(s, ManifestSlot::Valid(r)
+                    if r.txn_id.get() == held.txn_id.get() && r.crc.get() == held.crc.get())
+            }),
+        },
+        Err(_) => SlotsNow::Unknown,
+    })
 }
 
 /// Reads `len` bytes at `offset` that the state `txn` names, checking their CRC.
 fn read_checked<S: Source + ?Sized>(
     src: &S,
-    txn: u64,
+    held: &ManifestRecord,
     offset: u64,
     len: u64,
     crc: u32,
@@ -80,7 +108,7 @@ fn read_checked<S: Source + ?Sized>(
     what: &str,
 ) -> Result<Vec<u8>> {
     let bad =
-        |detail: String| superseded_or_corrupt(src, txn, Violation::new(invariant, what, detail));
+        |detail: String| superseded_or_corrupt(src, held, Violation::new(invariant, what, detail));
     if offset.checked_add(len).is_none_or(|end| end > src.len()) {
         return Err(bad(format!(
             "{len} bytes at {offset}: past the end of the file"
@@ -113,11 +141,10 @@ impl ManifestState {
     /// Reads the state a reader takes: the slots and the head, nothing else.
     pub fn read<S: Source + ?Sized>(src: &S) -> Result<ManifestState> {
         let (slot, record) = choose_state(src)?;
-        let txn = record.txn_id.get();
         if record.file_length.get() > src.len() {
             return Err(superseded_or_corrupt(
                 src,
-                txn,
+                &record,
                 Violation::new(
                     Invariant::ManifestRecord,
                     format!("manifest slot {slot}"),
@@ -131,7 +158,7 @@ impl ManifestState {
         }
         let bytes = read_checked(
             src,
-            txn,
+            &record,
             record.head_offset.get(),
             u64::from(record.head_len.get()),
             record.head_crc.get(),
@@ -175,7 +202,7 @@ impl ManifestState {
         let e = &self.head.pages[i];
         let bytes = read_checked(
             src,
-            self.record.txn_id.get(),
+            &self.record,
             e.offset.get(),
             u64::from(e.length.get()),
             e.crc.get(),
@@ -183,7 +210,7 @@ impl ManifestState {
             &format!("manifest tile page {i}"),
         )?;
         let records = decode_tile_page(&bytes, e, &self.record)
-            .map_err(|v| superseded_or_corrupt(src, self.record.txn_id.get(), v))?;
+            .map_err(|v| superseded_or_corrupt(src, &self.record, v))?;
         Ok(self.pages[i].get_or_init(|| Arc::new(records)).clone())
     }
 
@@ -196,7 +223,7 @@ impl ManifestState {
         }
         read_checked(
             src,
-            self.record.txn_id.get(),
+            &self.record,
             self.record.adjacency_area().start + tile.adjacency_offset.get(),
             len,
             tile.adjacency_crc.get(),

@@ -366,22 +366,34 @@ impl Dataset {
         Ok(store)
     }
 
-    /// The txn id of the manifest's latest state, when it is newer than the state this
-    /// dataset opened (a writer has published since).
-    pub(crate) fn newer_state(&self) -> Result<Option<u64>> {
-        Ok(super::manifest::latest_txn(&self.src)?.filter(|&latest| latest > self.txn_id()))
-    }
-
-    /// `e`, or `Superseded` when a newer dataset state has been published since this one.
+    /// `e`, or `Superseded` when a newer dataset state has been published since this one,
+    /// or `Changed` when the manifest no longer publishes this state and no newer one took
+    /// its place (the dataset was replaced underneath: a re-upload, a copy over it).
     pub(crate) fn moved_on(&self, e: Error) -> Error {
-        match super::manifest::latest_txn(&self.src) {
+        use crate::store::slots::SlotsNow;
+        match super::manifest::slots_now(&self.src, &self.state.record) {
             // A remote manifest replaced on the server: the reader's version is gone.
-            Err(changed @ Error::Io { .. }) if self.is_remote() => changed,
-            Ok(Some(latest)) if latest > self.txn_id() => Error::Superseded {
+            Err(changed @ (Error::Io { .. } | Error::Changed { .. })) if self.is_remote() => {
+                changed
+            }
+            Ok(SlotsNow::Latest { txn: latest, .. }) if latest > self.txn_id() => {
+                Error::Superseded {
+                    path: self.dir.clone(),
+                    txn: self.txn_id(),
+                    latest,
+                    detail: format!("a tile moved on with the newer dataset state: {e}"),
+                }
+            }
+            Ok(SlotsNow::Latest {
+                still_published: false,
+                ..
+            }) => Error::Changed {
                 path: self.dir.clone(),
-                txn: self.txn_id(),
-                latest,
-                detail: format!("a tile moved on with the newer dataset state: {e}"),
+                detail: format!(
+                    "the manifest no longer publishes the state this reader opened (txn {}), \
+                     and no newer state does; then: {e}",
+                    self.txn_id()
+                ),
             },
             _ => e,
         }

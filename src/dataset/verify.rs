@@ -7,13 +7,14 @@
 use serde::Serialize;
 
 use super::adjacency::{borders_of, tables_of, TileEdges};
-use super::manifest::{read_slots, MANIFEST_NAME};
+use super::manifest::{read_slots, slots_now, MANIFEST_NAME};
 use super::placement::check_tiling;
 use super::reader::{Dataset, Tile};
 use crate::error::{Error, Result};
 use crate::format::manifest::ManifestSlot;
 use crate::format::Invariant;
 use crate::model::SampleRect;
+use crate::store::slots::SlotsNow;
 use crate::store::verify::Checks;
 use crate::store::{verify_pinned, AnySource, CheckReport, CheckStatus, VerifyMode};
 
@@ -116,13 +117,29 @@ pub fn verify(
             .find(|c| c.status == CheckStatus::Failed)
             .and_then(|c| c.failures.first().map(|f| format!("{}: {f}", c.id)))
             .unwrap_or_default();
-        if let Some(latest) = dataset.newer_state()? {
-            return Err(Error::Superseded {
-                path: dir.to_path_buf(),
-                txn: dataset.txn_id(),
-                latest,
-                detail: format!("the check found {first} while a writer committed"),
-            });
+        let txn = dataset.txn_id();
+        match slots_now(dataset.manifest_source(), &dataset.state().record)? {
+            SlotsNow::Latest { txn: latest, .. } if latest > txn => {
+                return Err(Error::Superseded {
+                    path: dir.to_path_buf(),
+                    txn,
+                    latest,
+                    detail: format!("the check found {first} while a writer committed"),
+                })
+            }
+            SlotsNow::Latest {
+                still_published: false,
+                ..
+            } => {
+                return Err(Error::Changed {
+                    path: dir.to_path_buf(),
+                    detail: format!(
+                        "the manifest no longer publishes the state checked (txn {txn}), and \
+                         no newer state does; the check found {first}"
+                    ),
+                })
+            }
+            _ => {}
         }
     }
     Ok(report)

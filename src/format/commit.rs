@@ -54,6 +54,17 @@ pub const COMMIT_PAYLOAD_SLACK: u32 = 2;
 /// Every commit record flag this reader knows.
 pub const COMMIT_FLAGS_KNOWN: u32 = COMMIT_RECOVERY_NEEDED | COMMIT_PAYLOAD_SLACK;
 
+/// The largest transaction id (`2^62 - 1`, §2): a reader of state `t` locks byte `2^62 + t`
+/// (§11.6), so ids stop below the writer's lock byte's distance. A record with a larger id is
+/// invalid; a writer whose next id would pass it refuses to commit (at a million commits a
+/// second, that takes 146,000 years).
+pub const MAX_TXN_ID: u64 = (1 << 62) - 1;
+
+/// The id of the transaction after `txn`, or `None` when `txn` is the last (`MAX_TXN_ID`).
+pub fn next_txn_id(txn: u64) -> Option<u64> {
+    txn.checked_add(1).filter(|&t| t <= MAX_TXN_ID)
+}
+
 on_disk! {
     /// A commit record: the first [`COMMIT_RECORD_LEN`] bytes of page 0 or page 1.
     #[derive(Eq)]
@@ -319,8 +330,11 @@ pub fn classify(bytes: &[u8], slot: u8, offset: u64) -> Slot {
     if len % u64::from(p) != 0 || len < 2 * u64::from(p) {
         return invalid(format!("file length {len} is not two or more whole pages"));
     }
-    if r.txn_id.get() == 0 {
-        return invalid("transaction id 0".into());
+    if !(1..=MAX_TXN_ID).contains(&r.txn_id.get()) {
+        return invalid(format!(
+            "transaction id {}, not one of 1..=2^62-1",
+            r.txn_id.get()
+        ));
     }
     if r.binds_pages() && !(1..=r.txn_id.get()).contains(&r.pages_txn.get()) {
         return invalid(format!(

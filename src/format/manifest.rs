@@ -501,6 +501,19 @@ impl Head {
                     "georeference not finite, or a zero step".into(),
                 ));
             }
+        } else if known
+            && fixed
+                .origin
+                .iter()
+                .chain(&fixed.step)
+                .any(|v| v.get().to_bits() != 0)
+        {
+            // Without the flag the fields mean nothing, so they must say nothing (§3.1): a
+            // writer that left values there wrote something no reader would show.
+            return Err(bad(
+                "manifest head".into(),
+                "no georeference flag, but the origin or the step is not zero".into(),
+            ));
         }
         let body = record.body();
         let mut out = Vec::with_capacity(usize::try_from(pages).unwrap_or(0));

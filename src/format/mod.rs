@@ -91,7 +91,10 @@ pub mod tree;
 
 pub use crate::error::{Invariant, Violation};
 pub use blob::BlobRef;
-pub use commit::{CommitRecord, StateRoots, COMMIT_PAYLOAD_SLACK, COMMIT_RECORD_LEN, COMMIT_RECOVERY_NEEDED};
+pub use commit::{
+    CommitRecord, StateRoots, COMMIT_PAYLOAD_SLACK, COMMIT_RECORD_LEN, COMMIT_RECOVERY_NEEDED,
+    MAX_TXN_ID,
+};
 #[cfg(any(test, feature = "testing"))]
 pub use commit::COMMIT_FLAGS_KNOWN;
 pub use dataset::DatasetHeader;

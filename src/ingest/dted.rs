@@ -75,6 +75,9 @@ pub fn read(path: &Path, options: &IngestOptions) -> Result<Heightfield> {
         ));
     }
     check_dimensions(columns as u64, rows as u64).map_err(|e| Error::input(path, e.to_string()))?;
+    options
+        .limits
+        .check_declared(path, columns as u64, rows as u64, bytes.len() as u64)?;
     if bytes.get(UHL_LEN..UHL_LEN + 3) != Some(b"DSI")
         || bytes.get(UHL_LEN + DSI_LEN..UHL_LEN + DSI_LEN + 3) != Some(b"ACC")
     {

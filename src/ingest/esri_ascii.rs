@@ -73,6 +73,9 @@ pub fn read(path: &Path, options: &IngestOptions) -> Result<Heightfield> {
         return Err(Error::input(path, "header must give ncols and nrows"));
     };
     check_dimensions(ncols, nrows).map_err(|e| Error::input(path, e.to_string()))?;
+    options
+        .limits
+        .check_declared(path, ncols, nrows, bytes.len() as u64)?;
     if ncols * nrows > bytes.len() as u64 / 2 + 1 {
         return Err(Error::input(
             path,

@@ -60,6 +60,9 @@ pub fn read(path: &Path, options: &IngestOptions) -> Result<Heightfield> {
     let (width, height) = dec.dimensions().map_err(|e| tiff_error(path, e))?;
     check_dimensions(u64::from(width), u64::from(height))
         .map_err(|e| Error::input(path, e.to_string()))?;
+    options
+        .limits
+        .check_declared(path, u64::from(width), u64::from(height), file_len)?;
     match dec.colortype().map_err(|e| tiff_error(path, e))? {
         ColorType::Gray(_) => {}
         other => {
@@ -165,7 +168,22 @@ fn check_data_extent<R: std::io::Read + std::io::Seek>(
         .flatten()
         .map(|v| v.iter().sum())
         .unwrap_or(1);
-    let have: u64 = counts.iter().fold(0u64, |a, &c| a.saturating_add(c));
+    // The bytes the strips or tiles cover, each byte once: a file whose tile offsets all
+    // point at one small stream (a decompression bomb) holds only that stream.
+    let mut spans: Vec<(u64, u64)> = offsets
+        .iter()
+        .zip(&counts)
+        .map(|(&o, &c)| (o, o.saturating_add(c)))
+        .collect();
+    spans.sort_unstable();
+    let (mut have, mut reach) = (0u64, 0u64);
+    for (start, end) in spans {
+        let from = start.max(reach);
+        if end > from {
+            have = have.saturating_add(end - from);
+            reach = end;
+        }
+    }
     let need = (u64::from(width) * bits).div_ceil(8) * u64::from(height);
     // The most bytes each codec can make of one stored byte: a header that claims more than
     // its data could decode to is refused before the image buffer is sized from it.

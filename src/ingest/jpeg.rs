@@ -30,6 +30,8 @@ const ZIGZAG: [usize; 64] = [
 enum Failure {
     Malformed(String),
     Unsupported(String),
+    /// The declared size is past the ingest limits (`super::limits`).
+    Limit(Error),
 }
 
 type Decoding<T> = std::result::Result<T, Failure>;
@@ -41,9 +43,17 @@ fn malformed<T>(msg: impl Into<String>) -> Decoding<T> {
 /// Reads a JPEG heightfield.
 pub fn read(path: &Path, options: &IngestOptions) -> Result<Heightfield> {
     let bytes = read_limited(path, MAX_SAMPLES * 4)?;
-    let (width, height, luma) = decode(&bytes).map_err(|f| match f {
+    let input_bytes = bytes.len() as u64;
+    let declared = |w: u32, h: u32| {
+        options
+            .limits
+            .check_declared(path, u64::from(w), u64::from(h), input_bytes)
+            .map_err(Failure::Limit)
+    };
+    let (width, height, luma) = decode(&bytes, &declared).map_err(|f| match f {
         Failure::Malformed(m) => Error::input(path, m),
         Failure::Unsupported(m) => Error::unsupported(path, m),
+        Failure::Limit(e) => e,
     })?;
     let samples = luma
         .into_iter()
@@ -270,7 +280,10 @@ fn u16_at(data: &[u8], at: usize) -> Decoding<usize> {
 }
 
 /// Decodes to `(width, height, luma)`.
-fn decode(data: &[u8]) -> Decoding<(u32, u32, Vec<u8>)> {
+fn decode(
+    data: &[u8],
+    declared: &dyn Fn(u32, u32) -> Decoding<()>,
+) -> Decoding<(u32, u32, Vec<u8>)> {
     if data.get(..2) != Some(&[0xFF, 0xD8]) {
         return malformed("not a JPEG (no start-of-image marker)");
     }
@@ -324,6 +337,7 @@ fn decode(data: &[u8]) -> Decoding<(u32, u32, Vec<u8>)> {
                 if check_dimensions(width as u64, height as u64).is_err() {
                     return malformed(format!("{width} x {height} pixels"));
                 }
+                declared(width as u32, height as u32)?;
                 if n != 1 && n != 3 || seg.len() < 6 + 3 * n {
                     return Err(Failure::Unsupported(format!(
                         "{n} components: grey (1) or YCbCr (3) only"

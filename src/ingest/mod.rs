@@ -19,6 +19,7 @@ mod dted;
 mod esri_ascii;
 mod geotiff;
 mod jpeg;
+pub mod limits;
 mod png;
 mod raw_f32;
 mod srtm;
@@ -30,6 +31,7 @@ use std::path::Path;
 
 use crate::error::{Error, Result};
 use crate::heightfield::{Georeference, Heightfield, Metadata};
+pub use limits::IngestLimits;
 
 /// The input formats fmrh reads ([`Format::about`] says what each takes).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -177,6 +179,9 @@ pub struct IngestOptions {
     /// The 1° tile an `.hgt` holds, named as SRTM names it (`N44W072`: the south-west
     /// corner), for a file whose name does not say.
     pub tile: Option<String>,
+    /// What a file may declare before it is believed ([`limits`]): the memory a build may
+    /// take and the samples a byte of input may claim.
+    pub limits: IngestLimits,
 }
 
 impl Default for IngestOptions {
@@ -188,6 +193,7 @@ impl Default for IngestOptions {
             z_offset: 0.0,
             nodata: None,
             tile: None,
+            limits: IngestLimits::default(),
         }
     }
 }
@@ -208,6 +214,15 @@ impl IngestOptions {
                 "z-scale {} and z-offset {} must be finite, and the scale non-zero",
                 self.z_scale, self.z_offset
             )));
+        }
+        if self
+            .limits
+            .max_samples_per_byte
+            .is_some_and(|r| r.is_nan() || r < 0.0)
+        {
+            return Err(Error::InvalidArgument(
+                "max-samples-per-byte must be a number >= 0 (0: no ceiling)".into(),
+            ));
         }
         if self.nodata.is_some_and(f64::is_nan) {
             return Err(Error::InvalidArgument("nodata must be a number".into()));
@@ -231,7 +246,7 @@ pub fn load(path: &Path, options: &IngestOptions) -> Result<Heightfield> {
         None => detect(path)?,
     };
     let mut hf = match format {
-        Format::F32 => raw_f32::read(path)?,
+        Format::F32 => raw_f32::read(path, options)?,
         Format::Hgt => srtm::read(path, options)?,
         Format::Geotiff => geotiff::read(path, options)?,
         Format::Png => png::read(path, options)?,
@@ -324,6 +339,14 @@ pub fn parse_tile_name(name: &str) -> Option<(i32, i32)> {
 }
 
 /// Reads at most `limit` bytes of `path`; more is an error (the caller's size check failed).
+/// Checks the grid `path` declares against the limits, by the file's size on disk.
+fn check_declared(path: &Path, options: &IngestOptions, width: u64, height: u64) -> Result<()> {
+    let len = std::fs::metadata(path)
+        .map_err(|e| Error::io(path, e))?
+        .len();
+    options.limits.check_declared(path, width, height, len)
+}
+
 fn read_limited(path: &Path, limit: u64) -> Result<Vec<u8>> {
     let file = File::open(path).map_err(|e| Error::io(path, e))?;
     let len = file.metadata().map_err(|e| Error::io(path, e))?.len();

@@ -48,6 +48,7 @@ pub fn read(path: &Path, options: &IngestOptions) -> Result<Heightfield> {
     let (width, height) = (info.width, info.height);
     check_dimensions(u64::from(width), u64::from(height))
         .map_err(|e| Error::input(path, e.to_string()))?;
+    super::check_declared(path, options, u64::from(width), u64::from(height))?;
     let (color, depth) = (info.color_type, info.bit_depth);
     let palette = info.palette.as_ref().map(|p| p.to_vec());
     // Row by row: the buffer grows only as image data actually decodes, so a header that

@@ -44,7 +44,7 @@ fn with_extension(path: &Path, ext: &str) -> PathBuf {
 }
 
 /// Reads the pair, given either file.
-pub fn read(path: &Path) -> Result<Heightfield> {
+pub fn read(path: &Path, options: &super::IngestOptions) -> Result<Heightfield> {
     let is_json = path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("json"));
@@ -88,6 +88,9 @@ pub fn read(path: &Path) -> Result<Heightfield> {
             ),
         ));
     }
+    options
+        .limits
+        .check_declared(&f32_path, sidecar.width, sidecar.height, len)?;
     let count = (sidecar.width * sidecar.height) as usize;
     let mut samples = Vec::with_capacity(count);
     let mut chunk = vec![0u8; 1 << 20];

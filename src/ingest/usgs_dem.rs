@@ -169,6 +169,9 @@ pub fn read(path: &Path, options: &IngestOptions) -> Result<Heightfield> {
     }
     let (width, height) = (columns as u64, rows_f as u64);
     check_dimensions(width, height).map_err(|e| Error::input(path, e.to_string()))?;
+    options
+        .limits
+        .check_declared(path, width, height, bytes.len() as u64)?;
     // The grid is the profiles' bounding box, sized from their y values: bound it by what the
     // file holds before allocating it. A quadrangle's profiles fill most of their box (a UTM
     // footprint is a slightly rotated rectangle); a box more than MAX_VOID_SHARE void is a

@@ -97,6 +97,10 @@ impl Source for AnySource {
         any_source!(self, s => s.read_at(offset, len))
     }
 
+    fn read_fresh(&self, offset: u64, len: usize) -> io::Result<Cow<'_, [u8]>> {
+        any_source!(self, s => s.read_fresh(offset, len))
+    }
+
     fn stable(&self) -> bool {
         any_source!(self, s => s.stable())
     }

@@ -142,7 +142,10 @@ pub(crate) fn read<S: Source + ?Sized>(src: &S, commit: &CommitRecord) -> Result
         );
         return Err(super::slots::superseded_or_corrupt(
             src,
-            commit.txn_id.get(),
+            super::slots::StateId {
+                txn: commit.txn_id.get(),
+                record_crc: commit.crc.get(),
+            },
             v,
         ));
     }

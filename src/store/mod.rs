@@ -351,6 +351,7 @@ impl<S: Source> Store<S> {
     pub(crate) fn binding(&self) -> pages::Binding {
         pages::Binding {
             txn: self.txn_id(),
+            record_crc: self.commit.crc.get(),
             txn_tag: self.commit.page_txn_tag(),
         }
     }
@@ -377,7 +378,7 @@ impl<S: Source> Store<S> {
                 Ok(_) | Err(bundled::PageError::Outside) => {}
                 Err(bundled::PageError::Read(e)) => return Err(e),
                 Err(bundled::PageError::Bad(v)) => {
-                    return Err(slots::superseded_or_corrupt(&self.src, self.txn_id(), v))
+                    return Err(slots::superseded_or_corrupt(&self.src, self.binding().id(), v))
                 }
             }
         }

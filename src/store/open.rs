@@ -254,6 +254,7 @@ fn open_once<S: Source>(src: &S, walk: Walk, pin: Option<StatePin>) -> Result<Op
         check: true,
         state: Binding {
             txn: commit.txn_id.get(),
+            record_crc: commit.crc.get(),
             txn_tag: commit.page_txn_tag(),
         },
         cache: None,
@@ -316,9 +317,13 @@ fn open_once<S: Source>(src: &S, walk: Walk, pin: Option<StatePin>) -> Result<Op
     }
     if !registered && commit.binds_pages() {
         // A tag repeats every 2^16 transactions: if that many could have committed since the
-        // state's pages were written, a page read above might carry a reused tag.
+        // state's pages were written, a page read above might carry a reused tag. While the
+        // state is still the latest, no commit after it wrote a page it reaches, however many
+        // marks republished it (a state never names itself superseded).
         let latest = latest_txn(src)?.unwrap_or(0);
-        if latest.saturating_add(1) >= commit.pages_txn.get().saturating_add(0xffff) {
+        if latest > commit.txn_id.get()
+            && latest.saturating_add(1) >= commit.pages_txn.get().saturating_add(0xffff)
+        {
             return Err(Error::Superseded {
                 path: src.name().to_path_buf(),
                 txn: commit.txn_id.get(),

@@ -123,8 +123,20 @@ impl std::ops::Deref for PageBytes<'_> {
 pub(crate) struct Binding {
     /// The txn id of the state.
     pub txn: u64,
+    /// The CRC of the state's commit record (with the id, which state this is).
+    pub record_crc: u32,
     /// The txn tag its structured pages carry.
     pub txn_tag: u16,
+}
+
+impl Binding {
+    /// The state's identity, for triage.
+    pub fn id(&self) -> super::slots::StateId {
+        super::slots::StateId {
+            txn: self.txn,
+            record_crc: self.record_crc,
+        }
+    }
 }
 
 impl<'a, S: Source + ?Sized> Pages<'a, S> {
@@ -253,7 +265,9 @@ impl<'a, S: Source + ?Sized> Pages<'a, S> {
     #[cold]
     fn check_wrap(&self, pages_txn: u64) -> Result<()> {
         let latest = super::slots::latest_txn(self.src)?.unwrap_or(0);
-        if latest.saturating_add(1) >= pages_txn.saturating_add(0xffff) {
+        // While the state is the latest, no commit after it wrote a page (format §4).
+        if latest > self.state.txn && latest.saturating_add(1) >= pages_txn.saturating_add(0xffff)
+        {
             return Err(Error::Superseded {
                 path: self.src.name().to_path_buf(),
                 txn: self.state.txn,
@@ -267,7 +281,7 @@ impl<'a, S: Source + ?Sized> Pages<'a, S> {
     #[cold]
     #[inline(never)]
     fn reused_or_corrupt(&self, v: Violation) -> Error {
-        super::slots::superseded_or_corrupt(self.src, self.state.txn, v)
+        super::slots::superseded_or_corrupt(self.src, self.state.id(), v)
     }
 
     /// A valid page with another transaction's tag: a later state reused it, or (if the state
@@ -283,7 +297,7 @@ impl<'a, S: Source + ?Sized> Pages<'a, S> {
                 self.state.txn_tag
             ),
         );
-        super::slots::superseded_or_corrupt(self.src, self.state.txn, v)
+        super::slots::superseded_or_corrupt(self.src, self.state.id(), v)
     }
 
     // The error paths stay out of line: `get` runs for every page of every lookup.

@@ -67,6 +67,21 @@ impl<S: Source> Store<S> {
         v.in_file(self.src.name())
     }
 
+    /// The id a commit on this state takes (`txn_id + 1`); an error when this state has the
+    /// last id a file can hold (`MAX_TXN_ID`, format §2).
+    pub(crate) fn next_txn_id(&self) -> Result<u64> {
+        crate::format::commit::next_txn_id(self.txn_id()).ok_or_else(|| {
+            Error::unsupported(
+                self.src.name(),
+                format!(
+                    "transaction {} is the last a file can hold (2^62 - 1): rebuild the file \
+                     to commit again",
+                    self.txn_id()
+                ),
+            )
+        })
+    }
+
     /// Page access for lookups: each page checked on its first read, then cached.
     pub(crate) fn pages(&self) -> Pages<'_, S> {
         Pages {
@@ -319,7 +334,7 @@ impl<S: Source> Store<S> {
             );
             return Err(super::slots::superseded_or_corrupt(
                 &self.src,
-                self.txn_id(),
+                self.binding().id(),
                 v,
             ));
         }

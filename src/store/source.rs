@@ -25,6 +25,14 @@ pub trait Source: Send + Sync {
         self.len() == 0
     }
 
+    /// Bytes `offset .. offset + len` as the source holds them now, past anything it keeps
+    /// in memory: what error triage reads (the commit slots) to tell a superseded or
+    /// replaced state from damage. The default is [`Source::read_at`], for sources that keep
+    /// nothing.
+    fn read_fresh(&self, offset: u64, len: usize) -> io::Result<Cow<'_, [u8]>> {
+        self.read_at(offset, len)
+    }
+
     /// Bytes `offset .. offset + len`. Callers check the range against [`Source::len`]
     /// first; a range beyond it is an error, never a panic.
     fn read_at(&self, offset: u64, len: usize) -> io::Result<Cow<'_, [u8]>>;
@@ -110,6 +118,10 @@ impl<S: Source + ?Sized> Source for &S {
     #[inline]
     fn read_at(&self, offset: u64, len: usize) -> io::Result<Cow<'_, [u8]>> {
         (**self).read_at(offset, len)
+    }
+
+    fn read_fresh(&self, offset: u64, len: usize) -> io::Result<Cow<'_, [u8]>> {
+        (**self).read_fresh(offset, len)
     }
 
     #[inline]
@@ -425,6 +437,13 @@ impl<S: Source> Source for Counted<S> {
         self.calls.fetch_add(1, Relaxed);
         self.bytes.fetch_add(len as u64, Relaxed);
         self.inner.read_at(offset, len)
+    }
+
+    fn read_fresh(&self, offset: u64, len: usize) -> io::Result<Cow<'_, [u8]>> {
+        use std::sync::atomic::Ordering::Relaxed;
+        self.calls.fetch_add(1, Relaxed);
+        self.bytes.fetch_add(len as u64, Relaxed);
+        self.inner.read_fresh(offset, len)
     }
 
     fn stable(&self) -> bool {

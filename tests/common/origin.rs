@@ -75,13 +75,18 @@ impl Origin {
         Origin { state, base }
     }
 
-    /// Serves `bytes` at `path` (starting with `/`) under `etag`; returns its URL.
+    /// Serves `bytes` at `path` (starting with `/`) under `etag` (none when empty, as some
+    /// servers and proxies give none); returns its URL.
     pub fn put(&self, path: &str, bytes: Vec<u8>, etag: &str) -> String {
         self.state.lock().unwrap().objects.insert(
             path.to_string(),
             Object {
                 bytes,
-                etag: format!("\"{etag}\""),
+                etag: if etag.is_empty() {
+                    String::new()
+                } else {
+                    format!("\"{etag}\"")
+                },
             },
         );
         format!("{}{path}", self.base)
@@ -172,7 +177,11 @@ fn answer(stream: TcpStream, state: &Mutex<State>) {
                 std::thread::sleep(d);
             }
             let total = obj.bytes.len() as u64;
-            let etag = format!("ETag: {}\r\n", obj.etag);
+            let etag = if obj.etag.is_empty() {
+                String::new()
+            } else {
+                format!("ETag: {}\r\n", obj.etag)
+            };
             if if_match.as_ref().is_some_and(|m| *m != obj.etag) {
                 head("412 Precondition Failed", "", 0).into_bytes()
             } else if fault == Some(Fault::IgnoreRange) || range.is_none() {

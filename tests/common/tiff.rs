@@ -41,11 +41,11 @@ impl Value {
 /// A TIFF of `strips` (their offsets and byte counts filled in) and `tags` (which must not
 /// include 273 or 279).
 pub fn tiff(tags: Vec<(u16, Value)>, strips: &[Vec<u8>]) -> Vec<u8> {
-    let mut t = b"II*\0\0\0\0\0".to_vec();
     let mut offsets = Vec::new();
+    let mut data = Vec::new();
     for s in strips {
-        offsets.push(t.len() as u32);
-        t.extend_from_slice(s);
+        offsets.push(8 + data.len() as u32);
+        data.extend_from_slice(s);
     }
     let mut all = tags;
     all.push((273, Value::Long(offsets)));
@@ -53,6 +53,15 @@ pub fn tiff(tags: Vec<(u16, Value)>, strips: &[Vec<u8>]) -> Vec<u8> {
         279,
         Value::Long(strips.iter().map(|s| s.len() as u32).collect()),
     ));
+    tiff_raw(all, &data)
+}
+
+/// A TIFF whose image data `data` lies at byte 8, with exactly `tags` (offsets into the file
+/// are the caller's: the data's first byte is at 8).
+pub fn tiff_raw(tags: Vec<(u16, Value)>, data: &[u8]) -> Vec<u8> {
+    let mut t = b"II*\0\0\0\0\0".to_vec();
+    t.extend_from_slice(data);
+    let mut all = tags;
     all.sort_by_key(|(tag, _)| *tag);
     // Values longer than 4 bytes go before the IFD, word-aligned.
     let mut entries = Vec::new();

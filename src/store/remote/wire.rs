@@ -200,12 +200,13 @@ impl Client {
 
     /// The error for an object that is no longer the version this reader opened.
     fn changed(&self) -> io::Error {
-        failed(format!(
-            "{}: the object changed underneath this reader (its ETag is no longer {}); open \
-             it again",
+        io::Error::other(crate::error::ObjectChanged(format!(
+            "{}: the object changed underneath this reader (its ETag or length is no longer \
+             {} bytes, {}); open it again",
             self.url,
-            self.etag.as_deref().unwrap_or("what it was")
-        ))
+            self.len,
+            self.etag.as_deref().unwrap_or("no ETag")
+        )))
     }
 
     /// Bytes `offset .. offset + len` of the object (checked against its length), pinned.

@@ -149,7 +149,7 @@ pub(crate) fn write_state<I: Io>(
     min_pages: u64,
 ) -> Result<(CommitRecord, CommitSummary)> {
     let p = base.page_size();
-    let txn = base.txn_id() + 1;
+    let txn = base.next_txn_id()?;
     let model = editor.model();
     let d = *model.domain();
     let finest = d.finest_level();

@@ -258,7 +258,7 @@ impl<I: Io> Container<I> {
             return Ok(base.txn_id());
         }
         let flags = record.flags.get() & COMMIT_PAYLOAD_SLACK;
-        let copy = record.copy_as(record.txn_id.get() + 1, flags);
+        let copy = record.copy_as(base.next_txn_id()?, flags);
         let store = self.guard(|| self.publish(&base, &copy))?;
         let txn = store.txn_id();
         *lock(&self.shared.current) = Arc::new(store);
@@ -433,7 +433,7 @@ impl<I: Io> WriteTxn<'_, I> {
                 base
             } else {
                 let r = base.commit_record();
-                let marked = r.copy_as(r.txn_id.get() + 1, r.flags.get() | COMMIT_RECOVERY_NEEDED);
+                let marked = r.copy_as(base.next_txn_id()?, r.flags.get() | COMMIT_RECOVERY_NEEDED);
                 Arc::new(container.publish(&base, &marked)?)
             };
             let limit = container.reuse_limit(base.txn_id())?;
