@@ -106,6 +106,7 @@ rooms!(
     format,
     globe,
     heightfield,
+    http,
     ingest,
     mesh,
     model,

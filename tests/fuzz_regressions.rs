@@ -5,8 +5,13 @@
 //! (`level + 1` overflowed in the validator), and a physical block with a subtree (the
 //! validator asked whether level `L + 1` exists).
 
+#[path = "../fuzz/fuzz_targets/http_request_input.rs"]
+mod http_request_input;
 #[path = "../fuzz/fuzz_targets/open_verify_input.rs"]
 mod open_verify_input;
+#[cfg(feature = "remote")]
+#[path = "../fuzz/fuzz_targets/remote_response_input.rs"]
+mod remote_response_input;
 
 use std::path::PathBuf;
 
@@ -37,5 +42,26 @@ fn open_verify_corpus_replays() {
     for (path, bytes) in inputs {
         eprintln!("{}", path.display());
         open_verify_input::run(&bytes);
+    }
+}
+
+#[test]
+fn http_request_corpus_replays() {
+    let inputs = corpus("http_request");
+    assert!(!inputs.is_empty());
+    for (path, bytes) in inputs {
+        eprintln!("{}", path.display());
+        http_request_input::run(&bytes);
+    }
+}
+
+#[cfg(feature = "remote")]
+#[test]
+fn remote_response_corpus_replays() {
+    let inputs = corpus("remote_response");
+    assert!(!inputs.is_empty());
+    for (path, bytes) in inputs {
+        eprintln!("{}", path.display());
+        remote_response_input::run(&bytes);
     }
 }

@@ -7,7 +7,9 @@ use std::path::{Path, PathBuf};
 
 /// The layers, bottom first; rooms of one layer may use each other.
 const LAYERS: &[&[&str]] = &[
-    &["curve", "codec", "globe", "crs", "error", "progress"],
+    &[
+        "curve", "codec", "globe", "crs", "error", "progress", "http",
+    ],
     &["heightfield"],
     &["model"],
     &["format"],

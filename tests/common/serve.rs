@@ -41,10 +41,16 @@ pub struct Served {
 impl Served {
     /// Serves `paths` on a free port of 127.0.0.1.
     pub fn start(paths: &[&Path]) -> Served {
+        Served::start_with(paths, &[])
+    }
+
+    /// Serves `paths` on a free port of 127.0.0.1, with more arguments.
+    pub fn start_with(paths: &[&Path], args: &[&str]) -> Served {
         let mut child = Command::new(env!("CARGO_BIN_EXE_fmrh"))
             .arg("serve")
             .args(paths)
             .args(["--port", "0"])
+            .args(args)
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit())
             .spawn()

@@ -17,11 +17,8 @@
 //! `fmrh replace` or `dataset add`) is seen by the next request, and a reader never holds a
 //! state a writer waits on. The server only reads: nothing it does can change a file.
 
-pub mod http;
-pub mod ranges;
-
 use std::collections::BTreeMap;
-use std::io::{Read, Seek, SeekFrom};
+use std::io::{Seek, SeekFrom};
 use std::net::TcpListener;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -36,7 +33,7 @@ use crate::Error;
 
 use super::args::RefineArg;
 use super::args::{ModeArg, ViewArgs};
-use http::{Body, Request, Response};
+use crate::http::{self, ranges, Body, Request, Response};
 
 /// The viewer page and its script, served at `/` and `/viewer.js`.
 const INDEX_HTML: &str = include_str!("page/index.html");
@@ -54,6 +51,20 @@ pub struct ServeArgs {
     /// anyone who can reach it (the server only reads, but it reads everything served).
     #[arg(long, default_value = "127.0.0.1")]
     bind: String,
+    /// Seconds a connection may idle, a request head may take to arrive, and a client may
+    /// take an answer's first bytes (after that, it must read at least 16 KiB a second).
+    #[arg(long, default_value_t = 30.0, value_parser = positive_seconds)]
+    timeout: f64,
+}
+
+/// A timeout in seconds: finite, more than 0, at most a day.
+fn positive_seconds(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(s) if s > 0.0 && s <= 86_400.0 => Ok(s),
+        _ => Err(format!(
+            "{text:?}: expected seconds, more than 0 and at most 86400"
+        )),
+    }
 }
 
 /// One served path.
@@ -127,7 +138,11 @@ pub fn run(args: &ServeArgs) -> Result<ExitCode, Error> {
         }
         let _ = out.flush();
     }
-    http::serve(listener, move |request| answer(&items, request));
+    let limits = http::Limits {
+        timeout: std::time::Duration::from_secs_f64(args.timeout),
+        ..http::Limits::default()
+    };
+    http::serve(listener, limits, move |request| answer(&items, request));
     Ok(ExitCode::SUCCESS)
 }
 
@@ -199,7 +214,7 @@ fn route(items: &[Item], path: &str, query: &str, request: &Request) -> Answer {
 }
 
 /// The file `/files/REST` names: a container by its name, or a file directly inside a
-/// served dataset's directory. Never anything else: no `..`, no subdirectories.
+/// served dataset's directory. Never anything else: no `..`, no subdirectories, no links.
 fn file_of(items: &[Item], rest: &str) -> Option<PathBuf> {
     let mut segments = rest.split('/');
     let name = segments.next()?;
@@ -212,7 +227,10 @@ fn file_of(items: &[Item], rest: &str) -> Option<PathBuf> {
         (false, None) => Some(item.path.clone()),
         (true, Some(m)) if !m.is_empty() && m != "." && m != ".." && !m.contains(['\\', '\0']) => {
             let path = item.path.join(m);
-            path.is_file().then_some(path)
+            // A regular file in the directory itself, never a symbolic link: a link there
+            // could point anywhere on the machine.
+            let meta = std::fs::symlink_metadata(&path).ok()?;
+            meta.file_type().is_file().then_some(path)
         }
         _ => None,
     }
@@ -273,20 +291,15 @@ fn serve_file(path: &Path, request: &Request) -> Answer {
         }
         ranges::Asked::Ranges(rs) => {
             let boundary = format!("fmrh-{:016x}", boundary_for(&etag, rs.len()));
-            let body = ranges::multipart(&rs, len, &boundary, |r| {
-                let mut part = vec![0u8; (r.end - r.start) as usize];
-                file.seek(SeekFrom::Start(r.start))?;
-                file.read_exact(&mut part)?;
-                Ok::<_, std::io::Error>(part)
-            });
-            match body {
-                Ok(body) => common(bytes(
+            let (parts, end) = ranges::multipart_heads(&rs, len, &boundary);
+            common(
+                Response::new(
                     206,
                     &format!("multipart/byteranges; boundary={boundary}"),
-                    body,
-                )),
-                Err(e) => error(500, format!("cannot read the file: {e}")),
-            }
+                    Body::Parts(file, parts, end),
+                )
+                .with("Cache-Control", "no-cache"),
+            )
         }
     }
 }

@@ -47,6 +47,13 @@
 mod target;
 mod wire;
 
+/// The response parsers, for the fuzz targets: a `multipart/byteranges` body and a
+/// `Content-Range` value, as the reader takes them from a server.
+#[cfg(feature = "testing")]
+pub mod parse {
+    pub use super::wire::{content_range, multipart};
+}
+
 use std::borrow::Cow;
 use std::io;
 use std::ops::Range;

@@ -260,7 +260,7 @@ impl Client {
 }
 
 /// Parts of an answer: where each starts, and its bytes.
-pub(super) type Parts = Vec<(u64, Vec<u8>)>;
+pub type Parts = Vec<(u64, Vec<u8>)>;
 
 /// Requests of a batch: each one's byte range, and the indices of the spans it serves.
 pub(super) type Requests = Vec<(Range<u64>, Vec<usize>)>;
@@ -276,7 +276,10 @@ pub(super) struct Answer {
 
 /// The parts of a `multipart/byteranges` body (RFC 9110 §14.6): each part's start and
 /// bytes, and the object's length. Every part must say its range, all the same length.
-fn multipart(body: &[u8], boundary: &str) -> std::result::Result<(Parts, u64), String> {
+pub fn multipart(
+    body: &[u8],
+    boundary: &str,
+) -> std::result::Result<(Parts, u64), String> {
     let delimiter = format!("--{boundary}");
     let mut at = 0usize;
     let mut parts = Vec::new();
@@ -340,7 +343,7 @@ pub(super) fn failed(detail: String) -> io::Error {
 }
 
 /// `Content-Range: bytes a-b/total` as `(a, b, total)`.
-fn content_range(value: &str) -> Option<(u64, u64, u64)> {
+pub fn content_range(value: &str) -> Option<(u64, u64, u64)> {
     let rest = value.trim().strip_prefix("bytes ")?;
     let (span, total) = rest.split_once('/')?;
     let (a, b) = span.split_once('-')?;

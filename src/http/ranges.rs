@@ -1,6 +1,6 @@
 //! HTTP byte ranges (RFC 9110 §14): what a `Range` header asks of an object of a given
 //! length, and the `multipart/byteranges` body that answers several ranges at once. Pure
-//! functions, no I/O: `fmrh serve` reads the bytes, this says which.
+//! functions, no I/O: the server reads the bytes, this says which.
 //!
 //! The remote reader (`crate::store::remote`) opens a container with one multi-range request
 //! (its first 4 KiB and its last 36 KiB) and reads payloads with single ranges, so a server
@@ -105,27 +105,47 @@ pub fn content_range(range: &Range<u64>, len: u64) -> String {
     format!("bytes {}-{}/{len}", range.start, range.end - 1)
 }
 
-/// The `multipart/byteranges` body answering `ranges` of `object` (of `len` bytes) with
-/// `boundary`: each part its `Content-Type` and `Content-Range`, then its bytes, as
-/// `read(range)` gives them.
+/// One part of a `multipart/byteranges` body: its head, then the bytes of its range.
+pub type Part = (Vec<u8>, Range<u64>);
+
+/// The `multipart/byteranges` body answering `ranges` of an object of `len` bytes with
+/// `boundary`, as the head of each part (its delimiter, `Content-Type` and `Content-Range`)
+/// beside its range, and the closing delimiter. The server sends each head and then the
+/// range's bytes from the file, so an answer costs no memory in proportion to its parts.
+pub fn multipart_heads(
+    ranges: &[Range<u64>],
+    len: u64,
+    boundary: &str,
+) -> (Vec<Part>, Vec<u8>) {
+    let parts = ranges
+        .iter()
+        .map(|r| {
+            let head = format!(
+                "\r\n--{boundary}\r\nContent-Type: application/octet-stream\r\nContent-Range: {}\r\n\r\n",
+                content_range(r, len)
+            );
+            (head.into_bytes(), r.clone())
+        })
+        .collect();
+    (parts, format!("\r\n--{boundary}--\r\n").into_bytes())
+}
+
+/// The whole `multipart/byteranges` body, `read(range)` giving each range's bytes (what
+/// [`multipart_heads`] describes, gathered: for tests).
+#[cfg(test)]
 pub fn multipart<E>(
     ranges: &[Range<u64>],
     len: u64,
     boundary: &str,
     mut read: impl FnMut(&Range<u64>) -> Result<Vec<u8>, E>,
 ) -> Result<Vec<u8>, E> {
+    let (parts, end) = multipart_heads(ranges, len, boundary);
     let mut body = Vec::new();
-    for r in ranges {
-        body.extend_from_slice(
-            format!(
-                "\r\n--{boundary}\r\nContent-Type: application/octet-stream\r\nContent-Range: {}\r\n\r\n",
-                content_range(r, len)
-            )
-            .as_bytes(),
-        );
-        body.extend_from_slice(&read(r)?);
+    for (head, r) in parts {
+        body.extend_from_slice(&head);
+        body.extend_from_slice(&read(&r)?);
     }
-    body.extend_from_slice(format!("\r\n--{boundary}--\r\n").as_bytes());
+    body.extend_from_slice(&end);
     Ok(body)
 }
 
