@@ -197,9 +197,9 @@ pub mod raw {
     pub use crate::model::Domain;
     pub use crate::store::verify::verify;
     pub use crate::store::{
-        AnySource, Block, Bytes, Children, CodeScan, CommitSummary, Container, FileSource, Grid,
-        HeldGrid, HilbertScan, Layout, LoadedBlock, MmapSource, ReadStats, Snapshot, Source,
-        StateInfo, Store, Wanted, WriteTxn,
+        compact, AnySource, Block, Bytes, Children, CodeScan, CommitSummary, CompactOptions,
+        Compacted, Container, FileSource, Grid, HeldGrid, HilbertScan, Layout, LoadedBlock,
+        MmapSource, ReadStats, Snapshot, Source, StateInfo, Store, Wanted, WriteTxn,
     };
 }
 

@@ -1,8 +1,12 @@
 //! Fuzz target: arbitrary bytes under every input format's name must load or fail with an
 //! error, never panic, hang or allocate without bound. The first byte picks the format.
 //!
-//! cargo install cargo-fuzz
-//! cargo fuzz run --sanitizer none ingest      (stable toolchain)
+//! Run it under a memory limit, so that a decompression bomb the ingest limits miss is a
+//! finding (`src/ingest/limits.rs`): an input of at most 4 KiB may declare at most 2^24
+//! samples past the proportion check (256 a byte), about 100 MB to decode, so anything near
+//! 512 MB is a bomb:
+//!
+//! cargo fuzz run --sanitizer none ingest corpus/ingest -- -rss_limit_mb=512 -malloc_limit_mb=512
 
 #![no_main]
 

@@ -9,6 +9,7 @@
 
 pub mod args;
 pub mod build;
+pub mod compact;
 pub mod dataset;
 pub mod extract;
 pub mod fly;
@@ -196,6 +197,11 @@ enum Command {
     /// length and a torn record in the unused commit slot, which `verify` reports (I-3, I-4).
     /// Any writer's open recovers the file; this command does only that, then closes it.
     Recover(self::recover::RecoverArgs),
+    /// Rewrite a container's current state as a fresh build of it would be: the pages edits
+    /// left behind are gone; every sample and every scene stays the same. Atomic (a new file
+    /// renamed over the old one, under the writer's lock); readers of the old file are not
+    /// disturbed.
+    Compact(self::compact::CompactArgs),
     /// Datasets of many tiles: build one, add a tile. Every other command takes a dataset's
     /// directory where it takes a container.
     #[command(subcommand)]
@@ -223,6 +229,7 @@ impl Command {
             Command::Fly(a) => a.json,
             Command::Replace(a) => a.json,
             Command::Recover(a) => a.json,
+            Command::Compact(a) => a.json,
             Command::Dataset(c) => c.json(),
             Command::Extract(_)
             | Command::Render(_)
@@ -267,6 +274,7 @@ pub fn main() -> ExitCode {
         Command::Serve(args) => self::serve::run(args),
         Command::Replace(args) => self::replace::run(args),
         Command::Recover(args) => self::recover::run(args),
+        Command::Compact(args) => self::compact::run(args),
         Command::Dataset(command) => self::dataset::run(command),
         Command::Completions { shell } => {
             let mut command = <Cli as clap::CommandFactory>::command();

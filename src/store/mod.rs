@@ -95,7 +95,9 @@ pub use decode::ANCESTOR_CACHE;
 pub use pagecache::ReadStats;
 pub use read::{Children, CodeScan, HilbertScan, Layout};
 pub use source::{Bytes, Counted, FileSource, MmapSource, RequestStats, Source};
-pub use txn::{CommitSummary, Container, Recovery, Snapshot, WriteTxn};
+pub use txn::{
+    compact, CommitSummary, CompactOptions, Compacted, Container, Recovery, Snapshot, WriteTxn,
+};
 pub use verify::{
     verify, verify_pinned, verify_with_progress, CheckReport, CheckStatus, VerifyMode, VerifyReport,
 };

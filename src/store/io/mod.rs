@@ -91,7 +91,24 @@ impl FileIo {
     /// in this process or another, is refused instead of corrupting the file. Readers that
     /// open the file without a `Container` take no lock and are not protected (see
     /// `format-spec/container.md` §11.6).
+    ///
+    /// A file replaced at `path` between the open and the lock (`fmrh compact` renames a
+    /// rewritten file over the old one while it holds the lock) is opened again: a writer
+    /// never commits to a file that is no longer at its path.
     pub fn open(path: &Path) -> io::Result<FileIo> {
+        for _ in 0..8 {
+            let io = FileIo::open_once(path)?;
+            if still_at(&io.file, path)? {
+                return Ok(io);
+            }
+        }
+        Err(io::Error::new(
+            io::ErrorKind::WouldBlock,
+            "the file was replaced at its path eight times while it was opened",
+        ))
+    }
+
+    fn open_once(path: &Path) -> io::Result<FileIo> {
         let file = std::fs::OpenOptions::new()
             .read(true)
             .write(true)
@@ -120,6 +137,21 @@ impl FileIo {
             path: path.to_path_buf(),
         })
     }
+}
+
+/// Whether `path` still names the file `file` is open on (the same device and inode).
+#[cfg(unix)]
+fn still_at(file: &std::fs::File, path: &Path) -> io::Result<bool> {
+    use std::os::unix::fs::MetadataExt;
+    let (open, named) = (file.metadata()?, std::fs::metadata(path));
+    Ok(named.is_ok_and(|n| n.dev() == open.dev() && n.ino() == open.ino()))
+}
+
+/// Elsewhere a path is not replaced under an open file in the same way (Windows refuses to
+/// rename over an open file).
+#[cfg(not(unix))]
+fn still_at(_file: &std::fs::File, _path: &Path) -> io::Result<bool> {
+    Ok(true)
 }
 
 impl Drop for FileIo {

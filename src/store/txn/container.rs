@@ -370,17 +370,7 @@ impl<I: Io> WriteTxn<'_, I> {
 
     fn editor(&mut self) -> Result<&mut ModelEditor> {
         if self.cache.editor.is_none() {
-            let base = &self.base;
-            let hf = base.read_window(base.domain().data_rect())?;
-            let thresholds: Vec<f64> = base.clusters().iter().map(|c| c.threshold).collect();
-            let editor = ModelEditor::new(
-                hf,
-                base.domain().block_size(),
-                &thresholds,
-                base.header().precision,
-                base.header().thinning(),
-            )?;
-            self.cache.editor = Some(editor);
+            self.cache.editor = Some(editor_of(&self.base)?);
         }
         self.cache
             .editor
@@ -472,4 +462,19 @@ impl<I: Io> Drop for WriteTxn<'_, I> {
     fn drop(&mut self) {
         self.abandon();
     }
+}
+
+/// The model of the state `store` holds, ready for edits: its samples, rebuilt with the
+/// file's block size, thresholds, precision and thinning, which is the model a fresh build
+/// of the same samples with the same options makes (the editor's invariant).
+pub(crate) fn editor_of<S: crate::store::Source>(store: &Store<S>) -> Result<ModelEditor> {
+    let hf = store.read_window(store.domain().data_rect())?;
+    let thresholds: Vec<f64> = store.clusters().iter().map(|c| c.threshold).collect();
+    ModelEditor::new(
+        hf,
+        store.domain().block_size(),
+        &thresholds,
+        store.header().precision,
+        store.header().thinning(),
+    )
 }

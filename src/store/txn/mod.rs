@@ -37,12 +37,14 @@
 mod alloc;
 mod cache;
 mod commit;
+mod compact;
 mod container;
 
 use std::sync::{Mutex, MutexGuard};
 
 pub use cache::IoSource;
 pub use commit::CommitSummary;
+pub use compact::{compact, CompactOptions, Compacted};
 pub use container::{Container, Recovery, Snapshot, WriteTxn};
 
 #[allow(unused_imports)]
