@@ -2,7 +2,7 @@
 //! length, and the `multipart/byteranges` body that answers several ranges at once. Pure
 //! functions, no I/O: the server reads the bytes, this says which.
 //!
-//! The remote reader (`crate::store::remote`) opens a container with one multi-range request
+//! The remote reader (`src/store/remote/`) opens a container with one multi-range request
 //! (its first 4 KiB and its last 36 KiB) and reads payloads with single ranges, so a server
 //! it can use answers both; this module follows the RFC where the reader does not care
 //! either: a header that does not parse is ignored (the whole object, `200`), a satisfiable
@@ -12,7 +12,7 @@
 use std::ops::Range;
 
 /// Ranges one request may ask for before the server answers with the whole object instead
-/// (the remote reader asks for at most `crate::store::remote::MAX_PARTS`, 128).
+/// (the remote reader asks for at most 128, its `MAX_PARTS`).
 pub const MAX_RANGES: usize = 256;
 
 /// What a `Range` header asks of an object.
