@@ -43,23 +43,26 @@ fn workload() -> Vec<Txn> {
         }
     })
     .unwrap();
-    let flat = Heightfield::from_fn(200, 150, |_, _| 100.0).unwrap();
-    let steps = Heightfield::from_fn(200, 150, |x, y| {
+    // Large enough that the rough grids outgrow every free run and are appended: commits
+    // reuse the shortest free run that holds an extent and pack small payloads, so a small
+    // change fits in what the file already has.
+    let flat = Heightfield::from_fn(400, 300, |_, _| 100.0).unwrap();
+    let steps = Heightfield::from_fn(400, 300, |x, y| {
         ((x.wrapping_mul(2_654_435_761) ^ y.wrapping_mul(40_503)) % 97) as f32 * 2.5
     })
     .unwrap();
     vec![
         vec![(100, 100, raised), (300, 50, voids)],
         // Flat ground: nodes merge.
-        vec![(200, 250, flat)],
+        vec![(100, 150, flat)],
         // Rough ground in the same place: they split again, and their new grids are
         // appended at the file's end ...
-        vec![(200, 250, steps)],
+        vec![(100, 150, steps)],
         // ... flat again: they merge, and those grids are freed ...
         vec![(
-            200,
-            250,
-            Heightfield::from_fn(200, 150, |_, _| 101.0).unwrap(),
+            100,
+            150,
+            Heightfield::from_fn(400, 300, |_, _| 101.0).unwrap(),
         )],
         // ... and cut off by the next commit (a length change after the record).
         vec![(

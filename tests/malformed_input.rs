@@ -328,3 +328,22 @@ proptest! {
         let _ = load_default(&f);
     }
 }
+
+/// Regression (issue 39, found by the `ingest` fuzz target): a 705-byte TIFF whose
+/// GeoKeyDirectory declares 926 M shorts made the `tiff` crate ask for 29.6 GB before reading
+/// them, and the process aborted. Every tag's declared size is now checked against the file
+/// first: an input error.
+#[test]
+fn a_tiff_tag_declaring_more_than_the_file_holds_is_refused() {
+    let input = std::fs::read(
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("fuzz/corpus/ingest/regress-tag-count-29gb"),
+    )
+    .unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    // The fuzz target's first byte picks the format (2: a `.tif`).
+    assert_eq!(input[0], 2);
+    let f = write(dir.path(), "x.tif", &input[1..]);
+    let err = load_default(&f).unwrap_err();
+    assert!(err.to_string().contains("more than the whole"), "{err}");
+    assert_input_error(Err(err), &f);
+}

@@ -141,7 +141,18 @@ fn run_dataset(args: &VerifyArgs) -> Result<ExitCode, Error> {
         println!(
             "{}: {} ({} check of the manifest and {} tiles, txn {})",
             args.file.display(),
-            if report.valid { "valid" } else { "INVALID" },
+            if report.valid {
+                "valid"
+            } else if report.busy
+                && report
+                    .checks
+                    .iter()
+                    .all(|c| c.status != CheckStatus::Failed)
+            {
+                "BUSY (a tile's writer was committing: run again)"
+            } else {
+                "INVALID"
+            },
             match report.mode {
                 VerifyMode::Fast => "fast",
                 VerifyMode::Full => "full",
@@ -169,8 +180,14 @@ fn run_dataset(args: &VerifyArgs) -> Result<ExitCode, Error> {
             );
         }
     }
+    let failed = report
+        .checks
+        .iter()
+        .any(|c| c.status == CheckStatus::Failed);
     Ok(if report.valid {
         ExitCode::SUCCESS
+    } else if report.busy && !failed {
+        ExitCode::from(EXIT_BUSY)
     } else {
         ExitCode::from(1)
     })

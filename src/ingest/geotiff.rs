@@ -50,8 +50,10 @@ fn tiff_error(path: &Path, e: tiff::TiffError) -> Error {
 
 /// Reads a single-band GeoTIFF.
 pub fn read(path: &Path, options: &IngestOptions) -> Result<Heightfield> {
-    let file = File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
     let file_len = file.metadata().map_err(|e| Error::io(path, e))?.len();
+    check_first_ifd(path, &mut file, file_len)?;
+    std::io::Seek::rewind(&mut file).map_err(|e| Error::io(path, e))?;
     let mut limits = Limits::default();
     limits.decoding_buffer_size = usize::try_from(MAX_SAMPLES * 8).unwrap_or(usize::MAX);
     let mut dec = Decoder::new(BufReader::new(file))
@@ -121,6 +123,83 @@ pub fn read(path: &Path, options: &IngestOptions) -> Result<Heightfield> {
 
 /// The strips (or tiles) must lie inside the file, and for an uncompressed image they must hold
 /// every sample. The decoder would otherwise pad a short image silently.
+/// Every entry of the first IFD declares values that fit in the file. The `tiff` crate sizes
+/// a tag's value vector from its declared count before it reads it (0.11: a GeoKeyDirectory
+/// of 926 M shorts in a 705-byte file asked for 29.6 GB and aborted; found by the `ingest`
+/// fuzz target), so the counts are checked here first, from the bytes.
+fn check_first_ifd(path: &Path, file: &mut File, file_len: u64) -> Result<()> {
+    use std::io::{Read, Seek, SeekFrom};
+    let mut read = |at: u64, n: usize| -> Result<Option<Vec<u8>>> {
+        if at.saturating_add(n as u64) > file_len {
+            return Ok(None);
+        }
+        let mut b = vec![0u8; n];
+        file.seek(SeekFrom::Start(at))
+            .and_then(|_| file.read_exact(&mut b))
+            .map_err(|e| Error::io(path, e))?;
+        Ok(Some(b))
+    };
+    // Anything malformed here is the crate's to refuse with its own words.
+    let Some(head) = read(0, 16.min(file_len as usize))? else {
+        return Ok(());
+    };
+    let le = match head.get(..2) {
+        Some(b"II") => true,
+        Some(b"MM") => false,
+        _ => return Ok(()),
+    };
+    let uint = |b: &[u8]| -> u64 {
+        let mut v = [0u8; 8];
+        if le {
+            v[..b.len()].copy_from_slice(b);
+            u64::from_le_bytes(v)
+        } else {
+            v[8 - b.len()..].copy_from_slice(b);
+            u64::from_be_bytes(v)
+        }
+    };
+    let (big, ifd) = match (head.get(2..4).map(uint), head.len()) {
+        (Some(42), n) if n >= 8 => (false, uint(&head[4..8])),
+        (Some(43), 16) => (true, uint(&head[8..16])),
+        _ => return Ok(()),
+    };
+    let (count_len, entry_len) = if big { (8, 20) } else { (2, 12) };
+    let Some(count) = read(ifd, count_len)?.map(|b| uint(&b)) else {
+        return Ok(());
+    };
+    let entries_end = (count as u128) * (entry_len as u128) + (ifd + count_len as u64) as u128;
+    if entries_end > u128::from(file_len) {
+        return Err(Error::input(
+            path,
+            format!("the first IFD declares {count} entries, past the end of the {file_len}-byte file"),
+        ));
+    }
+    let Some(entries) = read(ifd + count_len as u64, (count as usize) * entry_len)? else {
+        return Ok(());
+    };
+    for e in entries.chunks_exact(entry_len) {
+        let (tag, kind) = (uint(&e[0..2]), uint(&e[2..4]));
+        let n = if big { uint(&e[4..12]) } else { uint(&e[4..8]) };
+        let size: u64 = match kind {
+            1 | 2 | 6 | 7 => 1,
+            3 | 8 => 2,
+            4 | 9 | 11 | 13 => 4,
+            5 | 10 | 12 | 16 | 17 | 18 => 8,
+            _ => continue,
+        };
+        if n.checked_mul(size).is_none_or(|bytes| bytes > file_len) {
+            return Err(Error::input(
+                path,
+                format!(
+                    "tag {tag} declares {n} values of {size} bytes, more than the whole \
+                     {file_len}-byte file"
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
 fn check_data_extent<R: std::io::Read + std::io::Seek>(
     path: &Path,
     dec: &mut Decoder<R>,

@@ -1,4 +1,4 @@
-//! The page allocator of one commit (format §11.3): first-fit runs of free pages that no
+//! The page allocator of one commit (format §11.3): best-fit runs of free pages that no
 //! snapshot and no durable state can reach, else pages appended past the end.
 //!
 //! A free page freed by txn `F` may still be reached by states older than `F`. The commit
@@ -58,25 +58,34 @@ impl Alloc {
         first
     }
 
-    /// The first run of `n` consecutive reusable pages in the pool.
+    /// The best run of `n` consecutive reusable pages in the pool: the first of the
+    /// shortest runs that hold `n` (best fit, so that a long run stays whole for a long
+    /// extent, a metadata bundle or a large payload, rather than being cut up by small ones).
     pub fn reusable_run(&self, n: u64) -> Option<u64> {
+        // (run length, first page) of the best run so far.
+        fn consider(best: &mut Option<(u64, u64)>, n: u64, start: u64, len: u64) {
+            if len >= n && best.is_none_or(|(l, _)| len < l) {
+                *best = Some((len, start));
+            }
+        }
+        let mut best = None;
         let (mut start, mut len) = (0u64, 0u64);
         for (&p, &freed) in &self.pool {
             if freed > self.reuse_limit {
+                consider(&mut best, n, start, len);
                 len = 0;
                 continue;
             }
             if len > 0 && p == start + len {
                 len += 1;
             } else {
+                consider(&mut best, n, start, len);
                 start = p;
                 len = 1;
             }
-            if len == n {
-                return Some(start);
-            }
         }
-        None
+        consider(&mut best, n, start, len);
+        best.map(|(_, first)| first)
     }
 
     /// Frees `page` as of txn `txn`.
@@ -122,5 +131,16 @@ mod tests {
         c.trim(10);
         assert_eq!(c.end, 10);
         assert!(c.pool.contains_key(&9) && !c.pool.contains_key(&10));
+    }
+
+    #[test]
+    fn the_shortest_run_that_holds_an_extent_is_taken() {
+        // Runs 3..=7 (five pages) and 20..=21 (two): two pages come from the short run, so
+        // the long one stays whole for a five-page extent.
+        let pool = (3..=7).chain(20..=21).map(|p| (p, 1)).collect();
+        let mut a = Alloc::new(pool, 1, 30);
+        assert_eq!(a.extent(2), 20);
+        assert_eq!(a.extent(5), 3);
+        assert_eq!(a.extent(1), 30, "nothing left to reuse");
     }
 }

@@ -70,6 +70,10 @@ struct CommitSink<'a, I: Io> {
     /// The transaction writing: every structured page carries its tag.
     txn: u64,
     written: u64,
+    /// The unused tail of the last page this commit gave a payload (its next byte, the
+    /// page's end): the next payload that fits goes there, as a build packs them, rather
+    /// than into a page of its own. Always zero bytes: the page was written whole, padded.
+    tail: Option<(u64, u64)>,
 }
 
 impl<I: Io> CommitSink<'_, I> {
@@ -96,18 +100,31 @@ impl<I: Io> CommitSink<'_, I> {
         Ok(root)
     }
 
-    /// Writes `bytes` as a payload in a run of whole pages of its own, zero-padded.
+    /// Writes `bytes` as a payload: into the tail of the last payload page this commit
+    /// wrote when it fits there, else into a run of whole pages of its own, zero-padded.
     fn payload(&mut self, mut bytes: Vec<u8>) -> Result<PayloadRef> {
         let p = u64::from(self.page_size);
-        let n = (bytes.len() as u64).div_ceil(p).max(1);
+        let len = bytes.len() as u64;
+        let bad = || Error::Internal(format!("a payload of {len} bytes"));
+        if let Some((at, end)) = self.tail {
+            if len > 0 && len <= end - at {
+                let r = PayloadRef::of(at, &bytes).ok_or_else(bad)?;
+                self.io
+                    .write_at(at, &bytes)
+                    .map_err(|e| Error::io(self.io.name(), e))?;
+                self.tail = Some((at + len, end));
+                return Ok(r);
+            }
+        }
+        let n = len.div_ceil(p).max(1);
         let first = self.alloc.extent(n);
-        let r = PayloadRef::of(first * p, &bytes)
-            .ok_or_else(|| Error::Internal(format!("a payload of {} bytes", bytes.len())))?;
+        let r = PayloadRef::of(first * p, &bytes).ok_or_else(bad)?;
         bytes.resize(usize::try_from(n * p).unwrap_or(0), 0);
         self.io
             .write_at(first * p, &bytes)
             .map_err(|e| Error::io(self.io.name(), e))?;
         self.written += n;
+        self.tail = Some((first * p + len, (first + n) * p));
         Ok(r)
     }
 }
@@ -169,6 +186,7 @@ pub(crate) fn write_state<I: Io>(
         page_size: p,
         txn,
         written: 0,
+        tail: None,
     };
     let meets = |r: &SampleRect| dirty.iter().any(|x| x.intersect(r).is_some());
     let mut summary = CommitSummary {
@@ -461,6 +479,7 @@ fn write_free_list<I: Io>(io: &I, alloc: &mut Alloc, p: u32, txn: u64) -> Result
         page_size: p,
         txn,
         written: 0,
+        tail: None,
     };
     Ok((sink.tree_at(first, &records, FREE)?, k))
 }
