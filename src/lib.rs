@@ -147,7 +147,7 @@ pub mod types {
     pub use crate::dataset::{DatasetReport, TileReport};
     pub use crate::error::Invariant;
     pub use crate::heightfield::{Georeference, Metadata};
-    pub use crate::ingest::{ColorEncoding, Format, IngestOptions};
+    pub use crate::ingest::{ColorEncoding, Format, IngestLimits, IngestOptions};
     pub use crate::model::{SampleRect, ThinByArea, Thresholds};
     pub use crate::scene::{Mode, NeighbourLevels, SceneStats};
     pub use crate::store::{CheckReport, CheckStatus, VerifyMode, VerifyReport};

@@ -42,10 +42,11 @@ const UNKNOWN_MACHINE_MEMORY: u64 = 8 << 30;
 /// The limits an input's declared size is checked against.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct IngestLimits {
-    /// Bytes a build may hold; `None`: half of the machine's memory ([`machine_memory`]).
+    /// Bytes a build may hold (a build takes about 6 bytes a sample); `None`: half of the
+    /// machine's memory, or of its cgroup's limit where that is less.
     pub max_memory: Option<u64>,
-    /// Declared samples per byte of input allowed past [`RATIO_FLOOR`]; `None`:
-    /// [`DEFAULT_SAMPLES_PER_BYTE`]; `0` or infinite: no ceiling.
+    /// Declared samples per byte of input allowed past 2^24 samples (smaller grids pass
+    /// whatever their bytes); `None`: 256; `0` or infinite: no ceiling.
     pub max_samples_per_byte: Option<f64>,
 }
 

@@ -179,8 +179,8 @@ pub struct IngestOptions {
     /// The 1° tile an `.hgt` holds, named as SRTM names it (`N44W072`: the south-west
     /// corner), for a file whose name does not say.
     pub tile: Option<String>,
-    /// What a file may declare before it is believed ([`limits`]): the memory a build may
-    /// take and the samples a byte of input may claim.
+    /// What a file may declare before it is believed: the memory a build may take and the
+    /// samples a byte of input may claim ([`IngestLimits`]).
     pub limits: IngestLimits,
 }
 
