@@ -17,19 +17,6 @@ use fmrh::{CreateOptions, Heightfield};
 /// changes by design: a commit may code a payload alone where a fresh build codes it
 /// against its parent. The samples themselves are compared bit for bit besides.
 fn scene(file: &str) -> serde_json::Value {
-    fn strip(v: &mut serde_json::Value) {
-        match v {
-            serde_json::Value::Object(m) => {
-                m.retain(|k, _| {
-                    !k.ends_with("_ns")
-                        && !["reads", "payload", "bytes", "index_pages"].contains(&k.as_str())
-                });
-                m.values_mut().for_each(strip);
-            }
-            serde_json::Value::Array(a) => a.iter_mut().for_each(strip),
-            _ => {}
-        }
-    }
     let mut v = common::ok_json(&common::fmrh(&[
         "scene",
         file,
@@ -42,7 +29,7 @@ fn scene(file: &str) -> serde_json::Value {
         "1",
         "--json",
     ]));
-    strip(&mut v);
+    common::without_keys(&mut v, &["reads", "payload", "bytes", "index_pages"]);
     v
 }
 

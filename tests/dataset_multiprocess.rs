@@ -48,31 +48,20 @@ fn hash(bytes: &[u8]) -> u64 {
 /// tile files on disk now (`file_bytes`, `total_bytes`: a commit in progress appends pages
 /// that belong to no published state yet; `info` reports the disk, not the state).
 fn json_hash(stdout: &[u8]) -> u64 {
-    fn strip(v: &mut serde_json::Value) {
-        match v {
-            serde_json::Value::Object(m) => {
-                m.retain(|k, _| {
-                    !k.ends_with("_ns")
-                        && ![
-                            "reads",
-                            "open_reads",
-                            "open_bytes",
-                            "path",
-                            "file",
-                            "file_bytes",
-                            "total_bytes",
-                        ]
-                        .contains(&k.as_str())
-                });
-                m.values_mut().for_each(strip);
-            }
-            serde_json::Value::Array(a) => a.iter_mut().for_each(strip),
-            _ => {}
-        }
-    }
     match serde_json::from_slice::<serde_json::Value>(stdout) {
         Ok(mut v) => {
-            strip(&mut v);
+            common::without_keys(
+                &mut v,
+                &[
+                    "reads",
+                    "open_reads",
+                    "open_bytes",
+                    "path",
+                    "file",
+                    "file_bytes",
+                    "total_bytes",
+                ],
+            );
             hash(v.to_string().as_bytes())
         }
         Err(_) => hash(stdout),

@@ -45,19 +45,9 @@ fn hash(bytes: &[u8]) -> u64 {
 /// chose its state again, and read the slots more times, but the scene it answers is a
 /// committed state's, which is what this test checks.
 fn scene_hash(stdout: &[u8]) -> u64 {
-    fn strip(v: &mut serde_json::Value) {
-        match v {
-            serde_json::Value::Object(m) => {
-                m.retain(|k, _| !k.ends_with("_ns") && k != "reads");
-                m.values_mut().for_each(strip);
-            }
-            serde_json::Value::Array(a) => a.iter_mut().for_each(strip),
-            _ => {}
-        }
-    }
     match serde_json::from_slice::<serde_json::Value>(stdout) {
         Ok(mut v) => {
-            strip(&mut v);
+            common::without_keys(&mut v, &["reads"]);
             hash(v.to_string().as_bytes())
         }
         Err(_) => hash(stdout),

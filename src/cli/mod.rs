@@ -92,20 +92,7 @@ pub fn write_output(output: &Path, force: bool, bytes: &[u8]) -> Result<(), Erro
 /// Whether `path` names a dataset (a directory with a MANIFEST) rather than a container; a
 /// directory without one is an error, not a file to open.
 pub fn is_dataset(path: &Path) -> Result<bool, Error> {
-    if url_of(path).is_some() {
-        // A URL names a dataset when it ends with `/` or `/MANIFEST`.
-        return Ok(crate::dataset::is_dataset(path));
-    }
-    if !path.is_dir() {
-        return Ok(false);
-    }
-    if crate::dataset::is_dataset(path) {
-        return Ok(true);
-    }
-    Err(Error::input(
-        path,
-        "a directory without a MANIFEST: not an fmrh dataset (nor a container file)",
-    ))
+    crate::terrain::names_dataset(path)
 }
 
 #[derive(Parser)]

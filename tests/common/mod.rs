@@ -51,6 +51,19 @@ pub fn first_difference(a: &[f32], b: &[f32]) -> Option<(usize, f32, f32)> {
         .map(|(i, (x, y))| (i, *x, *y))
 }
 
+/// `v` without the timings a command reports (keys ending in `_ns`) nor the keys in `drop`,
+/// at every depth: what differs between two answers about the same state.
+pub fn without_keys(v: &mut serde_json::Value, drop: &[&str]) {
+    match v {
+        serde_json::Value::Object(m) => {
+            m.retain(|k, _| !k.ends_with("_ns") && !drop.contains(&k.as_str()));
+            m.values_mut().for_each(|v| without_keys(v, drop));
+        }
+        serde_json::Value::Array(a) => a.iter_mut().for_each(|v| without_keys(v, drop)),
+        _ => {}
+    }
+}
+
 /// Runs the `fmrh` binary built for these tests.
 pub fn fmrh(args: &[&str]) -> std::process::Output {
     std::process::Command::new(env!("CARGO_BIN_EXE_fmrh"))

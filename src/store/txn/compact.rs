@@ -55,8 +55,8 @@ pub fn compact(path: &Path, options: &CompactOptions) -> Result<Compacted> {
     let bytes_before = std::fs::metadata(path).map_err(|e| Error::io(path, e))?.len();
     let txn_before = store.txn_id();
     let free_pages_before = store.free_pages()?.len() as u64;
-    let editor = editor_of(store)?;
     let samples = store.read_window(store.domain().data_rect())?;
+    let editor = editor_of(store, samples.clone())?;
     let metadata = store.header().metadata.clone();
     let write = WriteOptions {
         page_size: store.page_size(),

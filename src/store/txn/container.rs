@@ -370,7 +370,9 @@ impl<I: Io> WriteTxn<'_, I> {
 
     fn editor(&mut self) -> Result<&mut ModelEditor> {
         if self.cache.editor.is_none() {
-            self.cache.editor = Some(editor_of(&self.base)?);
+            let base = &self.base;
+            let samples = base.read_window(base.domain().data_rect())?;
+            self.cache.editor = Some(editor_of(base, samples)?);
         }
         self.cache
             .editor
@@ -464,11 +466,14 @@ impl<I: Io> Drop for WriteTxn<'_, I> {
     }
 }
 
-/// The model of the state `store` holds, ready for edits: its samples, rebuilt with the
-/// file's block size, thresholds, precision and thinning, which is the model a fresh build
-/// of the same samples with the same options makes (the editor's invariant).
-pub(crate) fn editor_of<S: crate::store::Source>(store: &Store<S>) -> Result<ModelEditor> {
-    let hf = store.read_window(store.domain().data_rect())?;
+/// The model of the state `store` holds, ready for edits: its samples `hf` (read whole from
+/// it), rebuilt with the file's block size, thresholds, precision and thinning, which is the
+/// model a fresh build of the same samples with the same options makes (the editor's
+/// invariant).
+pub(crate) fn editor_of<S: crate::store::Source>(
+    store: &Store<S>,
+    hf: crate::heightfield::Heightfield,
+) -> Result<ModelEditor> {
     let thresholds: Vec<f64> = store.clusters().iter().map(|c| c.threshold).collect();
     ModelEditor::new(
         hf,
