@@ -5,7 +5,11 @@
 //! count), one commit each; after every 100, the
 //! file's size beside a fresh build of the same samples with the same options (`compact` on
 //! a copy), the ratio the issue bounds (goal: at most 1.3x in the steady state).
-//! Prints a table per DEM.
+//! Prints a table per DEM, with the largest the file was since the row before (a commit's
+//! length swings as free pages at the end are cut). `FMRH_BENCH_DEM` keeps only the DEMs
+//! whose name contains it; `FMRH_BENCH_KEEP=DIR` copies each edited file there at the end
+//! (for `fmrh info`); `FMRH_BENCH_VERBOSE=1` prints each commit's summary, and the payload
+//! bytes the cleaner moved (`src/store/txn/clean.rs`) in all.
 
 #[path = "common/dems.rs"]
 mod dems;
@@ -38,8 +42,10 @@ fn main() {
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(1000);
+    let only = std::env::var("FMRH_BENCH_DEM").unwrap_or_default();
+    let keep = std::env::var_os("FMRH_BENCH_KEEP");
     let dir = tempfile::tempdir().unwrap();
-    for dem in dems::dems() {
+    for dem in dems::dems().into_iter().filter(|d| d.name.contains(&only)) {
         let path = dem.build(dir.path());
         let built = std::fs::metadata(&path).unwrap().len();
         let (w, h) = (
@@ -47,8 +53,11 @@ fn main() {
             u64::from(dem.source.height()),
         );
         println!("\n{}: {} x {}, built {built} bytes", dem.name, w, h);
-        println!("| edits | file bytes | x build | fresh build of the same samples | x fresh |");
-        println!("|---|---|---|---|---|");
+        println!(
+            "| edits | file bytes | x build | fresh build of the same samples | x fresh | largest since last row | x fresh |"
+        );
+        println!("|---|---|---|---|---|---|---|");
+        let (mut peak, mut moved, mut written) = (0u64, 0u64, 0u64);
         let container = Container::open(&path).unwrap();
         let mut rng = 39u64;
         for i in 1..=edits {
@@ -60,7 +69,17 @@ fn main() {
             let mut txn = container.begin_write().unwrap();
             txn.replace_region(c0, r0, &patch(&dem.source, side, from_c, from_r))
                 .unwrap();
-            txn.commit().unwrap();
+            let s = txn.commit().unwrap();
+            peak = peak.max(s.file_length);
+            moved += s.bytes_moved;
+            written += s.pages_written;
+            if std::env::var_os("FMRH_BENCH_VERBOSE").is_some() {
+                eprintln!(
+                    "{i} side {side}: blocks {} grids {} written {} reused {} freed {} moved {} ({} B) length {}",
+                    s.blocks, s.grids, s.pages_written, s.pages_reused, s.pages_freed,
+                    s.payloads_moved, s.bytes_moved, s.file_length
+                );
+            }
             if i % 100 == 0 || i == edits {
                 let now = std::fs::metadata(&path).unwrap().len();
                 // A fresh build of the same state: compaction of a copy (the writer's lock is
@@ -71,12 +90,24 @@ fn main() {
                     .unwrap()
                     .bytes_after;
                 println!(
-                    "| {i} | {now} | {:.2} | {fresh} | {:.2} |",
+                    "| {i} | {now} | {:.2} | {fresh} | {:.2} | {peak} | {:.2} |",
                     now as f64 / built as f64,
-                    now as f64 / fresh as f64
+                    now as f64 / fresh as f64,
+                    peak as f64 / fresh as f64
                 );
+                peak = 0;
             }
         }
         container.close().unwrap();
+        println!(
+            "{edits} commits wrote {written} pages; the cleaner moved {moved} payload bytes of them"
+        );
+        if let Some(keep) = &keep {
+            std::fs::copy(
+                &path,
+                std::path::Path::new(keep).join(format!("{}.fmrh", dem.name)),
+            )
+            .unwrap();
+        }
     }
 }

@@ -189,5 +189,11 @@ fn print_text(r: &ReplaceReport) {
         "  pages              {} written ({} reused), {} freed",
         s.pages_written, s.pages_reused, s.pages_freed
     );
+    if s.payloads_moved > 0 {
+        println!(
+            "  moved              {} payloads ({} bytes) off sparse pages",
+            s.payloads_moved, s.bytes_moved
+        );
+    }
     println!("  file length        {} bytes", s.file_length);
 }

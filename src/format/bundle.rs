@@ -41,9 +41,17 @@ pub const MAX_BUNDLE_BYTES: u64 = 16 << 20;
 /// The default most stored bytes a writer gives a bundle: a state whose compressed
 /// metadata is larger keeps it in file pages, read page by page as lookups reach them. Since
 /// 5.0 a reader reads a bundle page by page too (opening reads only its head), so the limit
-/// no longer bounds opening; it bounds what every commit compresses and writes again (a
-/// bundle is rewritten whole, where paged tables rewrite only the pages that change).
+/// no longer bounds opening; it bounds what a build compresses at level 19. Commits have
+/// their own, larger limit ([`COMMIT_BUNDLE_LIMIT`]).
 pub const DEFAULT_BUNDLE_LIMIT: u64 = 32 << 10;
+
+/// The default most stored bytes a *commit* gives a bundle (`Container::set_bundle_limit`
+/// changes it): larger than a build's, because a commit writes every table again, bundled or
+/// paged, and the bundle is the smaller by far (Puget Sound 4k: 220 pages of tables, 76
+/// of bundle), so it is what a commit writes and what the file must hold twice while the
+/// old state is still reachable (issue 39: the tables alone kept an edited Puget Sound 4k at
+/// 1.25x a fresh build).
+pub const COMMIT_BUNDLE_LIMIT: u64 = 1 << 20;
 
 /// The zstd level a writer compresses a bundle with.
 pub const BUNDLE_ZSTD_LEVEL: i32 = 19;

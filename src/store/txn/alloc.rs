@@ -1,4 +1,4 @@
-//! The page allocator of one commit (format §11.3): best-fit runs of free pages that no
+//! The page allocator of one commit (format §11.3): first-fit runs of free pages that no
 //! snapshot and no durable state can reach, else pages appended past the end.
 //!
 //! A free page freed by txn `F` may still be reached by states older than `F`. The commit
@@ -58,34 +58,62 @@ impl Alloc {
         first
     }
 
-    /// The best run of `n` consecutive reusable pages in the pool: the first of the
-    /// shortest runs that hold `n` (best fit, so that a long run stays whole for a long
-    /// extent, a metadata bundle or a large payload, rather than being cut up by small ones).
+    /// The first run of `n` consecutive reusable pages in the pool (first fit, lowest
+    /// pages first: what is written gathers at the front of the file, and free pages at its
+    /// end, where a later commit cuts them off; best fit, tried first, left holes all through
+    /// an edited file and kept its length).
     pub fn reusable_run(&self, n: u64) -> Option<u64> {
-        // (run length, first page) of the best run so far.
-        fn consider(best: &mut Option<(u64, u64)>, n: u64, start: u64, len: u64) {
-            if len >= n && best.is_none_or(|(l, _)| len < l) {
-                *best = Some((len, start));
-            }
-        }
-        let mut best = None;
+        self.best_run(n).map(|(first, _)| first)
+    }
+
+    /// The run [`Alloc::reusable_run`] picks, with its whole length: `(first, length)`.
+    pub fn best_run(&self, n: u64) -> Option<(u64, u64)> {
         let (mut start, mut len) = (0u64, 0u64);
         for (&p, &freed) in &self.pool {
             if freed > self.reuse_limit {
-                consider(&mut best, n, start, len);
+                if len >= n.max(1) {
+                    return Some((start, len));
+                }
                 len = 0;
                 continue;
             }
             if len > 0 && p == start + len {
                 len += 1;
             } else {
-                consider(&mut best, n, start, len);
+                if len >= n.max(1) {
+                    return Some((start, len));
+                }
                 start = p;
                 len = 1;
             }
         }
-        consider(&mut best, n, start, len);
-        best.map(|(_, first)| first)
+        (len >= n.max(1)).then_some((start, len))
+    }
+
+    /// Whether `page` is a free page this commit may write.
+    pub fn reusable(&self, page: u64) -> bool {
+        self.pool
+            .get(&page)
+            .is_some_and(|&freed| freed <= self.reuse_limit)
+    }
+
+    /// Gives back a page [`Alloc::take`] handed out and the commit did not write, freed as
+    /// before by `freed_txn`.
+    pub fn give_back(&mut self, page: u64, freed_txn: u64) {
+        self.pool.insert(page, freed_txn);
+        self.reused -= 1;
+    }
+
+    /// Gives back a page [`Alloc::append`] handed out and the commit did not write: the end
+    /// moves back over it when it is the last page, else it joins the pool as reusable now
+    /// (past the base's end, no state reaches it).
+    pub fn give_back_appended(&mut self, page: u64) {
+        self.appended -= 1;
+        if page + 1 == self.end {
+            self.end -= 1;
+        } else {
+            self.pool.insert(page, self.reuse_limit);
+        }
     }
 
     /// Frees `page` as of txn `txn`.
@@ -134,13 +162,15 @@ mod tests {
     }
 
     #[test]
-    fn the_shortest_run_that_holds_an_extent_is_taken() {
-        // Runs 3..=7 (five pages) and 20..=21 (two): two pages come from the short run, so
-        // the long one stays whole for a five-page extent.
+    fn the_first_run_that_holds_an_extent_is_taken() {
+        // Runs 3..=7 (five pages) and 20..=21 (two): first fit takes from the lowest run
+        // that holds the extent, so written pages gather at the front of the file.
         let pool = (3..=7).chain(20..=21).map(|p| (p, 1)).collect();
         let mut a = Alloc::new(pool, 1, 30);
+        assert_eq!(a.best_run(2), Some((3, 5)));
+        assert_eq!(a.extent(2), 3);
+        assert_eq!(a.extent(3), 5);
         assert_eq!(a.extent(2), 20);
-        assert_eq!(a.extent(5), 3);
         assert_eq!(a.extent(1), 30, "nothing left to reuse");
     }
 }

@@ -10,6 +10,7 @@ use serde::Serialize;
 use zerocopy::IntoBytes;
 
 use super::alloc::Alloc;
+use super::clean;
 use super::SnapshotStore;
 use crate::error::{Error, Result};
 use crate::format::blob::encode_blob;
@@ -54,6 +55,10 @@ pub struct CommitSummary {
     pub pages_reused: u64,
     /// Pages this commit freed.
     pub pages_freed: u64,
+    /// Kept payloads moved off sparse pages so that those could be freed (`clean`).
+    pub payloads_moved: u64,
+    /// Their bytes.
+    pub bytes_moved: u64,
     /// File length after the commit.
     pub file_length: u64,
     /// `L` of format §11.3: pages freed by states up to this txn id could be reused. Below
@@ -62,7 +67,8 @@ pub struct CommitSummary {
     pub reuse_limit: u64,
 }
 
-/// A [`PageSink`] that writes each tree or blob into an extent from the allocator.
+/// A [`PageSink`] that writes each tree or blob into an extent from the allocator, and
+/// payloads back to back through runs of pages ([`PayloadRun`]).
 struct CommitSink<'a, I: Io> {
     io: &'a I,
     alloc: &'a mut Alloc,
@@ -70,13 +76,46 @@ struct CommitSink<'a, I: Io> {
     /// The transaction writing: every structured page carries its tag.
     txn: u64,
     written: u64,
-    /// The unused tail of the last page this commit gave a payload (its next byte, the
-    /// page's end): the next payload that fits goes there, as a build packs them, rather
-    /// than into a page of its own. Always zero bytes: the page was written whole, padded.
-    tail: Option<(u64, u64)>,
+    /// The run payloads are going into now.
+    run: Option<PayloadRun>,
+    /// Earlier runs of this commit whose last page has room left: a payload that fits a
+    /// tail goes there (the smallest tail it fits), so that a run ending in a one-page hole
+    /// does not leave most of that page empty (Puget Sound 1k's blocks are 1 to 4 KiB).
+    parked: Vec<PayloadRun>,
+    /// Bytes of payloads still to come in this batch (a hint: a new run is sized for them).
+    pending: u64,
+}
+
+/// The most runs a commit keeps open for their tails.
+const MAX_PARKED: usize = 8;
+
+/// Consecutive pages a commit packs payloads into end to end, as a build does: a payload
+/// straddles pages, and only the run's last page has a tail. Held in memory until the run
+/// ends, then written whole (the tail zeroed).
+struct PayloadRun {
+    first: u64,
+    /// The pages reserved: `first .. first + pages`.
+    pages: u64,
+    /// For each reserved page, the txn that freed it (`None`: appended past the end).
+    freed: Vec<Option<u64>>,
+    /// The bytes so far, from the run's first byte.
+    bytes: Vec<u8>,
 }
 
 impl<I: Io> CommitSink<'_, I> {
+    fn new<'a>(io: &'a I, alloc: &'a mut Alloc, page_size: u32, txn: u64) -> CommitSink<'a, I> {
+        CommitSink {
+            io,
+            alloc,
+            page_size,
+            txn,
+            written: 0,
+            run: None,
+            parked: Vec::new(),
+            pending: 0,
+        }
+    }
+
     fn write_pages(&mut self, first: u64, pages: &[Vec<u8>]) -> Result<()> {
         for (page, bytes) in (first..).zip(pages) {
             self.io
@@ -100,32 +139,146 @@ impl<I: Io> CommitSink<'_, I> {
         Ok(root)
     }
 
-    /// Writes `bytes` as a payload: into the tail of the last payload page this commit
-    /// wrote when it fits there, else into a run of whole pages of its own, zero-padded.
-    fn payload(&mut self, mut bytes: Vec<u8>) -> Result<PayloadRef> {
+    /// Writes `bytes` as a payload, next in the current run: the run grows into the pages
+    /// after it when they are free (or past the end), else a new run begins, sized for the
+    /// payloads still to come where the free list has room for them.
+    fn payload(&mut self, bytes: Vec<u8>) -> Result<PayloadRef> {
         let p = u64::from(self.page_size);
         let len = bytes.len() as u64;
-        let bad = || Error::Internal(format!("a payload of {len} bytes"));
-        if let Some((at, end)) = self.tail {
-            if len > 0 && len <= end - at {
-                let r = PayloadRef::of(at, &bytes).ok_or_else(bad)?;
-                self.io
-                    .write_at(at, &bytes)
-                    .map_err(|e| Error::io(self.io.name(), e))?;
-                self.tail = Some((at + len, end));
-                return Ok(r);
+        self.pending = self.pending.saturating_sub(len);
+        let room = |run: &PayloadRun| (run.pages * p).saturating_sub(run.bytes.len() as u64);
+        let tail = self
+            .parked
+            .iter()
+            .enumerate()
+            .filter(|(_, r)| room(r) >= len)
+            .min_by_key(|(_, r)| room(r))
+            .map(|(i, _)| i);
+        let run = match tail {
+            Some(i) => &mut self.parked[i],
+            None => {
+                if self.run.as_ref().is_none_or(|r| room(r) < len) && !self.grow(len) {
+                    self.park()?;
+                    self.begin_run(len);
+                }
+                self.run
+                    .as_mut()
+                    .ok_or_else(|| Error::Internal("a payload without a run".into()))?
+            }
+        };
+        let at = run.first * p + run.bytes.len() as u64;
+        let r = PayloadRef::of(at, &bytes)
+            .ok_or_else(|| Error::Internal(format!("a payload of {len} bytes")))?;
+        run.bytes.extend_from_slice(&bytes);
+        Ok(r)
+    }
+
+    /// Grows the current run to hold `len` more bytes, when the pages after it are reusable
+    /// free pages, or are past the end of the file.
+    fn grow(&mut self, len: u64) -> bool {
+        let p = u64::from(self.page_size);
+        let Some(run) = self.run.as_mut() else {
+            return false;
+        };
+        let need = (run.bytes.len() as u64 + len).div_ceil(p) - run.pages;
+        let next = run.first + run.pages;
+        // Past the end only while no free run could take the payload: appending whenever
+        // a run ended the file grew it at every commit, free runs or not.
+        if next == self.alloc.end && self.alloc.best_run(len.div_ceil(p).max(1)).is_none() {
+            self.alloc.append(need);
+            run.freed.extend((0..need).map(|_| None));
+        } else if (next..next + need).all(|page| self.alloc.reusable(page)) {
+            run.freed
+                .extend((next..next + need).map(|page| self.alloc.pool.get(&page).copied()));
+            self.alloc.take(next, need);
+        } else {
+            return false;
+        }
+        run.pages += need;
+        true
+    }
+
+    /// Begins a run for a payload of `len` bytes and the `pending` after it: in the first
+    /// run of free pages that holds this payload (`Alloc::best_run`), reserving as much of
+    /// it as the payloads to come could fill; else past the end.
+    fn begin_run(&mut self, len: u64) {
+        let p = u64::from(self.page_size);
+        let least = len.div_ceil(p).max(1);
+        let want = (len + self.pending).div_ceil(p).max(least);
+        let (first, pages, freed) = match self.alloc.best_run(least) {
+            Some((first, run)) => {
+                let n = run.min(want);
+                let freed = (first..first + n)
+                    .map(|page| self.alloc.pool.get(&page).copied())
+                    .collect();
+                (self.alloc.take(first, n), n, freed)
+            }
+            None => (
+                self.alloc.append(least),
+                least,
+                (0..least).map(|_| None).collect(),
+            ),
+        };
+        self.run = Some(PayloadRun {
+            first,
+            pages,
+            freed,
+            bytes: Vec::new(),
+        });
+    }
+
+    /// Parks the current run (its tail may take a later payload); beyond [`MAX_PARKED`]
+    /// runs, the one with the least room left is written out.
+    fn park(&mut self) -> Result<()> {
+        let Some(run) = self.run.take() else {
+            return Ok(());
+        };
+        self.parked.push(run);
+        if self.parked.len() > MAX_PARKED {
+            let p = u64::from(self.page_size);
+            let fullest = (0..self.parked.len())
+                .min_by_key(|&i| {
+                    (self.parked[i].pages * p).saturating_sub(self.parked[i].bytes.len() as u64)
+                })
+                .unwrap_or(0);
+            let run = self.parked.swap_remove(fullest);
+            self.end_run(run)?;
+        }
+        Ok(())
+    }
+
+    /// Writes every run out: the last step before the tables.
+    fn finish(&mut self) -> Result<()> {
+        self.park()?;
+        for run in std::mem::take(&mut self.parked) {
+            self.end_run(run)?;
+        }
+        Ok(())
+    }
+
+    /// Writes a run's pages (its last zero-padded) and gives back the pages it reserved
+    /// and did not use.
+    fn end_run(&mut self, mut run: PayloadRun) -> Result<()> {
+        let p = u64::from(self.page_size);
+        let used = (run.bytes.len() as u64).div_ceil(p);
+        run.bytes.resize(usize::try_from(used * p).unwrap_or(0), 0);
+        self.io
+            .write_at(run.first * p, &run.bytes)
+            .map_err(|e| Error::io(self.io.name(), e))?;
+        self.written += used;
+        // From the last page back, so that appended pages move the end back.
+        let unused: Vec<(u64, Option<u64>)> = (run.first..run.first + run.pages)
+            .zip(run.freed)
+            .skip(usize::try_from(used).unwrap_or(usize::MAX))
+            .collect();
+        for (page, freed) in unused.into_iter().rev() {
+            match freed {
+                Some(txn) => self.alloc.give_back(page, txn),
+                // Appended: still past the base's end, no state reaches it.
+                None => self.alloc.give_back_appended(page),
             }
         }
-        let n = len.div_ceil(p).max(1);
-        let first = self.alloc.extent(n);
-        let r = PayloadRef::of(first * p, &bytes).ok_or_else(bad)?;
-        bytes.resize(usize::try_from(n * p).unwrap_or(0), 0);
-        self.io
-            .write_at(first * p, &bytes)
-            .map_err(|e| Error::io(self.io.name(), e))?;
-        self.written += n;
-        self.tail = Some((first * p + len, (first + n) * p));
-        Ok(r)
+        Ok(())
     }
 }
 
@@ -143,6 +296,60 @@ impl<I: Io> PageSink for CommitSink<'_, I> {
         let (blob, pages) = encode_blob(content, tag, first, self.txn, self.page_size);
         self.write_pages(first, &pages)?;
         Ok(blob)
+    }
+}
+
+/// Small payloads a commit stores once (as a build does, `tables::MAX_SHARED_PAYLOAD`): the
+/// ones it writes, and the base state's, found by length and CRC and compared byte for byte
+/// before one is shared. Sea, void and flat blocks code to the same few bytes by the
+/// thousand; without this, each edit of sea wrote its own copies.
+struct Sharer {
+    /// This commit's small payloads.
+    written: HashMap<Vec<u8>, PayloadRef>,
+    /// The base state's small payloads, by length and CRC.
+    base: HashMap<(u32, u32), PayloadRef>,
+}
+
+impl Sharer {
+    fn new(base_refs: impl Iterator<Item = PayloadRef>) -> Sharer {
+        Sharer {
+            written: HashMap::new(),
+            base: base_refs
+                .filter(|r| r.len > 0 && r.len as usize <= tables::MAX_SHARED_PAYLOAD)
+                .map(|r| ((r.len, r.crc), r))
+                .collect(),
+        }
+    }
+
+    /// Where `bytes` go: an identical small payload already stored (a base state's one is
+    /// pushed on `kept`, so that its pages stay), else written by `sink`.
+    fn place<I: Io>(
+        &mut self,
+        bytes: Vec<u8>,
+        base: &SnapshotStore<I>,
+        sink: &mut CommitSink<'_, I>,
+        kept: &mut Vec<PayloadRef>,
+    ) -> Result<PayloadRef> {
+        if bytes.is_empty() || bytes.len() > tables::MAX_SHARED_PAYLOAD {
+            return sink.payload(bytes);
+        }
+        if let Some(&r) = self.written.get(&bytes) {
+            return Ok(r);
+        }
+        // At most MAX_SHARED_PAYLOAD bytes here: the length fits.
+        let key = (
+            u32::try_from(bytes.len()).unwrap_or(u32::MAX),
+            crate::format::crc32(&bytes),
+        );
+        if let Some(&r) = self.base.get(&key) {
+            if base.payload(r)?.as_ref() == bytes.as_slice() {
+                kept.push(r);
+                return Ok(r);
+            }
+        }
+        let r = sink.payload(bytes.clone())?;
+        self.written.insert(bytes, r);
+        Ok(r)
     }
 }
 
@@ -180,14 +387,13 @@ pub(crate) fn write_state<I: Io>(
         .map(|f| (f.page, f.freed_txn))
         .collect();
     let mut alloc = Alloc::new(pool, reuse_limit, base.page_count());
-    let mut sink = CommitSink {
-        io: io.as_ref(),
-        alloc: &mut alloc,
-        page_size: p,
-        txn,
-        written: 0,
-        tail: None,
-    };
+    let mut sink = CommitSink::new(io.as_ref(), &mut alloc, p, txn);
+    let mut sharer = Sharer::new(
+        old_nodes
+            .iter()
+            .map(|n| n.payload())
+            .chain(old_blocks.iter().map(|b| b.payload())),
+    );
     let meets = |r: &SampleRect| dirty.iter().any(|x| x.intersect(r).is_some());
     let mut summary = CommitSummary {
         txn_id: txn,
@@ -301,8 +507,9 @@ pub(crate) fn write_state<I: Io>(
         .par_iter()
         .map(|&i| tables::encode_grid(model, tables::node_id(i), grid_voids[i], false, true, true))
         .collect();
+    sink.pending = coded.iter().map(|(b, _)| b.len() as u64).sum();
     for (&i, (bytes, against)) in rewrite_grids.iter().zip(coded) {
-        grid_ref[i] = sink.payload(bytes)?;
+        grid_ref[i] = sharer.place(bytes, base, &mut sink, &mut kept)?;
         grid_against[i] = against;
         summary.grids += 1;
     }
@@ -357,10 +564,30 @@ pub(crate) fn write_state<I: Io>(
         .par_iter()
         .map(|&(i, parent)| tables::encode_block(model, &shapes[i], parent, false, true))
         .collect();
+    sink.pending = coded.iter().map(|(b, _)| b.len() as u64).sum();
     for (&(i, _), (bytes, a)) in rewrite_blocks.iter().zip(coded) {
-        block_ref[i] = sink.payload(bytes)?;
+        block_ref[i] = sharer.place(bytes, base, &mut sink, &mut kept)?;
         against[i] = a;
         summary.blocks += 1;
+    }
+    // The cleaner: payloads kept on sparse pages move into this commit's pages, so that
+    // theirs can be freed (`clean`).
+    let moved = clean::payloads_to_move(&kept, p);
+    if !moved.is_empty() {
+        let mut to: HashMap<PayloadRef, PayloadRef> = HashMap::with_capacity(moved.len());
+        sink.pending = moved.iter().map(|r| u64::from(r.len)).sum();
+        for &r in &moved {
+            let bytes = base.payload(r)?.into_owned();
+            summary.bytes_moved += u64::from(r.len);
+            to.insert(r, sink.payload(bytes)?);
+        }
+        for r in grid_ref.iter_mut().chain(block_ref.iter_mut()) {
+            if let Some(&new) = to.get(r) {
+                *r = new;
+            }
+        }
+        kept.retain(|r| !to.contains_key(r));
+        summary.payloads_moved = moved.len() as u64;
     }
     summary.nodes_removed = old_nodes
         .iter()
@@ -404,6 +631,7 @@ pub(crate) fn write_state<I: Io>(
             (dataset_header, roots, BundleRef::default())
         }
     };
+    sink.finish()?;
     let written = sink.written;
 
     // What this commit frees: the old state's metadata pages, and payload pages no kept
@@ -473,14 +701,7 @@ fn write_free_list<I: Io>(io: &I, alloc: &mut Alloc, p: u32, txn: u64) -> Result
         _ => alloc.append(k),
     };
     let records: Vec<u8> = free_entries(&alloc.pool);
-    let mut sink = CommitSink {
-        io,
-        alloc,
-        page_size: p,
-        txn,
-        written: 0,
-        tail: None,
-    };
+    let mut sink = CommitSink::new(io, alloc, p, txn);
     Ok((sink.tree_at(first, &records, FREE)?, k))
 }
 

@@ -161,7 +161,7 @@ impl<I: Io> Container<I> {
                     writer: Mutex::new(WriterCache::default()),
                     poisoned: AtomicBool::new(false),
                     bundle_limit: std::sync::atomic::AtomicU64::new(
-                        crate::format::bundle::DEFAULT_BUNDLE_LIMIT,
+                        crate::format::bundle::COMMIT_BUNDLE_LIMIT,
                     ),
                     min_length: std::sync::atomic::AtomicU64::new(0),
                 }),
@@ -180,7 +180,8 @@ impl<I: Io> Container<I> {
     }
 
     /// Sets the most stored bytes later commits give the metadata bundle (format §6.7;
-    /// 32 KiB unless set). Larger metadata, or any
+    /// 1 MiB unless set: larger than a build's 32 KiB, because a commit writes every table
+    /// again, and the bundle is much the smaller). Larger metadata, or any
     /// with 0, is written in pages of its own. Either way the commit is the same
     /// copy-on-write protocol: this changes bytes, not atomicity or durability.
     pub fn set_bundle_limit(&self, bytes: u64) {

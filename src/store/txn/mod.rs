@@ -31,11 +31,13 @@
 //! next open. [`Container::close`] commits an unmarked copy.
 //!
 //! Rooms: `cache` (the page cache a state is read through), `alloc` (which pages a commit may
-//! write), `commit` (one commit's pages), `container` (the life cycle: open, recover,
-//! snapshots, transactions, publish, close).
+//! write), `clean` (which kept payloads a commit moves off sparse pages), `commit` (one
+//! commit's pages), `container` (the life cycle: open, recover, snapshots, transactions,
+//! publish, close).
 
 mod alloc;
 mod cache;
+mod clean;
 mod commit;
 mod compact;
 mod container;

@@ -27,11 +27,6 @@ use crate::format::{self, tag, BlobRef, CommitRecord, DatasetHeader, StateRoots,
 use crate::heightfield::Metadata;
 use crate::model::{Domain, Model};
 
-/// Payloads of at most this many bytes are stored once however many records have them.
-/// Longer identical payloads are rare; keeping every payload's bytes to find them would cost
-/// the whole file's size in memory.
-const MAX_SHARED_PAYLOAD: usize = 256;
-
 /// The transaction id of a freshly built file's one state: every page of it carries its tag.
 const FIRST_TXN: u64 = 1;
 
@@ -246,7 +241,7 @@ fn write_payloads<W: Write>(
             .collect();
         for (item, (bytes, parent)) in w_items.iter().zip(encoded) {
             phase.advance(raw_len(item));
-            let shared = (bytes.len() <= MAX_SHARED_PAYLOAD)
+            let shared = (bytes.len() <= tables::MAX_SHARED_PAYLOAD)
                 .then(|| small.get(&bytes).copied())
                 .flatten();
             let r = match shared {
@@ -265,7 +260,7 @@ fn write_payloads<W: Write>(
                         Item::Grid { .. } => sections.grids += bytes.len() as u64,
                         Item::Block { .. } => sections.blocks += bytes.len() as u64,
                     }
-                    if bytes.len() <= MAX_SHARED_PAYLOAD {
+                    if bytes.len() <= tables::MAX_SHARED_PAYLOAD {
                         small.insert(bytes, r);
                     }
                     r

@@ -20,6 +20,12 @@ use crate::format::{
 };
 use crate::model::{cluster, Model, NodeGrid, Precision, SampleRect, NO_PARENT};
 
+
+/// Payloads of at most this many bytes are stored once however many records have them (by
+/// the bulk writer and by commits). Longer identical payloads are rare; keeping every
+/// payload's bytes to find them would cost the whole file's size in memory.
+pub(crate) const MAX_SHARED_PAYLOAD: usize = 256;
+
 /// Where the pages of a state's tables and blobs go.
 pub(crate) trait PageSink {
     /// Writes `records` (`spec.record_size` bytes each) as a tree of `spec.tag` pages.
