@@ -97,6 +97,16 @@ impl Alloc {
             .is_some_and(|&freed| freed <= self.reuse_limit)
     }
 
+    /// Takes the run `first .. first + n` out of the pool, as [`Alloc::take`] does, and
+    /// returns the txn that freed each page (for [`Alloc::give_back`]).
+    pub fn take_freed(&mut self, first: u64, n: u64) -> Vec<Option<u64>> {
+        let freed = (first..first + n)
+            .map(|page| self.pool.get(&page).copied())
+            .collect();
+        self.take(first, n);
+        freed
+    }
+
     /// Gives back a page [`Alloc::take`] handed out and the commit did not write, freed as
     /// before by `freed_txn`.
     pub fn give_back(&mut self, page: u64, freed_txn: u64) {

@@ -99,6 +99,7 @@ pub fn payloads_to_move(kept: &[PayloadRef], page_size: u32) -> Vec<PayloadRef> 
 
 /// The cleaner's working state: the kept payloads, their bytes on each page, which move.
 struct Plan {
+    page_size: u32,
     p: u64,
     refs: Vec<PayloadRef>,
     /// Kept bytes on each page (payloads never overlap); 0 once emptied.
@@ -129,12 +130,13 @@ impl Plan {
         let mut live: BTreeMap<u64, u64> = BTreeMap::new();
         let mut on: BTreeMap<u64, Vec<usize>> = BTreeMap::new();
         for (i, r) in refs.iter().enumerate() {
-            for (page, bytes) in page_parts(r, p) {
+            for (page, bytes) in page_parts(r, page_size) {
                 *live.entry(page).or_default() += bytes;
                 on.entry(page).or_default().push(i);
             }
         }
         Plan {
+            page_size,
             p,
             held: live.values().sum(),
             waste: live.values().map(|&b| p - b.min(p)).sum(),
@@ -167,7 +169,7 @@ impl Plan {
             for &i in self.on.get(&page).map(Vec::as_slice).unwrap_or(&[]) {
                 if !self.moved[i] && !movers.contains(&i) {
                     movers.push(i);
-                    for (pg, bytes) in page_parts(&self.refs[i], self.p) {
+                    for (pg, bytes) in page_parts(&self.refs[i], self.page_size) {
                         *takes.entry(pg).or_default() += bytes;
                     }
                 }
@@ -211,35 +213,25 @@ impl Plan {
     }
 }
 
-/// The pages `r` touches and its bytes on each (`p` bytes a page).
-fn page_parts(r: &PayloadRef, p: u64) -> impl Iterator<Item = (u64, u64)> + '_ {
-    let pages = if r.len == 0 { 0..0 } else { r.offset / p..r.end().div_ceil(p) };
-    pages.map(move |page| {
+/// The pages `r` touches and its bytes on each.
+fn page_parts(r: &PayloadRef, page_size: u32) -> impl Iterator<Item = (u64, u64)> + '_ {
+    let p = u64::from(page_size);
+    r.pages(page_size).map(move |page| {
         let lo = r.offset.max(page * p);
         let hi = r.end().min((page + 1) * p);
         (page, hi - lo)
     })
 }
 
-/// The waste of the pages `kept` touches (the rule in the module's docs), in bytes.
-#[cfg(test)]
-fn waste(kept: &[PayloadRef], page_size: u32) -> u64 {
-    let p = u64::from(page_size);
-    let unique: BTreeSet<(u64, u32)> = kept.iter().map(|r| (r.offset, r.len)).collect();
-    let mut live: BTreeMap<u64, u64> = BTreeMap::new();
-    for &(offset, len) in &unique {
-        let r = PayloadRef { offset, len, crc: 0 };
-        for (page, bytes) in page_parts(&r, p) {
-            *live.entry(page).or_default() += bytes;
-        }
-    }
-    live.values().map(|&b| p - b.min(p)).sum()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    /// The waste of the pages `kept` touches (the rule in the module's docs), in bytes.
+    fn waste(kept: &[PayloadRef], page_size: u32) -> u64 {
+        Plan::new(kept, page_size).waste
+    }
 
     fn at(offset: u64, len: u32) -> PayloadRef {
         PayloadRef {

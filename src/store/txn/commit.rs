@@ -188,9 +188,7 @@ impl<I: Io> CommitSink<'_, I> {
             self.alloc.append(need);
             run.freed.extend((0..need).map(|_| None));
         } else if (next..next + need).all(|page| self.alloc.reusable(page)) {
-            run.freed
-                .extend((next..next + need).map(|page| self.alloc.pool.get(&page).copied()));
-            self.alloc.take(next, need);
+            run.freed.extend(self.alloc.take_freed(next, need));
         } else {
             return false;
         }
@@ -208,10 +206,7 @@ impl<I: Io> CommitSink<'_, I> {
         let (first, pages, freed) = match self.alloc.best_run(least) {
             Some((first, run)) => {
                 let n = run.min(want);
-                let freed = (first..first + n)
-                    .map(|page| self.alloc.pool.get(&page).copied())
-                    .collect();
-                (self.alloc.take(first, n), n, freed)
+                (first, n, self.alloc.take_freed(first, n))
             }
             None => (
                 self.alloc.append(least),
