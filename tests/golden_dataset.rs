@@ -90,6 +90,7 @@ fn build(out: &Path) {
         },
         seam: SeamPolicy::Strict,
         spacing_m: None,
+        tile_size: None,
     };
     fmrh::dataset::build(
         &inputs,

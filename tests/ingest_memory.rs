@@ -327,3 +327,40 @@ fn ingest_memory_follows_the_data_not_the_header() {
         );
     }
 }
+
+/// A raster read by windows costs the window, never the raster: a 6,000 × 6,000 `f32`
+/// GeoTIFF (144 MB of samples in 2.2 MB of PackBits tiles) read as a 1,000 × 700 window
+/// (2.8 MB) peaks at the window, one decoded tile and the tile table, under 8 MiB; the
+/// samples are the tiles' own.
+#[test]
+fn a_window_costs_the_window_not_the_raster() {
+    const TILE: u32 = 256;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("large.tif");
+    std::fs::write(&path, tiff::packbits_tiled(6000, 6000, TILE)).unwrap();
+    let base = CURRENT.load(Ordering::Relaxed);
+    PEAK.store(base, Ordering::Relaxed);
+    let window = fmrh::model::SampleRect {
+        col0: 2500,
+        row0: 4100,
+        col1: 3499,
+        row1: 4799,
+    };
+    let part = fmrh::ingest::WindowedRaster::open(&path, &IngestOptions::default())
+        .and_then(|mut r| r.read(window))
+        .unwrap();
+    let peak = PEAK.load(Ordering::Relaxed) - base;
+    assert!(
+        peak <= 8 * MIB,
+        "peak heap {peak} bytes for a 2.8 MB window"
+    );
+    let across = 6000u32.div_ceil(TILE);
+    for (i, v) in part.samples().iter().enumerate() {
+        let (x, y) = (2500 + i as u32 % 1000, 4100 + i as u32 / 1000);
+        assert_eq!(
+            *v,
+            tiff::tile_value((y / TILE) * across + x / TILE),
+            "({x}, {y})"
+        );
+    }
+}

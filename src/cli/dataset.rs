@@ -66,6 +66,7 @@ impl TileOptions {
             write: self.model.write_options(0),
             seam,
             spacing_m: self.model.spacing()?,
+            tile_size: None,
         })
     }
 }
@@ -86,6 +87,13 @@ pub struct BuildArgs {
     /// samples) or mean (both take the mean; a void on either side wins).
     #[arg(long, default_value = "strict")]
     seam: SeamPolicy,
+    /// Cut every input larger than this many samples a side into tiles of at most this many
+    /// (neighbours share an edge row or column). Without it, only an input too large to
+    /// build within --max-memory is cut, into tiles of up to 8,193 samples a side that fit
+    /// the budget: so a GeoTIFF or .f32 larger than the machine's memory is built in the
+    /// memory of one tile.
+    #[arg(long, value_name = "SAMPLES")]
+    tile_size: Option<u32>,
     #[command(flatten)]
     tile_options: TileOptions,
     /// No progress.
@@ -141,7 +149,8 @@ fn build(args: &BuildArgs) -> Result<ExitCode, Error> {
             })
             .collect(),
     };
-    let options = args.tile_options.options(args.seam)?;
+    let mut options = args.tile_options.options(args.seam)?;
+    options.tile_size = args.tile_size;
     let quiet = args.quiet || args.json;
     let bar = (!quiet).then(super::progress::Bar::new);
     let silent = crate::progress::Silent;
@@ -166,11 +175,13 @@ fn build(args: &BuildArgs) -> Result<ExitCode, Error> {
             #[serde(flatten)]
             summary: &'a dataset::DatasetSummary,
             build_time_s: f64,
+            peak_memory_bytes: Option<u64>,
         }
         super::print_json(&Report {
             output: args.output.display().to_string(),
             summary: &summary,
             build_time_s: seconds,
+            peak_memory_bytes: super::build::peak_memory_bytes(),
         })?;
     } else {
         println!(
@@ -202,6 +213,9 @@ fn build(args: &BuildArgs) -> Result<ExitCode, Error> {
             "  manifest {} bytes; {} bytes in all; built in {seconds:.1} s",
             summary.manifest_bytes, summary.total_bytes
         );
+        if let Some(bytes) = super::build::peak_memory_bytes() {
+            println!("  peak memory {:.1} MiB", bytes as f64 / (1 << 20) as f64);
+        }
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -1,6 +1,10 @@
 //! Building a dataset from tile DEMs, streaming (`docs/datasets-design.md` §1). Memory is
 //! bounded by one tile plus the border rows and columns of all of them, never the dataset:
 //!
+//! 0. **Cut:** an input larger than the memory budget (a GeoTIFF or `.f32` of any size up to
+//!    2^32 - 1 samples a side), or larger than `--tile-size`, becomes a grid of windows read
+//!    by [`WindowedRaster`], each a tile: so a raster larger than the machine is built in
+//!    the memory of one window.
 //! 1. **Scan:** each tile is read once for its size, georeference and four border lines; its
 //!    samples are dropped.
 //! 2. **Place:** by the layout, or by the georeferences; the tiling is checked (neighbours
@@ -28,7 +32,8 @@ use crate::format::manifest::{
 };
 use crate::format::page_size_for;
 use crate::heightfield::{Georeference, Heightfield};
-use crate::ingest::{self, IngestOptions};
+use crate::ingest::limits::BUILD_BYTES_PER_SAMPLE;
+use crate::ingest::{self, IngestOptions, WindowedRaster};
 use crate::model::{BuildOptions, Model, SampleRect};
 use crate::progress::Progress;
 use crate::store::io::FileIo;
@@ -56,6 +61,10 @@ pub struct DatasetOptions {
     pub seam: SeamPolicy,
     /// Metres between samples, overriding what the tiles say.
     pub spacing_m: Option<[f64; 2]>,
+    /// Cut every input wider or taller than this many samples into windows of at most this
+    /// many a side, each a tile (neighbours share an edge row or column). `None`: only an
+    /// input too large for the memory budget is cut, into tiles of [`tile_side_for`] samples.
+    pub tile_size: Option<u32>,
 }
 
 /// One tile built.
@@ -176,13 +185,132 @@ fn seam_byte(p: SeamPolicy) -> u8 {
     }
 }
 
+/// The side of the square tiles an input too large for a memory budget of `budget` bytes is
+/// cut into: the largest `2^k + 1` (`k` from 13 down to 6: 8,193 to 65 samples) whose build
+/// fits the budget, since a build takes about [`BUILD_BYTES_PER_SAMPLE`] bytes a sample.
+/// 8,193² samples build in about 400 MB; larger tiles only make each tile slower to edit and
+/// to serve.
+pub fn tile_side_for(budget: u64) -> u32 {
+    (6..=13)
+        .rev()
+        .map(|k| (1u64 << k) + 1)
+        .find(|side| side * side * BUILD_BYTES_PER_SAMPLE <= budget)
+        .unwrap_or(65) as u32
+}
+
+/// The inclusive `(first, last)` spans that cut `n` samples into the fewest windows of at most
+/// `side` samples, as even as they can be, each sharing its last sample with the next
+/// window's first.
+pub fn window_spans(n: u64, side: u64) -> Vec<(u64, u64)> {
+    let side = side.max(2);
+    if n <= side {
+        return vec![(0, n.saturating_sub(1))];
+    }
+    let count = (n - 1).div_ceil(side - 1);
+    (0..count)
+        .map(|i| ((n - 1) * i / count, (n - 1) * (i + 1) / count))
+        .collect()
+}
+
+/// What becomes one tile: an input whole, or a window of one.
+struct Piece {
+    /// Its input.
+    input: usize,
+    /// Its samples in the input's (north-up) samples; `None`: the whole input.
+    window: Option<SampleRect>,
+    /// How errors and the report name it.
+    name: String,
+    /// The name its tile file is made from.
+    file_hint: PathBuf,
+}
+
+impl Piece {
+    /// Its samples.
+    fn load(&self, inputs: &[TileInput], options: &IngestOptions) -> Result<Heightfield> {
+        let path = &inputs[self.input].path;
+        match self.window {
+            None => ingest::load(path, options),
+            Some(w) => WindowedRaster::open(path, options)?.read(w),
+        }
+    }
+}
+
+/// Cuts the inputs into pieces: an input is cut into windows when it is larger than
+/// `tile_size`, or, without one, when its build would not fit the memory budget (or fmrh's
+/// limits on one grid). Only a GeoTIFF or `.f32` can be cut; any other input is one piece,
+/// read whole under the budget.
+fn cut(inputs: &[TileInput], options: &DatasetOptions) -> Result<Vec<Piece>> {
+    use crate::heightfield::{MAX_SAMPLES, MAX_SIDE};
+    if options.tile_size.is_some_and(|s| s < 2) {
+        return Err(Error::InvalidArgument(
+            "--tile-size must be at least 2 samples: neighbouring tiles share an edge".into(),
+        ));
+    }
+    let budget = options.ingest.limits.budget();
+    let mut pieces = Vec::with_capacity(inputs.len());
+    for (i, t) in inputs.iter().enumerate() {
+        let whole = Piece {
+            input: i,
+            window: None,
+            name: t.path.display().to_string(),
+            file_hint: t.path.clone(),
+        };
+        let format = match options.ingest.format {
+            Some(f) => f,
+            None => ingest::detect(&t.path)?,
+        };
+        if !matches!(format, ingest::Format::Geotiff | ingest::Format::F32) {
+            pieces.push(whole);
+            continue;
+        }
+        let raster = WindowedRaster::open(&t.path, &options.ingest)?;
+        let (w, h) = (raster.width(), raster.height());
+        let too_big = w > MAX_SIDE
+            || h > MAX_SIDE
+            || w * h > MAX_SAMPLES
+            || w * h * BUILD_BYTES_PER_SAMPLE > budget;
+        let side = match options.tile_size {
+            Some(s) => u64::from(s),
+            None if too_big => u64::from(tile_side_for(budget)),
+            None => {
+                pieces.push(whole);
+                continue;
+            }
+        };
+        if w <= side && h <= side {
+            pieces.push(whole);
+            continue;
+        }
+        let stem = t
+            .path
+            .file_stem()
+            .map_or("tile".into(), |s| s.to_string_lossy().into_owned());
+        let (columns, rows) = (window_spans(w, side), window_spans(h, side));
+        for (r, &(row0, row1)) in rows.iter().enumerate() {
+            for (c, &(col0, col1)) in columns.iter().enumerate() {
+                pieces.push(Piece {
+                    input: i,
+                    window: Some(SampleRect {
+                        col0,
+                        row0,
+                        col1,
+                        row1,
+                    }),
+                    name: format!(
+                        "{} (columns {col0}..={col1}, rows {row0}..={row1})",
+                        t.path.display()
+                    ),
+                    file_hint: PathBuf::from(format!("{stem}_{r}_{c}.tile")),
+                });
+            }
+        }
+    }
+    Ok(pieces)
+}
+
 /// The error for a placement that fails, naming tiles by their inputs.
-fn placement_error(e: PlacementError, inputs: &[TileInput]) -> Error {
-    let name = |i: usize| {
-        inputs
-            .get(i)
-            .map_or("?".into(), |t| t.path.display().to_string())
-    };
+fn placement_error(e: PlacementError, names: &[String]) -> Error {
+    let name = |i: usize| names.get(i).map_or("?", |n| n.as_str());
     Error::InvalidArgument(match e {
         PlacementError::Overlap {
             a,
@@ -228,29 +356,39 @@ pub fn build(
             "either every tile has a layout position or none has (placed by georeference)".into(),
         ));
     }
+    // 0. Cut.
+    let pieces = cut(inputs, options)?;
+    let names: Vec<String> = pieces.iter().map(|p| p.name.clone()).collect();
     // 1. Scan.
-    let n = inputs.len();
+    let n = pieces.len();
     let mut scans = Vec::with_capacity(n);
-    for (i, t) in inputs.iter().enumerate() {
-        on_tile("scanning", i, n, &t.path);
-        let hf = ingest::load(&t.path, &options.ingest)?;
+    for (i, p) in pieces.iter().enumerate() {
+        on_tile("scanning", i, n, &inputs[p.input].path);
+        let hf = p.load(inputs, &options.ingest)?;
         scans.push(Scanned::of(&hf));
     }
     // 2. Place.
-    let offsets: Vec<(u64, u64)> = if by_layout == n {
-        inputs.iter().filter_map(|t| t.at).collect()
+    let offsets: Vec<(u64, u64)> = if by_layout == inputs.len() {
+        pieces
+            .iter()
+            .filter_map(|p| {
+                let (c, r) = inputs[p.input].at?;
+                let w = p.window.unwrap_or_default();
+                Some((c + w.col0, r + w.row0))
+            })
+            .collect()
     } else {
         let mut geo = Vec::with_capacity(n);
         for (i, s) in scans.iter().enumerate() {
             let Some(g) = s.georeference.clone() else {
                 return Err(Error::InvalidArgument(format!(
                     "tile {} has no georeference: place the tiles with a layout (path,col0,row0)",
-                    inputs[i].path.display()
+                    names[i]
                 )));
             };
             geo.push((g, s.width, s.height));
         }
-        place_by_georeference(&geo).map_err(|e| placement_error(e, inputs))?
+        place_by_georeference(&geo).map_err(|e| placement_error(e, &names))?
     };
     let rects: Vec<SampleRect> = offsets
         .iter()
@@ -261,13 +399,13 @@ pub fn build(
         if r.col1 >= 1 << 40 || r.row1 >= 1 << 40 {
             return Err(Error::InvalidArgument(format!(
                 "tile {} at column {}, row {}: a dataset grid is at most 2^40 samples a side",
-                inputs[i].path.display(),
+                names[i],
                 r.col0,
                 r.row0
             )));
         }
     }
-    let shared = check_tiling(&rects).map_err(|e| placement_error(e, inputs))?;
+    let shared = check_tiling(&rects).map_err(|e| placement_error(e, &names))?;
     let mut settled: Vec<(usize, usize, SampleRect, Vec<f32>)> = Vec::with_capacity(shared.len());
     for &(a, b, o) in &shared {
         let field = |t: usize| -> Result<Heightfield> {
@@ -280,9 +418,9 @@ pub fn build(
                         Error::InvalidArgument(format!(
                             "tiles {} and {} overlap along a line inside {}: neighbours may \
                              share only an edge row or column of both",
-                            inputs[a].path.display(),
-                            inputs[b].path.display(),
-                            inputs[t].path.display()
+                            names[a],
+                            names[b],
+                            names[t]
                         ))
                     })?);
                 }
@@ -307,11 +445,11 @@ pub fn build(
                     "tiles {} and {} disagree on their shared edge: at dataset column {}, row {} \
                      ({} column {}, row {}) one holds {} and the other {}. Give --seam first or \
                      --seam mean to settle shared edges (format-spec/dataset.md §1)",
-                    inputs[a].path.display(),
-                    inputs[b].path.display(),
+                    names[a],
+                    names[b],
                     d.col,
                     d.row,
-                    inputs[b].path.display(),
+                    names[b],
                     d.col - rects[b].col0,
                     d.row - rects[b].row0,
                     d.a,
@@ -334,11 +472,12 @@ pub fn build(
     let mut built = Vec::with_capacity(n);
     let mut spacing = options.spacing_m;
     let mut georeference = None;
-    for (i, t) in inputs.iter().enumerate() {
-        on_tile("building", i, n, &t.path);
-        let hf = ingest::load(&t.path, &options.ingest)?;
+    for (i, p) in pieces.iter().enumerate() {
+        let input = &inputs[p.input].path;
+        on_tile("building", i, n, input);
+        let hf = p.load(inputs, &options.ingest)?;
         if hf.width() != scans[i].width || hf.height() != scans[i].height {
-            return Err(Error::input(&t.path, "changed while the dataset was built"));
+            return Err(Error::input(input, "changed while the dataset was built"));
         }
         let mut metadata = hf.metadata.clone();
         if let Some(s) = options.spacing_m {
@@ -379,7 +518,7 @@ pub fn build(
         }
         let hf = Heightfield::new(w, h, samples)?.with_metadata(metadata.clone());
         let model = Model::build_with_progress(hf, &options.build, progress)?;
-        let name = tile_name(&t.path, &taken);
+        let name = tile_name(&p.file_hint, &taken);
         taken.insert(name.to_ascii_lowercase());
         let path = tmp.path().join(&name);
         let mut write = options.write.clone();
@@ -397,7 +536,7 @@ pub fn build(
             (root.min_height, root.max_height),
         ));
         built.push(BuiltTile {
-            input: t.path.display().to_string(),
+            input: p.name.clone(),
             name,
             rect: rects[i],
             file_length: summary.file_length,
@@ -475,4 +614,55 @@ pub(crate) fn sync_dir(dir: &Path) -> Result<()> {
     }
     let _ = dir;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    #[test]
+    fn tile_sides_fit_the_budget() {
+        assert_eq!(tile_side_for(u64::MAX), 8193);
+        assert_eq!(tile_side_for(48 << 20), 2049);
+        assert_eq!(tile_side_for(64 << 20), 2049);
+        assert_eq!(tile_side_for(256 << 20), 4097);
+        // Below 65² samples' build the side stays 65: a window reader refuses what the
+        // budget cannot hold, with the figures.
+        assert_eq!(tile_side_for(1), 65);
+        for k in 6..=13u32 {
+            let side = u64::from(tile_side_for((((1u64 << k) + 1).pow(2)) * 6));
+            assert_eq!(side, (1 << k) + 1);
+        }
+    }
+
+    #[test]
+    fn window_spans_of_small_and_exact_sizes() {
+        assert_eq!(window_spans(1, 65), vec![(0, 0)]);
+        assert_eq!(window_spans(65, 65), vec![(0, 64)]);
+        assert_eq!(window_spans(66, 65), vec![(0, 32), (32, 65)]);
+        assert_eq!(window_spans(129, 65), vec![(0, 64), (64, 128)]);
+        assert_eq!(window_spans(10, 4), vec![(0, 3), (3, 6), (6, 9)]);
+    }
+
+    proptest! {
+        /// The spans cover `0..n` in order, each at most `side` long, neighbours sharing one
+        /// sample, and no fewer could do it.
+        #[test]
+        fn window_spans_cover_share_and_are_fewest(n in 1u64..100_000, side in 2u64..10_000) {
+            let spans = window_spans(n, side);
+            prop_assert_eq!(spans[0].0, 0);
+            prop_assert_eq!(spans[spans.len() - 1].1, n - 1);
+            for s in &spans {
+                prop_assert!(s.0 <= s.1 && s.1 - s.0 < side);
+                prop_assert!(spans.len() == 1 || s.1 > s.0);
+            }
+            for p in spans.windows(2) {
+                prop_assert_eq!(p[0].1, p[1].0);
+            }
+            // k windows of `side` samples sharing edges cover at most k·(side-1)+1.
+            let fewer = spans.len() as u64 - 1;
+            prop_assert!(fewer == 0 || fewer * (side - 1) + 1 < n);
+        }
+    }
 }

@@ -49,8 +49,24 @@ fn tiff_error(path: &Path, e: tiff::TiffError) -> Error {
     }
 }
 
-/// Reads a single-band GeoTIFF.
-pub fn read(path: &Path, options: &IngestOptions) -> Result<Heightfield> {
+/// A GeoTIFF whose header has been read and checked: any window of it can be decoded, one
+/// strip or tile at a time, without the rest.
+pub(super) struct Tiff {
+    path: std::path::PathBuf,
+    dec: Decoder<BufReader<File>>,
+    /// Columns and rows, as stored.
+    pub width: u32,
+    pub height: u32,
+    nodata: Option<f64>,
+    /// The georeference as stored (a south-up grid is not yet turned).
+    pub metadata: Metadata,
+}
+
+/// Opens a single-band GeoTIFF and checks its header. `whole`: the whole grid is to be held,
+/// so it is checked against the memory budget and fmrh's limits on a heightfield; otherwise
+/// (a reader of windows) only against the proportion of samples to bytes and TIFF's own
+/// limits, and each window is the caller's to bound.
+pub(super) fn open(path: &Path, options: &IngestOptions, whole: bool) -> Result<Tiff> {
     let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
     let file_len = file.metadata().map_err(|e| Error::io(path, e))?.len();
     check_first_ifd(path, &mut file, file_len)?;
@@ -61,11 +77,20 @@ pub fn read(path: &Path, options: &IngestOptions) -> Result<Heightfield> {
         .map_err(|e| tiff_error(path, e))?
         .with_limits(limits);
     let (width, height) = dec.dimensions().map_err(|e| tiff_error(path, e))?;
-    check_dimensions(u64::from(width), u64::from(height))
-        .map_err(|e| Error::input(path, e.to_string()))?;
-    options
-        .limits
-        .check_declared(path, u64::from(width), u64::from(height), file_len)?;
+    if whole {
+        check_dimensions(u64::from(width), u64::from(height))
+            .map_err(|e| Error::input(path, e.to_string()))?;
+        options
+            .limits
+            .check_declared(path, u64::from(width), u64::from(height), file_len)?;
+    } else {
+        if width == 0 || height == 0 {
+            return Err(Error::input(path, format!("{width} x {height} samples")));
+        }
+        options
+            .limits
+            .check_proportion(path, u64::from(width), u64::from(height), file_len)?;
+    }
     match dec.colortype().map_err(|e| tiff_error(path, e))? {
         ColorType::Gray(_) => {}
         other => {
@@ -85,85 +110,122 @@ pub fn read(path: &Path, options: &IngestOptions) -> Result<Heightfield> {
     };
     check_data_extent(path, &mut dec, width, height, file_len)?;
     let metadata = georeference(path, &mut dec, height)?;
-    let convert = |raw: f64| -> f32 {
-        if raw.is_nan() || nodata == Some(raw) {
-            f32::NAN
-        } else {
-            options.height(raw)
-        }
-    };
-    let samples = read_chunks(path, &mut dec, width, height, convert)?;
-    finish(path, width, height, samples, metadata)
+    Ok(Tiff {
+        path: path.to_path_buf(),
+        dec,
+        width,
+        height,
+        nodata,
+        metadata,
+    })
 }
 
-/// The image, decoded one strip or tile at a time into the grid of `f32` heights: the grid
-/// is the only allocation the size of the image. A whole-image decode first held every
-/// sample in its stored type as well (for 16-bit integers 6 bytes a sample at the peak, 4
-/// now: `fmrh build` of Puget Sound 4k as a tiled 16-bit GeoTIFF peaked at 105 MB, now 76 MB;
-/// 32-bit floats were converted in place and peak as before). Each chunk's decoded length is
-/// checked against the size its place in the image declares, and the chunks' count against
-/// the image's size.
-fn read_chunks<R: std::io::Read + std::io::Seek>(
-    path: &Path,
-    dec: &mut Decoder<R>,
-    width: u32,
-    height: u32,
-    convert: impl Fn(f64) -> f32,
-) -> Result<Vec<f32>> {
-    let (cw, ch) = dec.chunk_dimensions();
-    if cw == 0 || ch == 0 {
-        return Err(Error::input(path, format!("{cw} x {ch} strips or tiles")));
-    }
-    let count = match dec.get_chunk_type() {
-        ChunkType::Strip => dec.strip_count(),
-        ChunkType::Tile => dec.tile_count(),
-    }
-    .map_err(|e| tiff_error(path, e))?;
-    let (across, down) = (width.div_ceil(cw), height.div_ceil(ch));
-    if u64::from(count) != u64::from(across) * u64::from(down) {
-        return Err(Error::input(
-            path,
-            format!(
-                "{count} strips or tiles of {cw} x {ch} samples for a {width} x {height} image \
-                 (it needs {})",
-                u64::from(across) * u64::from(down)
-            ),
-        ));
-    }
-    let (w, h) = (width as usize, height as usize);
-    let mut samples = vec![f32::NAN; w * h];
-    for index in 0..count {
-        let chunk = dec.read_chunk(index).map_err(|e| tiff_error(path, e))?;
-        let (x0, y0) = ((index % across) * cw, (index / across) * ch);
-        // The data in this chunk: clipped at the image's right and bottom edges.
-        let (dw, dh) = (cw.min(width - x0) as usize, ch.min(height - y0) as usize);
-        let values = chunk_values(path, chunk)?;
-        // A chunk decodes to its data (dw x dh) or, for an edge tile, to the whole padded
-        // tile (cw x ch); any other length is not what the file declares.
-        let stride = match values.len() {
-            n if n == dw * dh => dw,
-            n if n == cw as usize * ch as usize => cw as usize,
-            n => {
-                return Err(Error::input(
-                    path,
-                    format!(
-                        "strip or tile {index} decodes to {n} samples, not the {dw} x {dh} \
-                         it declares (more than one band?)"
-                    ),
-                ))
+/// Reads a single-band GeoTIFF.
+pub fn read(path: &Path, options: &IngestOptions) -> Result<Heightfield> {
+    let mut tiff = open(path, options, true)?;
+    let (width, height) = (tiff.width, tiff.height);
+    let samples = tiff.read_window(0, 0, width, height, options)?;
+    finish(path, width, height, samples, tiff.metadata)
+}
+
+impl Tiff {
+    /// The `w × h` samples from column `x0`, row `y0` (as stored), decoded one strip or tile
+    /// at a time into the grid of `f32` heights: only the chunks the window touches are read,
+    /// and the window is the only allocation its size. (A whole-image decode first held every
+    /// sample in its stored type as well: for 16-bit integers 6 bytes a sample at the peak, 4
+    /// now. `fmrh build` of Puget Sound 4k as a tiled 16-bit GeoTIFF peaked at 105 MB, now
+    /// 76 MB.) Each chunk's decoded length is checked against the size its place in the image
+    /// declares, and the chunks' count against the image's size.
+    pub(super) fn read_window(
+        &mut self,
+        x0: u32,
+        y0: u32,
+        w: u32,
+        h: u32,
+        options: &IngestOptions,
+    ) -> Result<Vec<f32>> {
+        let path = self.path.as_path();
+        let (width, height) = (self.width, self.height);
+        if w == 0
+            || h == 0
+            || u64::from(x0) + u64::from(w) > u64::from(width)
+            || u64::from(y0) + u64::from(h) > u64::from(height)
+        {
+            return Err(Error::InvalidArgument(format!(
+                "window of {w} x {h} samples at column {x0}, row {y0} of a {width} x {height} \
+                 image"
+            )));
+        }
+        let nodata = self.nodata;
+        let convert = |raw: f64| -> f32 {
+            if raw.is_nan() || nodata == Some(raw) {
+                f32::NAN
+            } else {
+                options.height(raw)
             }
         };
-        for row in 0..dh {
-            let to = (y0 as usize + row) * w + x0 as usize;
-            for (out, &v) in samples[to..to + dw]
-                .iter_mut()
-                .zip(&values[row * stride..row * stride + dw])
-            {
-                *out = convert(v);
+        let dec = &mut self.dec;
+        let (cw, ch) = dec.chunk_dimensions();
+        if cw == 0 || ch == 0 {
+            return Err(Error::input(path, format!("{cw} x {ch} strips or tiles")));
+        }
+        let count = match dec.get_chunk_type() {
+            ChunkType::Strip => dec.strip_count(),
+            ChunkType::Tile => dec.tile_count(),
+        }
+        .map_err(|e| tiff_error(path, e))?;
+        let (across, down) = (width.div_ceil(cw), height.div_ceil(ch));
+        if u64::from(count) != u64::from(across) * u64::from(down) {
+            return Err(Error::input(
+                path,
+                format!(
+                    "{count} strips or tiles of {cw} x {ch} samples for a {width} x {height} \
+                     image (it needs {})",
+                    u64::from(across) * u64::from(down)
+                ),
+            ));
+        }
+        let (ww, wh) = (w as usize, h as usize);
+        let mut samples = vec![f32::NAN; ww * wh];
+        // The chunks the window touches, row by row of chunks.
+        for cy in y0 / ch..=(y0 + (h - 1)) / ch {
+            for cx in x0 / cw..=(x0 + (w - 1)) / cw {
+                let index = cy * across + cx;
+                let chunk = dec.read_chunk(index).map_err(|e| tiff_error(path, e))?;
+                let (cx0, cy0) = (cx * cw, cy * ch);
+                // The data in this chunk: clipped at the image's right and bottom edges.
+                let (dw, dh) = (cw.min(width - cx0) as usize, ch.min(height - cy0) as usize);
+                let values = chunk_values(path, chunk)?;
+                // A chunk decodes to its data (dw x dh) or, for an edge tile, to the whole
+                // padded tile (cw x ch); any other length is not what the file declares.
+                let stride = match values.len() {
+                    n if n == dw * dh => dw,
+                    n if n == cw as usize * ch as usize => cw as usize,
+                    n => {
+                        return Err(Error::input(
+                            path,
+                            format!(
+                                "strip or tile {index} decodes to {n} samples, not the {dw} x \
+                                 {dh} it declares (more than one band?)"
+                            ),
+                        ))
+                    }
+                };
+                // The part of the chunk inside the window, in image coordinates.
+                let (ix0, ix1) = (cx0.max(x0), (cx0 + dw as u32).min(x0 + w));
+                let (iy0, iy1) = (cy0.max(y0), (cy0 + dh as u32).min(y0 + h));
+                let n = (ix1 - ix0) as usize;
+                for y in iy0..iy1 {
+                    let from = (y - cy0) as usize * stride + (ix0 - cx0) as usize;
+                    let to = (y - y0) as usize * ww + (ix0 - x0) as usize;
+                    for (out, &v) in samples[to..to + n].iter_mut().zip(&values[from..from + n]) {
+                        *out = convert(v);
+                    }
+                }
             }
         }
+        Ok(samples)
     }
-    Ok(samples)
 }
 
 /// A decoded chunk's values as `f64` (every supported sample type converts exactly).

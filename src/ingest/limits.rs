@@ -82,14 +82,29 @@ impl IngestLimits {
                 detail: format!(
                     "{width} x {height} samples need about {} to build ({BUILD_BYTES_PER_SAMPLE} \
                      bytes a sample), more than the memory budget of {} (--max-memory; by \
-                     default half of this machine's {}). Raise it, or cut the raster into tiles \
-                     and build a dataset (fmrh dataset build)",
+                     default half of this machine's {}). Raise it, or build a dataset of it \
+                     (fmrh dataset build -o DIR FILE), which reads a GeoTIFF or .f32 in \
+                     windows that fit the budget",
                     human(need),
                     human(budget),
                     human(machine_memory())
                 ),
             });
         }
+        self.check_proportion(path, width, height, input_bytes)
+    }
+
+    /// Checks only that `width × height` declared samples are in proportion to the
+    /// `input_bytes` of `path` (a reader of windows, which never holds the whole grid, checks
+    /// each window against the budget instead).
+    pub fn check_proportion(
+        &self,
+        path: &Path,
+        width: u64,
+        height: u64,
+        input_bytes: u64,
+    ) -> Result<()> {
+        let samples = width.saturating_mul(height);
         let ceiling = self
             .max_samples_per_byte
             .unwrap_or(DEFAULT_SAMPLES_PER_BYTE);

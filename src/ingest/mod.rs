@@ -24,6 +24,7 @@ mod png;
 mod raw_f32;
 mod srtm;
 mod usgs_dem;
+pub mod window;
 
 use std::fs::File;
 use std::io::Read;
@@ -32,6 +33,7 @@ use std::path::Path;
 use crate::error::{Error, Result};
 use crate::heightfield::{Georeference, Heightfield, Metadata};
 pub use limits::IngestLimits;
+pub use window::WindowedRaster;
 
 /// The input formats fmrh reads ([`Format::about`] says what each takes).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -391,20 +393,42 @@ fn north_up(g: &mut Georeference, samples: &mut [f32], width: usize, height: usi
     if width == 0 || samples.len() != width * height {
         return; // Heightfield::new refuses it
     }
-    if g.step[1] > 0.0 {
+    let [flip_columns, flip_rows] = north_up_georeference(g, width as u64, height as u64);
+    flip(samples, width, flip_columns, flip_rows);
+}
+
+/// Moves `g` to the north-up orientation of a `width × height` grid (as [`north_up`] does);
+/// says whether the columns and the rows are to be reversed.
+fn north_up_georeference(g: &mut Georeference, width: u64, height: u64) -> [bool; 2] {
+    let flip_rows = g.step[1] > 0.0;
+    if flip_rows {
+        g.origin[1] += g.step[1] * height.saturating_sub(1) as f64;
+        g.step[1] = -g.step[1];
+    }
+    let flip_columns = g.step[0] < 0.0;
+    if flip_columns {
+        g.origin[0] += g.step[0] * width.saturating_sub(1) as f64;
+        g.step[0] = -g.step[0];
+    }
+    [flip_columns, flip_rows]
+}
+
+/// Reverses the columns and/or the rows of a row-major `width`-column grid.
+fn flip(samples: &mut [f32], width: usize, columns: bool, rows: bool) {
+    if width == 0 {
+        return;
+    }
+    let height = samples.len() / width;
+    if rows {
         for y in 0..height / 2 {
             let (top, bottom) = samples.split_at_mut((height - 1 - y) * width);
             top[y * width..(y + 1) * width].swap_with_slice(&mut bottom[..width]);
         }
-        g.origin[1] += g.step[1] * (height - 1) as f64;
-        g.step[1] = -g.step[1];
     }
-    if g.step[0] < 0.0 {
+    if columns {
         for row in samples.chunks_exact_mut(width) {
             row.reverse();
         }
-        g.origin[0] += g.step[0] * (width - 1) as f64;
-        g.step[0] = -g.step[0];
     }
 }
 

@@ -95,6 +95,7 @@ pub fn options(thresholds: Option<Vec<f64>>) -> DatasetOptions {
         },
         seam: SeamPolicy::Strict,
         spacing_m: None,
+        tile_size: None,
     }
 }
 
