@@ -10,12 +10,14 @@
 //! [`mod@scene`] (scenes across tiles), [`fly`] (frames across tiles), [`adjacency`] (the
 //! adjacent-cluster tables), [`mod@build`] (tiles in, a dataset out, one tile in memory at a
 //! time), [`mod@add`] (one more tile, or a whole tile replaced), [`commit`] (a change to
-//! several tiles, atomic across the files) and [`mod@verify`] (the validator).
+//! several tiles, atomic across the files), [`mod@compact`] (every tile rewritten fresh, one
+//! commit) and [`mod@verify`] (the validator).
 
 pub mod add;
 pub mod adjacency;
 pub mod build;
 pub mod commit;
+pub mod compact;
 pub mod fly;
 pub mod manifest;
 pub mod placement;
@@ -29,6 +31,7 @@ pub use build::{build, DatasetOptions, DatasetSummary, TileInput};
 #[cfg(any(test, feature = "testing"))]
 pub use build::BuiltTile;
 pub use commit::{recover, replace, DatasetCommit, Dir};
+pub use compact::compact;
 #[cfg(any(test, feature = "testing"))]
 pub use commit::{DatasetRecovery, Files, TileCommit};
 pub use fly::DatasetScheduler;

@@ -23,7 +23,8 @@ use serde::Serialize;
 use super::container::editor_of;
 use super::Container;
 use crate::error::{Error, Result};
-use crate::store::{write_file, FileSource, Store, WriteOptions};
+use crate::store::write::write_file_checked;
+use crate::store::{FileSource, Store, WriteOptions};
 
 /// How to rewrite.
 #[derive(Clone, Debug, Default)]
@@ -46,6 +47,47 @@ pub struct Compacted {
     pub free_pages_before: u64,
 }
 
+/// Writes the state `store` holds as a fresh build of it would be to `dest` (atomically:
+/// complete or not at all; an existing `dest` only if `overwrite`), with the file's own block
+/// size, thresholds, precision, thinning and page size. The new file is read back before it
+/// takes `dest`'s name: unless it holds every sample bit for bit, it is removed and `dest` is
+/// left as it was. Returns the new file's length.
+pub(crate) fn rewrite<S: crate::store::Source>(
+    store: &Store<S>,
+    dest: &Path,
+    overwrite: bool,
+    options: &CompactOptions,
+) -> Result<u64> {
+    let samples = store.read_window(store.domain().data_rect())?;
+    let editor = editor_of(store, samples.clone())?;
+    let metadata = store.header().metadata.clone();
+    let write = WriteOptions {
+        page_size: store.page_size(),
+        against_parents: !options.payloads_alone,
+        ..WriteOptions::default()
+    };
+    let check = |written: &Path| {
+        let fresh = Store::<FileSource>::open(written)?;
+        let again = fresh.read_window(fresh.domain().data_rect())?;
+        let same = again.samples().len() == samples.samples().len()
+            && again
+                .samples()
+                .iter()
+                .zip(samples.samples())
+                .all(|(a, b)| a.to_bits() == b.to_bits());
+        if same {
+            Ok(())
+        } else {
+            Err(Error::Internal(format!(
+                "{}: the compacted file does not read back the samples it was written from",
+                dest.display()
+            )))
+        }
+    };
+    let summary = write_file_checked(editor.model(), &metadata, dest, &write, overwrite, check)?;
+    Ok(summary.file_length)
+}
+
 /// Rewrites the container at `path` as a fresh build of its current state (see the module
 /// doc). Refused while another writer holds the file.
 pub fn compact(path: &Path, options: &CompactOptions) -> Result<Compacted> {
@@ -55,36 +97,13 @@ pub fn compact(path: &Path, options: &CompactOptions) -> Result<Compacted> {
     let bytes_before = std::fs::metadata(path).map_err(|e| Error::io(path, e))?.len();
     let txn_before = store.txn_id();
     let free_pages_before = store.free_pages()?.len() as u64;
-    let samples = store.read_window(store.domain().data_rect())?;
-    let editor = editor_of(store, samples.clone())?;
-    let metadata = store.header().metadata.clone();
-    let write = WriteOptions {
-        page_size: store.page_size(),
-        against_parents: !options.payloads_alone,
-        ..WriteOptions::default()
-    };
-    let summary = write_file(editor.model(), &metadata, path, &write, true)?;
-    // The renamed file, read back: every sample as the old state held it.
-    let fresh = Store::<FileSource>::open(path)?;
-    let again = fresh.read_window(fresh.domain().data_rect())?;
-    let same = again.samples().len() == samples.samples().len()
-        && again
-            .samples()
-            .iter()
-            .zip(samples.samples())
-            .all(|(a, b)| a.to_bits() == b.to_bits());
-    if !same {
-        return Err(Error::Internal(format!(
-            "{}: the compacted file does not read back the samples it was written from",
-            path.display()
-        )));
-    }
+    let bytes_after = rewrite(store, path, true, options)?;
     drop(snapshot);
     // The lock on the old file goes with it; the path names the new one already.
     container.abandon();
     Ok(Compacted {
         bytes_before,
-        bytes_after: summary.file_length,
+        bytes_after,
         txn_before,
         free_pages_before,
     })

@@ -47,6 +47,7 @@ use std::sync::{Mutex, MutexGuard};
 pub use cache::IoSource;
 pub use commit::CommitSummary;
 pub use compact::{compact, CompactOptions, Compacted};
+pub(crate) use compact::rewrite;
 pub use container::{Container, Recovery, Snapshot, WriteTxn};
 
 #[allow(unused_imports)]

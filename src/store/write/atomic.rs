@@ -73,6 +73,19 @@ pub fn write_atomically<T>(
     overwrite: bool,
     fill: impl FnOnce(&mut BufWriter<&std::fs::File>) -> Result<T>,
 ) -> Result<T> {
+    write_atomically_checked(path, overwrite, fill, |_| Ok(()))
+}
+
+/// [`write_atomically`], with `check` run on the complete, synced temporary file (by its path)
+/// before it is renamed into place: an error from it removes the file and leaves `path` as it
+/// was. (Compaction reads its new file back there, so that a file that does not hold what it
+/// was written from never replaces the one that does.)
+pub fn write_atomically_checked<T>(
+    path: &Path,
+    overwrite: bool,
+    fill: impl FnOnce(&mut BufWriter<&std::fs::File>) -> Result<T>,
+    check: impl FnOnce(&Path) -> Result<()>,
+) -> Result<T> {
     if !overwrite && path.exists() {
         return Err(Error::InvalidArgument(format!(
             "{} exists; pass --force to replace it",
@@ -100,7 +113,7 @@ pub fn write_atomically<T>(
     let temp_path = temp.path().to_path_buf();
     in_progress().push(temp_path.clone());
     // Renamed into place, or removed when `temp` drops: either way no longer ours to clean.
-    let result = write_and_persist(temp, path, dir, overwrite, fill);
+    let result = write_and_persist(temp, path, dir, overwrite, fill, check);
     in_progress().retain(|p| *p != temp_path);
     result
 }
@@ -111,6 +124,7 @@ fn write_and_persist<T>(
     dir: &Path,
     overwrite: bool,
     fill: impl FnOnce(&mut BufWriter<&std::fs::File>) -> Result<T>,
+    check: impl FnOnce(&Path) -> Result<()>,
 ) -> Result<T> {
     let value = {
         let mut w = BufWriter::with_capacity(1 << 20, temp.as_file());
@@ -128,6 +142,7 @@ fn write_and_persist<T>(
     temp.as_file()
         .unlock()
         .map_err(|e| Error::io(temp.path(), e))?;
+    check(temp.path())?;
     let persisted = if overwrite {
         temp.persist(path).map_err(|e| Error::io(path, e.error))?
     } else {

@@ -18,7 +18,7 @@ use std::sync::Arc;
 
 use serde::Serialize;
 
-pub use atomic::{remove_temporary_files, write_atomically};
+pub use atomic::{remove_temporary_files, write_atomically, write_atomically_checked};
 #[cfg(any(test, feature = "testing"))]
 pub use bulk::write_to;
 
@@ -122,8 +122,24 @@ pub fn write_file(
     options: &WriteOptions,
     overwrite: bool,
 ) -> Result<WriteSummary> {
-    write_atomically(path, overwrite, |w| {
-        bulk::write_named(model, metadata, options, w, path)
-    })
+    write_file_checked(model, metadata, path, options, overwrite, |_| Ok(()))
+}
+
+/// [`write_file`], with `check` run on the complete temporary file before it takes `path`'s
+/// name ([`write_atomically_checked`]).
+pub fn write_file_checked(
+    model: &Model,
+    metadata: &Metadata,
+    path: &Path,
+    options: &WriteOptions,
+    overwrite: bool,
+    check: impl FnOnce(&Path) -> Result<()>,
+) -> Result<WriteSummary> {
+    write_atomically_checked(
+        path,
+        overwrite,
+        |w| bulk::write_named(model, metadata, options, w, path),
+        check,
+    )
 }
 
