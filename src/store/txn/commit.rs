@@ -567,8 +567,14 @@ pub(crate) fn write_state<I: Io>(
     }
     // The cleaner: payloads kept on sparse pages move into this commit's pages, so that
     // theirs can be freed (`clean`).
-    let moved = clean::payloads_to_move(&kept, p);
-    if !moved.is_empty() {
+    let mut move_payloads = |moved: Vec<PayloadRef>,
+                             sink: &mut CommitSink<'_, I>,
+                             kept: &mut Vec<PayloadRef>,
+                             summary: &mut CommitSummary|
+     -> Result<()> {
+        if moved.is_empty() {
+            return Ok(());
+        }
         let mut to: HashMap<PayloadRef, PayloadRef> = HashMap::with_capacity(moved.len());
         sink.pending = moved.iter().map(|r| u64::from(r.len)).sum();
         for &r in &moved {
@@ -582,8 +588,58 @@ pub(crate) fn write_state<I: Io>(
             }
         }
         kept.retain(|r| !to.contains_key(r));
-        summary.payloads_moved = moved.len() as u64;
-    }
+        summary.payloads_moved += moved.len() as u64;
+        Ok(())
+    };
+    move_payloads(
+        clean::payloads_to_move(&kept, p),
+        &mut sink,
+        &mut kept,
+        &mut summary,
+    )?;
+    // The tail: when the holes inside the file pass their allowance, the kept payloads at
+    // its end move into them, so that a later commit cuts the end off (`clean`).
+    let old_bundle = base.commit_record().bundle;
+    let old_payload_pages: HashSet<u64> = old_nodes
+        .iter()
+        .map(|n| n.payload())
+        .chain(old_blocks.iter().map(|b| b.payload()))
+        .chain(old_bundle.is_present().then(|| old_bundle.payload()))
+        .flat_map(|r| r.pages(p))
+        .collect();
+    let metadata = base.metadata_pages()?;
+    let tail = {
+        let kept_pages: HashSet<u64> = kept.iter().flat_map(|r| r.pages(p)).collect();
+        let pool = &sink.alloc.pool;
+        let limit = sink.alloc.reuse_limit;
+        let base_pages = base.page_count();
+        // What the tables (or the bundle) will take of the holes: about what the base's took.
+        let reserve = (2..base_pages).filter(|&pg| metadata.contains(pg)).count() as u64;
+        let reusable: Vec<u64> = pool
+            .iter()
+            .filter(|&(_, &freed)| freed <= limit)
+            .map(|(&pg, _)| pg)
+            .collect();
+        let largest = reusable
+            .chunk_by(|a, b| a + 1 == *b)
+            .map(|run| run.len() as u64)
+            .max()
+            .unwrap_or(0);
+        let holes = (reusable.len() as u64).saturating_sub(reserve);
+        clean::tail_to_move(&kept, p, sink.alloc.end, holes, largest, |page| {
+            if kept_pages.contains(&page) {
+                clean::TailPage::Kept
+            } else if pool.contains_key(&page)
+                || (page < base_pages
+                    && (metadata.contains(page) || old_payload_pages.contains(&page)))
+            {
+                clean::TailPage::Leaves
+            } else {
+                clean::TailPage::Stays
+            }
+        })
+    };
+    move_payloads(tail, &mut sink, &mut kept, &mut summary)?;
     summary.nodes_removed = old_nodes
         .iter()
         .filter(|n| !seen.contains(&(n.level, n.x.get(), n.y.get())))
@@ -632,19 +688,10 @@ pub(crate) fn write_state<I: Io>(
     // What this commit frees: the old state's metadata pages, and payload pages no kept
     // payload touches.
     let kept_pages: HashSet<u64> = kept.iter().flat_map(|r| r.pages(p)).collect();
-    let metadata = base.metadata_pages()?;
     let mut freed: Vec<u64> = (2..base.page_count())
         .filter(|&page| metadata.contains(page))
         .collect();
-    // The old bundle (if any) is a payload no new record keeps.
-    let old_bundle = base.commit_record().bundle;
-    let old_payload_pages: HashSet<u64> = old_nodes
-        .iter()
-        .map(|n| n.payload())
-        .chain(old_blocks.iter().map(|b| b.payload()))
-        .chain(old_bundle.is_present().then(|| old_bundle.payload()))
-        .flat_map(|r| r.pages(p))
-        .collect();
+    // The old bundle (if any) is a payload no new record keeps (in `old_payload_pages`).
     freed.extend(
         old_payload_pages
             .into_iter()
