@@ -143,7 +143,7 @@ impl WindowedRaster {
                 what: self.path.display().to_string(),
                 detail: format!(
                     "a window of {w} x {h} samples needs about {need} bytes to build, more than \
-                     the memory budget of {budget} (--max-memory): take smaller tiles"
+                     the memory budget of {budget} bytes: raise --max-memory, or give a smaller --tile-size"
                 ),
             });
         }
