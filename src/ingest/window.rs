@@ -143,7 +143,8 @@ impl WindowedRaster {
                 what: self.path.display().to_string(),
                 detail: format!(
                     "a window of {w} x {h} samples needs about {need} bytes to build, more than \
-                     the memory budget of {budget} bytes: raise --max-memory, or give a smaller --tile-size"
+                     the memory budget of {budget} bytes: raise --max-memory, or give a \
+                     smaller --tile-size"
                 ),
             });
         }
