@@ -591,8 +591,19 @@ pub(crate) fn write_state<I: Io>(
         summary.payloads_moved += moved.len() as u64;
         Ok(())
     };
+    // What the moves may take: the holes (less what the tables will), so that they fill
+    // holes rather than grow the file; at least two segments, so that cleaning goes on.
+    let metadata = base.metadata_pages()?;
+    let reserve = (2..base.page_count())
+        .filter(|&pg| metadata.contains(pg))
+        .count() as u64;
+    let holes = {
+        let limit = sink.alloc.reuse_limit;
+        (sink.alloc.pool.values().filter(|&&f| f <= limit).count() as u64).saturating_sub(reserve)
+    };
+    let budget = (holes * u64::from(p) / 2).max(2 * clean::SEGMENT_PAGES * u64::from(p));
     move_payloads(
-        clean::payloads_to_move(&kept, p),
+        clean::payloads_to_move(&kept, p, budget),
         &mut sink,
         &mut kept,
         &mut summary,
@@ -607,7 +618,6 @@ pub(crate) fn write_state<I: Io>(
         .chain(old_bundle.is_present().then(|| old_bundle.payload()))
         .flat_map(|r| r.pages(p))
         .collect();
-    let metadata = base.metadata_pages()?;
     let tail = {
         let kept_pages: HashSet<u64> = kept.iter().flat_map(|r| r.pages(p)).collect();
         let pool = &sink.alloc.pool;
