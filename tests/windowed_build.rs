@@ -186,9 +186,18 @@ proptest! {
     }
 }
 
-/// Reads an `.f32` written by `fmrh extract`.
-fn read_f32(path: &std::path::Path) -> Vec<f32> {
-    std::fs::read(path)
+/// Every sample of the dataset `ds`, as `fmrh extract` writes them (into `scratch`).
+fn extracted(ds: &std::path::Path, scratch: &std::path::Path) -> Vec<f32> {
+    let f32_out = scratch.join("extracted.f32");
+    let out = common::fmrh(&[
+        "extract",
+        "-q",
+        ds.to_str().unwrap(),
+        "-o",
+        f32_out.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{out:?}");
+    std::fs::read(&f32_out)
         .unwrap()
         .chunks_exact(4)
         .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
@@ -253,10 +262,7 @@ fn a_raster_larger_than_the_budget_is_built_in_windows_within_it() {
 
     let verify = common::fmrh(&["verify", "--full", ds_s]);
     assert!(verify.status.success(), "{verify:?}");
-    let f32_out = dir.path().join("all.f32");
-    let out = common::fmrh(&["extract", "-q", ds_s, "-o", f32_out.to_str().unwrap()]);
-    assert!(out.status.success(), "{out:?}");
-    let samples = read_f32(&f32_out);
+    let samples = extracted(&ds, dir.path());
     assert_eq!(samples.len(), (W * H) as usize);
     let across = W.div_ceil(TILE);
     for (i, v) in samples.iter().enumerate() {
@@ -336,10 +342,7 @@ fn tile_size_cuts_every_larger_input_placed_by_a_layout() {
         let h = r["row1"].as_u64().unwrap() - r["row0"].as_u64().unwrap() + 1;
         assert!(w <= 100 && h <= 100, "{t}");
     }
-    let out_f32 = d.join("out.f32");
-    let out = common::fmrh(&["extract", "-q", ds_s, "-o", out_f32.to_str().unwrap()]);
-    assert!(out.status.success(), "{out:?}");
-    let got = read_f32(&out_f32);
+    let got = extracted(&ds, d);
     assert_eq!(got.len(), 370 * 180);
     for y in 0..180 {
         for x in 0..370 {
@@ -393,16 +396,7 @@ fn tile_size_cuts_a_georeferenced_input_placed_by_its_georeference() {
         "129",
     ]));
     assert_eq!(report["tiles"].as_array().unwrap().len(), 3 * 2, "{report}");
-    let out_f32 = d.join("out.f32");
-    let out = common::fmrh(&[
-        "extract",
-        "-q",
-        ds.to_str().unwrap(),
-        "-o",
-        out_f32.to_str().unwrap(),
-    ]);
-    assert!(out.status.success(), "{out:?}");
-    let got = read_f32(&out_f32);
+    let got = extracted(&ds, d);
     assert_eq!(got.len(), whole.samples().len());
     assert!(got
         .iter()

@@ -10,7 +10,7 @@
 use std::path::Path;
 use std::sync::Arc;
 
-use super::build::{sync_dir, tile_name, DatasetOptions};
+use super::build::{record_of, sync_dir, tile_name, DatasetOptions};
 use super::commit::{commit_tiles, publish, read_manifest, records, DatasetCommit, Dir, Files};
 use super::manifest::MANIFEST_NAME;
 use super::placement::{check_tiling, rect};
@@ -283,15 +283,7 @@ fn add_or_replace(
     }
     write_file(&model, &metadata, &path, &write, false)?;
     drop(model);
-    let store = Store::open(&path)?;
-    let root = store.node(0)?;
-    let record = TileRecord::new(
-        &name,
-        new_rect,
-        store.pin(),
-        (root.min_height, root.max_height),
-    );
-    drop(store);
+    let record = record_of(&Store::open(&path)?, &name, new_rect)?;
     sync_dir(dir)?;
     let outcome = (|| {
         let (open, commits, mut updated) = commit_tiles(&files, &all, &neighbour_changes)?;

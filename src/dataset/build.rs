@@ -31,7 +31,7 @@ use crate::format::manifest::{
     tile_name_is_valid, TileRecord, SEAM_FIRST, SEAM_MEAN, SEAM_STRICT, TILE_NAME_LEN,
 };
 use crate::format::page_size_for;
-use crate::heightfield::{Georeference, Heightfield};
+use crate::heightfield::{check_dimensions, Georeference, Heightfield};
 use crate::ingest::limits::BUILD_BYTES_PER_SAMPLE;
 use crate::ingest::{self, IngestOptions, WindowedRaster};
 use crate::model::{BuildOptions, Model, SampleRect};
@@ -97,6 +97,22 @@ pub struct DatasetSummary {
     pub manifest_bytes: u64,
     /// Bytes of every file of the dataset.
     pub total_bytes: u64,
+}
+
+/// The record of a tile file `name` at `rect`, whose container is `store`: pinned at its
+/// state, with its root's height range.
+pub(super) fn record_of<S: crate::store::Source>(
+    store: &Store<S>,
+    name: &str,
+    rect: SampleRect,
+) -> Result<TileRecord> {
+    let root = store.node(0)?;
+    Ok(TileRecord::new(
+        name,
+        rect,
+        store.pin(),
+        (root.min_height, root.max_height),
+    ))
 }
 
 /// What the scan keeps of a tile.
@@ -224,14 +240,27 @@ struct Piece {
     file_hint: PathBuf,
 }
 
-impl Piece {
-    /// Its samples.
-    fn load(&self, inputs: &[TileInput], options: &IngestOptions) -> Result<Heightfield> {
-        let path = &inputs[self.input].path;
-        match self.window {
-            None => ingest::load(path, options),
-            Some(w) => WindowedRaster::open(path, options)?.read(w),
-        }
+/// Reads the pieces' samples, keeping the last windowed input open: the pieces of one
+/// input come one after another, so each pass reads its header once, not once a window.
+struct Reader<'a> {
+    inputs: &'a [TileInput],
+    options: &'a IngestOptions,
+    open: Option<(usize, WindowedRaster)>,
+}
+
+impl Reader<'_> {
+    fn load(&mut self, piece: &Piece) -> Result<Heightfield> {
+        let path = &self.inputs[piece.input].path;
+        let Some(window) = piece.window else {
+            return ingest::load(path, self.options);
+        };
+        let raster = match &mut self.open {
+            Some((i, raster)) if *i == piece.input => raster,
+            open => &mut open
+                .insert((piece.input, WindowedRaster::open(path, self.options)?))
+                .1,
+        };
+        raster.read(window)
     }
 }
 
@@ -240,7 +269,6 @@ impl Piece {
 /// limits on one grid). Only a GeoTIFF or `.f32` can be cut; any other input is one piece,
 /// read whole under the budget.
 fn cut(inputs: &[TileInput], options: &DatasetOptions) -> Result<Vec<Piece>> {
-    use crate::heightfield::{MAX_SAMPLES, MAX_SIDE};
     if options.tile_size.is_some_and(|s| s < 2) {
         return Err(Error::InvalidArgument(
             "--tile-size must be at least 2 samples: neighbouring tiles share an edge".into(),
@@ -259,16 +287,13 @@ fn cut(inputs: &[TileInput], options: &DatasetOptions) -> Result<Vec<Piece>> {
             Some(f) => f,
             None => ingest::detect(&t.path)?,
         };
-        if !matches!(format, ingest::Format::Geotiff | ingest::Format::F32) {
+        if !ingest::window::streams(format) {
             pieces.push(whole);
             continue;
         }
         let raster = WindowedRaster::open(&t.path, &options.ingest)?;
         let (w, h) = (raster.width(), raster.height());
-        let too_big = w > MAX_SIDE
-            || h > MAX_SIDE
-            || w * h > MAX_SAMPLES
-            || w * h * BUILD_BYTES_PER_SAMPLE > budget;
+        let too_big = check_dimensions(w, h).is_err() || !options.ingest.limits.holds(w * h);
         let side = match options.tile_size {
             Some(s) => u64::from(s),
             None if too_big => u64::from(tile_side_for(budget)),
@@ -362,9 +387,14 @@ pub fn build(
     // 1. Scan.
     let n = pieces.len();
     let mut scans = Vec::with_capacity(n);
+    let mut reader = Reader {
+        inputs,
+        options: &options.ingest,
+        open: None,
+    };
     for (i, p) in pieces.iter().enumerate() {
         on_tile("scanning", i, n, &inputs[p.input].path);
-        let hf = p.load(inputs, &options.ingest)?;
+        let hf = reader.load(p)?;
         scans.push(Scanned::of(&hf));
     }
     // 2. Place.
@@ -475,7 +505,7 @@ pub fn build(
     for (i, p) in pieces.iter().enumerate() {
         let input = &inputs[p.input].path;
         on_tile("building", i, n, input);
-        let hf = p.load(inputs, &options.ingest)?;
+        let hf = reader.load(p)?;
         if hf.width() != scans[i].width || hf.height() != scans[i].height {
             return Err(Error::input(input, "changed while the dataset was built"));
         }
@@ -527,14 +557,7 @@ pub fn build(
         }
         let summary = write_file(&model, &metadata, &path, &write, false)?;
         drop(model);
-        let store = Store::open(&path)?;
-        let root = store.node(0)?;
-        records.push(TileRecord::new(
-            &name,
-            rects[i],
-            store.pin(),
-            (root.min_height, root.max_height),
-        ));
+        records.push(record_of(&Store::open(&path)?, &name, rects[i])?);
         built.push(BuiltTile {
             input: p.name.clone(),
             name,

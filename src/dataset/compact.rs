@@ -26,7 +26,7 @@ use std::sync::Arc;
 use serde::Serialize;
 
 use super::adjacency::TileEdges;
-use super::build::{sync_dir, tile_name};
+use super::build::{record_of, sync_dir, tile_name};
 use super::commit::{publish, read_manifest, records, Dir, Files};
 use super::manifest::MANIFEST_NAME;
 use super::reader::{Dataset, Tile};
@@ -119,13 +119,7 @@ pub fn compact(
             written.push(name.clone());
             drop(old);
             let store = Store::open(&path)?;
-            let root = store.node(0)?;
-            let record = TileRecord::new(
-                &name,
-                t.rect(),
-                store.pin(),
-                (root.min_height, root.max_height),
-            );
+            let record = record_of(&store, &name, t.rect())?;
             edges.insert(i, Arc::new(TileEdges::read(&store, &record)?));
             updated.push(record);
             report.push(TileCompacted {

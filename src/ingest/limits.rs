@@ -64,6 +64,11 @@ impl IngestLimits {
         self.max_memory.unwrap_or_else(|| machine_memory() / 2)
     }
 
+    /// Whether a build of `samples` samples fits the budget.
+    pub fn holds(&self, samples: u64) -> bool {
+        samples.saturating_mul(BUILD_BYTES_PER_SAMPLE) <= self.budget()
+    }
+
     /// Checks a grid of `width × height` samples that `path`, of `input_bytes` bytes,
     /// declares, before anything is sized from it.
     pub fn check_declared(
@@ -74,9 +79,8 @@ impl IngestLimits {
         input_bytes: u64,
     ) -> Result<()> {
         let samples = width.saturating_mul(height);
-        let need = samples.saturating_mul(BUILD_BYTES_PER_SAMPLE);
-        let budget = self.budget();
-        if need > budget {
+        if !self.holds(samples) {
+            let (need, budget) = (samples.saturating_mul(BUILD_BYTES_PER_SAMPLE), self.budget());
             return Err(Error::TooLarge {
                 what: path.display().to_string(),
                 detail: format!(

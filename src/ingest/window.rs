@@ -12,8 +12,8 @@
 //!   Large rasters are tiled (a COG is), so that cost is documented rather than cached.
 //! * **`.f32`**: each row of the window is one seek and one read.
 //! * **Every other format** (SRTM, DTED, PNG, JPEG, ASCII grids) is small by nature or cannot
-//!   be read by parts; it is loaded whole under the budget, as `fmrh build` loads it, and
-//!   windows are cut from it.
+//!   be read by parts ([`streams`] says which do): it is loaded whole, under the budget, as
+//!   `fmrh build` loads it.
 //!
 //! Windows are in fmrh's orientation (row 0 north, column 0 west) whatever the file stores: a
 //! south-up or east-to-west source is read from the mirrored place and turned, so that the
@@ -24,7 +24,7 @@ use std::path::{Path, PathBuf};
 
 use super::{detect, flip, geotiff, north_up_georeference, raw_f32, Format, IngestOptions};
 use crate::error::{Error, Result};
-use crate::heightfield::{check_dimensions, Georeference, Heightfield, Metadata};
+use crate::heightfield::{check_dimensions, Heightfield, Metadata};
 use crate::ingest::limits::BUILD_BYTES_PER_SAMPLE;
 use crate::model::SampleRect;
 
@@ -32,7 +32,11 @@ use crate::model::SampleRect;
 enum Source {
     Tiff(Box<geotiff::Tiff>),
     F32 { file: File, path: PathBuf },
-    Whole(Heightfield),
+}
+
+/// Whether rasters of `format` are read by windows.
+pub fn streams(format: Format) -> bool {
+    matches!(format, Format::Geotiff | Format::F32)
 }
 
 /// A raster whose header has been read, read by windows.
@@ -51,7 +55,7 @@ pub struct WindowedRaster {
 impl WindowedRaster {
     /// Opens `path` for windowed reading: a GeoTIFF's or `.f32`'s header only (its sides may
     /// be up to 2^32 - 1 samples, its samples in proportion to its bytes); any other format is
-    /// read whole, under the memory budget.
+    /// refused ([`streams`]).
     pub fn open(path: &Path, options: &IngestOptions) -> Result<WindowedRaster> {
         options.check()?;
         let format = match options.format {
@@ -82,17 +86,19 @@ impl WindowedRaster {
                     },
                 )
             }
-            _ => {
-                let hf = super::load(path, options)?;
-                let (w, h) = (u64::from(hf.width()), u64::from(hf.height()));
-                let metadata = hf.metadata.clone();
-                (w, h, metadata, Source::Whole(hf))
+            other => {
+                return Err(Error::unsupported(
+                    path,
+                    format!(
+                        "{} is read whole, not by windows (only a GeoTIFF or .f32 is)",
+                        other.name()
+                    ),
+                ))
             }
         };
-        let flip = match (&source, &mut metadata.georeference) {
-            // load() has turned it already.
-            (Source::Whole(_), _) | (_, None) => [false, false],
-            (_, Some(g)) => north_up_georeference(g, width, height),
+        let flip = match &mut metadata.georeference {
+            Some(g) => north_up_georeference(g, width, height),
+            None => [false, false],
         };
         super::check_metadata(path, &metadata)?;
         metadata.source_format = format.name().to_string();
@@ -136,15 +142,15 @@ impl WindowedRaster {
         }
         let (w, h) = (col1 - col0 + 1, row1 - row0 + 1);
         check_dimensions(w, h).map_err(|e| Error::input(&self.path, e.to_string()))?;
-        let need = w * h * BUILD_BYTES_PER_SAMPLE;
-        let budget = self.options.limits.budget();
-        if need > budget {
+        if !self.options.limits.holds(w * h) {
             return Err(Error::TooLarge {
                 what: self.path.display().to_string(),
                 detail: format!(
-                    "a window of {w} x {h} samples needs about {need} bytes to build, more than \
-                     the memory budget of {budget} bytes: raise --max-memory, or give a \
-                     smaller --tile-size"
+                    "a window of {w} x {h} samples needs about {} bytes to build, more than \
+                     the memory budget of {} bytes: raise --max-memory, or give a smaller \
+                     --tile-size",
+                    w * h * BUILD_BYTES_PER_SAMPLE,
+                    self.options.limits.budget()
                 ),
             });
         }
@@ -169,28 +175,12 @@ impl WindowedRaster {
             Source::F32 { file, path } => {
                 raw_f32::read_window(file, path, self.width, (x0, y0, w, h))?
             }
-            Source::Whole(hf) => {
-                let full = hf.samples();
-                let stride = self.width as usize;
-                let mut out = Vec::with_capacity((w * h) as usize);
-                for y in row0..=row1 {
-                    let at = y as usize * stride;
-                    out.extend_from_slice(&full[at + col0 as usize..=at + col1 as usize]);
-                }
-                out
-            }
         };
         flip(&mut samples, w as usize, flip_columns, flip_rows);
         let mut metadata = self.metadata.clone();
         if let Some(g) = &mut metadata.georeference {
-            *g = Georeference {
-                crs: g.crs.clone(),
-                origin: [
-                    g.origin[0] + col0 as f64 * g.step[0],
-                    g.origin[1] + row0 as f64 * g.step[1],
-                ],
-                step: g.step,
-            };
+            g.origin[0] += col0 as f64 * g.step[0];
+            g.origin[1] += row0 as f64 * g.step[1];
         }
         Heightfield::new(w as u32, h as u32, samples)
             .map(|hf| hf.with_metadata(metadata))

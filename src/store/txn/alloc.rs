@@ -90,6 +90,22 @@ impl Alloc {
         (len >= n.max(1)).then_some((start, len))
     }
 
+    /// The reusable free pages: how many, and the longest run of them.
+    pub fn holes(&self) -> (u64, u64) {
+        let reusable: Vec<u64> = self
+            .pool
+            .iter()
+            .filter(|&(_, &freed)| freed <= self.reuse_limit)
+            .map(|(&page, _)| page)
+            .collect();
+        let longest = reusable
+            .chunk_by(|a, b| a + 1 == *b)
+            .map(|run| run.len() as u64)
+            .max()
+            .unwrap_or(0);
+        (reusable.len() as u64, longest)
+    }
+
     /// Whether `page` is a free page this commit may write.
     pub fn reusable(&self, page: u64) -> bool {
         self.pool
@@ -156,6 +172,7 @@ mod tests {
             .into_iter()
             .collect();
         let mut a = Alloc::new(pool, 4, 11);
+        assert_eq!(a.holes(), (4, 2), "5, 6, 9, 10 reusable; 7 is not yet");
         assert_eq!(a.reusable_run(3), None, "page 7 is not reusable yet");
         assert_eq!(a.extent(2), 5);
         assert_eq!(a.extent(3), 11, "appended");

@@ -594,13 +594,11 @@ pub(crate) fn write_state<I: Io>(
     // What the moves may take: the holes (less what the tables will), so that they fill
     // holes rather than grow the file; at least two segments, so that cleaning goes on.
     let metadata = base.metadata_pages()?;
+    // What the tables (or the bundle) will take of the holes: about what the base's took.
     let reserve = (2..base.page_count())
         .filter(|&pg| metadata.contains(pg))
         .count() as u64;
-    let holes = {
-        let limit = sink.alloc.reuse_limit;
-        (sink.alloc.pool.values().filter(|&&f| f <= limit).count() as u64).saturating_sub(reserve)
-    };
+    let holes = sink.alloc.holes().0.saturating_sub(reserve);
     let budget = (holes * u64::from(p) / 2).max(2 * clean::SEGMENT_PAGES * u64::from(p));
     move_payloads(
         clean::payloads_to_move(&kept, p, budget),
@@ -621,21 +619,9 @@ pub(crate) fn write_state<I: Io>(
     let tail = {
         let kept_pages: HashSet<u64> = kept.iter().flat_map(|r| r.pages(p)).collect();
         let pool = &sink.alloc.pool;
-        let limit = sink.alloc.reuse_limit;
         let base_pages = base.page_count();
-        // What the tables (or the bundle) will take of the holes: about what the base's took.
-        let reserve = (2..base_pages).filter(|&pg| metadata.contains(pg)).count() as u64;
-        let reusable: Vec<u64> = pool
-            .iter()
-            .filter(|&(_, &freed)| freed <= limit)
-            .map(|(&pg, _)| pg)
-            .collect();
-        let largest = reusable
-            .chunk_by(|a, b| a + 1 == *b)
-            .map(|run| run.len() as u64)
-            .max()
-            .unwrap_or(0);
-        let holes = (reusable.len() as u64).saturating_sub(reserve);
+        let (holes, largest) = sink.alloc.holes();
+        let holes = holes.saturating_sub(reserve);
         clean::tail_to_move(&kept, p, sink.alloc.end, holes, largest, |page| {
             if kept_pages.contains(&page) {
                 clean::TailPage::Kept
