@@ -8,7 +8,7 @@
 mod common;
 
 use fmrh::render::{
-    perspective, top, Image, Surface, FRUSTUM_COLOUR, LEGEND_MARGIN, LEGEND_SWATCH,
+    perspective, top, Image, MapGround, Surface, FRUSTUM_COLOUR, LEGEND_MARGIN, LEGEND_SWATCH,
 };
 use fmrh::scene::{reconstruct, Camera, SceneOptions, Terrain, WorldFrame};
 use fmrh::store::Store;
@@ -128,7 +128,9 @@ fn an_overhead_map_tints_blocks_by_level_and_marks_the_eye() {
     );
     let side = 514;
     let (scene, image) = picture(&store, &camera, 1.0, true, |s| {
-        top(s, &camera, side).unwrap()
+        top(s, &camera, side, MapGround::Grid { north_deg: None })
+            .unwrap()
+            .image
     });
     let levels: std::collections::BTreeSet<u8> = scene.blocks.iter().map(|b| b.level).collect();
     assert!(levels.len() >= 2, "levels {levels:?}");
@@ -313,19 +315,35 @@ fn the_cli_draws_a_dataset_across_its_tiles() {
         let i = ((y * info.width + x) * 3) as usize;
         [buf[i], buf[i + 1], buf[i + 2]]
     };
-    // The legend's white panel, from its corner along its top row and left column.
-    let m = LEGEND_MARGIN as u32;
+    // The white panels of the legend (north-west), the north arrow (north-east) and the
+    // scale bar (south-west), each from its corner along its edges.
     let white = [255, 255, 255];
-    assert_eq!(pixel(m, m), white, "the legend");
-    let lw = (m..info.width)
-        .take_while(|&x| pixel(x, m) == white)
-        .count() as u32;
-    let lh = (m..info.height)
-        .take_while(|&y| pixel(m, y) == white)
-        .count() as u32;
+    let panel = |x0: u32, y0: u32, dx: i64, dy: i64| {
+        assert_eq!(pixel(x0, y0), white, "a panel's corner at ({x0}, {y0})");
+        let run = |step: &dyn Fn(i64) -> (u32, u32)| {
+            (0..)
+                .map(step)
+                .take_while(|&(x, y)| x < info.width && y < info.height && pixel(x, y) == white)
+                .last()
+                .unwrap()
+        };
+        let (x1, _) = run(&|k| ((i64::from(x0) + dx * k) as u32, y0));
+        let (_, y1) = run(&|k| (x0, (i64::from(y0) + dy * k) as u32));
+        (x0.min(x1)..=x0.max(x1), y0.min(y1)..=y0.max(y1))
+    };
+    let m = LEGEND_MARGIN as u32;
+    let corner = 8;
+    let panels = [
+        panel(m, m, 1, 1),
+        panel(info.width - 1 - corner, corner, -1, 1),
+        panel(corner, info.height - 1 - corner, 1, -1),
+    ];
     for y in 0..info.height {
         for x in 0..info.width {
-            if (m..m + lw).contains(&x) && (m..m + lh).contains(&y) {
+            if panels
+                .iter()
+                .any(|(xs, ys)| xs.contains(&x) && ys.contains(&y))
+            {
                 continue;
             }
             let [r, g, b] = pixel(x, y);

@@ -115,6 +115,16 @@ fn check_step(served: &Served, file: &Path, s: &Step) -> serde_json::Value {
 /// Runs tests/js/viewer-check.mjs in Chromium on `url`, the screenshot to `shot`: the
 /// page's report of its three steps.
 fn browse(url: &str, shot: &Path) -> serde_json::Value {
+    let report = node("viewer-check.mjs", &[url, shot.to_str().unwrap()]);
+    assert!(
+        !report["renderer"].as_str().unwrap_or("").is_empty(),
+        "{report}"
+    );
+    report
+}
+
+/// Runs a script of tests/js in Node with Chromium, and returns the JSON it prints.
+fn node(script: &str, args: &[&str]) -> serde_json::Value {
     let js = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/js");
     assert!(
         js.join("node_modules/playwright-core").is_dir(),
@@ -127,9 +137,8 @@ fn browse(url: &str, shot: &Path) -> serde_json::Value {
          set CHROMIUM"
     );
     let run = Command::new("node")
-        .arg(js.join("viewer-check.mjs"))
-        .arg(url)
-        .arg(shot)
+        .arg(js.join(script))
+        .args(args)
         .env("CHROMIUM", &chromium)
         .output()
         .expect("node runs (Node.js is needed for the browser test)");
@@ -138,12 +147,7 @@ fn browse(url: &str, shot: &Path) -> serde_json::Value {
         "the browser check failed:\n{}",
         String::from_utf8_lossy(&run.stderr)
     );
-    let report: serde_json::Value = serde_json::from_slice(&run.stdout).expect("JSON");
-    assert!(
-        !report["renderer"].as_str().unwrap_or("").is_empty(),
-        "{report}"
-    );
-    report
+    serde_json::from_slice(&run.stdout).expect("JSON")
 }
 
 /// Asserts that the screenshot `shot` shows shaded terrain: most of the view right of the
@@ -158,24 +162,41 @@ fn assert_terrain(shot: &Path) {
     assert!(colours > 100, "{colours} colours: a flat, unshaded picture");
 }
 
-/// The share of the view right of the panel that is not sky, and its distinct colours.
-fn terrain_in(shot: &Path) -> (f64, usize) {
+/// Whether a pixel is the sky's colour.
+fn is_sky(px: &[u8]) -> bool {
+    px.iter().zip(SKY).all(|(a, b)| a.abs_diff(b) <= 3)
+}
+
+/// The page's panel covers the canvas left of this x, in CSS pixels.
+const PANEL: usize = 300;
+
+/// A 960 × 600 screenshot's width, height and RGB samples.
+fn screenshot(shot: &Path) -> (usize, usize, Vec<u8>) {
     let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(shot).unwrap()));
     let mut reader = decoder.read_info().unwrap();
     let mut buf = vec![0; reader.output_buffer_size().unwrap()];
     let info = reader.next_frame(&mut buf).unwrap();
     assert_eq!((info.width, info.height), (960, 600));
     let channels = info.color_type.samples();
+    let rgb = buf[..info.buffer_size()]
+        .chunks_exact(channels)
+        .flat_map(|px| [px[0], px[1], px[2]])
+        .collect();
+    (960, 600, rgb)
+}
+
+/// The share of the view right of the panel that is not sky, and its distinct colours.
+fn terrain_in(shot: &Path) -> (f64, usize) {
+    let (width, height, rgb) = screenshot(shot);
     let (mut terrain, mut total) = (0usize, 0usize);
     let mut colours = std::collections::HashSet::new();
     // Right of the panel (which covers x < 300).
-    for y in 0..info.height as usize {
-        for x in 300..info.width as usize {
-            let i = (y * info.width as usize + x) * channels;
-            let px = [buf[i], buf[i + 1], buf[i + 2]];
+    for y in 0..height {
+        for x in PANEL..width {
+            let i = (y * width + x) * 3;
+            let px = [rgb[i], rgb[i + 1], rgb[i + 2]];
             total += 1;
-            let sky = px.iter().zip(SKY).all(|(a, b)| a.abs_diff(b) <= 3);
-            if !sky {
+            if !is_sky(&px) {
                 terrain += 1;
                 colours.insert(px);
             }
@@ -287,4 +308,117 @@ fn the_viewer_flies_a_dataset_across_its_tiles() {
         }
     }
     assert_terrain(&shot);
+}
+
+/// One camera for every picture (issue 40): the viewer, looking north at the asymmetric
+/// scene of `common::tower`, draws the tower on the right and the ridge on the left, where
+/// `View::project` (the camera of `fmrh render`, `fmrh mesh` and the selection) puts them.
+/// Checked twice: the page's own transformation (`fmrhViewer.project`, what its shader
+/// does) against `View::project`, and the pixels where screenshots with and without each
+/// feature differ: the tower alone and the ridge alone, each against flat ground (shaded
+/// by height, a feature's colour depends on the container's height range; the ground, the
+/// lowest height in each, is drawn alike in all).
+#[test]
+fn the_viewer_draws_each_feature_on_the_side_the_camera_puts_it() {
+    use common::tower::{self, RIDGE, RIDGE_M, TOWER, TOWER_M};
+    let dir = tempfile::tempdir().unwrap();
+    let [_, ridge_only, tower_only] = tower::containers(dir.path());
+    let flat = dir.path().join("flat.fmrh");
+    tower::container(tower::field(false, false), &flat);
+    let files = [flat, tower_only, ridge_only];
+    let served = Served::start(&[&files[0], &files[1], &files[2]]);
+    // The page's canvas and field of view.
+    let camera = fmrh::scene::Camera {
+        fov_y_deg: 60.0,
+        ..tower::camera([960, 600])
+    };
+    let view = camera.view().unwrap();
+    let tops = [top_of_json(TOWER, TOWER_M), top_of_json(RIDGE, RIDGE_M)];
+    let points = serde_json::to_string(&tops).unwrap();
+    let mut shots = Vec::new();
+    for file in &files {
+        let name = file.file_name().unwrap().to_str().unwrap();
+        let shot = file.with_extension("png");
+        let url = format!(
+            "{}/#item={name}&eye={}&target={}&tau=1&colour=shaded",
+            served.base(),
+            tower::EYE,
+            tower::TARGET
+        );
+        let report = node("viewer-shot.mjs", &[&url, shot.to_str().unwrap(), &points]);
+        for (i, top) in tops.iter().enumerate() {
+            let at = glam::DVec3::new(top[0], top[1], top[2]);
+            let [x, y, _] = view.project(at).unwrap();
+            let page = &report["projected"][i];
+            let (px, py) = (page[0].as_f64().unwrap(), page[1].as_f64().unwrap());
+            assert!(
+                (px - x).abs() < 0.01 && (py - y).abs() < 0.01,
+                "{name}: the page puts {top:?} at ({px}, {py}), the camera at ({x}, {y})"
+            );
+        }
+        shots.push(screenshot(&shot));
+    }
+    // The flat ground's one colour. Its outline against the sky is anti-aliased, and
+    // differently when it is cut into other triangles: pixels near the outline (whose 3 × 3
+    // neighbourhood in the flat picture is not all sky or all ground) are left out.
+    let (width, height, flat_rgb) = &shots[0];
+    let mut counts = std::collections::HashMap::new();
+    for px in flat_rgb.chunks_exact(3) {
+        if !is_sky(px) {
+            *counts.entry([px[0], px[1], px[2]]).or_insert(0usize) += 1;
+        }
+    }
+    let ground = counts
+        .into_iter()
+        .max_by_key(|c| c.1)
+        .expect("ground drawn")
+        .0;
+    let centre = 480.0;
+    for (other, top, right, what) in [
+        (1, tops[0], true, "the tower"),
+        (2, tops[1], false, "the ridge"),
+    ] {
+        let [px, py, _] = view.project(glam::DVec3::from_array(top)).unwrap();
+        assert_eq!(px > centre, right, "{what}: projected at x = {px}");
+        let b = &shots[other].2;
+        let mut diff = Vec::new();
+        for y in 0..*height {
+            for x in PANEL..*width {
+                let i = (y * width + x) * 3;
+                // The 3 × 3 neighbourhood, clamped to the picture.
+                let around: Vec<&[u8]> = (y.saturating_sub(1)..=(y + 1).min(height - 1))
+                    .flat_map(|v| (x - 1..=(x + 1).min(width - 1)).map(move |u| (u, v)))
+                    .map(|(u, v)| &flat_rgb[(v * width + u) * 3..][..3])
+                    .collect();
+                let outline =
+                    !(around.iter().all(|p| is_sky(p)) || around.iter().all(|p| *p == ground));
+                if flat_rgb[i..i + 3] != b[i..i + 3] && !outline {
+                    diff.push((x as f64 + 0.5, y as f64 + 0.5));
+                }
+            }
+        }
+        assert!(diff.len() > 50, "{what}: drawn in {} pixels", diff.len());
+        for &(x, _) in &diff {
+            assert_eq!(
+                x > centre,
+                right,
+                "{what}: drawn at x = {x}, projected at {px}"
+            );
+        }
+        let lo = |f: fn(&(f64, f64)) -> f64| diff.iter().map(f).fold(f64::MAX, f64::min);
+        let hi = |f: fn(&(f64, f64)) -> f64| diff.iter().map(f).fold(f64::MIN, f64::max);
+        assert!(
+            (lo(|d| d.0)..=hi(|d| d.0)).contains(&px) && (lo(|d| d.1)..=hi(|d| d.1)).contains(&py),
+            "{what}: drawn in x {}..{}, y {}..{}; projected at ({px}, {py})",
+            lo(|d| d.0),
+            hi(|d| d.0),
+            lo(|d| d.1),
+            hi(|d| d.1)
+        );
+    }
+}
+
+/// The middle of a feature's top, as the page takes a point.
+fn top_of_json(r: [u32; 4], h: f32) -> [f64; 3] {
+    common::tower::top_of(r, h).to_array()
 }

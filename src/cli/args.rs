@@ -9,7 +9,7 @@ use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
 
 use crate::ingest::{ColorEncoding, Format, IngestOptions};
 use crate::model::{BuildOptions, Precision, ThinByArea, Thresholds, DEFAULT_BLOCK_SIZE};
-use crate::scene::{Camera, Mode, SceneOptions, DEFAULT_GAP};
+use crate::scene::{Camera, Handedness, Mode, SceneOptions, DEFAULT_GAP};
 use crate::store::WriteOptions;
 use crate::Error;
 
@@ -349,12 +349,18 @@ impl CameraArgs {
                 )
             }
         };
+        let handedness = if self.globe || self.eye_geo.is_some() {
+            Handedness::Right
+        } else {
+            Handedness::Left
+        };
         Ok(Camera {
             eye,
             target,
             up,
             fov_y_deg: view.fov,
             viewport: view.viewport()?,
+            handedness,
         })
     }
 

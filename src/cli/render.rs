@@ -5,8 +5,9 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
+use crate::heightfield::Georeference;
 use crate::model::SampleRect;
-use crate::render::{perspective, top, Surface};
+use crate::render::{perspective, top, MapGround, Surface};
 use crate::scene::{reconstruct, Camera, SceneBlock, Terrain, WorldFrame};
 use crate::Error;
 
@@ -100,7 +101,12 @@ fn render<S: crate::store::Source>(
         blocks: &scene.blocks,
         frame: WorldFrame::new(spacing.or(store.header().metadata.spacing_m)),
     };
-    draw(args, &camera, &surface)
+    draw(
+        args,
+        &camera,
+        &surface,
+        store.header().metadata.georeference.as_ref(),
+    )
 }
 
 /// A dataset's scene, across its tiles, in the dataset's world frame.
@@ -120,21 +126,44 @@ fn render_dataset(args: &RenderArgs) -> Result<ExitCode, Error> {
         blocks: &blocks,
         frame: WorldFrame::new(spacing.or(ds.spacing_m())),
     };
-    draw(args, &camera, &surface)
+    draw(args, &camera, &surface, ds.georeference().as_ref())
 }
 
-/// Draws `surface` as `args` asks and writes the PNG.
-fn draw(args: &RenderArgs, camera: &Camera, surface: &Surface<'_>) -> Result<ExitCode, Error> {
-    let image = if args.top {
-        top(surface, camera, args.size)?
+/// Draws `surface` as `args` asks and writes the PNG. An overhead map lays the ground out
+/// as `georef` says (see `crate::render::top`).
+fn draw(
+    args: &RenderArgs,
+    camera: &Camera,
+    surface: &Surface<'_>,
+    georef: Option<&Georeference>,
+) -> Result<ExitCode, Error> {
+    let (image, map) = if args.top {
+        let w = surface.window;
+        let ground = MapGround::of(
+            georef,
+            (w.col0 + w.col1) as f64 / 2.0,
+            (w.row0 + w.row1) as f64 / 2.0,
+        );
+        let map = top(surface, camera, args.size, ground)?;
+        let scale = format!(
+            " ({} a pixel, scale bar {}, {})",
+            metres(map.metres_per_pixel),
+            metres(map.scale_bar_m),
+            match map.north_deg {
+                Some(d) if d.abs() < 0.05 => "north up".to_string(),
+                Some(d) => format!("true north {d:+.1}° from up"),
+                None => "grid north up, true north unknown".to_string(),
+            }
+        );
+        (map.image, scale)
     } else {
-        perspective(surface, camera)?
+        (perspective(surface, camera)?, String::new())
     };
     let mut png = Vec::new();
     image.write_png(&mut png)?;
     super::write_output(&args.output, args.force, &png)?;
     eprintln!(
-        "fmrh: drew {} blocks (levels {}) as a {}x{} picture{}",
+        "fmrh: drew {} blocks (levels {}) as a {}x{} picture{}{map}",
         surface.blocks.len(),
         levels(surface.blocks),
         image.width,
@@ -146,6 +175,18 @@ fn draw(args: &RenderArgs, camera: &Camera, surface: &Surface<'_>) -> Result<Exi
         }
     );
     Ok(ExitCode::SUCCESS)
+}
+
+/// A length for people: metres below 10 km, else kilometres.
+fn metres(m: f64) -> String {
+    if m >= 10_000.0 {
+        let km = format!("{:.3}", m / 1000.0);
+        format!("{} km", km.trim_end_matches('0').trim_end_matches('.'))
+    } else if m >= 10.0 {
+        format!("{m:.0} m")
+    } else {
+        format!("{m:.2} m")
+    }
 }
 
 /// `a-b`: the coarsest and finest levels among `blocks`.

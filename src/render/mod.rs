@@ -6,8 +6,9 @@
 //! (a reconstruction) and the blocks themselves. Nothing here reads a file or chooses
 //! blocks; the caller schedules the scene and reconstructs it.
 //!
-//! The overhead map carries a legend in its north-west corner: each level's hue with its
-//! number, and the frustum's red.
+//! The overhead map (`top.rs`) is drawn in metres on the ground, north up, with a legend in
+//! its north-west corner (each level's hue with its number, and the frustum's red), a north
+//! arrow in its north-east corner and a scale bar in its south-west corner.
 //!
 //! **Shading.** Each sample's normal comes from central differences of its neighbours in
 //! metres; the light comes from the north-west, 45° up (the cartographic convention), with a
@@ -27,6 +28,11 @@ use glam::DVec3;
 use crate::error::{Error, Result};
 use crate::model::SampleRect;
 use crate::scene::{Camera, SceneBlock, WorldFrame};
+
+mod text;
+pub mod top;
+
+pub use top::{top, MapGround};
 
 /// Vertices along the longer side of the mesh a perspective picture rasterizes.
 pub const MESH_SIDE: usize = 768;
@@ -228,9 +234,6 @@ pub fn perspective(surface: &Surface<'_>, camera: &Camera) -> Result<Image> {
             image.set(i64::from(x), i64::from(y), sky);
         }
     }
-    let (right, up, forward) = (view.right, view.up, view.forward);
-    let lambda = view.lambda;
-    let (cx, cy) = (f64::from(width) / 2.0, f64::from(height) / 2.0);
     let step = w.max(h).div_ceil(MESH_SIDE).max(1);
     let cols: Vec<usize> = (0..w)
         .step_by(step)
@@ -241,8 +244,8 @@ pub fn perspective(surface: &Surface<'_>, camera: &Camera) -> Result<Image> {
         .chain(((h - 1) % step != 0).then_some(h - 1))
         .collect();
     let near = 1e-6 * (f64::from(width) + f64::from(height));
-    // Each mesh vertex on the screen: (x, y, 1/z), or None behind the near plane or without
-    // a height.
+    // Each mesh vertex on the screen (the camera's own projection, `View::project`):
+    // (x, y, 1/z), or None behind the near plane or without a height.
     let project = |col: usize, row: usize| -> Option<[f64; 3]> {
         let z = surface.heights[row * w + col];
         if !z.is_finite() {
@@ -252,16 +255,9 @@ pub fn perspective(surface: &Surface<'_>, camera: &Camera) -> Result<Image> {
             (surface.window.col0 + col as u64) as f64,
             (surface.window.row0 + row as u64) as f64,
             z,
-        ) - view.eye;
-        let depth = p.dot(forward);
-        if depth <= near {
-            return None;
-        }
-        Some([
-            cx + lambda * p.dot(right) / depth,
-            cy - lambda * p.dot(up) / depth,
-            1.0 / depth,
-        ])
+        );
+        let [x, y, depth] = view.project(p)?;
+        (depth > near).then_some([x, y, 1.0 / depth])
     };
     let screen: Vec<Vec<Option<[f64; 3]>>> = rows
         .iter()
@@ -354,132 +350,6 @@ fn fill_triangle(
     }
 }
 
-/// The surface from overhead, north up, its longer side `side` pixels: each block tinted by
-/// its level and outlined, and the camera's view drawn on the ground (the eye, and its four
-/// corner rays to where they meet the ground at the surface's mean height, or the picture's
-/// edge). The picture spans the window and the eye.
-pub fn top(surface: &Surface<'_>, camera: &Camera, side: u32) -> Result<Image> {
-    let view = camera.view()?;
-    if side == 0 || side > MAX_SIDE {
-        return Err(Error::InvalidArgument(format!(
-            "a picture side of {side}: it must be 1 to {MAX_SIDE} pixels"
-        )));
-    }
-    let shaded = surface.shade()?;
-    let (w, h) = (shaded.w, shaded.h);
-    // The picture spans the window and the eye (with a margin around it), so that the view
-    // is seen from where it starts: in window samples, `[c0, c1] x [r0, r1]`.
-    let eye_col = view.eye.x / surface.frame.dx - surface.window.col0 as f64;
-    let eye_row = view.eye.y / surface.frame.dy - surface.window.row0 as f64;
-    let margin = 0.03 * w.max(h) as f64;
-    let (mut c0, mut c1, mut r0, mut r1) = (0.0f64, (w - 1) as f64, 0.0f64, (h - 1) as f64);
-    if eye_col.is_finite() && eye_row.is_finite() {
-        let limit = 4.0 * w.max(h) as f64;
-        c0 = c0.min((eye_col - margin).max(-limit));
-        c1 = c1.max((eye_col + margin).min(limit));
-        r0 = r0.min((eye_row - margin).max(-limit));
-        r1 = r1.max((eye_row + margin).min(limit));
-    }
-    let scale = f64::from(side) / (c1 - c0 + 1.0).max(r1 - r0 + 1.0);
-    let iw = (((c1 - c0 + 1.0) * scale).round() as u32).clamp(1, side);
-    let ih = (((r1 - r0 + 1.0) * scale).round() as u32).clamp(1, side);
-    let mut image = Image::new(iw, ih);
-    // The window sample under pixel `(px, py)`, if it lies inside the window.
-    let sample = |px: u32, py: u32| -> Option<usize> {
-        let x = (c0 + (f64::from(px) + 0.5) / scale).floor();
-        let y = (r0 + (f64::from(py) + 0.5) / scale).floor();
-        (x >= 0.0 && y >= 0.0 && x < w as f64 && y < h as f64).then(|| y as usize * w + x as usize)
-    };
-    let owner_at = |px: u32, py: u32| sample(px, py).map_or(u32::MAX, |s| shaded.owner[s]);
-    for py in 0..ih {
-        for px in 0..iw {
-            let Some(s) = sample(px, py) else {
-                image.set(i64::from(px), i64::from(py), [250, 250, 250]);
-                continue;
-            };
-            let o = shaded.owner[s];
-            let light = shaded.light[s];
-            let c = if light.is_nan() {
-                [235, 235, 235]
-            } else {
-                lit(surface.level_of(o), light)
-            };
-            let edge = (px + 1 < iw && owner_at(px + 1, py) != o)
-                || (py + 1 < ih && owner_at(px, py + 1) != o);
-            let c = match (edge, surface.level_of(o)) {
-                (true, Some(l)) => scaled(level_colour(l), 0.45),
-                _ => c,
-            };
-            image.set(i64::from(px), i64::from(py), c);
-        }
-    }
-    // The view on the ground.
-    let finite: Vec<f64> = surface
-        .heights
-        .iter()
-        .copied()
-        .filter(|z| z.is_finite())
-        .collect();
-    let ground = if finite.is_empty() {
-        0.0
-    } else {
-        finite.iter().sum::<f64>() / finite.len() as f64
-    };
-    let to_pixel = |p: DVec3| -> (f64, f64) {
-        let col = p.x / surface.frame.dx - surface.window.col0 as f64;
-        let row = p.y / surface.frame.dy - surface.window.row0 as f64;
-        ((col - c0) * scale, (row - r0) * scale)
-    };
-    let reach = (w.max(h) as f64) * surface.frame.dx.max(surface.frame.dy) * 4.0;
-    let corners: Vec<(f64, f64)> = view
-        .rays
-        .iter()
-        .map(|r| {
-            let t = if r.z < 0.0 && view.eye.z > ground {
-                ((ground - view.eye.z) / r.z).min(reach / r.length())
-            } else {
-                reach / r.length()
-            };
-            to_pixel(view.eye + *r * t)
-        })
-        .collect();
-    let eye = to_pixel(view.eye);
-    for (i, c) in corners.iter().enumerate() {
-        line(&mut image, eye, *c, FRUSTUM_COLOUR);
-        line(&mut image, *c, corners[(i + 1) % 4], FRUSTUM_COLOUR);
-    }
-    for dy in -3i64..=3 {
-        for dx in -3i64..=3 {
-            if dx * dx + dy * dy <= 9 {
-                image.set(
-                    eye.0.floor() as i64 + dx,
-                    eye.1.floor() as i64 + dy,
-                    FRUSTUM_COLOUR,
-                );
-            }
-        }
-    }
-    let mut levels: Vec<u8> = surface.blocks.iter().map(|b| b.level).collect();
-    levels.sort_unstable();
-    levels.dedup();
-    legend(&mut image, &levels);
-    Ok(image)
-}
-
-/// Digits 0 to 9, three pixels wide and five high, a row in the low three bits (MSB left).
-const DIGITS: [[u8; 5]; 10] = [
-    [7, 5, 5, 5, 7],
-    [2, 6, 2, 2, 7],
-    [7, 1, 7, 4, 7],
-    [7, 1, 7, 1, 7],
-    [5, 5, 7, 1, 1],
-    [7, 4, 7, 1, 7],
-    [7, 4, 7, 5, 7],
-    [7, 1, 1, 1, 1],
-    [7, 5, 7, 5, 7],
-    [7, 5, 7, 1, 7],
-];
-
 /// Pixels from the picture's corner to the legend's, and between its rows.
 pub const LEGEND_MARGIN: i64 = 4;
 /// A legend swatch's side, in pixels; rows are this plus 4 apart.
@@ -497,28 +367,8 @@ fn legend(image: &mut Image, levels: &[u8]) {
     {
         return;
     }
-    let fill = |image: &mut Image, x0: i64, y0: i64, dx: i64, dy: i64, c: [u8; 3]| {
-        for y in y0..y0 + dy {
-            for x in x0..x0 + dx {
-                image.set(x, y, c);
-            }
-        }
-    };
     let (x0, y0) = (LEGEND_MARGIN, LEGEND_MARGIN);
     fill(image, x0, y0, w, h, [255, 255, 255]);
-    let text = |image: &mut Image, x: i64, y: i64, n: u8| {
-        for (k, d) in n.to_string().bytes().enumerate() {
-            let glyph = DIGITS[usize::from(d - b'0')];
-            for (gy, bits) in glyph.iter().enumerate() {
-                for gx in 0..3 {
-                    if bits >> (2 - gx) & 1 == 1 {
-                        let (px, py) = (x + k as i64 * 8 + 2 * gx, y + 2 * gy as i64);
-                        fill(image, px, py, 2, 2, [40, 40, 40]);
-                    }
-                }
-            }
-        }
-    };
     for (i, &l) in levels.iter().enumerate() {
         let y = y0 + 4 + row * i as i64;
         fill(
@@ -529,12 +379,21 @@ fn legend(image: &mut Image, levels: &[u8]) {
             LEGEND_SWATCH,
             level_colour(l),
         );
-        text(image, x0 + LEGEND_SWATCH + 10, y + 1, l);
+        text::draw(image, x0 + LEGEND_SWATCH + 10, y + 1, &l.to_string(), [40, 40, 40]);
     }
     // The frustum: a red line, with the eye's dot.
     let y = y0 + 4 + row * levels.len() as i64 + LEGEND_SWATCH / 2;
     fill(image, x0 + 4, y - 1, LEGEND_SWATCH + 20, 2, FRUSTUM_COLOUR);
     fill(image, x0 + 4, y - 3, 6, 6, FRUSTUM_COLOUR);
+}
+
+/// A `dx` × `dy` rectangle from `(x0, y0)`, clipped to the picture.
+fn fill(image: &mut Image, x0: i64, y0: i64, dx: i64, dy: i64, c: [u8; 3]) {
+    for y in y0..y0 + dy {
+        for x in x0..x0 + dx {
+            image.set(x, y, c);
+        }
+    }
 }
 
 /// A line from `a` to `b` (pixels), clipped to the picture.

@@ -4,8 +4,13 @@
 //! **World frame.** `x = col · dx` (east), `y = row · dy` (south), `z = height`, all in metres;
 //! `dx`, `dy` are the dataset's ground spacing (1 when the source did not say). Sample `(0, 0)`
 //! is the origin; the georeference is not applied, so coordinates stay small and exact. With
-//! `y` growing south and `z` up the frame is left-handed; nothing below depends on handedness
-//! (the image is merely mirrored for a right-handed reader, and culling is symmetric).
+//! `y` growing south and `z` up the frame is **left-handed**: `x × y = z` does not hold, and the
+//! screen's right is `up × forward`, not the `forward × up` of a right-handed frame (ECEF,
+//! glTF, OpenGL). A camera carries its frame's [`Handedness`], and [`View`] is the one place
+//! that turns a camera into a screen basis and a pixel: the pictures, the
+//! meshes' refinement and the selection all take it from there. (Before issue 40 the
+//! right was taken as `forward × up` in the flat frame too, which mirrored every perspective
+//! picture east-west; culling is symmetric, so the selection never depended on it.)
 //!
 //! **Screen-space error** (seed 004 eq. 2). A vertical error `e` seen at distance `d` covers
 //! `e · λ / d` pixels, with `λ = S / (2 · tan(fov_y / 2))` and `S` the viewport's height in
@@ -30,6 +35,17 @@ pub const DEFAULT_FOV_DEG: f64 = 60.0;
 pub const DEFAULT_VIEWPORT: [u32; 2] = [1024, 768];
 /// The largest viewport side accepted, in pixels.
 pub const MAX_VIEWPORT: u32 = 1 << 16;
+
+/// Which way round a world frame's axes turn: it decides which side of the screen is right.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Handedness {
+    /// `x` east, `y` south, `z` up: the flat terrain frame ([`WorldFrame`]). The screen's
+    /// right is `up × forward`.
+    Left,
+    /// Earth-centred, Earth-fixed metres ([`GlobeFrame`]), like glTF's and OpenGL's frames.
+    /// The screen's right is `forward × up`.
+    Right,
+}
 
 /// A pinhole camera in the world frame.
 ///
@@ -62,10 +78,15 @@ pub struct Camera {
     pub fov_y_deg: f64,
     /// Viewport `[width, height]` in pixels.
     pub viewport: [u32; 2],
+    /// The handedness of the frame `eye`, `target` and `up` are given in: [`Handedness::Left`]
+    /// in a flat terrain frame ([`Camera::looking_at`]), [`Handedness::Right`] on the globe
+    /// ([`Camera::on_globe`]). Only pictures depend on it: the frustum is symmetric.
+    pub handedness: Handedness,
 }
 
 impl Camera {
-    /// A camera at `eye` looking at `target`, `+z` up, 60° vertical field of view, 1024 × 768.
+    /// A camera at `eye` looking at `target` in a flat terrain frame (x east, y south, z
+    /// up), `+z` up, 60° vertical field of view, 1024 × 768.
     pub fn looking_at(eye: DVec3, target: DVec3) -> Camera {
         Camera {
             eye,
@@ -73,6 +94,7 @@ impl Camera {
             up: DVec3::Z,
             fov_y_deg: DEFAULT_FOV_DEG,
             viewport: DEFAULT_VIEWPORT,
+            handedness: Handedness::Left,
         }
     }
 
@@ -84,6 +106,7 @@ impl Camera {
         let (eye, target, up) = crate::globe::look(lat, lon, h, heading, pitch);
         Camera {
             up,
+            handedness: Handedness::Right,
             ..Camera::looking_at(eye, target)
         }
     }
@@ -117,20 +140,29 @@ impl Camera {
         if self.up.length_squared() == 0.0 {
             return bad("the up vector is zero".into());
         }
-        let right = [self.up, -DVec3::Y, DVec3::X]
+        // The screen's up is `up` made perpendicular to the view; where `up` is along it
+        // (looking straight down with `+z` up), north, then east.
+        let screen_up = [self.up, -DVec3::Y, DVec3::X]
             .into_iter()
-            .map(|up| forward.cross(up.normalize()))
-            .find(|r| r.length() > 1e-9)
+            .map(|up| {
+                let up = up.normalize();
+                up - forward * up.dot(forward)
+            })
+            .find(|u| u.length() > 1e-9)
             .map(DVec3::normalize)
-            .unwrap_or(DVec3::X);
-        let screen_up = right.cross(forward);
+            .unwrap_or(DVec3::Z);
+        let right = match self.handedness {
+            Handedness::Left => screen_up.cross(forward),
+            Handedness::Right => forward.cross(screen_up),
+        }
+        .normalize();
         let tan_y = (self.fov_y_deg.to_radians() / 2.0).tan();
         let tan_x = tan_y * f64::from(w) / f64::from(h);
         if !(tan_y.is_finite() && tan_x.is_finite() && tan_y > 0.0) {
             return bad(format!("field of view {}° is degenerate", self.fov_y_deg));
         }
-        // Corner rays, counter-clockwise seen from behind the eye: top-left, bottom-left,
-        // bottom-right, top-right.
+        // Corner rays, as the screen shows them: top-left, bottom-left, bottom-right,
+        // top-right.
         let rays = [
             forward - right * tan_x + screen_up * tan_y,
             forward - right * tan_x - screen_up * tan_y,
@@ -165,6 +197,7 @@ impl Camera {
             forward,
             right,
             up: screen_up,
+            centre: [f64::from(w) / 2.0, f64::from(h) / 2.0],
             lambda: f64::from(h) / (2.0 * tan_y),
             planes,
             rays,
@@ -259,6 +292,8 @@ pub struct View {
     pub right: DVec3,
     /// Unit direction of the screen's up, perpendicular to `forward` and `right`.
     pub up: DVec3,
+    /// The viewport's centre in pixels from its top-left corner: where `forward` lands.
+    pub centre: [f64; 2],
     /// Pixels covered by one metre at one metre: `S / (2 · tan(fov_y / 2))`.
     pub lambda: f64,
     /// The four side planes.
@@ -269,6 +304,21 @@ pub struct View {
 }
 
 impl View {
+    /// Where world point `p` lands on the screen: `[x, y, depth]`, `x` pixels from the
+    /// viewport's left edge, `y` down from its top, `depth` metres along the view. `None`
+    /// for a point not in front of the eye (depth ≤ 0). Every picture projects with this.
+    pub fn project(&self, p: DVec3) -> Option<[f64; 3]> {
+        let d = p - self.eye;
+        let depth = d.dot(self.forward);
+        (depth > 0.0).then(|| {
+            [
+                self.centre[0] + self.lambda * d.dot(self.right) / depth,
+                self.centre[1] - self.lambda * d.dot(self.up) / depth,
+                depth,
+            ]
+        })
+    }
+
     /// Screen-space error in pixels of a static error `error` whose box is at `distance`.
     /// Zero error is zero pixels at any distance; a positive error at distance 0 is infinite.
     pub fn screen_error(&self, error: f64, distance: f64) -> f64 {

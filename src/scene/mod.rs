@@ -36,7 +36,7 @@ mod view_dependent;
 
 #[cfg(any(test, feature = "testing"))]
 pub use crate::format::PayloadRef;
-pub use camera::{Aabb, Camera, GlobeFrame, TerrainFrame, View, WorldFrame};
+pub use camera::{Aabb, Camera, GlobeFrame, Handedness, TerrainFrame, View, WorldFrame};
 #[cfg(any(test, feature = "testing"))]
 pub use camera::Coverage;
 pub use layers::{LayerBlock, Layers};

@@ -104,12 +104,14 @@ pub fn bytes_of(
 pub mod bundle;
 pub mod fields;
 pub mod globe;
+pub mod gltf;
 pub mod oracle;
 pub mod origin;
 pub mod quantized_mesh;
 pub mod serve;
 pub mod servers;
 pub mod tiles;
+pub mod tower;
 pub mod txn;
 pub mod txn_driver;
 pub mod views;

@@ -498,6 +498,7 @@ fn parse_view<'a>(items: &'a [Item], query: &str) -> Result<ViewQuery<'a>, Error
         up: super::args::parse_vec3(params.get("up").map_or("0,0,1", String::as_str), "up")?,
         fov_y_deg: fov,
         viewport: view.viewport()?,
+        handedness: crate::scene::Handedness::Left,
     };
     Ok(ViewQuery {
         item,

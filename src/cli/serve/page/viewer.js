@@ -229,6 +229,30 @@ function upload(scene) {
   drawn = { blocks, origin: scene.origin };
 }
 
+// The camera's view-projection matrix for a canvas `width` × `height`: in the frame the
+// shader draws in (east-north-up, centred on the eye), so that it is right-handed and the
+// screen's right is forward × up.
+function viewProjection(width, height) {
+  const f = forward();
+  const [dx, dy] = item.spacing_m || [1, 1];
+  const size = Math.max(item.width * dx, item.height * dy);
+  const hi = (item.height_range || [0, 0])[1];
+  const above = Math.max(camera.eye[2] - hi, 1);
+  const near = Math.min(Math.max(above * 0.05, 1), 1000);
+  const far = size * 4 + Math.abs(camera.eye[2]) * 4;
+  return multiply(perspective((FOV_DEG * Math.PI) / 180, width / height, near, far), viewMatrix([f[0], -f[1], f[2]]));
+}
+
+// Where the point `p` of fmrh's frame lands on the canvas, in CSS pixels from its top-left,
+// by the shader's own transformation (for tests: the same side as `fmrh render`'s).
+viewer.project = (p) => {
+  const vp = viewProjection(canvas.width, canvas.height);
+  const w = [p[0] - camera.eye[0], -(p[1] - camera.eye[1]), p[2] - camera.eye[2], 1];
+  const clip = [0, 1, 2, 3].map((r) => vp[r] * w[0] + vp[4 + r] * w[1] + vp[8 + r] * w[2] + vp[12 + r] * w[3]);
+  const [cw, ch] = [canvas.clientWidth, canvas.clientHeight];
+  return [((clip[0] / clip[3] + 1) / 2) * cw, ((1 - clip[1] / clip[3]) / 2) * ch];
+};
+
 function draw() {
   const width = canvas.width;
   const height = canvas.height;
@@ -238,14 +262,8 @@ function draw() {
   if (!program || !item) return;
   gl.enable(gl.DEPTH_TEST);
   gl.useProgram(program);
-  const f = forward();
-  const [dx, dy] = item.spacing_m || [1, 1];
-  const size = Math.max(item.width * dx, item.height * dy);
   const [lo, hi] = item.height_range || [0, 0];
-  const above = Math.max(camera.eye[2] - hi, 1);
-  const near = Math.min(Math.max(above * 0.05, 1), 1000);
-  const far = size * 4 + Math.abs(camera.eye[2]) * 4;
-  const vp = multiply(perspective((FOV_DEG * Math.PI) / 180, width / height, near, far), viewMatrix([f[0], -f[1], f[2]]));
+  const vp = viewProjection(width, height);
   gl.uniformMatrix4fv(where.u_view_projection, false, new Float32Array(vp));
   gl.uniform3f(where.u_offset, drawn.origin[0] - camera.eye[0], drawn.origin[1] - camera.eye[1], -camera.eye[2]);
   gl.uniform1i(where.u_mode, $('colour').value === 'shaded' ? 1 : 0);
