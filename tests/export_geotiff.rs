@@ -1,7 +1,9 @@
 //! A GeoTIFF written by fmrh (`fmrh::export::geotiff`, `extract --format tif`,
 //! `scene --reconstruct X.tif`) reads back as what was written: the same samples bit for
 //! bit, voids where the voids were, and the same georeference (the centre of sample (0, 0),
-//! the steps, the EPSG code) as fmrh's own GeoTIFF reader sees it. A property test writes
+//! the steps, the EPSG code) as fmrh's own GeoTIFF reader sees it; a grid without a
+//! georeference reads back with the geotransform the writer gives it (1 a sample from the
+//! origin) and no CRS. A property test writes
 //! random grids with voids, north-up and south-up georeferences, geographic, projected and
 //! unnamed CRSs; the committed georeferencing fixtures (GeoTIFFs made by GDAL) go through a
 //! container and `fmrh extract` whole and as a window, whose georeference must be the
@@ -25,7 +27,12 @@ use proptest::prelude::*;
 fn round_trip(hf: &Heightfield, dir: &Path) -> (geotiff::Written, Heightfield) {
     let path = dir.join("out.tif");
     let file = std::fs::File::create(&path).unwrap();
-    let written = geotiff::write(hf, std::io::BufWriter::new(file)).unwrap();
+    let written = geotiff::write(
+        hf,
+        &geotiff::CogOptions::default(),
+        std::io::BufWriter::new(file),
+    )
+    .unwrap();
     let back = load(&path, &IngestOptions::default()).unwrap();
     (written, back)
 }
@@ -145,11 +152,24 @@ proptest! {
                 prop_assert_eq!(written.epsg, code);
                 prop_assert_eq!(b.crs.clone(), code.map(|c| format!("EPSG:{c}")));
                 prop_assert_eq!(
-                    written.crs_kept.is_some(),
+                    written.crs_wkt.is_some(),
                     g.crs.is_some() && code.is_none()
                 );
             }
-            (None, None) => prop_assert_eq!(written.epsg, None),
+            // No georeference: the file still has a geotransform (1 a sample, sample
+            // (0, 0)'s centre at the origin, rows running south), and no CRS.
+            (None, Some(b)) => {
+                prop_assert_eq!(written.epsg, None);
+                same_georeference(
+                    &Georeference {
+                        crs: None,
+                        origin: [0.0, 0.0],
+                        step: [1.0, -1.0],
+                    },
+                    b,
+                );
+                prop_assert_eq!(b.crs.clone(), None);
+            }
             (a, b) => prop_assert!(false, "georeference {a:?} read back as {b:?}"),
         }
     }

@@ -1,6 +1,6 @@
 //! `fmrh extract`: full-resolution samples out of a container, bit for bit as stored, in the
 //! `.f32` + `.json` form of `../shared/data` (so `fmrh build` reads them back) or as a
-//! GeoTIFF.
+//! Cloud-Optimized GeoTIFF.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -19,9 +19,12 @@ pub struct ExtractArgs {
     /// (`.tif`, `.tiff`, or --format tif). `-`: standard output.
     #[arg(short, long)]
     output: PathBuf,
-    /// The output's format (default: from its name; `.f32` otherwise).
+    /// The output's format (default: from its name; `.f32` otherwise). `tif` (or `cog`)
+    /// is a Cloud-Optimized GeoTIFF.
     #[arg(long, value_enum)]
     format: Option<super::sidecar::RasterFormat>,
+    #[command(flatten)]
+    tif: super::sidecar::TifArgs,
     /// Replace existing output files.
     #[arg(long)]
     force: bool,
@@ -38,7 +41,8 @@ pub fn run(args: &ExtractArgs) -> Result<ExitCode, Error> {
             Some(text) => super::args::parse_window(text)?,
             None => ds.grid(),
         };
-        let out = super::sidecar::RasterOutput::new(&args.output, args.format, args.force)?;
+        let out = super::sidecar::RasterOutput::new(&args.output, args.format, args.force)?
+            .with_tif(&args.tif);
         let hf = ds.read_window(window)?;
         out.write_dataset(&hf, window, &args.file, ds.txn_id())?;
         return Ok(ExitCode::SUCCESS);
@@ -62,7 +66,8 @@ fn extract<S: crate::store::Source>(
         Some(text) => super::args::parse_window(text)?,
         None => data,
     };
-    let out = super::sidecar::RasterOutput::new(&args.output, args.format, args.force)?;
+    let out = super::sidecar::RasterOutput::new(&args.output, args.format, args.force)?
+        .with_tif(&args.tif);
     let hf = if args.quiet {
         store.read_window(window)?
     } else {

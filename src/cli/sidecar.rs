@@ -58,7 +58,10 @@ struct Source {
 pub enum RasterFormat {
     /// Raw little-endian f32 with a `.json` sidecar (what `../shared/data` holds).
     F32,
-    /// A GeoTIFF: f32, DEFLATE, the georeference and CRS as GeoTIFF tags, voids as NaN.
+    /// A Cloud-Optimized GeoTIFF: f32 in 512² tiles, DEFLATE or ZSTD with the
+    /// floating-point predictor, overviews, the georeference and CRS as GeoTIFF tags (a CRS
+    /// that is not an EPSG code in a `.tif.aux.xml` beside it), voids as NaN.
+    #[value(alias = "cog", alias = "tiff")]
     Tif,
 }
 
@@ -75,13 +78,50 @@ impl RasterFormat {
     }
 }
 
-/// Where a raster goes (a `.f32` and its sidecar, or a GeoTIFF), checked before any work is
-/// done.
+/// The compressions of a GeoTIFF output (`--compress`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum TifCompression {
+    /// zlib DEFLATE: every TIFF reader has it.
+    #[default]
+    Deflate,
+    /// ZSTD: smaller and faster to decode; GDAL ≥ 2.3 and most COG readers have it.
+    Zstd,
+}
+
+/// How a GeoTIFF output is written: `--compress` and `--tile`.
+#[derive(clap::Args, Clone, Copy, Debug)]
+pub struct TifArgs {
+    /// A GeoTIFF output's compression (with the floating-point predictor).
+    #[arg(long, value_enum, default_value_t = TifCompression::Deflate)]
+    compress: TifCompression,
+    /// A GeoTIFF output's tile side in samples: 256 or 512.
+    #[arg(long, default_value_t = 512)]
+    tile: u32,
+}
+
+impl TifArgs {
+    /// The writer's options.
+    pub fn options(&self) -> crate::export::geotiff::CogOptions {
+        crate::export::geotiff::CogOptions {
+            compression: match self.compress {
+                TifCompression::Deflate => crate::export::geotiff::TiffCompression::Deflate,
+                TifCompression::Zstd => crate::export::geotiff::TiffCompression::Zstd,
+            },
+            tile: self.tile,
+            force_bigtiff: false,
+        }
+    }
+}
+
+/// Where a raster goes (a `.f32` and its sidecar, or a GeoTIFF and, when its CRS is not an
+/// EPSG code, GDAL's `.aux.xml` beside it), checked before any work is done.
 pub struct RasterOutput {
     f32_path: PathBuf,
+    /// The `.json` sidecar of a `.f32`, or the `.tif.aux.xml` of a GeoTIFF.
     json_path: PathBuf,
     format: RasterFormat,
     force: bool,
+    cog: crate::export::geotiff::CogOptions,
 }
 
 impl RasterOutput {
@@ -94,13 +134,31 @@ impl RasterOutput {
         force: bool,
     ) -> Result<RasterOutput, Error> {
         let format = format.unwrap_or_else(|| RasterFormat::of(output));
-        if output == Path::new("-") || format == RasterFormat::Tif {
-            super::check_output(output, force)?;
+        let cog = crate::export::geotiff::CogOptions::default();
+        if output == Path::new("-") {
             return Ok(RasterOutput {
                 f32_path: output.to_path_buf(),
                 json_path: PathBuf::new(),
                 format,
                 force,
+                cog,
+            });
+        }
+        if format == RasterFormat::Tif {
+            // GDAL's sidecar: it may be written (a CRS that is not an EPSG code), and a stale
+            // one would give the new file an old CRS, so it is an output too.
+            let mut aux = output.as_os_str().to_owned();
+            aux.push(".aux.xml");
+            let aux = PathBuf::from(aux);
+            for p in [output, &aux] {
+                super::check_output(p, force)?;
+            }
+            return Ok(RasterOutput {
+                f32_path: output.to_path_buf(),
+                json_path: aux,
+                format,
+                force,
+                cog,
             });
         }
         if output.extension().is_some_and(|e| e == "json") {
@@ -117,7 +175,16 @@ impl RasterOutput {
             json_path,
             format,
             force,
+            cog,
         })
+    }
+
+    /// The same output, a GeoTIFF written as `tif` says.
+    pub fn with_tif(self, tif: &TifArgs) -> RasterOutput {
+        RasterOutput {
+            cog: tif.options(),
+            ..self
+        }
     }
 
     /// Writes `hf` (the container's samples `window`) and its sidecar, each atomically.
@@ -245,13 +312,37 @@ impl RasterOutput {
         Ok(())
     }
 
-    /// Writes `hf` as a GeoTIFF, atomically (or to standard output).
+    /// Writes `hf` as a Cloud-Optimized GeoTIFF, atomically (or to standard output), and
+    /// its CRS in GDAL's `.aux.xml` beside it when that is not an EPSG code (a stale sidecar
+    /// is removed: it would give the new file an old CRS). The two files are written one
+    /// after the other, the sidecar first.
     fn write_tif(&self, hf: &Heightfield) -> Result<(), Error> {
-        let mut bytes = std::io::Cursor::new(Vec::new());
-        let written = crate::export::geotiff::write(hf, &mut bytes)?;
-        let bytes = bytes.into_inner();
+        let mut bytes = Vec::new();
+        let written = crate::export::geotiff::write(hf, &self.cog, &mut bytes)?;
         let path = &self.f32_path;
-        if path == Path::new("-") {
+        let stdout = path == Path::new("-");
+        let mut sidecar = String::new();
+        if let Some(wkt) = &written.crs_wkt {
+            if stdout {
+                eprintln!(
+                    "fmrh: the CRS {wkt:?} is not an EPSG code and has no sidecar to go to on \
+                     standard output: the GeoTIFF has the geotransform without a CRS"
+                );
+            } else {
+                let aux = crate::export::geotiff::aux_xml(wkt);
+                write_atomically(&self.json_path, self.force, |w| {
+                    w.write_all(aux.as_bytes())
+                        .map_err(|e| Error::io(&self.json_path, e))
+                })?;
+                sidecar = format!(
+                    ", its CRS (not an EPSG code) in {}",
+                    self.json_path.display()
+                );
+            }
+        } else if !stdout && self.json_path.exists() {
+            std::fs::remove_file(&self.json_path).map_err(|e| Error::io(&self.json_path, e))?;
+        }
+        if stdout {
             let mut out = std::io::stdout().lock();
             out.write_all(&bytes)
                 .and_then(|()| out.flush())
@@ -261,26 +352,38 @@ impl RasterOutput {
                 w.write_all(&bytes).map_err(|e| Error::io(path, e))
             })?;
         }
-        if let Some(name) = &written.crs_kept {
-            eprintln!(
-                "fmrh: the CRS {name:?} is not an EPSG code; the GeoTIFF carries it as its \
-                 citation only, beside the geotransform"
-            );
-        }
+        let overviews: Vec<String> = written
+            .overviews
+            .iter()
+            .map(|o| format!("{}x{} (max error {:.3})", o.width, o.height, o.max_error))
+            .collect();
         eprintln!(
-            "fmrh: wrote {} x {} samples ({} void) to {} as a GeoTIFF{}",
+            "fmrh: wrote {} x {} samples ({} void) to {} as a Cloud-Optimized GeoTIFF{}{}, \
+             {} tiles of {}, {}{}",
             hf.width(),
             hf.height(),
             written.voids,
-            if path == Path::new("-") {
+            if stdout {
                 "standard output".to_string()
             } else {
                 path.display().to_string()
             },
+            if written.bigtiff { " (BigTIFF)" } else { "" },
             written
                 .epsg
                 .map(|c| format!(" (EPSG:{c})"))
-                .unwrap_or_default()
+                .unwrap_or_default(),
+            match self.cog.compression {
+                crate::export::geotiff::TiffCompression::Deflate => "DEFLATE",
+                crate::export::geotiff::TiffCompression::Zstd => "ZSTD",
+            },
+            self.cog.tile,
+            if overviews.is_empty() {
+                "no overview (one tile)".to_string()
+            } else {
+                format!("nearest-sample overviews {}", overviews.join(", "))
+            },
+            sidecar
         );
         Ok(())
     }
