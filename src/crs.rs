@@ -153,6 +153,12 @@ impl Crs {
             }
             _ => CrsKind::Other,
         };
+        // No code in the WKT (an ESRI `.prj`): the registry's CRS that is the same datum,
+        // projection and parameters, if one is.
+        let epsg = epsg.or_else(|| {
+            resolve::epsg_of(root)
+                .filter(|&c| Crs::from_epsg(c).is_some_and(|c| kind_matches(c.kind, kind)))
+        });
         let proj4 = epsg
             .and_then(Crs::from_epsg)
             .filter(|c| kind_matches(c.kind, kind))
@@ -163,6 +169,36 @@ impl Crs {
     /// The name a WKT gives its CRS (the root's first string), for display.
     pub fn wkt_name(text: &str) -> Option<String> {
         wkt::parse(text).ok()?.string(0).map(str::to_owned)
+    }
+
+    /// A CRS as a user gives it (`--crs`): `EPSG:n`, WKT, or a PROJ string the EPSG
+    /// registry has (the same parameters, in any order). An error says why not.
+    pub fn from_user(text: &str) -> Result<Crs, String> {
+        let text = text.trim();
+        if let Some(code) = text
+            .strip_prefix("EPSG:")
+            .or_else(|| text.strip_prefix("epsg:"))
+        {
+            let code: u32 = code
+                .trim()
+                .parse()
+                .map_err(|_| format!("--crs {text}: not an EPSG code"))?;
+            return Crs::from_epsg(code)
+                .ok_or_else(|| format!("--crs {text}: the EPSG registry fmrh has knows no such CRS"));
+        }
+        if text.contains('[') {
+            return Crs::from_wkt(text).map_err(|e| format!("--crs: {e}"));
+        }
+        if text.starts_with("+proj=") || text.contains(" +proj=") {
+            return resolve::epsg_of_proj4(text)
+                .and_then(Crs::from_epsg)
+                .ok_or_else(|| {
+                    format!(
+                        "--crs {text}: no EPSG code has this PROJ string; give EPSG:N or WKT"
+                    )
+                });
+        }
+        Err(format!("--crs {text}: give EPSG:N, WKT or a PROJ string (+proj=...)"))
     }
 
     /// A CRS from the name a georeference carries: `EPSG:n`, or WKT.
@@ -331,6 +367,8 @@ fn proj4_metres_per_unit(proj4: &str) -> Option<f64> {
         _ => None,
     }
 }
+
+mod resolve;
 
 /// A small WKT reader: `KEYWORD[value, value, ...]` trees (or with parentheses), values being
 /// quoted strings, numbers, bare words or nested nodes. It keeps no meaning; `Crs` asks.

@@ -38,6 +38,11 @@ pub struct BuildArgs {
     /// Print the report as JSON.
     #[arg(long)]
     pub json: bool,
+    /// The CRS of the input's georeference, over what the input says: `EPSG:N`, WKT (WKT1,
+    /// ESRI or WKT2; resolved to its EPSG code when one has its datum, projection and
+    /// parameters) or a PROJ string the EPSG registry has.
+    #[arg(long, value_name = "CRS")]
+    crs: Option<String>,
     #[command(flatten)]
     model: super::args::ModelArgs,
 }
@@ -111,6 +116,55 @@ pub(super) fn peak_memory_bytes() -> Option<u64> {
     Some(kb * 1024)
 }
 
+/// `--crs`: the georeference's CRS becomes `text` (as `EPSG:N` when it resolves to one),
+/// and the spacing in metres follows from it.
+fn override_crs(
+    heightfield: &mut crate::Heightfield,
+    text: &str,
+    input: &std::path::Path,
+) -> Result<(), Error> {
+    let crs = crate::crs::Crs::from_user(text).map_err(Error::InvalidArgument)?;
+    let h = heightfield.height();
+    let Some(g) = heightfield.metadata.georeference.as_mut() else {
+        return Err(Error::InvalidArgument(format!(
+            "--crs: {} has no georeference (origin and step) for a CRS to apply to",
+            input.display()
+        )));
+    };
+    g.crs = Some(match crs.epsg {
+        Some(code) => format!("EPSG:{code}"),
+        None => text.trim().to_string(),
+    });
+    let centre_lat = g.origin[1] + g.step[1] * f64::from(h.max(1) - 1) / 2.0;
+    heightfield.metadata.spacing_m = crs.spacing(g.step, centre_lat);
+    Ok(())
+}
+
+/// Warns when the input's CRS is one fmrh cannot place on the ground: a WKT no EPSG code
+/// matches, or a CRS that is neither geographic nor projected in a known unit.
+fn warn_of_unplaced_crs(heightfield: &crate::Heightfield, input: &std::path::Path) {
+    let Some(name) = heightfield
+        .metadata
+        .georeference
+        .as_ref()
+        .and_then(|g| g.crs.as_deref())
+    else {
+        return;
+    };
+    let placed = crate::crs::Crs::parse(name).is_some_and(|c| c.epsg.is_some());
+    if !placed {
+        let shown =
+            crate::crs::Crs::wkt_name(name).unwrap_or_else(|| name.chars().take(60).collect());
+        eprintln!(
+            "fmrh: warning: the CRS of {} (\"{shown}\") is not one fmrh can place on the ground: \
+             no EPSG code has its datum, projection and parameters. It is kept as given; \
+             longitude and latitude, geodetic tiling and --eye-geo are not available. Give \
+             --crs EPSG:N if you know its code.",
+            input.display()
+        );
+    }
+}
+
 /// Runs `fmrh build`.
 pub fn run(args: &BuildArgs) -> Result<ExitCode, Error> {
     if args.output.as_deref() == Some(std::path::Path::new("-")) {
@@ -135,9 +189,13 @@ pub fn run(args: &BuildArgs) -> Result<ExitCode, Error> {
     let loaded = ingest::load(&args.input, &args.model.ingest.options());
     progress.finish();
     let mut heightfield = loaded?;
+    if let Some(text) = &args.crs {
+        override_crs(&mut heightfield, text, &args.input)?;
+    }
     if let Some(spacing) = args.model.spacing()? {
         heightfield.metadata.spacing_m = Some(spacing);
     }
+    warn_of_unplaced_crs(&heightfield, &args.input);
     let ingest_time = t0.elapsed();
     if heightfield.metadata.spacing_m.is_none() {
         // Scenes measure distances in metres: without a spacing they take samples as 1 m apart.

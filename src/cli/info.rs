@@ -77,12 +77,21 @@ struct GeoInfo {
     lon_lat_bounds: Option<[f64; 4]>,
 }
 
-/// A CRS for the text report: a WKT shown by its name (the JSON report has it whole).
+/// A CRS for the text report: a WKT shown by its name and what fmrh made of it, the EPSG
+/// code whose datum, projection and parameters it has, or that none has (the JSON report
+/// has the WKT whole).
 fn crs_label(crs: &str) -> String {
     if crs.contains('[') {
-        match Crs::wkt_name(crs) {
-            Some(name) => format!("\"{name}\" (WKT)"),
-            None => "(WKT)".into(),
+        let name = Crs::wkt_name(crs).map_or_else(String::new, |n| format!("\"{n}\" "));
+        match Crs::from_wkt(crs) {
+            Ok(Crs {
+                epsg: Some(code), ..
+            }) => format!("{name}(WKT, the CRS of EPSG:{code})"),
+            Ok(_) => format!(
+                "{name}(WKT fmrh cannot place on the ground: no EPSG code has its datum, \
+                 projection and parameters; no lon/lat)"
+            ),
+            Err(e) => format!("{name}(WKT fmrh cannot read: {e})"),
         }
     } else {
         crs.to_owned()
