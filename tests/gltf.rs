@@ -575,3 +575,63 @@ fn refine_fractal_on_a_dataset_names_each_nodes_tile() {
     from_scene.sort_unstable();
     assert_eq!(from_mesh, from_scene);
 }
+
+/// The output's name says what is written (issue 40: `-o x.gltf` and `-o x.obj` both got
+/// GLB bytes): `.glb` a binary glTF; `.gltf` JSON glTF naming `x.bin` beside it, the same
+/// document as the GLB's JSON chunk but for that URI, and the `.bin` its binary chunk byte
+/// for byte; any other name refused (exit 2), nothing written. The Khronos validator
+/// checks a `.gltf` and its `.bin` in the large-data suite (`tests/mesh_real.rs`).
+#[test]
+fn the_output_name_says_glb_or_gltf_and_anything_else_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = container(dir.path());
+    let glb = dir.path().join("scene.glb");
+    let gltf = dir.path().join("scene.gltf");
+    for out in [&glb, &gltf] {
+        let run = mesh_cli(&file, out, &[]);
+        assert!(
+            run.status.success(),
+            "{}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+    }
+    let (glb_json, glb_bin) = chunks(&std::fs::read(&glb).unwrap());
+    let text = std::fs::read_to_string(&gltf).unwrap();
+    let mut doc: Value = serde_json::from_str(&text).expect("a .gltf is JSON");
+    assert_eq!(doc["buffers"][0]["uri"], "scene.bin");
+    assert_eq!(doc["buffers"][0]["byteLength"], glb_bin.len());
+    doc["buffers"][0].as_object_mut().unwrap().remove("uri");
+    assert_eq!(doc, glb_json);
+    assert_eq!(
+        std::fs::read(dir.path().join("scene.bin")).unwrap(),
+        glb_bin
+    );
+    // Again without --force: refused, both files kept; with it, replaced.
+    let run = mesh_cli(&file, &gltf, &[]);
+    assert_eq!(run.status.code(), Some(2));
+    std::fs::remove_file(&gltf).unwrap();
+    let run = mesh_cli(&file, &gltf, &[]);
+    assert_eq!(run.status.code(), Some(2), "the .bin is there");
+    assert!(!gltf.exists());
+    let run = mesh_cli(&file, &gltf, &["--force"]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    for name in ["scene.obj", "scene.txt", "scene", "scene.GLB.tmp"] {
+        let out = dir.path().join(name);
+        let run = mesh_cli(&file, &out, &[]);
+        assert_eq!(run.status.code(), Some(2), "{name}");
+        let said = String::from_utf8_lossy(&run.stderr);
+        assert!(
+            said.contains(".glb") && said.contains(".gltf"),
+            "{name}: {said}"
+        );
+        assert!(!out.exists(), "{name}");
+    }
+    // Upper case is the same extension.
+    let upper = dir.path().join("SCENE.GLB");
+    assert!(mesh_cli(&file, &upper, &[]).status.success());
+    assert_eq!(&std::fs::read(&upper).unwrap()[..4], b"glTF");
+}

@@ -160,6 +160,14 @@ fn meshes_of_every_shared_dem_and_a_dataset_are_valid_gltf() {
     args.extend(["-o".into(), out.display().to_string()]);
     stitched.push(("N43E006+N43E007".into(), fmrh_ok(&args)));
     files.push(out);
+    // The same as JSON glTF with its buffer beside it (`-o X.gltf` writes X.bin too).
+    let out = dir.path().join("dataset.gltf");
+    let mut args = vec!["mesh".into(), ds.display().to_string()];
+    args.extend(view(&json));
+    args.extend(["-o".into(), out.display().to_string()]);
+    fmrh_ok(&args);
+    assert!(dir.path().join("dataset.bin").is_file());
+    files.push(out);
 
     // Detail past the data: Puget Sound 1k (bundled) seen from 800 m, refined by fractal
     // nodes and stitched to its stored blocks.

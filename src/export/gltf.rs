@@ -301,3 +301,37 @@ pub fn glb_in(blocks: &[GltfBlock<'_>], frame: &GltfFrame, scene_extras: Value) 
     out.extend_from_slice(&indices);
     Ok(out)
 }
+
+/// A GLB (as [`glb_in`] writes it) as glTF JSON with its binary buffer apart: the JSON's one
+/// buffer gets `uri = bin_uri` (the `.bin` file beside it, a relative URI), the bytes are the
+/// GLB's binary chunk. The two are the same asset as the GLB, for tools that want text.
+pub fn gltf_from_glb(glb: &[u8], bin_uri: &str) -> Result<(Vec<u8>, Vec<u8>)> {
+    let bad = |what: &str| Error::InvalidArgument(format!("glTF: {what}"));
+    let word = |at: usize| -> Result<usize> {
+        glb.get(at..at + 4)
+            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize)
+            .ok_or_else(|| bad("a truncated GLB"))
+    };
+    if word(0)? != GLB_MAGIC as usize || word(12 + 4)? != CHUNK_JSON as usize {
+        return Err(bad("not a GLB"));
+    }
+    let json_len = word(12)?;
+    let json = glb
+        .get(20..20 + json_len)
+        .ok_or_else(|| bad("a truncated JSON chunk"))?;
+    let bin_at = 20 + json_len;
+    let bin_len = word(bin_at)?;
+    if word(bin_at + 4)? != CHUNK_BIN as usize {
+        return Err(bad("no binary chunk"));
+    }
+    let bin = glb
+        .get(bin_at + 8..bin_at + 8 + bin_len)
+        .ok_or_else(|| bad("a truncated binary chunk"))?;
+    let mut doc: Value =
+        serde_json::from_slice(json).map_err(|e| bad(&format!("its JSON: {e}")))?;
+    doc["buffers"][0]["uri"] = Value::String(bin_uri.to_string());
+    let mut text =
+        serde_json::to_vec_pretty(&doc).map_err(|e| bad(&format!("its JSON: {e}")))?;
+    text.push(b'\n');
+    Ok((text, bin.to_vec()))
+}

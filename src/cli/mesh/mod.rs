@@ -84,7 +84,9 @@ pub struct MeshArgs {
     /// nodes below the physical blocks, deterministic, marked synthetic in every output.
     #[arg(long, value_enum)]
     refine: Option<RefineArg>,
-    /// The .glb to write (`-`: standard output), or the tile directory to create.
+    /// What to write, by its name: `X.glb` a binary glTF (`-`: to standard output), `X.gltf`
+    /// a JSON glTF with its buffer in `X.bin` beside it; with --format quantized-mesh the
+    /// tile directory to create. Any other name is refused.
     #[arg(short, long)]
     output: PathBuf,
     /// Replace an existing output.
@@ -225,9 +227,54 @@ fn refine_fractal(
     Ok(out)
 }
 
+/// A glTF output, as its name says.
+enum GltfOutput {
+    /// Binary glTF to this path or `-`.
+    Glb,
+    /// JSON glTF, its buffer in the `.bin` of this path and named by this URI.
+    Gltf { bin: PathBuf, uri: String },
+}
+
+/// What `output` asks for: `.glb` or `-`, or `.gltf` (its `.bin` beside it, checked as an
+/// output too). Anything else is refused, so `-o mesh.obj` never gets GLB bytes.
+fn gltf_output(output: &std::path::Path, force: bool) -> Result<GltfOutput, Error> {
+    if output == std::path::Path::new("-") {
+        return Ok(GltfOutput::Glb);
+    }
+    let ext = output
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    match ext.as_deref() {
+        Some("glb") => Ok(GltfOutput::Glb),
+        Some("gltf") => {
+            let bin = output.with_extension("bin");
+            super::check_output(&bin, force)?;
+            let uri = bin
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            Ok(GltfOutput::Gltf { bin, uri })
+        }
+        other => Err(Error::InvalidArgument(format!(
+            "-o {}: fmrh mesh writes glTF, as `X.glb` (binary) or `X.gltf` (JSON, with \
+             `X.bin` beside it){}",
+            output.display(),
+            match other {
+                Some(e) => format!("; it does not write .{e}"),
+                None => String::new(),
+            }
+        ))),
+    }
+}
+
 /// Runs `fmrh mesh`.
 pub fn run(args: &MeshArgs) -> Result<ExitCode, Error> {
     super::check_output(&args.output, args.force)?;
+    let gltf = if args.format == MeshFormat::Glb {
+        Some(gltf_output(&args.output, args.force)?)
+    } else {
+        None
+    };
     if args.format == MeshFormat::QuantizedMesh && args.output == std::path::Path::new("-") {
         return Err(Error::InvalidArgument(
             "quantized-mesh tiles are written to a directory, not `-`".into(),
@@ -275,8 +322,19 @@ pub fn run(args: &MeshArgs) -> Result<ExitCode, Error> {
     let stitched = meshes.iter().filter(|m| m.stitched.contains(&true)).count();
     let synthetic = meshed.synthetic();
     let bytes = meshed.glb()?;
-    super::write_output(&args.output, args.force, &bytes)?;
-    let bytes = bytes.len() as u64;
+    let bytes = match gltf {
+        Some(GltfOutput::Gltf { bin, uri }) => {
+            let (json, buffer) = crate::export::gltf::gltf_from_glb(&bytes, &uri)?;
+            // The buffer first: the JSON that names it appears only once it is there.
+            super::write_output(&bin, args.force, &buffer)?;
+            super::write_output(&args.output, args.force, &json)?;
+            (json.len() + buffer.len()) as u64
+        }
+        _ => {
+            super::write_output(&args.output, args.force, &bytes)?;
+            bytes.len() as u64
+        }
+    };
     eprintln!(
         "fmrh: meshed {} blocks ({} stitched to a neighbour{}) as {} triangles, {} bytes{}",
         meshes.len(),
