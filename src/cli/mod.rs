@@ -103,9 +103,13 @@ pub fn is_dataset(path: &Path) -> Result<bool, Error> {
     long_about = "fmrh turns a DEM (a grid of heights) into an FMRH: a quadtree of blocks, \
 each with a measured error, grouped into error clusters in Hilbert order, so that a view \
 becomes a few range scans. It stores the lot in one checksummed .fmrh container.\n\n\
-Exit status: 0 success, 2 unusable input or arguments, 1 system error, 75 a concurrent \
-writer got in the way: retry (verify: 0 valid, 1 invalid, 2 unusable, 75 a writer is \
-committing: retry)."
+Exit status (docs/containers.md, Exit status):\n  \
+0    success (verify: VALID)\n  \
+1    a system error: a disk or network failure, out of space (verify: INVALID)\n  \
+2    unusable input or arguments: a missing, unreadable or malformed file, a bad option\n  \
+74   verify only: a read failed, nothing was decided\n  \
+75   a concurrent writer got in the way: run again\n  \
+129  SIGHUP, 130 SIGINT, 143 SIGTERM: stopped, no temporary file left"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -242,7 +246,21 @@ pub fn main() -> ExitCode {
     unsafe {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
-    // Ctrl-C or SIGTERM during a write removes the temporary file it was writing.
+    // A signal during a write removes the temporary file it was writing, and the process
+    // exits as a shell reports that signal: 128 + its number (SIGINT 130, SIGTERM 143).
+    #[cfg(unix)]
+    {
+        use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
+        if let Ok(mut signals) = signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGHUP]) {
+            std::thread::spawn(move || {
+                if let Some(signal) = signals.forever().next() {
+                    crate::store::write::remove_temporary_files();
+                    std::process::exit(128 + signal);
+                }
+            });
+        }
+    }
+    #[cfg(not(unix))]
     let _ = ctrlc::set_handler(|| {
         crate::store::write::remove_temporary_files();
         std::process::exit(130);
@@ -280,10 +298,23 @@ pub fn main() -> ExitCode {
         Ok(code) => code,
         Err(e) => {
             eprintln!("fmrh: error: {e}");
+            // A file that is not there, or that fmrh may not read, is the caller's to fix:
+            // an unusable input (exit 2), not a failure of the system (exit 1).
+            let unusable = matches!(
+                &e,
+                Error::Io { source, .. } if matches!(
+                    source.kind(),
+                    std::io::ErrorKind::NotFound | std::io::ErrorKind::PermissionDenied
+                )
+            );
             if cli.command.json() {
                 // --json promises JSON on stdout, failures included.
-                let out = serde_json::json!({ "error": e.to_string(), "kind": e.kind() });
+                let kind = if unusable { "input" } else { e.kind() };
+                let out = serde_json::json!({ "error": e.to_string(), "kind": kind });
                 println!("{out}");
+            }
+            if unusable {
+                return ExitCode::from(2);
             }
             match e {
                 // `verify` exits 1 for INVALID: a failed read (a network gone, a disk error)
