@@ -454,12 +454,12 @@ fn serve_refuses_what_it_cannot_serve() {
     let twin = other.join("ps1k.fmrh");
     let bad = not_a_container.to_str().unwrap();
     let missing = dir.path().join("missing.fmrh");
-    // Exit 2 for what the user asked wrongly, 1 for a file that cannot be read (as every
-    // command).
+    // Exit 2 for what the user asked wrongly, a missing file included (as every command:
+    // issue 40; 1 is for the system's failures).
     for (args, code, says) in [
         (vec![f, twin.to_str().unwrap()], 2, "both named `ps1k.fmrh`"),
         (vec![bad], 2, "x.fmrh"),
-        (vec![missing.to_str().unwrap()], 1, "missing.fmrh"),
+        (vec![missing.to_str().unwrap()], 2, "missing.fmrh"),
         (vec!["http://127.0.0.1:1/a.fmrh"], 2, "not URLs"),
         (vec![other.to_str().unwrap()], 2, "without a MANIFEST"),
         (

@@ -118,7 +118,7 @@ pub struct ModelArgs {
     no_thin: bool,
     /// Ground distance between samples in metres, DX or DX,DY (east, south). Overrides what
     /// the source says; scenes use it to place the terrain in the world.
-    #[arg(long, value_delimiter = ',')]
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
     spacing: Option<Vec<f64>>,
     #[command(flatten)]
     pub ingest: IngestArgs,
@@ -186,7 +186,7 @@ pub struct ViewArgs {
     /// Ground distance between samples in metres, DX or DX,DY (east, south), where cameras
     /// are placed. Required when the file does not record it (`info` says "spacing
     /// unknown"); `--spacing 1` measures the world in samples. Overrides the file's.
-    #[arg(long, value_delimiter = ',')]
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
     pub spacing: Option<Vec<f64>>,
 }
 
@@ -430,8 +430,8 @@ pub fn parse_list(text: &str, n: usize, what: &str) -> Result<Vec<f64>, Error> {
 }
 
 /// Parses a Rust-style range of integers into an inclusive one: `a..b` (b excluded) or
-/// `a..=b` (b included). `None` when the range is empty.
-pub fn parse_range(text: &str, what: &str) -> Result<Option<(u64, u64)>, Error> {
+/// `a..=b` (b included). An empty or reversed range is an error: nothing to scan is a mistake.
+pub fn parse_range(text: &str, what: &str) -> Result<(u64, u64), Error> {
     let bad = || {
         Error::InvalidArgument(format!(
             "{what} `{text}`: expected A..B (B excluded) or A..=B (B included)"
@@ -447,7 +447,16 @@ pub fn parse_range(text: &str, what: &str) -> Result<Option<(u64, u64)>, Error> 
     let a: u64 = a.trim().parse().map_err(|_| bad())?;
     let b: u64 = b.trim().parse().map_err(|_| bad())?;
     let last = if inclusive { Some(b) } else { b.checked_sub(1) };
-    Ok(last.filter(|&l| l >= a).map(|l| (a, l)))
+    match last.filter(|&l| l >= a) {
+        Some(l) => Ok((a, l)),
+        // Nothing to scan is a mistake in the range, not an empty answer.
+        None if b < a => Err(Error::InvalidArgument(format!(
+            "{what} `{text}`: the range is reversed ({b} is below {a})"
+        ))),
+        None => Err(Error::InvalidArgument(format!(
+            "{what} `{text}`: the range is empty ({b} is excluded); A..=B includes B"
+        ))),
+    }
 }
 
 /// `--spacing`: one or two finite positive distances.

@@ -32,7 +32,8 @@ pub struct BuildArgs {
     /// complete).
     #[arg(long)]
     force: bool,
-    /// No progress bar.
+    /// Quiet: no progress bar, and no report on success (warnings and errors still go to
+    /// standard error).
     #[arg(long, short)]
     quiet: bool,
     /// Print the report as JSON.
@@ -293,7 +294,7 @@ pub fn run(args: &BuildArgs) -> Result<ExitCode, Error> {
     };
     if args.json {
         super::print_json(&report)?;
-    } else {
+    } else if !args.quiet {
         print_report(&report);
     }
     Ok(ExitCode::SUCCESS)

@@ -96,7 +96,7 @@ pub struct BuildArgs {
     tile_size: Option<u32>,
     #[command(flatten)]
     tile_options: TileOptions,
-    /// No progress.
+    /// Quiet: no progress, and no report on success.
     #[arg(long, short)]
     quiet: bool,
     /// Print the report as JSON.
@@ -183,7 +183,7 @@ fn build(args: &BuildArgs) -> Result<ExitCode, Error> {
             build_time_s: seconds,
             peak_memory_bytes: super::build::peak_memory_bytes(),
         })?;
-    } else {
+    } else if !args.quiet {
         println!(
             "{}: {} tiles, {} x {} samples, {} shared edges",
             args.output.display(),

@@ -28,7 +28,7 @@ pub struct ExtractArgs {
     /// Replace existing output files.
     #[arg(long)]
     force: bool,
-    /// No progress bar.
+    /// Quiet: no progress bar, and no message on success.
     #[arg(long, short)]
     quiet: bool,
 }
@@ -42,7 +42,8 @@ pub fn run(args: &ExtractArgs) -> Result<ExitCode, Error> {
             None => ds.grid(),
         };
         let out = super::sidecar::RasterOutput::new(&args.output, args.format, args.force)?
-            .with_tif(&args.tif);
+            .with_tif(&args.tif)
+            .quietly(args.quiet);
         let hf = ds.read_window(window)?;
         out.write_dataset(&hf, window, &args.file, ds.txn_id())?;
         return Ok(ExitCode::SUCCESS);
@@ -67,7 +68,8 @@ fn extract<S: crate::store::Source>(
         None => data,
     };
     let out = super::sidecar::RasterOutput::new(&args.output, args.format, args.force)?
-        .with_tif(&args.tif);
+        .with_tif(&args.tif)
+        .quietly(args.quiet);
     let hf = if args.quiet {
         store.read_window(window)?
     } else {

@@ -60,16 +60,16 @@ pub fn run(args: &ScanArgs) -> Result<ExitCode, Error> {
         ))
     })?;
     let found: Vec<_> = match (&args.hilbert, &args.codes) {
-        (Some(h), _) => match super::args::parse_range(h, "--hilbert")? {
-            Some((lo, hi)) => store.scan_hilbert(args.cluster, lo..=hi)?.collect(),
-            None => Vec::new(),
-        },
-        (None, Some(c)) => match super::args::parse_range(c, "--codes")? {
-            Some((a, b)) => store
+        (Some(h), _) => {
+            let (lo, hi) = super::args::parse_range(h, "--hilbert")?;
+            store.scan_hilbert(args.cluster, lo..=hi)?.collect()
+        }
+        (None, Some(c)) => {
+            let (a, b) = super::args::parse_range(c, "--codes")?;
+            store
                 .scan_codes(args.cluster, a..b.saturating_add(1))?
-                .collect(),
-            None => Vec::new(),
-        },
+                .collect()
+        }
         (None, None) => unreachable!("clap requires --hilbert or --codes"),
     };
     let d = *store.domain();

@@ -122,6 +122,8 @@ pub struct RasterOutput {
     format: RasterFormat,
     force: bool,
     cog: crate::export::geotiff::CogOptions,
+    /// No message on success.
+    quiet: bool,
 }
 
 impl RasterOutput {
@@ -142,6 +144,7 @@ impl RasterOutput {
                 format,
                 force,
                 cog,
+                quiet: false,
             });
         }
         if format == RasterFormat::Tif {
@@ -159,6 +162,7 @@ impl RasterOutput {
                 format,
                 force,
                 cog,
+                quiet: false,
             });
         }
         if output.extension().is_some_and(|e| e == "json") {
@@ -176,7 +180,13 @@ impl RasterOutput {
             format,
             force,
             cog,
+            quiet: false,
         })
+    }
+
+    /// The same output, with no message on success.
+    pub fn quietly(self, quiet: bool) -> RasterOutput {
+        RasterOutput { quiet, ..self }
     }
 
     /// The same output, a GeoTIFF written as `tif` says.
@@ -287,6 +297,9 @@ impl RasterOutput {
             out.write_all(&raw)
                 .and_then(|()| out.flush())
                 .map_err(|e| Error::io("<stdout>", e))?;
+            if self.quiet {
+                return Ok(());
+            }
             eprintln!(
                 "fmrh: wrote {} x {} samples ({} void) to standard output as raw little-endian \
                  f32, row-major",
@@ -300,6 +313,9 @@ impl RasterOutput {
             write_atomically(path, self.force, |w| {
                 w.write_all(bytes).map_err(|e| Error::io(path, e))
             })?;
+        }
+        if self.quiet {
+            return Ok(());
         }
         eprintln!(
             "fmrh: wrote {} x {} samples ({} void) to {} and {}",
@@ -357,6 +373,9 @@ impl RasterOutput {
             .iter()
             .map(|o| format!("{}x{} (max error {:.3})", o.width, o.height, o.max_error))
             .collect();
+        if self.quiet {
+            return Ok(());
+        }
         eprintln!(
             "fmrh: wrote {} x {} samples ({} void) to {} as a Cloud-Optimized GeoTIFF{}{}, \
              {} tiles of {}, {}{}",

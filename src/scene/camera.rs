@@ -36,6 +36,11 @@ pub const DEFAULT_VIEWPORT: [u32; 2] = [1024, 768];
 /// The largest viewport side accepted, in pixels.
 pub const MAX_VIEWPORT: u32 = 1 << 16;
 
+/// The largest camera coordinate accepted, in metres: a thousand times the Earth's orbit,
+/// far past any terrain, and small enough that differences of coordinates stay finite
+/// and keep millimetres near the terrain.
+pub const MAX_COORDINATE: f64 = 1e12;
+
 /// Which way round a world frame's axes turn: it decides which side of the screen is right.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Handedness {
@@ -132,6 +137,15 @@ impl Camera {
             return bad(format!(
                 "viewport {w}x{h}: each side must be 1 to {MAX_VIEWPORT} pixels"
             ));
+        }
+        for (name, p) in [("eye", self.eye), ("target", self.target)] {
+            if p.abs().max_element() > MAX_COORDINATE {
+                return bad(format!(
+                    "camera coordinates out of range: the {name} is at ({}, {}, {}); each \
+                     coordinate must be within ±{MAX_COORDINATE:e} m",
+                    p.x, p.y, p.z
+                ));
+            }
         }
         let forward = (self.target - self.eye).normalize_or_zero();
         if forward == DVec3::ZERO || !forward.is_finite() {
