@@ -1,5 +1,6 @@
 //! The command line says what it did, once, and nothing when told to be quiet (issue 40,
-//! point 6): `-q` prints nothing on a successful `build`, `extract` or `dataset build`;
+//! point 6): `-q` prints nothing on a successful `build`, `extract`, `dataset build` or
+//! `verify` of a valid file (and `verify -q` still reports a damaged one);
 //! `replace`'s message names one txn, the one `info` shows; out-of-range camera numbers
 //! are "camera coordinates out of range", not "the target must differ from the eye";
 //! `--spacing=-10` and `--spacing -10` are values refused with a message, not unknown
@@ -73,6 +74,24 @@ fn quiet_commands_print_nothing_on_success() {
         ]);
         assert!(String::from_utf8_lossy(&out.stderr).contains("wrote"));
     }
+    // verify -q: nothing when valid; the report when not.
+    let out = common::fmrh(&["verify", "-q", f]);
+    assert_eq!(out.status.code(), Some(0));
+    assert!(
+        out.stdout.is_empty() && out.stderr.is_empty(),
+        "verify -q of a valid file"
+    );
+    let damaged = dir.path().join("damaged.fmrh");
+    let mut bytes = std::fs::read(&file).unwrap();
+    let at = bytes.len() / 2;
+    bytes[at] ^= 0xff;
+    std::fs::write(&damaged, bytes).unwrap();
+    let out = common::fmrh(&["verify", "-q", damaged.to_str().unwrap()]);
+    assert_ne!(out.status.code(), Some(0));
+    assert!(
+        !out.stdout.is_empty() || !out.stderr.is_empty(),
+        "verify -q of a damaged file says why"
+    );
     let png = common::bundled_dir().join("puget-sound-1k/ps_height_1k.png");
     let layout = dir.path().join("layout.csv");
     std::fs::write(

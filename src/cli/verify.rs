@@ -18,7 +18,8 @@ pub struct VerifyArgs {
     /// Print the report as JSON.
     #[arg(long)]
     pub json: bool,
-    /// No progress bar.
+    /// Quiet: no progress bar, and nothing printed when the file is valid (the exit status
+    /// says so); the report is printed when it is not.
     #[arg(long, short)]
     quiet: bool,
 }
@@ -62,7 +63,7 @@ fn check<S: crate::store::Source>(args: &VerifyArgs, src: S) -> Result<ExitCode,
     };
     if args.json {
         super::print_json(&report)?;
-    } else {
+    } else if !(args.quiet && report.valid) {
         println!(
             "{}: {} ({} check, txn {})",
             path.display(),
@@ -137,7 +138,7 @@ fn run_dataset(args: &VerifyArgs) -> Result<ExitCode, Error> {
     };
     if args.json {
         super::print_json(&report)?;
-    } else {
+    } else if !(args.quiet && report.valid) {
         println!(
             "{}: {} ({} check of the manifest and {} tiles, txn {})",
             args.file.display(),
