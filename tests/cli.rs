@@ -143,9 +143,10 @@ fn bad_input_is_a_clear_error() {
     let hgt = hgt.to_str().unwrap();
     let fuji = data("fuji-terrain-rgb/fuji.png");
 
+    // A missing input is the caller's to fix: exit 2 (issue 40's exit table).
     fails_with(
         &["build", "/nonexistent/dem.hgt", "--dry-run"],
-        1,
+        2,
         "No such file",
     );
     fails_with(&["build", junk, "--dry-run"], 2, "junk.png");

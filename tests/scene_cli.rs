@@ -232,5 +232,6 @@ fn bad_input_is_a_clear_error() {
         "--tau",
         "1",
     ]);
-    assert_eq!(o.status.code(), Some(1));
+    // A missing path file is an unusable input, exit 2 (issue 40's exit table).
+    assert_eq!(o.status.code(), Some(2));
 }
