@@ -149,7 +149,7 @@ pub mod types {
     pub use crate::heightfield::{Georeference, Metadata};
     pub use crate::ingest::{ColorEncoding, Format, IngestLimits, IngestOptions};
     pub use crate::model::{SampleRect, ThinByArea, Thresholds};
-    pub use crate::scene::{Mode, NeighbourLevels, SceneStats};
+    pub use crate::scene::{Handedness, Mode, NeighbourLevels, SceneStats};
     pub use crate::store::{CheckReport, CheckStatus, VerifyMode, VerifyReport};
     pub use crate::terrain::{Committed, Created, ErrorLevel, Kind};
 }

@@ -44,10 +44,10 @@ pub const MAX_COORDINATE: f64 = 1e12;
 /// Which way round a world frame's axes turn: it decides which side of the screen is right.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Handedness {
-    /// `x` east, `y` south, `z` up: the flat terrain frame ([`WorldFrame`]). The screen's
+    /// `x` east, `y` south, `z` up: the flat terrain frame (`WorldFrame`). The screen's
     /// right is `up × forward`.
     Left,
-    /// Earth-centred, Earth-fixed metres ([`GlobeFrame`]), like glTF's and OpenGL's frames.
+    /// Earth-centred, Earth-fixed metres (`GlobeFrame`), like glTF's and OpenGL's frames.
     /// The screen's right is `forward × up`.
     Right,
 }
