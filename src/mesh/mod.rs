@@ -40,6 +40,7 @@
 //! dataset's scene across tiles, in one sample frame.
 
 pub mod fractal;
+pub mod rtin;
 mod lines;
 mod triangulate;
 
