@@ -228,7 +228,9 @@ impl Rtin {
         while let Some(t) = stack.pop() {
             if let Some(m) = t.split_point() {
                 let e = self.errors[m[1] as usize * side + m[0] as usize];
-                if !(e <= budget) {
+                // NaN budgets and errors split: only a known error within budget stops.
+                let within = e <= budget;
+                if !within {
                     stack.extend(t.children(m));
                     continue;
                 }
