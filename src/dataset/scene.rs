@@ -21,7 +21,7 @@ use serde::Serialize;
 use super::reader::{Dataset, Tile};
 use crate::error::{Error, Result};
 use crate::model::SampleRect;
-use crate::scene::{
+use crate::scene::{DEFAULT_GAP, 
     Aabb, Camera, GlobeFrame, Mode, NeighbourLevels, SceneBlock, SceneOptions, SceneStats, Terrain,
     TerrainFrame, View, WorldFrame,
 };
@@ -210,6 +210,72 @@ impl Dataset {
     pub fn scene_on_globe(&self, camera: &Camera, options: &SceneOptions) -> Result<DatasetScene> {
         let globe = self.globe_frame()?;
         self.scene_in(camera, options, TerrainFrame::Globe(globe))
+    }
+
+    /// The cut of the dataset within the static bound `max_error` over `window` (dataset
+    /// samples): each tile's [`Terrain::cut`] over its part of the window, moved into
+    /// dataset samples. Every tile's cut is a cut of its whole tree, so two windows get the
+    /// same blocks wherever they overlap.
+    pub fn cut(&self, window: SampleRect, max_error: f64) -> Result<DatasetScene> {
+        let started = std::time::Instant::now();
+        window.check_inside(&self.grid(), "dataset")?;
+        let tiles = self.tiles_meeting(&window)?;
+        let per_tile = self.for_tiles(&tiles, |tile| {
+            let r = tile.rect();
+            let Some(p) = window.intersect(&r) else {
+                return Ok(None);
+            };
+            let local = SampleRect {
+                col0: p.col0 - r.col0,
+                row0: p.row0 - r.row0,
+                col1: p.col1 - r.col0,
+                row1: p.row1 - r.row0,
+            };
+            let store = self.open_tile(tile)?;
+            let before = store.read_stats();
+            let scene = Terrain::with_spacing(&store, None)?.cut(local, max_error, DEFAULT_GAP)?;
+            let reads = store.read_stats().since(&before);
+            Ok(Some((store, scene, reads)))
+        })?;
+        let mut blocks = Vec::new();
+        let mut parts = Vec::new();
+        let mut stats = SceneStats::default();
+        let mut finest = Vec::new();
+        for (tile, done) in tiles.iter().zip(per_tile) {
+            let Some((store, scene, reads)) = done else {
+                continue;
+            };
+            let r = tile.rect();
+            stats.merge(&scene.stats);
+            parts.push(TilePart {
+                tile: tile.index,
+                name: tile.name().to_string(),
+                window: scene.window.map(|w| shifted(&w, &r)),
+                blocks: scene.blocks.len() as u64,
+                cluster: scene.stats.cluster,
+                reads,
+            });
+            let fl = store.domain().finest_level();
+            for mut block in scene.blocks {
+                let w = shifted(&block.rect(), &r);
+                (block.col0, block.row0, block.col1, block.row1) = (w.col0, w.row0, w.col1, w.row1);
+                blocks.push(DatasetBlock {
+                    tile: tile.index,
+                    block,
+                });
+                finest.push((fl, store.domain().block_size(), r));
+            }
+        }
+        set_border_neighbours(&mut blocks, &finest);
+        stats.schedule_ns = started.elapsed().as_nanos() as u64;
+        Ok(DatasetScene {
+            mode: Mode::Uniform,
+            tau: 0.0,
+            window: Some(window),
+            blocks,
+            stats,
+            tiles: parts,
+        })
     }
 
     fn scene_in(

@@ -11,9 +11,68 @@ use super::result::{Mode, Scene, SceneOptions, SceneStats};
 use super::search::Search;
 use super::terrain::Terrain;
 use crate::error::{Error, Result};
+use crate::model::SampleRect;
 use crate::store::Source;
 
 impl<S: Source> Terrain<'_, S> {
+    /// The *cut* of the terrain within a static bound: the blocks over `window` (inclusive
+    /// samples, inside the data) of the coarsest error level whose every node is within
+    /// `max_error` metres of the source (`format-spec/model.md`'s cluster of the largest
+    /// threshold at most `max_error`; physical blocks, `e* = 0`, below the finest). No
+    /// camera: the blocks' distances and screen errors are left at 0. A level is a cut of
+    /// the whole tree, so two windows get the same block wherever they overlap: tiles cut
+    /// from neighbouring windows agree on their shared edges.
+    pub fn cut(&self, window: SampleRect, max_error: f64, gap: u64) -> Result<Scene> {
+        let started = Instant::now();
+        if !(max_error >= 0.0) {
+            return Err(Error::InvalidArgument(format!(
+                "error bound {max_error} m: must be a number >= 0"
+            )));
+        }
+        // A camera the search can hold; a window decides the region, so it is not looked
+        // through, and no block is culled by it.
+        let b = self.rect_box(&window, self.root().min_height, self.root().max_height);
+        let centre = (b.min + b.max) * 0.5;
+        let reach = (b.max - b.min).length().max(1.0);
+        let nominal = Camera {
+            eye: centre + glam::DVec3::splat(reach),
+            target: centre,
+            ..Camera::looking_at(glam::DVec3::ONE, glam::DVec3::ZERO)
+        };
+        let view = nominal.view()?;
+        let d = *self.domain();
+        let (quadrants, window) = self.region(&view, Some(window))?;
+        let mut search = Search {
+            terrain: self,
+            view: &view,
+            tau: 0.0,
+            out: Vec::new(),
+            stats: SceneStats {
+                quadrants: quadrants.len() as u64,
+                ..SceneStats::default()
+            },
+        };
+        search.uniform_within(&quadrants, max_error, gap)?;
+        let Search {
+            mut out, mut stats, ..
+        } = search;
+        self.finish(&view, window, &mut out);
+        let side = u64::from(d.block_size());
+        for block in &mut out {
+            block.distance = 0.0;
+            block.screen_error = 0.0;
+            stats.add_block(block, side);
+        }
+        stats.schedule_ns = started.elapsed().as_nanos() as u64;
+        Ok(Scene {
+            mode: Mode::Uniform,
+            tau: 0.0,
+            window,
+            blocks: out,
+            stats,
+        })
+    }
+
     /// Selects the blocks `camera` needs at tolerance `options.tau`.
     pub fn scene(&self, camera: &Camera, options: &SceneOptions) -> Result<Scene> {
         self.scene_with(camera, options, None)

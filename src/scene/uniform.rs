@@ -15,9 +15,16 @@ use crate::store::Source;
 impl<S: Source> Search<'_, '_, S> {
     /// Fills the scene of `quadrants` in uniform mode; `p_min` is the nearest distance.
     pub fn uniform(&mut self, quadrants: &[Quadrant], p_min: f64, gap: u64) -> Result<()> {
-        let d = *self.terrain.domain();
         let allowed = self.view.allowed_error(self.tau, p_min);
         self.stats.p_min = Some(p_min);
+        self.uniform_within(quadrants, allowed, gap)
+    }
+
+    /// The uniform cut within the static bound `allowed` (metres) over `quadrants`: the
+    /// cluster with the largest threshold at most `allowed`, or physical blocks below the
+    /// finest threshold.
+    pub fn uniform_within(&mut self, quadrants: &[Quadrant], allowed: f64, gap: u64) -> Result<()> {
+        let d = *self.terrain.domain();
         self.stats.allowed_error = Some(allowed);
         // The largest threshold within the bound: the thresholds ascend.
         let thresholds = self.terrain.thresholds();

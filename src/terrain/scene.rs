@@ -212,6 +212,74 @@ impl Terrain {
         }
     }
 
+    /// The *cut* of the terrain within a static bound, decoded: the blocks over `window`
+    /// (inclusive samples, inside the data) of the coarsest error level whose every block
+    /// is within `max_error` of the source (exact physical blocks below the finest level).
+    /// No camera: screen errors are 0. An error level is a cut of the whole tree, so two
+    /// windows get the same blocks where they overlap (tiles of another pyramid cut from
+    /// neighbouring windows agree along their edges).
+    ///
+    /// ```
+    /// use fmrh::types::SampleRect;
+    /// use fmrh::Terrain;
+    ///
+    /// # fn main() -> fmrh::Result<()> {
+    /// # let dir = tempfile::tempdir().unwrap();
+    /// # let path = dir.path().join("ridges.fmrh");
+    /// let ridges = fmrh::Heightfield::from_fn(257, 257, |x, y| ((x * 3 + y) % 40) as f32)?;
+    /// fmrh::create(&path, ridges, &fmrh::CreateOptions::default())?;
+    /// let terrain = Terrain::open(&path)?;
+    /// let window = SampleRect { col0: 10, row0: 20, col1: 200, row1: 120 };
+    /// let exact = terrain.cut(window, 0.0)?;
+    /// let coarse = terrain.cut(window, 25.0)?;
+    /// assert!(exact.blocks.iter().all(|b| b.error == 0.0 && b.stride == 1));
+    /// assert!(coarse.blocks.iter().all(|b| b.error <= 25.0));
+    /// assert!(coarse.blocks.len() <= exact.blocks.len());
+    /// # Ok(()) }
+    /// ```
+    pub fn cut(&self, window: SampleRect, max_error: f64) -> Result<Scene> {
+        match &self.source {
+            Source::Container(store) => {
+                let selector = crate::scene::Terrain::with_spacing(store, None)?;
+                let scene = selector.cut(window, max_error, crate::scene::DEFAULT_GAP)?;
+                let loaded = load_blocks(store, &scene.blocks, PAYLOAD_GAP)?;
+                let spacing = self.spacing_m.or(store.header().metadata.spacing_m);
+                let d = store.domain();
+                let blocks = scene
+                    .blocks
+                    .iter()
+                    .zip(loaded)
+                    .map(|(b, l)| block(b, None, d.stride(b.level), spacing, l))
+                    .collect();
+                Ok(Scene {
+                    mode: scene.mode,
+                    tau: scene.tau,
+                    window: scene.window,
+                    blocks,
+                    stats: scene.stats,
+                })
+            }
+            Source::Dataset(ds) => {
+                let scene = ds.cut(window, max_error)?;
+                let loaded = ds.load_blocks(&scene)?;
+                let spacing = self.spacing_m.or(ds.spacing_m());
+                let blocks = scene
+                    .blocks
+                    .iter()
+                    .zip(loaded)
+                    .map(|(b, (l, stride))| block(&b.block, Some(b.tile), stride, spacing, l))
+                    .collect();
+                Ok(Scene {
+                    mode: scene.mode,
+                    tau: scene.tau,
+                    window: scene.window,
+                    blocks,
+                    stats: scene.stats,
+                })
+            }
+        }
+    }
+
     /// The spacing flat scenes place samples with: the one set, else the data's, else an
     /// error (a camera in metres over samples of unknown size would see the wrong terrain).
     fn flat_spacing(&self) -> Result<[f64; 2]> {
