@@ -24,7 +24,7 @@ impl<S: Source> Terrain<'_, S> {
     /// from neighbouring windows agree on their shared edges.
     pub fn cut(&self, window: SampleRect, max_error: f64, gap: u64) -> Result<Scene> {
         let started = Instant::now();
-        if !(max_error >= 0.0) {
+        if max_error.is_nan() || max_error < 0.0 {
             return Err(Error::InvalidArgument(format!(
                 "error bound {max_error} m: must be a number >= 0"
             )));
