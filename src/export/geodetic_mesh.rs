@@ -250,12 +250,11 @@ pub struct SampledTile {
 /// tile `t`, as `(lon, lat)` for `(i, j)` with `j` from the south.
 fn grid_lon_lat(t: &GeodeticTile, i: i64, j: i64) -> [f64; 2] {
     let d = geodetic::tile_degrees(t.z);
+    // Past the tile, the next tile's own grid line: every tile of a level then puts a
+    // given line at the same longitude or latitude, to the bit.
     let at = |k: i64| -> f64 {
-        if (0..=CELLS as i64).contains(&k) {
-            f64::from(grid_code(k as usize)) / f64::from(QUANTIZED_MAX)
-        } else {
-            k as f64 / CELLS as f64
-        }
+        let (whole, part) = (k.div_euclid(CELLS as i64), k.rem_euclid(CELLS as i64));
+        whole as f64 + f64::from(grid_code(part as usize)) / f64::from(QUANTIZED_MAX)
     };
     [
         -180.0 + (f64::from(t.x) + at(i)) * d,
@@ -263,17 +262,49 @@ fn grid_lon_lat(t: &GeodeticTile, i: i64, j: i64) -> [f64; 2] {
     ]
 }
 
-/// Samples `tile` from `surface` placed by `placement`; `data_box` is the longitude and
-/// latitude box of the data (what decides *near* vertices).
-pub fn sample_tile(
+/// A tile's grid sampled from a surface, before quantization: `GRID²` lines and a one-line
+/// apron, `APRON²` values row-major from the south-west corner of the apron.
+pub struct GridSample {
+    /// Longitude and latitude of each point.
+    pub lon_lat: Vec<[f64; 2]>,
+    /// Its height: the surface inside the data, the nearest data next to it, else 0.
+    pub raw: Vec<f64>,
+    /// Whether the surface holds it.
+    pub inside: Vec<bool>,
+    /// The block it was taken from (`usize::MAX` outside).
+    pub owner: Vec<usize>,
+}
+
+/// Values along a side of a [`GridSample`]: the grid and its apron.
+pub const APRON: usize = GRID + 2;
+
+impl GridSample {
+    /// Index of grid point `(i, j)` (from the tile's south-west corner) in the arrays.
+    pub fn index(i: usize, j: usize) -> usize {
+        (j + 1) * APRON + (i + 1)
+    }
+
+    /// The `GRID²` heights of the tile's own grid, row-major from the south-west.
+    pub fn grid_heights(&self) -> Vec<f64> {
+        (0..GRID)
+            .flat_map(|j| (0..GRID).map(move |i| (i, j)))
+            .map(|(i, j)| self.raw[GridSample::index(i, j)])
+            .collect()
+    }
+}
+
+/// Samples `tile`'s grid and apron from `surface` placed by `placement`; `data_box` is the
+/// longitude and latitude box of the data (what decides *near* points). A point's height
+/// depends on its longitude and latitude alone, so two tiles sharing a point (an edge, or
+/// an apron line on the next tile's grid) give it the same height.
+pub fn sample_grid(
     tile: GeodeticTile,
     surface: &Surface<'_>,
     placement: &Placement,
     data_box: [f64; 4],
-) -> Result<SampledTile> {
-    let bounds = tile.bounds();
+) -> GridSample {
     // The grid with an apron one line beyond each edge, for normals across tile edges.
-    const A: usize = GRID + 2;
+    const A: usize = APRON;
     let mut lon_lat = Vec::with_capacity(A * A);
     for j in -1..=GRID as i64 {
         for i in -1..=GRID as i64 {
@@ -329,6 +360,30 @@ pub fn sample_tile(
             }
         }
     }
+    GridSample {
+        lon_lat,
+        raw,
+        inside,
+        owner,
+    }
+}
+
+/// Samples `tile` from `surface` placed by `placement`; `data_box` is the longitude and
+/// latitude box of the data (what decides *near* vertices).
+pub fn sample_tile(
+    tile: GeodeticTile,
+    surface: &Surface<'_>,
+    placement: &Placement,
+    data_box: [f64; 4],
+) -> Result<SampledTile> {
+    let bounds = tile.bounds();
+    const A: usize = APRON;
+    let GridSample {
+        lon_lat,
+        mut raw,
+        inside,
+        owner,
+    } = sample_grid(tile, surface, placement, data_box);
     // The tile's own vertices, quantized as a decoder reads them.
     let index = |i: usize, j: usize| (j + 1) * A + (i + 1);
     let mut heights = Vec::with_capacity(GRID * GRID);
@@ -438,7 +493,13 @@ pub fn sample_tile(
         horizon: geodetic::horizon_occlusion_point(sphere_centre, &points),
     };
     let (resampling, error, measured, block_error) =
-        measure(&tile, &heights, surface, placement, data_box);
+        measure(
+            &tile,
+            |lon, lat| tile_height(&tile, &heights, lon, lat),
+            surface,
+            placement,
+            data_box,
+        );
     Ok(SampledTile {
         tile,
         data: TileData {
@@ -489,12 +550,12 @@ pub fn tile_height(tile: &GeodeticTile, heights: &[f64], lon: f64, lat: f64) -> 
     }
 }
 
-/// `(resampling, error, samples, block error)` of a tile whose decoded heights are
-/// `heights`: over the data samples inside it, the largest `|tile - surface|`, `|tile -
-/// surface| + e*` and `e*`.
-fn measure(
+/// `(resampling, error, samples, block error)` of a tile that draws `height(lon, lat)`:
+/// over the data samples inside it, the largest `|tile - surface|`, `|tile - surface| +
+/// e*` and `e*`.
+pub(crate) fn measure(
     tile: &GeodeticTile,
-    heights: &[f64],
+    height: impl Fn(f64, f64) -> f64,
     surface: &Surface<'_>,
     placement: &Placement,
     data_box: [f64; 4],
@@ -574,7 +635,7 @@ fn measure(
             let Some(sampled) = surface.at(p[0], p[1]) else {
                 continue;
             };
-            let d = (tile_height(tile, heights, lon, lat) - sampled.height).abs();
+            let d = (height(lon, lat) - sampled.height).abs();
             resampling = resampling.max(d);
             let e = surface.blocks()[sampled.block].error;
             error = error.max(d + e);

@@ -9,3 +9,4 @@ pub mod geodetic_mesh;
 pub mod geotiff;
 pub mod gltf;
 pub mod quantized_mesh;
+pub mod tin_tile;

@@ -1,0 +1,368 @@
+//! A tile of the geographic pyramid as an error-bounded TIN: the tile's 65² grid
+//! (`super::geodetic_mesh::sample_grid`) meshed by `crate::mesh::rtin` within a budget, its
+//! edges shared with its four neighbours, its heights quantized so that shared vertices
+//! decode to the same heights, and its error measured.
+//!
+//! **Edges.** Each neighbour's grid is sampled and meshed too (the same budget), and every
+//! edge gets the vertices both sides put on it ([`RtinMesh::add_edge_vertices`]). A point's
+//! height depends on its longitude and latitude alone, so a tile and its neighbour compute
+//! the same meshes for each other, and agree on their common edge: the same vertices, at
+//! the same heights. (Across levels, Cesium hangs skirts from the edge lists.)
+//!
+//! **Heights.** A tile quantizes heights in steps of a power of two `s` metres over
+//! `[lo, lo + 32767 s]`, `lo` a multiple of `s`. Interior vertices are rounded to `s`; a
+//! vertex on an edge to the coarser step of the two tiles, and a corner to the pyramid's
+//! corner step `Q` ([`Quanta`]), which no tile's step exceeds: a multiple of a coarser power
+//! of two is one of every finer one, so both tiles store exactly the same height there (up
+//! to the rounding of a decoder's `lo + code / 32767 · (hi - lo)`, about 1e-12 m).
+//!
+//! **Error.** The mesh is within the budget of the grid at every grid point (and between
+//! them, where the grid is linear), but for the fans an edge's added vertices make
+//! (`mesh::rtin`), and the grid resamples the surface. So the error a tile reports is
+//! measured: the tile as a decoder draws it (quantized heights, linear in `(u, v)` over each
+//! triangle) against the surface at every data sample inside the tile, plus the `e*` of
+//! the block owning the sample (`geodetic_mesh::measure`).
+
+use super::geodetic::{self, GeodeticTile};
+use super::geodetic_mesh::{self, sample_grid, GridSample, Placement, APRON, GRID};
+use super::quantized_mesh::{self, Header, TileData, QUANTIZED_MAX};
+use crate::error::Result;
+use crate::mesh::rtin::{Grid, Rtin, RtinMesh};
+use crate::scene::surface::Surface;
+
+/// Cells along a side of a tile's grid.
+const CELLS: usize = GRID - 1;
+
+/// The smallest step worth quantizing to, metres (a micrometre, about 2^-20).
+const MIN_STEP: f64 = 1.0 / (1u64 << 20) as f64;
+
+/// The steps a pyramid's tiles quantize heights in.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Quanta {
+    /// The corner step `Q`: a power of two no tile's own step exceeds.
+    pub corner: f64,
+}
+
+impl Quanta {
+    /// The steps for a pyramid whose every height (the data's, and 0 off the data) lies in
+    /// `[min, max]`.
+    pub fn for_range(min: f64, max: f64) -> Quanta {
+        // A tile's step covers its range plus `Q` each way in 32766 steps; with `Q` at
+        // least the whole range over 32764, that step is never past `Q`.
+        let span = (max - min).abs();
+        Quanta {
+            corner: power_of_two_at_least(span / 32764.0),
+        }
+    }
+
+    /// A tile's own step and base `(s, lo)` for grid heights in `[min, max]`.
+    fn of_tile(&self, min: f64, max: f64) -> (f64, f64) {
+        let (lo_raw, hi_raw) = (min - self.corner, max + self.corner);
+        let s = power_of_two_at_least((hi_raw - lo_raw) / 32766.0);
+        (s, (lo_raw / s).floor() * s)
+    }
+}
+
+fn power_of_two_at_least(x: f64) -> f64 {
+    let x = if x.is_finite() { x.max(MIN_STEP) } else { 1.0 };
+    2f64.powi(x.log2().ceil() as i32)
+}
+
+/// A tile cut as a TIN, ready to write, with what it measured.
+pub struct TinTile {
+    /// The tile.
+    pub tile: GeodeticTile,
+    /// Its quantized mesh (the metadata left empty for the caller).
+    pub data: TileData,
+    /// The height of each vertex as a decoder reads it.
+    pub heights: Vec<f64>,
+    /// `max |tile - surface|` over the data samples inside the tile (0 with none).
+    pub resampling: f64,
+    /// `max (|tile - surface| + e*)` over them: the tile's measured error.
+    pub error: f64,
+    /// Data samples measured.
+    pub measured: u64,
+    /// The largest `e*` of the blocks owning them.
+    pub block_error: f64,
+}
+
+/// The tile across side `side` (0 south, 1 east, 2 north, 3 west: `mesh::rtin`'s sides
+/// with `i` east and `j` north), wrapping around the antimeridian; `None` past a pole.
+pub fn neighbour(t: GeodeticTile, side: usize) -> Option<GeodeticTile> {
+    let columns = 2u32 << t.z;
+    let rows = 1u32 << t.z;
+    match side {
+        0 => (t.y > 0).then(|| GeodeticTile { y: t.y - 1, ..t }),
+        1 => Some(GeodeticTile {
+            x: (t.x + 1) % columns,
+            ..t
+        }),
+        2 => (t.y + 1 < rows).then(|| GeodeticTile { y: t.y + 1, ..t }),
+        _ => Some(GeodeticTile {
+            x: (t.x + columns - 1) % columns,
+            ..t
+        }),
+    }
+}
+
+/// The grid of `tile` meshed within `budget`, and its heights' range.
+fn meshed(
+    tile: GeodeticTile,
+    surface: &Surface<'_>,
+    placement: &Placement,
+    data_box: [f64; 4],
+    budget: f64,
+) -> (GridSample, Vec<f64>, RtinMesh) {
+    let sample = sample_grid(tile, surface, placement, data_box);
+    let heights = sample.grid_heights();
+    let mesh = match Grid::new(CELLS, &heights) {
+        Some(grid) => Rtin::new(&grid).mesh(budget),
+        None => RtinMesh::default(), // unreachable: GRID is 2^6 + 1
+    };
+    (sample, heights, mesh)
+}
+
+fn range(heights: &[f64]) -> (f64, f64) {
+    heights
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &h| {
+            (a.min(h), b.max(h))
+        })
+}
+
+/// Cuts `tile` from `surface` as a TIN within `budget` metres of its grid, its edges
+/// shared with its neighbours, heights quantized by `quanta`.
+pub fn tin_tile(
+    tile: GeodeticTile,
+    surface: &Surface<'_>,
+    placement: &Placement,
+    data_box: [f64; 4],
+    budget: f64,
+    quanta: Quanta,
+) -> Result<TinTile> {
+    let (sample, grid, mut mesh) = meshed(tile, surface, placement, data_box, budget);
+    let (min, max) = range(&grid);
+    let (step, lo) = quanta.of_tile(min, max);
+    // Each side's step: the coarser of this tile's and the neighbour's.
+    let mut side_step = [step; 4];
+    for (side, slot) in side_step.iter_mut().enumerate() {
+        let Some(n) = neighbour(tile, side) else {
+            continue;
+        };
+        let (_, their_grid, theirs) = meshed(n, surface, placement, data_box, budget);
+        mesh.add_edge_vertices(side, &theirs.edge((side + 2) % 4));
+        let (tmin, tmax) = range(&their_grid);
+        *slot = step.max(quanta.of_tile(tmin, tmax).0);
+    }
+    let n = CELLS as u32;
+    let hi = lo + f64::from(QUANTIZED_MAX) * step;
+    let mut h = Vec::with_capacity(mesh.vertices.len());
+    let mut heights = Vec::with_capacity(mesh.vertices.len());
+    for &[i, j] in &mesh.vertices {
+        let on = [j == 0, i == n, j == n, i == 0];
+        let sides = on.iter().filter(|&&b| b).count();
+        let q = if sides >= 2 {
+            quanta.corner
+        } else {
+            (0..4)
+                .filter(|&k| on[k])
+                .map(|k| side_step[k])
+                .fold(step, f64::max)
+        };
+        let raw = grid[j as usize * GRID + i as usize];
+        let rounded = (raw / q).round() * q;
+        let code = ((rounded - lo) / step)
+            .round()
+            .clamp(0.0, f64::from(QUANTIZED_MAX)) as u16;
+        h.push(code);
+        heights.push(quantized_mesh::dequantize_height(lo as f32, hi as f32, code));
+    }
+    let grid_code =
+        |k: u32| ((f64::from(QUANTIZED_MAX) * f64::from(k) / CELLS as f64).round()) as u16;
+    let u: Vec<u16> = mesh.vertices.iter().map(|v| grid_code(v[0])).collect();
+    let v: Vec<u16> = mesh.vertices.iter().map(|v| grid_code(v[1])).collect();
+    // Normals from the unquantized grid and its apron (the same at a shared vertex in
+    // both tiles); positions from the heights a decoder reads.
+    let ecef_apron: Vec<[f64; 3]> = (0..APRON * APRON)
+        .map(|k| geodetic::ecef(sample.lon_lat[k][0], sample.lon_lat[k][1], sample.raw[k]))
+        .collect();
+    let normals: Vec<[u8; 2]> = mesh
+        .vertices
+        .iter()
+        .map(|&[i, j]| {
+            let k = GridSample::index(i as usize, j as usize);
+            let (e, w, no, so) = (
+                ecef_apron[k + 1],
+                ecef_apron[k - 1],
+                ecef_apron[k + APRON],
+                ecef_apron[k - APRON],
+            );
+            let east = [e[0] - w[0], e[1] - w[1], e[2] - w[2]];
+            let north = [no[0] - so[0], no[1] - so[1], no[2] - so[2]];
+            let c = [
+                east[1] * north[2] - east[2] * north[1],
+                east[2] * north[0] - east[0] * north[2],
+                east[0] * north[1] - east[1] * north[0],
+            ];
+            let len = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
+            let unit = if len > 0.0 && len.is_finite() {
+                [c[0] / len, c[1] / len, c[2] / len]
+            } else {
+                let [lon, lat] = sample.lon_lat[k];
+                geodetic::up(lon, lat)
+            };
+            quantized_mesh::oct_encode(unit)
+        })
+        .collect();
+    let points: Vec<[f64; 3]> = mesh
+        .vertices
+        .iter()
+        .zip(&heights)
+        .map(|(&[i, j], &hh)| {
+            let [lon, lat] = sample.lon_lat[GridSample::index(i as usize, j as usize)];
+            geodetic::ecef(lon, lat, hh)
+        })
+        .collect();
+    let header = header_of(&tile, &points, lo as f32, hi as f32);
+    let locate = Locator::new(&u, &v, &mesh.triangles);
+    let (resampling, error, measured, block_error) = geodetic_mesh::measure(
+        &tile,
+        |lon, lat| locate.height(&tile, &u, &v, &heights, &mesh.triangles, lon, lat),
+        surface,
+        placement,
+        data_box,
+    );
+    Ok(TinTile {
+        tile,
+        data: TileData {
+            header,
+            u,
+            v,
+            h,
+            triangles: mesh.triangles,
+            normals: Some(normals),
+            metadata: serde_json::Value::Null,
+        },
+        heights,
+        resampling,
+        error,
+        measured,
+        block_error,
+    })
+}
+
+/// The header of a tile whose vertices are `points` (ECEF).
+fn header_of(tile: &GeodeticTile, points: &[[f64; 3]], lo: f32, hi: f32) -> Header {
+    let mut lo3 = [f64::INFINITY; 3];
+    let mut hi3 = [f64::NEG_INFINITY; 3];
+    for p in points {
+        for a in 0..3 {
+            lo3[a] = lo3[a].min(p[a]);
+            hi3[a] = hi3[a].max(p[a]);
+        }
+    }
+    let sphere_centre = [
+        (lo3[0] + hi3[0]) / 2.0,
+        (lo3[1] + hi3[1]) / 2.0,
+        (lo3[2] + hi3[2]) / 2.0,
+    ];
+    let radius = points
+        .iter()
+        .map(|p| {
+            ((p[0] - sphere_centre[0]).powi(2)
+                + (p[1] - sphere_centre[1]).powi(2)
+                + (p[2] - sphere_centre[2]).powi(2))
+            .sqrt()
+        })
+        .fold(0.0f64, f64::max);
+    let [w, s, e, n] = tile.bounds();
+    let (vlo, vhi) = points.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |r, p| {
+        let (_, _, h) = crate::globe::geodetic(glam::DVec3::from_array(*p));
+        (r.0.min(h), r.1.max(h))
+    });
+    let mid = if vlo <= vhi {
+        (vlo + vhi) / 2.0
+    } else {
+        (f64::from(lo) + f64::from(hi)) / 2.0
+    };
+    Header {
+        centre: geodetic::ecef((w + e) / 2.0, (s + n) / 2.0, mid),
+        min_height: lo,
+        max_height: hi,
+        sphere_centre,
+        // Past the rounding of the distances above.
+        sphere_radius: radius * (1.0 + 1e-12) + 1e-6,
+        horizon: geodetic::horizon_occlusion_point(sphere_centre, points),
+    }
+}
+
+/// Which triangles may hold a point: buckets of a 64 × 64 grid over `(u, v)`.
+struct Locator {
+    buckets: Vec<Vec<u32>>,
+}
+
+const BUCKETS: usize = 64;
+
+impl Locator {
+    fn new(u: &[u16], v: &[u16], triangles: &[[u32; 3]]) -> Locator {
+        let mut buckets = vec![Vec::new(); BUCKETS * BUCKETS];
+        let cell = |c: u16| (usize::from(c) * BUCKETS / (usize::from(QUANTIZED_MAX) + 1)).min(BUCKETS - 1);
+        for (k, t) in triangles.iter().enumerate() {
+            let us = t.map(|i| u[i as usize]);
+            let vs = t.map(|i| v[i as usize]);
+            let (i0, i1) = (cell(*us.iter().min().unwrap_or(&0)), cell(*us.iter().max().unwrap_or(&0)));
+            let (j0, j1) = (cell(*vs.iter().min().unwrap_or(&0)), cell(*vs.iter().max().unwrap_or(&0)));
+            for j in j0..=j1 {
+                for i in i0..=i1 {
+                    buckets[j * BUCKETS + i].push(k as u32);
+                }
+            }
+        }
+        Locator { buckets }
+    }
+
+    /// The height the tile draws at `(lon, lat)`: linear in `(u, v)` over the triangle
+    /// holding it (the nearest by barycentric margin, for a point on a shared edge).
+    #[allow(clippy::too_many_arguments)]
+    fn height(
+        &self,
+        tile: &GeodeticTile,
+        u: &[u16],
+        v: &[u16],
+        heights: &[f64],
+        triangles: &[[u32; 3]],
+        lon: f64,
+        lat: f64,
+    ) -> f64 {
+        let [w, s, e, n] = tile.bounds();
+        let q = f64::from(QUANTIZED_MAX);
+        let fu = ((lon - w) / (e - w) * q).clamp(0.0, q);
+        let fv = ((lat - s) / (n - s) * q).clamp(0.0, q);
+        let cell = |f: f64| ((f / (q + 1.0) * BUCKETS as f64) as usize).min(BUCKETS - 1);
+        let mut best: Option<(f64, f64)> = None;
+        for &k in &self.buckets[cell(fv) * BUCKETS + cell(fu)] {
+            let t = triangles[k as usize];
+            let p = t.map(|i| [f64::from(u[i as usize]), f64::from(v[i as usize])]);
+            let area = (p[1][0] - p[0][0]) * (p[2][1] - p[0][1])
+                - (p[1][1] - p[0][1]) * (p[2][0] - p[0][0]);
+            if area == 0.0 {
+                continue;
+            }
+            let bary = |a: [f64; 2], b: [f64; 2]| {
+                ((b[0] - a[0]) * (fv - a[1]) - (b[1] - a[1]) * (fu - a[0])) / area
+            };
+            let (l0, l1, l2) = (bary(p[1], p[2]), bary(p[2], p[0]), bary(p[0], p[1]));
+            let margin = l0.min(l1).min(l2);
+            let value = l0 * heights[t[0] as usize]
+                + l1 * heights[t[1] as usize]
+                + l2 * heights[t[2] as usize];
+            if best.is_none_or(|(m, _)| margin > m) {
+                best = Some((margin, value));
+            }
+            if margin >= 0.0 {
+                break;
+            }
+        }
+        best.map_or(f64::INFINITY, |(_, value)| value)
+    }
+}
