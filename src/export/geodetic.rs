@@ -77,10 +77,16 @@ impl GeodeticTile {
     }
 }
 
-/// Cesium's geometric error of a level-`z` tile, metres: a 65-sample heightmap over a
-/// quarter of the equator at level 0, halved each level.
+/// Cesium's geometric error of a level-`z` tile, metres, as `CesiumTerrainProvider` sets
+/// it (`TerrainProvider.getEstimatedLevelZeroGeometricErrorForAHeightmap`): the equator's
+/// length times the heightmap quality 0.25, over 65 samples times the 2 tiles of level 0
+/// (77,067 m), halved each level. (Before issue 41 fmrh left out the 2 tiles, and so
+/// doubled every level's error: 37.6 m at level 12 where Cesium uses 18.8 m.)
 pub fn geometric_error(z: u8) -> f64 {
-    let level_zero = WGS84_A * 2.0 * std::f64::consts::PI * 0.25 / HEIGHTMAP_WIDTH;
+    const HEIGHTMAP_QUALITY: f64 = 0.25;
+    const LEVEL_ZERO_TILES: f64 = 2.0;
+    let level_zero = WGS84_A * 2.0 * std::f64::consts::PI * HEIGHTMAP_QUALITY
+        / (HEIGHTMAP_WIDTH * LEVEL_ZERO_TILES);
     level_zero / f64::from(1u32 << z.min(31))
 }
 
@@ -126,6 +132,15 @@ pub fn tiles_meeting(z: u8, bounds: [f64; 4]) -> Vec<GeodeticTile> {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    /// Regression (issue 41): CesiumJS's level-0 error for the global-geodetic pyramid is
+    /// `6378137 · 2π · 0.25 / (65 · 2)` (computed here by hand, 77,067.34 m), 18.8 m at
+    /// level 12; fmrh had twice that.
+    #[test]
+    fn geometric_errors_are_cesium_s() {
+        assert!((geometric_error(0) - 77_067.34).abs() < 0.01, "{}", geometric_error(0));
+        assert!((geometric_error(12) - 18.815).abs() < 0.001, "{}", geometric_error(12));
+    }
 
     #[test]
     fn the_spec_s_first_tiles() {

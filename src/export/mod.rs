@@ -9,4 +9,5 @@ pub mod geodetic_mesh;
 pub mod geotiff;
 pub mod gltf;
 pub mod quantized_mesh;
+pub mod tileset;
 pub mod tin_tile;

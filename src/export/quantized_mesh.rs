@@ -235,12 +235,15 @@ pub fn write(tile: &TileData) -> Result<Vec<u8>> {
             out.extend_from_slice(&normals[i as usize]);
         }
     }
-    let json = serde_json::to_vec(&tile.metadata)
-        .map_err(|e| Error::InvalidArgument(format!("tile metadata: {e}")))?;
-    out.push(EXT_METADATA);
-    out.extend_from_slice(&(4 + json.len() as u32).to_le_bytes());
-    out.extend_from_slice(&(json.len() as u32).to_le_bytes());
-    out.extend_from_slice(&json);
+    // No metadata (`null`): no extension, for a client that did not ask for it.
+    if !tile.metadata.is_null() {
+        let json = serde_json::to_vec(&tile.metadata)
+            .map_err(|e| Error::InvalidArgument(format!("tile metadata: {e}")))?;
+        out.push(EXT_METADATA);
+        out.extend_from_slice(&(4 + json.len() as u32).to_le_bytes());
+        out.extend_from_slice(&(json.len() as u32).to_le_bytes());
+        out.extend_from_slice(&json);
+    }
     Ok(out)
 }
 

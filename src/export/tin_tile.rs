@@ -71,11 +71,10 @@ fn power_of_two_at_least(x: f64) -> f64 {
 /// A tile cut as a TIN, ready to write, with what it measured.
 pub struct TinTile {
     /// The tile.
+    #[cfg_attr(not(any(test, feature = "testing")), allow(dead_code))] // read by the tests
     pub tile: GeodeticTile,
     /// Its quantized mesh (the metadata left empty for the caller).
     pub data: TileData,
-    /// The height of each vertex as a decoder reads it.
-    pub heights: Vec<f64>,
     /// `max |tile - surface|` over the data samples inside the tile (0 with none).
     pub resampling: f64,
     /// `max (|tile - surface| + e*)` over them: the tile's measured error.
@@ -243,7 +242,6 @@ pub fn tin_tile(
             normals: Some(normals),
             metadata: serde_json::Value::Null,
         },
-        heights,
         resampling,
         error,
         measured,

@@ -132,9 +132,11 @@ fn reason(status: u16) -> &'static str {
         200 => "OK",
         204 => "No Content",
         206 => "Partial Content",
+        304 => "Not Modified",
         400 => "Bad Request",
         404 => "Not Found",
         405 => "Method Not Allowed",
+        406 => "Not Acceptable",
         408 => "Request Timeout",
         412 => "Precondition Failed",
         416 => "Range Not Satisfiable",
@@ -442,12 +444,18 @@ fn write(
     keep_alive: bool,
 ) -> std::io::Result<()> {
     let len = response.body.content_length();
+    // 204 and 304 have no body, and no length (a 304's would be the representation's).
+    let bodiless = matches!(response.status, 204 | 304);
     let mut head = format!(
-        "HTTP/1.1 {} {}\r\nServer: fmrh/{}\r\nContent-Length: {len}\r\n",
+        "HTTP/1.1 {} {}\r\nServer: fmrh/{}\r\n",
         response.status,
         reason(response.status),
         env!("CARGO_PKG_VERSION")
     );
+    if !bodiless {
+        head.push_str(&format!("Content-Length: {len}\r\n"));
+    }
+    let head_only = head_only || bodiless;
     for (k, v) in &response.headers {
         head.push_str(&format!("{k}: {v}\r\n"));
     }

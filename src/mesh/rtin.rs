@@ -210,11 +210,6 @@ impl Rtin {
         }
     }
 
-    /// Cells along a side of the grid.
-    pub fn cells(&self) -> usize {
-        self.cells
-    }
-
     /// The coarsest mesh of the hierarchy whose every triangle is within `budget` of every
     /// grid point it holds (a budget below 0, or NaN, keeps every grid point).
     pub fn mesh(&self, budget: f64) -> RtinMesh {

@@ -31,6 +31,8 @@ use crate::mesh::Cracks;
 use crate::scene::{Camera, SceneStats, Terrain, DEFAULT_GAP};
 use crate::Error;
 
+mod terrain;
+
 use super::args::RefineArg;
 use super::args::{ModeArg, ViewArgs};
 use crate::http::{self, ranges, Body, Request, Response};
@@ -55,6 +57,10 @@ pub struct ServeArgs {
     /// take an answer's first bytes (after that, it must read at least 16 KiB a second).
     #[arg(long, default_value_t = 30.0, value_parser = positive_seconds)]
     timeout: f64,
+    /// Cesium terrain: the most a tile's mesh may differ from its grid, metres (default:
+    /// half Cesium's geometric error at the tile's level).
+    #[arg(long, value_name = "METRES", allow_negative_numbers = true)]
+    max_error: Option<f64>,
 }
 
 /// A timeout in seconds: finite, more than 0, at most a day.
@@ -77,6 +83,13 @@ struct Item {
 
 /// Runs `fmrh serve`: checks every path opens, then answers until killed.
 pub fn run(args: &ServeArgs) -> Result<ExitCode, Error> {
+    if let Some(m) = args.max_error {
+        if m.is_nan() || m < 0.0 {
+            return Err(Error::InvalidArgument(format!(
+                "--max-error {m}: must be a number of metres >= 0"
+            )));
+        }
+    }
     let mut items: Vec<Item> = Vec::new();
     for path in &args.paths {
         if super::url_of(path).is_some() {
@@ -135,6 +148,19 @@ pub fn run(args: &ServeArgs) -> Result<ExitCode, Error> {
                 item.name,
                 if item.dataset { "/" } else { "" }
             );
+            // Cesium terrain for what can be placed on the globe.
+            let placeable = crate::terrain::Terrain::open(&item.path)
+                .and_then(|t| t.info())
+                .and_then(|i| crate::export::tileset::Tileset::new(&i, args.max_error));
+            if let Ok(tileset) = placeable {
+                let _ = writeln!(
+                    out,
+                    "  {:<9} /{}/layer.json (Cesium quantized-mesh, levels 0..={})",
+                    "terrain",
+                    item.name,
+                    tileset.maxzoom()
+                );
+            }
         }
         let _ = out.flush();
     }
@@ -142,7 +168,11 @@ pub fn run(args: &ServeArgs) -> Result<ExitCode, Error> {
         timeout: std::time::Duration::from_secs_f64(args.timeout),
         ..http::Limits::default()
     };
-    http::serve(listener, limits, move |request| answer(&items, request));
+    let cache = terrain::TileCache::default();
+    let max_error = args.max_error;
+    http::serve(listener, limits, move |request| {
+        answer(&items, &cache, max_error, request)
+    });
     Ok(ExitCode::SUCCESS)
 }
 
@@ -173,15 +203,34 @@ fn fmrh_error(e: &Error) -> Answer {
     error(status, e.to_string())
 }
 
-fn answer(items: &[Item], request: &Request) -> Answer {
+fn answer(
+    items: &[Item],
+    cache: &terrain::TileCache,
+    max_error: Option<f64>,
+    request: &Request,
+) -> Answer {
     let url = request.target.as_str();
     let (path, query) = url.split_once('?').unwrap_or((url, ""));
-    match request.method.as_str() {
-        "GET" | "HEAD" => match percent_decode(path, false) {
-            Some(path) => route(items, &path, query, request),
-            None => error(400, "the path is not valid percent-encoded UTF-8"),
-        },
-        _ => error(405, "fmrh serve answers GET and HEAD only").with("Allow", "GET, HEAD"),
+    let method = request.method.as_str();
+    let Some(path) = percent_decode(path, false) else {
+        return error(400, "the path is not valid percent-encoded UTF-8");
+    };
+    // The Cesium terrain's addresses, `/NAME/layer.json` and `/NAME/Z/X/Y.terrain`, also
+    // answer a CORS preflight.
+    let terrain = !path.starts_with("/files/")
+        && !path.starts_with("/api/")
+        && terrain::is_address(items, &path);
+    match (method, terrain) {
+        ("GET" | "HEAD" | "OPTIONS", true) => {
+            if let Some(r) = terrain::route(items, cache, max_error, &path, query, request) {
+                return r;
+            }
+            route(items, &path, query, request)
+        }
+        ("GET" | "HEAD", false) => route(items, &path, query, request),
+        (_, true) => error(405, "the terrain answers GET, HEAD and OPTIONS only")
+            .with("Allow", "GET, HEAD, OPTIONS"),
+        (_, false) => error(405, "fmrh serve answers GET and HEAD only").with("Allow", "GET, HEAD"),
     }
 }
 

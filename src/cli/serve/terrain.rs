@@ -1,0 +1,404 @@
+//! `fmrh serve`'s Cesium terrain: `/NAME/layer.json` and `/NAME/{z}/{x}/{y}.terrain` for
+//! every served container and dataset that can be placed on the globe
+//! (`crate::export::tileset`), each tile cut on request from the current state of the
+//! store.
+//!
+//! **Freshness.** Every request opens the terrain afresh, so a commit (`fmrh replace`,
+//! `dataset add`) is seen by the next request. The layer's `version` (in the tiles'
+//! addresses, `?v=`) is the state's transaction id and the file's identity, so a new state
+//! gets new addresses. A tile's `ETag` is a hash of its bytes: a tile the commit did not
+//! change keeps its tag, and a client's `If-None-Match` gets `304`. Tiles of the current
+//! version may be cached a day (`Cache-Control`); anything else must revalidate.
+//!
+//! **The cache.** Cut tiles are kept, by state, address and extensions, in a small LRU
+//! ([`TileCache`], 64 MiB), with their gzip form; a new state misses it and cuts afresh.
+//!
+//! **What a client asks.** `Accept: application/vnd.quantized-mesh;extensions=a-b-c` picks
+//! the extensions (`octvertexnormals`, `metadata`; `watermask` is not made and is left
+//! out); `application/octet-stream` or `*/*` gets the tile without extensions; an `Accept`
+//! that takes none of these gets `406`. `Accept-Encoding: gzip` gets it gzipped. Every
+//! answer carries CORS headers (`Access-Control-Allow-Origin: *`), and `OPTIONS` answers
+//! a preflight.
+
+use std::collections::{HashMap, VecDeque};
+use std::hash::{Hash, Hasher};
+use std::io::Write;
+use std::sync::{Arc, Mutex};
+
+use crate::export::geodetic::GeodeticTile;
+use crate::export::tileset::Tileset;
+use crate::http::{Body, Request, Response};
+use crate::terrain::Terrain;
+use crate::Error;
+
+use super::Item;
+
+/// Bytes of tiles the cache keeps.
+const CACHE_BYTES: usize = 64 << 20;
+
+/// The extensions a tile is written with.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+struct Extensions {
+    normals: bool,
+    metadata: bool,
+}
+
+impl Extensions {
+    fn names(&self) -> String {
+        let mut v = Vec::new();
+        if self.normals {
+            v.push("octvertexnormals");
+        }
+        if self.metadata {
+            v.push("metadata");
+        }
+        v.join("-")
+    }
+}
+
+/// A cached tile: its bytes, gzipped, and its tag.
+#[derive(Clone)]
+struct Cached {
+    plain: Arc<Vec<u8>>,
+    gzip: Arc<Vec<u8>>,
+    tag: u64,
+}
+
+/// Key: item, state version, tile, extensions.
+type Key = (String, String, GeodeticTile, Extensions);
+
+/// Cut tiles, least recently used dropped first past [`CACHE_BYTES`].
+#[derive(Default)]
+pub struct TileCache {
+    inner: Mutex<CacheState>,
+}
+
+#[derive(Default)]
+struct CacheState {
+    map: HashMap<Key, Cached>,
+    order: VecDeque<Key>,
+    bytes: usize,
+}
+
+impl TileCache {
+    fn get(&self, key: &Key) -> Option<Cached> {
+        let mut s = self.inner.lock().unwrap_or_else(|p| p.into_inner());
+        let hit = s.map.get(key).cloned()?;
+        if let Some(i) = s.order.iter().position(|k| k == key) {
+            let k = s.order.remove(i);
+            s.order.extend(k);
+        }
+        Some(hit)
+    }
+
+    fn put(&self, key: Key, plain: Arc<Vec<u8>>, gzip: Arc<Vec<u8>>, tag: u64) {
+        let size = plain.len() + gzip.len();
+        if size > CACHE_BYTES / 4 {
+            return;
+        }
+        let mut s = self.inner.lock().unwrap_or_else(|p| p.into_inner());
+        if s.map.contains_key(&key) {
+            return;
+        }
+        while s.bytes + size > CACHE_BYTES {
+            let Some(old) = s.order.pop_front() else {
+                break;
+            };
+            if let Some(c) = s.map.remove(&old) {
+                s.bytes -= c.plain.len() + c.gzip.len();
+            }
+        }
+        s.bytes += size;
+        s.order.push_back(key.clone());
+        s.map.insert(key, Cached { plain, gzip, tag });
+    }
+}
+
+fn with_cors(r: Response) -> Response {
+    r.with("Access-Control-Allow-Origin", "*")
+        .with("Access-Control-Expose-Headers", "ETag, Content-Encoding")
+}
+
+fn text_error(status: u16, message: impl Into<String>) -> Response {
+    let body =
+        serde_json::to_vec(&serde_json::json!({ "error": message.into() })).unwrap_or_default();
+    with_cors(
+        Response::new(status, "application/json", Body::Bytes(body))
+            .with("Cache-Control", "no-cache"),
+    )
+}
+
+/// What a terrain address asks for.
+enum Asked {
+    Layer,
+    Tile(GeodeticTile),
+}
+
+/// Whether `path` is under a served item's terrain: `/NAME/` and more, `NAME` served.
+pub fn is_address(items: &[Item], path: &str) -> bool {
+    path.strip_prefix('/')
+        .and_then(|rest| rest.split_once('/'))
+        .is_some_and(|(name, _)| items.iter().any(|i| i.name == name))
+}
+
+/// The terrain answer for `path` (already percent-decoded), or `None` when the path is not
+/// a terrain address (`/NAME/layer.json`, `/NAME/Z/X/Y.terrain`) of a served item.
+pub fn route(
+    items: &[Item],
+    cache: &TileCache,
+    max_error: Option<f64>,
+    path: &str,
+    query: &str,
+    request: &Request,
+) -> Option<Response> {
+    let rest = path.strip_prefix('/')?;
+    let (name, tail) = rest.split_once('/')?;
+    let item = items.iter().find(|i| i.name == name)?;
+    let asked = if tail == "layer.json" {
+        Asked::Layer
+    } else {
+        let parts: Vec<&str> = tail.split('/').collect();
+        let [z, x, y] = parts.as_slice() else {
+            return None;
+        };
+        let y = y.strip_suffix(".terrain")?;
+        let number = |s: &str| -> Option<u32> {
+            (!s.is_empty() && s.len() <= 10 && s.bytes().all(|b| b.is_ascii_digit()))
+                .then(|| s.parse().ok())
+                .flatten()
+        };
+        match (number(z), number(x), number(y)) {
+            (Some(z), Some(x), Some(y)) if z <= 255 => {
+                Asked::Tile(GeodeticTile { z: z as u8, x, y })
+            }
+            _ => return Some(text_error(400, format!("`{tail}`: expected Z/X/Y.terrain"))),
+        }
+    };
+    if request.method == "OPTIONS" {
+        return Some(with_cors(
+            Response::new(204, "text/plain", Body::Bytes(Vec::new()))
+                .with("Access-Control-Allow-Methods", "GET, HEAD, OPTIONS")
+                .with(
+                    "Access-Control-Allow-Headers",
+                    "Accept, Accept-Encoding, If-None-Match",
+                )
+                .with("Access-Control-Max-Age", "86400"),
+        ));
+    }
+    Some(
+        match answer(item, cache, max_error, &asked, query, request) {
+            Ok(r) => r,
+            Err(e) => {
+                let status = match &e {
+                    Error::InvalidArgument(_) => 404,
+                    Error::Input { .. } | Error::Unsupported { .. } | Error::Corrupt { .. } => 422,
+                    _ => 500,
+                };
+                text_error(status, e.to_string())
+            }
+        },
+    )
+}
+
+/// The state's version: its transaction id and the identity of the file that holds it.
+fn version(item: &Item, txn: u64) -> String {
+    let file = if item.dataset {
+        item.path.join("MANIFEST")
+    } else {
+        item.path.clone()
+    };
+    let id = std::fs::metadata(&file).map_or(String::new(), |m| super::etag_of(&m));
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    id.hash(&mut h);
+    format!("{txn}-{:08x}", h.finish() as u32)
+}
+
+fn answer(
+    item: &Item,
+    cache: &TileCache,
+    max_error: Option<f64>,
+    asked: &Asked,
+    query: &str,
+    request: &Request,
+) -> Result<Response, Error> {
+    let terrain = Terrain::open(&item.path)?;
+    let info = terrain.info()?;
+    let tileset = Tileset::new(&info, max_error)?;
+    let version = version(item, info.txn_id);
+    match asked {
+        Asked::Layer => {
+            let body = serde_json::to_vec_pretty(&tileset.layer_json(&item.name, &version))
+                .map_err(|e| Error::InvalidArgument(format!("layer.json: {e}")))?;
+            Ok(with_cors(
+                Response::new(200, "application/json", Body::Bytes(body))
+                    .with("Cache-Control", "no-cache"),
+            ))
+        }
+        Asked::Tile(t) => {
+            let columns = 2u64 << t.z.min(31);
+            let rows = 1u64 << t.z.min(31);
+            if t.z > tileset.maxzoom() {
+                return Ok(text_error(
+                    404,
+                    format!("level {} is past the deepest, {}", t.z, tileset.maxzoom()),
+                ));
+            }
+            if u64::from(t.x) >= columns || u64::from(t.y) >= rows {
+                return Ok(text_error(
+                    400,
+                    format!(
+                        "tile {}/{}/{}: level {} has columns 0..{columns} and rows 0..{rows}",
+                        t.z, t.x, t.y, t.z
+                    ),
+                ));
+            }
+            if !tileset.has(*t) {
+                return Ok(text_error(
+                    404,
+                    "no data in this tile (see layer.json's available)",
+                ));
+            }
+            let Some(ext) = accepted(request.header("Accept")) else {
+                return Ok(text_error(
+                    406,
+                    "this serves application/vnd.quantized-mesh (or application/octet-stream)",
+                ));
+            };
+            let gzip = request.header("Accept-Encoding").is_some_and(|v| {
+                v.split(',')
+                    .any(|e| e.trim().split(';').next() == Some("gzip"))
+            });
+            let key: Key = (item.name.clone(), version.clone(), *t, ext);
+            let (plain, zipped, tag) = match cache.get(&key) {
+                Some(hit) => (hit.plain, hit.gzip, hit.tag),
+                None => {
+                    let cut = tileset.cut(&terrain, *t)?;
+                    let plain = Tileset::encode(&cut, ext.normals, ext.metadata)?;
+                    let mut h = std::collections::hash_map::DefaultHasher::new();
+                    plain.hash(&mut h);
+                    let tag = h.finish();
+                    let mut enc =
+                        flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::new(5));
+                    let zipped = enc
+                        .write_all(&plain)
+                        .and_then(|()| enc.finish())
+                        .map_err(|e| Error::InvalidArgument(format!("gzip: {e}")))?;
+                    let (plain, zipped) = (Arc::new(plain), Arc::new(zipped));
+                    cache.put(key, plain.clone(), zipped.clone(), tag);
+                    (plain, zipped, tag)
+                }
+            };
+            let etag = format!(
+                "\"{tag:016x}-{}{}\"",
+                ext.names(),
+                if gzip { "-gz" } else { "" }
+            );
+            let current = query
+                .split('&')
+                .any(|p| p.strip_prefix("v=") == Some(version.as_str()));
+            let cache_control = if current {
+                "public, max-age=86400"
+            } else {
+                "no-cache"
+            };
+            let content_type = if ext.names().is_empty() {
+                "application/vnd.quantized-mesh".to_string()
+            } else {
+                format!("application/vnd.quantized-mesh;extensions={}", ext.names())
+            };
+            let matches = request
+                .header("If-None-Match")
+                .is_some_and(|v| v.split(',').map(str::trim).any(|t| t == etag || t == "*"));
+            let status = if matches { 304 } else { 200 };
+            let body = if matches {
+                Vec::new()
+            } else if gzip {
+                zipped.as_ref().clone()
+            } else {
+                plain.as_ref().clone()
+            };
+            let mut r = Response::new(status, &content_type, Body::Bytes(body))
+                .with("ETag", etag)
+                .with("Cache-Control", cache_control)
+                .with("Vary", "Accept, Accept-Encoding");
+            if gzip && !matches {
+                r = r.with("Content-Encoding", "gzip");
+            }
+            Ok(with_cors(r))
+        }
+    }
+}
+
+/// The extensions an `Accept` header asks for; `None` when it takes neither
+/// quantized-mesh nor an octet stream nor anything. No header: no extensions.
+fn accepted(accept: Option<&str>) -> Option<Extensions> {
+    let Some(accept) = accept else {
+        return Some(Extensions {
+            normals: false,
+            metadata: false,
+        });
+    };
+    let mut fallback = false;
+    for range in accept.split(',') {
+        let mut params = range.split(';').map(str::trim);
+        let media = params.next().unwrap_or("").to_ascii_lowercase();
+        let mut quality_zero = false;
+        let mut extensions: Option<&str> = None;
+        for p in params {
+            if let Some((k, v)) = p.split_once('=') {
+                match k.trim().to_ascii_lowercase().as_str() {
+                    "q" => quality_zero = v.trim().parse::<f64>().is_ok_and(|q| q <= 0.0),
+                    "extensions" => extensions = Some(v.trim()),
+                    _ => {}
+                }
+            }
+        }
+        if quality_zero {
+            continue;
+        }
+        match media.as_str() {
+            "application/vnd.quantized-mesh" => {
+                let names: Vec<&str> = extensions.map_or(Vec::new(), |e| e.split('-').collect());
+                return Some(Extensions {
+                    normals: names.contains(&"octvertexnormals"),
+                    metadata: names.contains(&"metadata"),
+                });
+            }
+            "application/octet-stream" | "application/*" | "*/*" => fallback = true,
+            _ => {}
+        }
+    }
+    fallback.then_some(Extensions {
+        normals: false,
+        metadata: false,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn accept_headers() {
+        let cesium = "application/vnd.quantized-mesh;extensions=octvertexnormals-watermask-metadata,application/octet-stream;q=0.9,*/*;q=0.01";
+        assert_eq!(
+            accepted(Some(cesium)),
+            Some(Extensions {
+                normals: true,
+                metadata: true
+            })
+        );
+        assert_eq!(
+            accepted(Some("application/vnd.quantized-mesh")),
+            Some(Extensions {
+                normals: false,
+                metadata: false
+            })
+        );
+        assert!(accepted(Some("*/*")).is_some());
+        assert_eq!(accepted(Some("image/png")), None);
+        assert_eq!(accepted(Some("application/octet-stream;q=0")), None);
+        assert_eq!(accepted(Some(";;;,,,===")), None);
+        assert!(accepted(None).is_some());
+    }
+}
