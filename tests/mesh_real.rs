@@ -246,46 +246,6 @@ fn meshes_of_every_shared_dem_and_a_dataset_are_valid_gltf() {
     }
 }
 
-/// CesiumJS's own reading (`tests/js/cesium-sample.mjs`) of the tileset in `dir`, at
-/// `points`: the height sampleTerrainMostDetailed gives at each, and the level it took it
-/// from.
-fn cesium_samples(dir: &Path, points: &[[f64; 2]]) -> (Vec<f64>, Vec<u32>) {
-    let js = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/js");
-    assert!(
-        js.join("node_modules/@cesium/engine").is_dir(),
-        "CesiumJS is not installed: run `npm ci --prefix tests/js` (.ci/run does)"
-    );
-    let file = dir.join("points.json");
-    std::fs::write(&file, serde_json::to_vec(points).unwrap()).unwrap();
-    let out = Command::new("node")
-        .arg(js.join("cesium-sample.mjs"))
-        .arg(dir)
-        .arg(&file)
-        .output()
-        .expect("node runs (Node.js is needed for CesiumJS)");
-    assert!(
-        out.status.success(),
-        "cesium-sample.mjs: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    assert_eq!(report["hasVertexNormals"], true);
-    assert_eq!(report["hasMetadata"], true);
-    let heights = report["heights"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|h| h.as_f64().expect("Cesium gave a height at every point"))
-        .collect();
-    let levels = report["levels"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|l| l.as_u64().unwrap() as u32)
-        .collect();
-    (heights, levels)
-}
-
 /// Geodetic quantized-mesh tilesets of every georeferenced shared DEM (the SRTM tiles by
 /// their HGT names, whose sidecars carry no machine-readable georeference) and of the
 /// N43E006 + N43E007 dataset (gzipped), opened by CesiumJS itself: at random valid samples, the
@@ -384,7 +344,7 @@ fn cesium_reads_the_geodetic_tilesets_within_their_errors() {
                 want.push(f64::from(source.samples[k]));
             }
         }
-        let (heights, levels) = cesium_samples(&out, &points);
+        let (heights, levels) = common::cesium::samples(out.to_str().unwrap(), &out, &points);
         for (i, &[lon, lat]) in points.iter().enumerate() {
             let holding: Vec<&common::quantized_mesh::Tile> = tiles
                 .values()

@@ -102,6 +102,7 @@ pub fn bytes_of(
 }
 
 pub mod bundle;
+pub mod cesium;
 pub mod fields;
 pub mod globe;
 pub mod gltf;

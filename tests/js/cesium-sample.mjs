@@ -1,9 +1,11 @@
 // Reads a quantized-mesh tileset the way a Cesium globe does, and samples its heights:
 // CesiumJS itself (npm `@cesium/engine`) opens the tileset's layer.json through
 // CesiumTerrainProvider, served here over HTTP from its directory, and answers
-// sampleTerrainMostDetailed for each point. Used by tests/mesh_real.rs.
+// sampleTerrainMostDetailed for each point. Used by tests/mesh_real.rs, and by
+// tests/terrain_cesium.rs with the layer `fmrh serve` serves live (a URL in place of the
+// directory).
 //
-//   node cesium-sample.mjs TILESET_DIR POINTS.json
+//   node cesium-sample.mjs TILESET_DIR|LAYER_URL POINTS.json
 //
 // POINTS.json is [[lon, lat], ...] in degrees. Prints one JSON object: for each point, the
 // height Cesium gives and the level of the tile it took it from (the deepest available
@@ -34,8 +36,33 @@ const server = http.createServer((req, res) => {
     res.end(data);
   });
 });
-await new Promise((resolve) => server.listen(0, '127.0.0.1', resolve));
-const url = `http://127.0.0.1:${server.address().port}/`;
+// At most 6 requests at once, as a browser keeps to one host over HTTP/1.1: CesiumJS on
+// Node.js fetches through undici, which opens as many connections as there are requests
+// (hundreds for a sampleTerrainMostDetailed), and `fmrh serve` answers a client past 64
+// connections 503. Each response is read whole before its slot is given back.
+const realFetch = globalThis.fetch;
+let active = 0;
+const waiting = [];
+globalThis.fetch = async (...args) => {
+  while (active >= 6) await new Promise((resolve) => waiting.push(resolve));
+  active += 1;
+  try {
+    const r = await realFetch(...args);
+    const body = await r.arrayBuffer();
+    return new Response(body, { status: r.status, statusText: r.statusText, headers: r.headers });
+  } finally {
+    active -= 1;
+    const next = waiting.shift();
+    if (next) next();
+  }
+};
+let url;
+if (/^https?:\/\//.test(dir)) {
+  url = dir;
+} else {
+  await new Promise((resolve) => server.listen(0, '127.0.0.1', resolve));
+  url = `http://127.0.0.1:${server.address().port}/`;
+}
 
 let provider;
 try {
@@ -58,4 +85,4 @@ console.log(JSON.stringify({
   heights: sampled.map((c) => c.height ?? null),
   levels,
 }));
-server.close();
+if (server.listening) server.close();

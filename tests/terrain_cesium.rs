@@ -1,0 +1,127 @@
+//! CesiumJS itself (`@cesium/engine` on Node.js, `tests/js/cesium-sample.mjs`) reads the
+//! terrain `fmrh serve` cuts live: `CesiumTerrainProvider.fromUrl` opens the served layer
+//! with normals and metadata, and `sampleTerrainMostDetailed` at 240 random valid samples of
+//! each source gives heights from the deepest level there (the layer's `maxzoom`), each
+//! within that tile's declared (measured) error of the source sample. Run on the SRTM tiles
+//! N43E006 (3") and S46W066 (1"), and on the N43E006 + N43E007 dataset. Large-data suite
+//! (needs `../shared` and `npm ci --prefix tests/js`).
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::quantized_mesh::{decode, Source, Tile};
+use common::serve::Served;
+
+fn fmrh_ok(args: &[&str]) {
+    let out = common::fmrh(args);
+    assert!(
+        out.status.success(),
+        "fmrh {}: {}",
+        args.join(" "),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+fn load(p: &Path) -> fmrh::Heightfield {
+    fmrh::ingest::load(p, &fmrh::ingest::IngestOptions::default()).expect("the DEM loads")
+}
+
+/// The deepest tile holding `(lon, lat)`, decoded, from the server.
+fn tile_at(served: &Served, name: &str, z: u32, lon: f64, lat: f64) -> Tile {
+    let d = 180.0 / f64::from(1u32 << z);
+    let x = ((lon + 180.0) / d).floor() as u32;
+    let y = ((lat + 90.0) / d).floor() as u32;
+    let a = served.ask(
+        "GET",
+        &format!("/{name}/{z}/{x}/{y}.terrain"),
+        &[(
+            "Accept",
+            "application/vnd.quantized-mesh;extensions=octvertexnormals-metadata",
+        )],
+    );
+    assert_eq!(a.status, 200, "{}", String::from_utf8_lossy(&a.body));
+    Tile::new(z, x, y, decode(&a.body))
+}
+
+#[test]
+fn cesium_reads_the_served_terrain_within_its_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = common::data_dir();
+    let mut cases: Vec<(PathBuf, Source)> = Vec::new();
+    for rel in [
+        "srtm3-pyhgtmap/N43E006.hgt",
+        "srtm1-asmyasnikov/S46W066.hgt.gz",
+    ] {
+        let dem = common::data(rel);
+        let out = dir.path().join(rel.replace(['/', '.'], "_") + ".fmrh");
+        fmrh_ok(&[
+            "build",
+            "-q",
+            dem.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        cases.push((out, Source::of(&load(&dem))));
+    }
+    let tiles = data.join("srtm3-pyhgtmap");
+    let ds = dir.path().join("ds");
+    fmrh_ok(&[
+        "dataset",
+        "build",
+        "-q",
+        "--seam",
+        "first",
+        tiles.join("N43E006.hgt").to_str().unwrap(),
+        tiles.join("N43E007.hgt").to_str().unwrap(),
+        "-o",
+        ds.to_str().unwrap(),
+    ]);
+    cases.push((
+        ds,
+        Source::beside(
+            &load(&tiles.join("N43E006.hgt")),
+            &load(&tiles.join("N43E007.hgt")),
+        ),
+    ));
+    let paths: Vec<&Path> = cases.iter().map(|(p, _)| p.as_path()).collect();
+    let served = Served::start(&paths);
+    for (path, source) in &cases {
+        let name = path.file_name().unwrap().to_str().unwrap();
+        let layer = served.get(&format!("/{name}/layer.json")).json();
+        let maxzoom = layer["maxzoom"].as_u64().unwrap() as u32;
+        let mut rng = common::fields::Rng::new(0xce51 ^ name.len() as u64);
+        let (mut points, mut want) = (Vec::new(), Vec::new());
+        while points.len() < 240 {
+            let k = (rng.next_u64() % source.samples.len() as u64) as usize;
+            if !source.samples[k].is_nan() {
+                points.push(source.lon_lat[k]);
+                want.push(f64::from(source.samples[k]));
+            }
+        }
+        let url = format!("{}/{name}/", served.base());
+        let (heights, levels) = common::cesium::samples(&url, dir.path(), &points);
+        let mut worst = 0.0f64;
+        for (i, &[lon, lat]) in points.iter().enumerate() {
+            assert_eq!(levels[i], maxzoom, "{name}: Cesium's level at {lon},{lat}");
+            let tile = tile_at(&served, name, maxzoom, lon, lat);
+            let error = tile.meta()["error"].as_f64().unwrap();
+            let ours = tile.height_at(lon, lat);
+            assert!(
+                (heights[i] - ours).abs() <= 1e-3,
+                "{name}: at {lon},{lat} Cesium draws {} where the tile draws {ours}",
+                heights[i]
+            );
+            assert!(
+                (heights[i] - want[i]).abs() <= error + 1e-3,
+                "{name}: at {lon},{lat} Cesium draws {} where the source has {} (declared error {error})",
+                heights[i],
+                want[i]
+            );
+            worst = worst.max((heights[i] - want[i]).abs());
+        }
+        eprintln!(
+            "{name}: maxzoom {maxzoom}, largest |Cesium - source| at 240 samples: {worst:.2} m"
+        );
+    }
+}
