@@ -3,8 +3,8 @@
 //! from the public specification):
 //!
 //! * `layer.json` is TileJSON as `CesiumTerrainProvider` reads it, its `available` levels
-//!   exactly the tiles that meet the data, down to the level whose 65² grid is as fine as
-//!   the data's samples, and its tiles' addresses carry the state's version;
+//!   exactly the tiles that meet the data, down to two levels past the one whose 65² grid
+//!   is as fine as the data's samples, and its tiles' addresses carry the state's version;
 //! * every tile of the pyramid's deepest three levels (and both roots) decodes; at every
 //!   source sample inside it the height it draws is within the error its metadata declares;
 //!   two neighbours have the same vertices at the same heights along their common edge; the
@@ -127,9 +127,15 @@ fn a_served_pyramid_keeps_its_promises() {
     assert_eq!(layer["tiles"][0], "{z}/{x}/{y}.terrain?v={version}");
     let version = layer["version"].as_str().unwrap().to_string();
     let maxzoom = layer["maxzoom"].as_u64().unwrap() as usize;
-    // The deepest level: the first whose 65² grid steps are at most the data's.
+    // The data's level is the first whose 65² grid steps are at most the data's; the
+    // deepest is `FINER` past it.
     let grid_step = |z: usize| 180.0 / f64::from(1u32 << z) / 64.0;
-    assert!(grid_step(maxzoom) <= STEP && grid_step(maxzoom - 1) > STEP);
+    let data_level = maxzoom - usize::from(fmrh::export::tileset::FINER);
+    assert!(grid_step(data_level) <= STEP && grid_step(data_level - 1) > STEP);
+    assert_eq!(
+        layer["fmrh"]["data_level"].as_u64(),
+        Some(data_level as u64)
+    );
     let bounds: Vec<f64> = layer["bounds"]
         .as_array()
         .unwrap()

@@ -4,15 +4,17 @@
 //! (`Terrain::cut`), its `layer.json`, and which tiles exist.
 //!
 //! **Levels and budgets.** Cesium refines a level-`z` tile when its geometric error,
-//! `geometric_error(z)` (a 65² heightmap over a quarter of the equator at level 0, halved
-//! each level), seen from the camera, passes its screen-space error. A tile here spends
-//! half of that on the blocks it is cut from (the error level within `geometric_error(z) /
-//! 2`), and the other half (or `--max-error`, if smaller) on the TIN against its grid.
-//! The deepest level, `maxzoom`, is the first whose 65² grid is at least as fine as the
-//! data's samples; its tiles are cut from the exact blocks (`e* = 0`), so the finest tiles
-//! differ from the source only by their TIN budget and the grid's resampling, not by a
-//! coarse level (a 1" SRTM tile gets level 14, where Cesium's error is 4.7 m, and not
-//! level 12's 65² grid, 2.5 samples a vertex). Every tile reports what it measured.
+//! `geometric_error(z)` (77 km at level 0, halved each level), seen from the camera, passes
+//! its screen-space error. A tile here spends half of that on the blocks it is cut from
+//! (the error level within `geometric_error(z) / 2`), and the other half (or
+//! `--max-error`, if smaller) on the TIN against its grid. The *data's level* is the first
+//! whose 65² grid is as fine as the data's samples: from it down, tiles are cut from the
+//! exact blocks (`e* = 0`) with the data level's budget. A grid's lines do not fall on the
+//! sample lines, so a grid as fine as the samples still misses a cliff between two of its
+//! points (75 m on 3" SRTM at its data level, 12); the deepest level, `maxzoom`, is
+//! [`FINER`] levels past it, where grids are 4 times finer than the samples and the
+//! largest measured error falls to the budget's size (6 m on that SRTM tile). Every tile
+//! reports what it measured.
 //!
 //! **Which tiles.** Both roots, and at each level from 1 to `maxzoom` the tiles meeting
 //! the data's longitude and latitude box: one rectangle of tiles a level, listed in
@@ -44,9 +46,16 @@ pub struct Tileset {
     data: SampleRect,
     data_box: [f64; 4],
     quanta: Quanta,
+    /// The first level whose 65² grid is as fine as the data's samples.
+    data_level: u8,
     maxzoom: u8,
     max_error: Option<f64>,
 }
+
+/// Levels past the data's own: the deepest tiles' grids are `2^FINER` times finer than the
+/// data's samples, so that resampling the data onto a grid (whose lines do not fall on
+/// sample lines) costs little next to the budget.
+pub const FINER: u8 = 2;
 
 impl Tileset {
     /// The tileset of a terrain described by `info`; `max_error` caps every level's TIN
@@ -83,11 +92,12 @@ impl Tileset {
         // The finer of the data's two steps, in degrees (a box's extent over its samples).
         let step = ((e - w) / info.width.max(2).saturating_sub(1) as f64)
             .min((n - s) / info.height.max(2).saturating_sub(1) as f64);
-        let maxzoom = if step > 0.0 && step.is_finite() {
+        let data_level = if step > 0.0 && step.is_finite() {
             level_for_step(step).min(MAX_ZOOM)
         } else {
             0
         };
+        let maxzoom = (data_level + FINER).min(MAX_ZOOM);
         let [lo, hi] = info.height_range.unwrap_or([0.0, 0.0]);
         let quanta = Quanta::for_range(f64::from(lo).min(0.0), f64::from(hi).max(0.0));
         Ok(Tileset {
@@ -95,6 +105,7 @@ impl Tileset {
             data,
             data_box,
             quanta,
+            data_level,
             maxzoom,
             max_error,
         })
@@ -106,9 +117,9 @@ impl Tileset {
     }
 
     /// The bound the blocks of a level-`z` tile are cut within: half Cesium's geometric
-    /// error, and the exact blocks at the deepest level.
+    /// error, and the exact blocks from the data's own level down.
     pub fn cut_bound(&self, z: u8) -> f64 {
-        if z >= self.maxzoom {
+        if z >= self.data_level {
             0.0
         } else {
             geodetic::geometric_error(z) / 2.0
@@ -116,9 +127,10 @@ impl Tileset {
     }
 
     /// The TIN budget of a level-`z` tile against its grid: half Cesium's geometric error,
-    /// or the cap if smaller.
+    /// no finer than at the data's own level (past it the grids are finer than the
+    /// samples: only resampling shrinks), or the cap if smaller.
     pub fn budget(&self, z: u8) -> f64 {
-        let half = geodetic::geometric_error(z) / 2.0;
+        let half = geodetic::geometric_error(z.min(self.data_level)) / 2.0;
         self.max_error.map_or(half, |m| m.min(half))
     }
 
@@ -194,6 +206,7 @@ impl Tileset {
                     "cut_bound_m": self.cut_bound(z),
                     "tin_budget_m": self.budget(z),
                 })).collect::<Vec<_>>(),
+                "data_level": self.data_level,
                 "corner_quantum_m": self.quanta.corner,
                 "error": "each tile's metadata: fmrh.error = max over the data samples inside \
                     it of |tile - surface| + the owning block's e*, so |tile - source| <= error",
