@@ -103,6 +103,7 @@ rooms!(
     dataset,
     error,
     export,
+    geoid,
     format,
     globe,
     heightfield,
