@@ -19,6 +19,53 @@
 
 use std::sync::OnceLock;
 
+/// What a terrain's heights are above.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum VerticalDatum {
+    /// The EGM96 geoid (mean sea level): SRTM's and DTED's heights.
+    Egm96,
+    /// The WGS 84 ellipsoid.
+    Ellipsoid,
+    /// Not known: heights are placed as they are, as if above the ellipsoid.
+    Unknown,
+}
+
+impl VerticalDatum {
+    /// What a reader's heights are above, when the file says nothing else: EGM96 for SRTM
+    /// (`.hgt`) and DTED, unknown for the rest.
+    pub fn of_source_format(format: &str) -> VerticalDatum {
+        match format {
+            "srtm-hgt" | "dted" => VerticalDatum::Egm96,
+            _ => VerticalDatum::Unknown,
+        }
+    }
+
+    /// A datum by name: `egm96`, `ellipsoid` or `unknown`. EGM2008 is refused by name: no
+    /// grid of it is bundled.
+    pub fn parse(name: &str) -> Result<VerticalDatum, String> {
+        match name.to_ascii_lowercase().as_str() {
+            "egm96" => Ok(VerticalDatum::Egm96),
+            "ellipsoid" | "wgs84" => Ok(VerticalDatum::Ellipsoid),
+            "unknown" => Ok(VerticalDatum::Unknown),
+            "egm2008" => Err("egm2008: fmrh bundles no EGM2008 grid (EGM96's only); give                               egm96, ellipsoid or unknown"
+                .into()),
+            other => Err(format!(
+                "`{other}`: expected egm96, ellipsoid or unknown"
+            )),
+        }
+    }
+
+    /// Its name, as [`VerticalDatum::parse`] reads it.
+    pub fn name(&self) -> &'static str {
+        match self {
+            VerticalDatum::Egm96 => "egm96",
+            VerticalDatum::Ellipsoid => "ellipsoid",
+            VerticalDatum::Unknown => "unknown",
+        }
+    }
+}
+
 /// The packed grid (`data/egm96-nga/pack.py`).
 const PACKED: &[u8] = include_bytes!("../data/egm96-nga/ww15mgh.i16.zlib");
 

@@ -14,6 +14,8 @@
 //! * after an edit (`Terrain::edit`, a committed replace) the layer's version changes, a
 //!   tile the edit did not touch keeps its `ETag`, and a tile over it draws the new heights
 //!   under a new one;
+//! * with `--vertical-datum egm96` every height is lifted by the EGM96 undulation, within
+//!   the declared error of the source plus `N`; `egm2008` is refused (no grid bundled);
 //! * bad requests (unknown names, levels past the deepest, columns past the level, wrong
 //!   extensions, `..`, absurd `Accept` headers, a terrain with no georeference) get 4xx.
 
@@ -404,4 +406,50 @@ fn bad_requests_get_4xx() {
     let pre = served.ask("OPTIONS", "/alps.fmrh/0/0/0.terrain", &[]);
     assert_eq!(pre.status, 204);
     assert!(pre.header("access-control-allow-methods").is_some());
+}
+
+#[test]
+fn the_geoid_lifts_heights_onto_the_ellipsoid() {
+    let dir = tempfile::tempdir().unwrap();
+    // The Alps, where EGM96's undulation is near 50 m.
+    let f = field(7.25, 45.4);
+    let path = container(dir.path(), "alps.fmrh", &f);
+    let source = Source::of(&f);
+    let served = Served::start_with(&[&path], &["--vertical-datum", "egm96"]);
+    let layer = served.get("/alps.fmrh/layer.json").json();
+    assert_eq!(layer["fmrh"]["vertical_datum"], "egm96");
+    let maxzoom = layer["maxzoom"].as_u64().unwrap() as usize;
+    let mut checked = 0;
+    for (x, y) in level(&layer["available"], maxzoom).into_iter().step_by(7) {
+        let a = get_tile(&served, &format!("/alps.fmrh/{maxzoom}/{x}/{y}.terrain"));
+        assert_eq!(a.status, 200);
+        let tile = Tile::new(maxzoom as u32, x, y, decode(&gunzip(&a.body)));
+        let error = tile.meta()["error"].as_f64().unwrap();
+        let [w, s, e, n] = tile.bounds();
+        for (k, &[lon, lat]) in source.lon_lat.iter().enumerate() {
+            if lon >= w && lon <= e && lat >= s && lat <= n {
+                let n96 = fmrh::geoid::egm96_undulation(lat, lon);
+                assert!(
+                    (45.0..60.0).contains(&n96),
+                    "EGM96 near 7.3 E 45.3 N: {n96}"
+                );
+                let want = f64::from(source.samples[k]) + n96;
+                let drawn = tile.height_at(lon, lat);
+                assert!(
+                    (drawn - want).abs() <= error + 1e-6,
+                    "{drawn} drawn where the source lifted by N is {want} (error {error})"
+                );
+                checked += 1;
+            }
+        }
+    }
+    assert!(checked > 1000, "{checked} samples checked");
+    let refused = common::fmrh(&[
+        "serve",
+        path.to_str().unwrap(),
+        "--vertical-datum",
+        "egm2008",
+    ]);
+    assert_eq!(refused.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("EGM2008"));
 }

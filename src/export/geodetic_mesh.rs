@@ -61,6 +61,9 @@ pub struct Placement {
     /// Multiply sample coordinates by this to get the surface's units (a refined scene's
     /// blocks are in finer units than samples).
     units: f64,
+    /// Whether heights are above the EGM96 geoid and go onto the globe above the ellipsoid
+    /// (`h = H + N`, [`Placement::lift`]).
+    geoid: bool,
 }
 
 impl Placement {
@@ -96,7 +99,25 @@ impl Placement {
             origin: g.origin,
             step: g.step,
             units,
+            geoid: false,
         })
+    }
+
+    /// This placement with heights above the EGM96 geoid lifted onto the ellipsoid (`on`),
+    /// or kept as they are.
+    pub fn with_geoid(mut self, on: bool) -> Placement {
+        self.geoid = on;
+        self
+    }
+
+    /// What goes onto a height at `(lon, lat)` to place it above the WGS 84 ellipsoid: the
+    /// EGM96 undulation `N` when heights are above that geoid, else 0.
+    pub fn lift(&self, lon: f64, lat: f64) -> f64 {
+        if self.geoid {
+            crate::geoid::egm96_undulation(lat, lon)
+        } else {
+            0.0
+        }
     }
 
     /// Whether the CRS is geographic (samples are affine in longitude and latitude).
@@ -358,6 +379,12 @@ pub fn sample_grid(
                     raw[k] = s.height;
                 }
             }
+        }
+    }
+    // Every point, on the data or off it (sea level there), onto the ellipsoid.
+    if placement.geoid {
+        for (h, &[lon, lat]) in raw.iter_mut().zip(&lon_lat) {
+            *h += placement.lift(lon, lat);
         }
     }
     GridSample {
@@ -635,7 +662,7 @@ pub(crate) fn measure(
             let Some(sampled) = surface.at(p[0], p[1]) else {
                 continue;
             };
-            let d = (height(lon, lat) - sampled.height).abs();
+            let d = (height(lon, lat) - (sampled.height + placement.lift(lon, lat))).abs();
             resampling = resampling.max(d);
             let e = surface.blocks()[sampled.block].error;
             error = error.max(d + e);

@@ -33,6 +33,7 @@ use super::tin_tile::{self, Quanta, TinTile};
 use crate::error::{Error, Result};
 use crate::model::SampleRect;
 use crate::scene::surface::{GridBlock, Surface};
+use crate::geoid::VerticalDatum;
 use crate::terrain::{Info, Terrain};
 
 /// The deepest level a tileset goes to, whatever the data (a 65² grid at level 24 is 7 cm
@@ -50,6 +51,7 @@ pub struct Tileset {
     data_level: u8,
     maxzoom: u8,
     max_error: Option<f64>,
+    datum: VerticalDatum,
 }
 
 /// Levels past the data's own: the deepest tiles' grids are `2^FINER` times finer than the
@@ -60,7 +62,7 @@ pub const FINER: u8 = 2;
 impl Tileset {
     /// The tileset of a terrain described by `info`; `max_error` caps every level's TIN
     /// budget. An error when the data cannot be placed on the globe.
-    pub fn new(info: &Info, max_error: Option<f64>) -> Result<Tileset> {
+    pub fn new(info: &Info, max_error: Option<f64>, datum: VerticalDatum) -> Result<Tileset> {
         let georeference = info.georeference.as_ref().ok_or_else(|| {
             Error::InvalidArgument(
                 "no georeference: the data cannot be placed on the globe, so it has no \
@@ -75,7 +77,8 @@ impl Tileset {
                 )));
             }
         }
-        let placement = Placement::new(georeference, 1.0)?;
+        let placement =
+            Placement::new(georeference, 1.0)?.with_geoid(datum == VerticalDatum::Egm96);
         if info.width == 0 || info.height == 0 {
             return Err(Error::InvalidArgument("the terrain has no samples".into()));
         }
@@ -99,7 +102,17 @@ impl Tileset {
         };
         let maxzoom = (data_level + FINER).min(MAX_ZOOM);
         let [lo, hi] = info.height_range.unwrap_or([0.0, 0.0]);
-        let quanta = Quanta::for_range(f64::from(lo).min(0.0), f64::from(hi).max(0.0));
+        // Heights and sea level off the data, lifted by the geoid where they are (EGM96's
+        // undulations lie within -107 m and +86 m).
+        let (lift_lo, lift_hi) = if datum == VerticalDatum::Egm96 {
+            (-110.0, 90.0)
+        } else {
+            (0.0, 0.0)
+        };
+        let quanta = Quanta::for_range(
+            f64::from(lo).min(0.0) + lift_lo,
+            f64::from(hi).max(0.0) + lift_hi,
+        );
         Ok(Tileset {
             placement,
             data,
@@ -108,7 +121,13 @@ impl Tileset {
             data_level,
             maxzoom,
             max_error,
+            datum,
         })
+    }
+
+    /// What the data's heights are above.
+    pub fn datum(&self) -> VerticalDatum {
+        self.datum
     }
 
     /// The deepest level.
@@ -207,6 +226,14 @@ impl Tileset {
                     "tin_budget_m": self.budget(z),
                 })).collect::<Vec<_>>(),
                 "data_level": self.data_level,
+                "vertical_datum": self.datum.name(),
+                "heights": match self.datum {
+                    VerticalDatum::Egm96 => "above the WGS 84 ellipsoid: the data's heights above \
+                        the EGM96 geoid plus its undulation N (NGA's 15' grid, bilinear)",
+                    VerticalDatum::Ellipsoid => "above the WGS 84 ellipsoid, as stored",
+                    VerticalDatum::Unknown => "as stored: the data does not say what they are \
+                        above (serve --vertical-datum says)",
+                },
                 "corner_quantum_m": self.quanta.corner,
                 "error": "each tile's metadata: fmrh.error = max over the data samples inside \
                     it of |tile - surface| + the owning block's e*, so |tile - source| <= error",

@@ -151,6 +151,7 @@ impl Terrain {
                     spacing_m: h.metadata.spacing_m,
                     georeference: h.metadata.georeference.clone(),
                     units: h.metadata.units.clone(),
+                    source_format: h.metadata.source_format.clone(),
                     height_range: valid.then_some([root.min_height, root.max_height]),
                     max_error: Some(h.max_error),
                     storage_error: h.storage_error(),
@@ -185,6 +186,10 @@ impl Terrain {
                     spacing_m: ds.spacing_m(),
                     georeference: ds.georeference(),
                     units: None,
+                    source_format: match ds.tiles()?.first() {
+                        Some(t) => ds.open_tile(t)?.header().metadata.source_format.clone(),
+                        None => String::new(),
+                    },
                     height_range: range,
                     max_error: None,
                     storage_error: 0.0,
@@ -289,6 +294,9 @@ pub struct Info {
     pub georeference: Option<Georeference>,
     /// Units of the heights, when the data says.
     pub units: Option<String>,
+    /// The reader that made it (`srtm-hgt`, `dted`, `geotiff`, …; a dataset's: its first
+    /// tile's), which says what the heights are above when nothing else does.
+    pub source_format: String,
     /// The lowest and highest real height; `None` when every sample is void.
     pub height_range: Option<[f32; 2]>,
     /// The coarsest level's measured error, in height units (a container's: its root's `e*`).

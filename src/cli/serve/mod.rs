@@ -61,6 +61,11 @@ pub struct ServeArgs {
     /// half Cesium's geometric error at the tile's level).
     #[arg(long, value_name = "METRES", allow_negative_numbers = true)]
     max_error: Option<f64>,
+    /// Cesium terrain: what the served heights are above: egm96 (lifted onto the WGS 84
+    /// ellipsoid by the geoid's undulation), ellipsoid or unknown (both served as stored).
+    /// Default: what the data's format says (SRTM and DTED: egm96), else unknown.
+    #[arg(long, value_name = "DATUM", value_parser = crate::geoid::VerticalDatum::parse)]
+    vertical_datum: Option<crate::geoid::VerticalDatum>,
 }
 
 /// A timeout in seconds: finite, more than 0, at most a day.
@@ -151,14 +156,24 @@ pub fn run(args: &ServeArgs) -> Result<ExitCode, Error> {
             // Cesium terrain for what can be placed on the globe.
             let placeable = crate::terrain::Terrain::open(&item.path)
                 .and_then(|t| t.info())
-                .and_then(|i| crate::export::tileset::Tileset::new(&i, args.max_error));
+                .and_then(|i| {
+                    let datum = args.vertical_datum.unwrap_or_else(|| {
+                        crate::geoid::VerticalDatum::of_source_format(&i.source_format)
+                    });
+                    crate::export::tileset::Tileset::new(&i, args.max_error, datum)
+                });
             if let Ok(tileset) = placeable {
                 let _ = writeln!(
                     out,
-                    "  {:<9} /{}/layer.json (Cesium quantized-mesh, levels 0..={})",
+                    "  {:<9} /{}/layer.json (Cesium quantized-mesh, levels 0..={}, heights {})",
                     "terrain",
                     item.name,
-                    tileset.maxzoom()
+                    tileset.maxzoom(),
+                    match tileset.datum() {
+                        crate::geoid::VerticalDatum::Egm96 => "EGM96 + N: above the ellipsoid",
+                        crate::geoid::VerticalDatum::Ellipsoid => "above the ellipsoid",
+                        crate::geoid::VerticalDatum::Unknown => "as stored (datum unknown)",
+                    }
                 );
             }
         }
@@ -169,9 +184,12 @@ pub fn run(args: &ServeArgs) -> Result<ExitCode, Error> {
         ..http::Limits::default()
     };
     let cache = terrain::TileCache::default();
-    let max_error = args.max_error;
+    let options = terrain::Options {
+        max_error: args.max_error,
+        datum: args.vertical_datum,
+    };
     http::serve(listener, limits, move |request| {
-        answer(&items, &cache, max_error, request)
+        answer(&items, &cache, options, request)
     });
     Ok(ExitCode::SUCCESS)
 }
@@ -206,7 +224,7 @@ fn fmrh_error(e: &Error) -> Answer {
 fn answer(
     items: &[Item],
     cache: &terrain::TileCache,
-    max_error: Option<f64>,
+    options: terrain::Options,
     request: &Request,
 ) -> Answer {
     let url = request.target.as_str();
@@ -222,7 +240,7 @@ fn answer(
         && terrain::is_address(items, &path);
     match (method, terrain) {
         ("GET" | "HEAD" | "OPTIONS", true) => {
-            if let Some(r) = terrain::route(items, cache, max_error, &path, query, request) {
+            if let Some(r) = terrain::route(items, cache, options, &path, query, request) {
                 return r;
             }
             route(items, &path, query, request)

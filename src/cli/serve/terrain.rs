@@ -27,6 +27,7 @@ use std::sync::{Arc, Mutex};
 
 use crate::export::geodetic::GeodeticTile;
 use crate::export::tileset::Tileset;
+use crate::geoid::VerticalDatum;
 use crate::http::{Body, Request, Response};
 use crate::terrain::Terrain;
 use crate::Error;
@@ -35,6 +36,15 @@ use super::Item;
 
 /// Bytes of tiles the cache keeps.
 const CACHE_BYTES: usize = 64 << 20;
+
+/// What `fmrh serve` was told about its terrain.
+#[derive(Clone, Copy, Debug)]
+pub struct Options {
+    /// The cap on every level's TIN budget, metres.
+    pub max_error: Option<f64>,
+    /// What the heights are above; `None`: what each terrain's format says.
+    pub datum: Option<VerticalDatum>,
+}
 
 /// The extensions a tile is written with.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -146,7 +156,7 @@ pub fn is_address(items: &[Item], path: &str) -> bool {
 pub fn route(
     items: &[Item],
     cache: &TileCache,
-    max_error: Option<f64>,
+    options: Options,
     path: &str,
     query: &str,
     request: &Request,
@@ -185,19 +195,17 @@ pub fn route(
                 .with("Access-Control-Max-Age", "86400"),
         ));
     }
-    Some(
-        match answer(item, cache, max_error, &asked, query, request) {
-            Ok(r) => r,
-            Err(e) => {
-                let status = match &e {
-                    Error::InvalidArgument(_) => 404,
-                    Error::Input { .. } | Error::Unsupported { .. } | Error::Corrupt { .. } => 422,
-                    _ => 500,
-                };
-                text_error(status, e.to_string())
-            }
-        },
-    )
+    Some(match answer(item, cache, options, &asked, query, request) {
+        Ok(r) => r,
+        Err(e) => {
+            let status = match &e {
+                Error::InvalidArgument(_) => 404,
+                Error::Input { .. } | Error::Unsupported { .. } | Error::Corrupt { .. } => 422,
+                _ => 500,
+            };
+            text_error(status, e.to_string())
+        }
+    })
 }
 
 /// The state's version: its transaction id and the identity of the file that holds it.
@@ -216,14 +224,17 @@ fn version(item: &Item, txn: u64) -> String {
 fn answer(
     item: &Item,
     cache: &TileCache,
-    max_error: Option<f64>,
+    options: Options,
     asked: &Asked,
     query: &str,
     request: &Request,
 ) -> Result<Response, Error> {
     let terrain = Terrain::open(&item.path)?;
     let info = terrain.info()?;
-    let tileset = Tileset::new(&info, max_error)?;
+    let datum = options
+        .datum
+        .unwrap_or_else(|| VerticalDatum::of_source_format(&info.source_format));
+    let tileset = Tileset::new(&info, options.max_error, datum)?;
     let version = version(item, info.txn_id);
     match asked {
         Asked::Layer => {
