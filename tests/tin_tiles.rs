@@ -6,6 +6,8 @@
 //!   search) is within the tile's measured `error` of the source;
 //! * **neighbours share their edges**: two tiles of one level that meet have the same
 //!   vertices along their common edge, at the same decoded heights;
+//! * what a tile computes of its neighbours' edges (which the server keeps) is what each
+//!   neighbour computes of itself;
 //! * the mesh is a TIN, not the grid: flat ground is two triangles, and no tile has more
 //!   triangles than the full 65² grid.
 //!
@@ -75,8 +77,18 @@ proptest! {
         let z = level_for_step(STEP).saturating_sub(coarser);
         let tiles: Vec<GeodeticTile> = tiles_meeting(z, data_box);
         let mut cut_tiles = std::collections::HashMap::new();
+        let mut learnt_edges = std::collections::HashMap::new();
         for &t in &tiles {
-            let tin = tin_tile(t, &surface, &placement, data_box, budget, quanta).unwrap();
+            let (tin, learnt) =
+                tin_tile(t, &surface, &placement, data_box, budget, quanta, &|_| None).unwrap();
+            // What a tile learns of its neighbours is what each says of itself (the
+            // server keeps it, and cuts later tiles from it).
+            prop_assert_eq!(learnt[0].0, t);
+            for (n, e) in learnt {
+                if let Some(previous) = learnt_edges.insert(n, e.clone()) {
+                    prop_assert_eq!(previous, e, "two tiles computed different edges for {:?}", n);
+                }
+            }
             let bytes = quantized_mesh::write(&tin.data).unwrap();
             let decoded = common::quantized_mesh::decode(&bytes);
             prop_assert!(decoded.triangles.len() <= 2 * 64 * 64);

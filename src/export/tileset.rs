@@ -29,7 +29,7 @@ use serde_json::{json, Value};
 use super::geodetic::{self, GeodeticTile};
 use super::geodetic_mesh::{level_for_step, Placement};
 use super::quantized_mesh;
-use super::tin_tile::{self, Quanta, TinTile};
+use super::tin_tile::{self, Edges, Quanta, TinTile};
 use crate::error::{Error, Result};
 use crate::model::SampleRect;
 use crate::scene::surface::{GridBlock, Surface};
@@ -58,6 +58,32 @@ pub struct Tileset {
 /// data's samples, so that resampling the data onto a grid (whose lines do not fall on
 /// sample lines) costs little next to the budget.
 pub const FINER: u8 = 2;
+
+/// The [`Edges`] of tiles already meshed, for one state of one terrain and one tileset:
+/// a tile cut after its neighbours takes their edges from here instead of meshing them
+/// again. Dropped whole past [`EdgeCache::MAX`] tiles.
+#[derive(Debug, Default)]
+pub struct EdgeCache {
+    map: std::sync::Mutex<std::collections::HashMap<GeodeticTile, Edges>>,
+}
+
+impl EdgeCache {
+    /// Tiles kept (a few hundred bytes each).
+    pub const MAX: usize = 1 << 17;
+
+    fn get(&self, t: GeodeticTile) -> Option<Edges> {
+        let map = self.map.lock().unwrap_or_else(|p| p.into_inner());
+        map.get(&t).cloned()
+    }
+
+    fn put(&self, learnt: Vec<(GeodeticTile, Edges)>) {
+        let mut map = self.map.lock().unwrap_or_else(|p| p.into_inner());
+        if map.len() + learnt.len() > Self::MAX {
+            map.clear();
+        }
+        map.extend(learnt);
+    }
+}
 
 impl Tileset {
     /// The tileset of a terrain described by `info`; `max_error` caps every level's TIN
@@ -296,7 +322,7 @@ impl Tileset {
     /// Cuts tile `t` from `terrain`: the blocks within the level's bound over the tile and
     /// its neighbours, meshed within its budget, with its metadata (what it measured, and
     /// for a root the availability of every level below it).
-    pub fn cut(&self, terrain: &Terrain, t: GeodeticTile) -> Result<TinTile> {
+    pub fn cut(&self, terrain: &Terrain, t: GeodeticTile, edges: &EdgeCache) -> Result<TinTile> {
         if !self.has(t) {
             return Err(Error::InvalidArgument(format!(
                 "tile {}/{}/{} is not in the tileset",
@@ -324,14 +350,16 @@ impl Tileset {
         let levels: std::collections::BTreeSet<u8> =
             scene.iter().flat_map(|s| &s.blocks).map(|b| b.level).collect();
         let surface = Surface::new(blocks);
-        let mut tin = tin_tile::tin_tile(
+        let (mut tin, learnt) = tin_tile::tin_tile(
             t,
             &surface,
             &self.placement,
             self.data_box,
             budget,
             self.quanta,
+            &|n| edges.get(n),
         )?;
+        edges.put(learnt);
         tin.data.metadata = json!({ "fmrh": {
             "tile": [t.z, t.x, t.y],
             "error": tin.error,

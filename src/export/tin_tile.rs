@@ -85,6 +85,18 @@ pub struct TinTile {
     pub block_error: f64,
 }
 
+/// What a tile's neighbours need of it: the vertices its own mesh (before any neighbour's
+/// were added) puts on each side ([`RtinMesh::edge`]), and its height step. A function of
+/// the tile's grid and budget alone, so it may be kept and given back to [`tin_tile`] for
+/// as long as the data and budget are the same.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Edges {
+    /// Positions along each side (`mesh::rtin`'s sides: south, east, north, west).
+    pub sides: [Vec<u32>; 4],
+    /// Its height step, metres.
+    pub step: f64,
+}
+
 /// The tile across side `side` (0 south, 1 east, 2 north, 3 west: `mesh::rtin`'s sides
 /// with `i` east and `j` north), wrapping around the antimeridian; `None` past a pole.
 pub fn neighbour(t: GeodeticTile, side: usize) -> Option<GeodeticTile> {
@@ -138,20 +150,36 @@ pub fn tin_tile(
     data_box: [f64; 4],
     budget: f64,
     quanta: Quanta,
-) -> Result<TinTile> {
+    known: &dyn Fn(GeodeticTile) -> Option<Edges>,
+) -> Result<(TinTile, Vec<(GeodeticTile, Edges)>)> {
     let (sample, grid, mut mesh) = meshed(tile, surface, placement, data_box, budget);
     let (min, max) = range(&grid);
     let (step, lo) = quanta.of_tile(min, max);
+    let mut learnt = vec![(
+        tile,
+        Edges {
+            sides: std::array::from_fn(|side| mesh.edge(side)),
+            step,
+        },
+    )];
     // Each side's step: the coarser of this tile's and the neighbour's.
     let mut side_step = [step; 4];
     for (side, slot) in side_step.iter_mut().enumerate() {
         let Some(n) = neighbour(tile, side) else {
             continue;
         };
-        let (_, their_grid, theirs) = meshed(n, surface, placement, data_box, budget);
-        mesh.add_edge_vertices(side, &theirs.edge((side + 2) % 4));
-        let (tmin, tmax) = range(&their_grid);
-        *slot = step.max(quanta.of_tile(tmin, tmax).0);
+        let theirs = known(n).unwrap_or_else(|| {
+            let (_, their_grid, their_mesh) = meshed(n, surface, placement, data_box, budget);
+            let (tmin, tmax) = range(&their_grid);
+            let e = Edges {
+                sides: std::array::from_fn(|side| their_mesh.edge(side)),
+                step: quanta.of_tile(tmin, tmax).0,
+            };
+            learnt.push((n, e.clone()));
+            e
+        });
+        mesh.add_edge_vertices(side, &theirs.sides[(side + 2) % 4]);
+        *slot = step.max(theirs.step);
     }
     let n = CELLS as u32;
     let hi = lo + f64::from(QUANTIZED_MAX) * step;
@@ -231,7 +259,8 @@ pub fn tin_tile(
         placement,
         data_box,
     );
-    Ok(TinTile {
+    Ok((
+        TinTile {
         tile,
         data: TileData {
             header,
@@ -246,7 +275,9 @@ pub fn tin_tile(
         error,
         measured,
         block_error,
-    })
+    },
+        learnt,
+    ))
 }
 
 /// The header of a tile whose vertices are `points` (ECEF).
@@ -297,6 +328,9 @@ fn header_of(tile: &GeodeticTile, points: &[[f64; 3]], lo: f32, hi: f32) -> Head
 /// Which triangles may hold a point: buckets of a 64 × 64 grid over `(u, v)`.
 struct Locator {
     buckets: Vec<Vec<u32>>,
+    /// The triangle the last point was in: the next point (along a row of samples) is
+    /// most often in it too.
+    last: std::cell::Cell<u32>,
 }
 
 const BUCKETS: usize = 64;
@@ -316,7 +350,10 @@ impl Locator {
                 }
             }
         }
-        Locator { buckets }
+        Locator {
+            buckets,
+            last: std::cell::Cell::new(0),
+        }
     }
 
     /// The height the tile draws at `(lon, lat)`: linear in `(u, v)` over the triangle
@@ -338,7 +375,12 @@ impl Locator {
         let fv = ((lat - s) / (n - s) * q).clamp(0.0, q);
         let cell = |f: f64| ((f / (q + 1.0) * BUCKETS as f64) as usize).min(BUCKETS - 1);
         let mut best: Option<(f64, f64)> = None;
-        for &k in &self.buckets[cell(fv) * BUCKETS + cell(fu)] {
+        let hint = self.last.get();
+        let bucket = &self.buckets[cell(fv) * BUCKETS + cell(fu)];
+        for &k in std::iter::once(&hint).chain(bucket) {
+            if k as usize >= triangles.len() {
+                continue;
+            }
             let t = triangles[k as usize];
             let p = t.map(|i| [f64::from(u[i as usize]), f64::from(v[i as usize])]);
             let area = (p[1][0] - p[0][0]) * (p[2][1] - p[0][1])
@@ -358,6 +400,7 @@ impl Locator {
                 best = Some((margin, value));
             }
             if margin >= 0.0 {
+                self.last.set(k);
                 break;
             }
         }

@@ -26,7 +26,7 @@ use std::io::Write;
 use std::sync::{Arc, Mutex};
 
 use crate::export::geodetic::GeodeticTile;
-use crate::export::tileset::Tileset;
+use crate::export::tileset::{EdgeCache, Tileset};
 use crate::geoid::VerticalDatum;
 use crate::http::{Body, Request, Response};
 use crate::terrain::Terrain;
@@ -81,6 +81,8 @@ type Key = (String, String, GeodeticTile, Extensions);
 #[derive(Default)]
 pub struct TileCache {
     inner: Mutex<CacheState>,
+    /// Each item's meshed edges, for its current state ([`EdgeCache`]).
+    edges: Mutex<HashMap<String, (String, Arc<EdgeCache>)>>,
 }
 
 #[derive(Default)]
@@ -99,6 +101,19 @@ impl TileCache {
             s.order.extend(k);
         }
         Some(hit)
+    }
+
+    /// The edge cache of `item` at state `version` (a new one when the state changed).
+    fn edges(&self, item: &str, version: &str) -> Arc<EdgeCache> {
+        let mut all = self.edges.lock().unwrap_or_else(|p| p.into_inner());
+        match all.get(item) {
+            Some((v, cache)) if v == version => cache.clone(),
+            _ => {
+                let cache = Arc::new(EdgeCache::default());
+                all.insert(item.to_string(), (version.to_string(), cache.clone()));
+                cache
+            }
+        }
     }
 
     fn put(&self, key: Key, plain: Arc<Vec<u8>>, gzip: Arc<Vec<u8>>, tag: u64) {
@@ -283,7 +298,8 @@ fn answer(
             let (plain, zipped, tag) = match cache.get(&key) {
                 Some(hit) => (hit.plain, hit.gzip, hit.tag),
                 None => {
-                    let cut = tileset.cut(&terrain, *t)?;
+                    let edges = cache.edges(&item.name, &version);
+                    let cut = tileset.cut(&terrain, *t, &edges)?;
                     let plain = Tileset::encode(&cut, ext.normals, ext.metadata)?;
                     let mut h = std::collections::hash_map::DefaultHasher::new();
                     plain.hash(&mut h);
