@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 /// The layers, bottom first; rooms of one layer may use each other.
 const LAYERS: &[&[&str]] = &[
     &[
-        "curve", "codec", "globe", "crs", "error", "progress", "http",
+        "curve", "codec", "globe", "geoid", "crs", "error", "progress", "http",
     ],
     &["heightfield"],
     &["model"],

@@ -34,7 +34,7 @@ use crate::error::{Error, Result};
 use crate::model::SampleRect;
 use crate::scene::surface::{GridBlock, Surface};
 use crate::geoid::VerticalDatum;
-use crate::terrain::{Info, Terrain};
+use crate::heightfield::Georeference;
 
 /// The deepest level a tileset goes to, whatever the data (a 65² grid at level 24 is 7 cm
 /// a cell at the equator).
@@ -58,6 +58,39 @@ pub struct Tileset {
 /// data's samples, so that resampling the data onto a grid (whose lines do not fall on
 /// sample lines) costs little next to the budget.
 pub const FINER: u8 = 2;
+
+/// What a tileset needs of a terrain: where its samples lie, how many, and its heights'
+/// range (`Terrain::info`'s).
+#[derive(Clone, Debug)]
+pub struct DataShape {
+    /// The georeference: a tileset needs one that can be placed on the globe.
+    pub georeference: Option<Georeference>,
+    /// Samples along a row.
+    pub width: u64,
+    /// Samples down a column.
+    pub height: u64,
+    /// The lowest and highest real height.
+    pub height_range: Option<[f32; 2]>,
+}
+
+/// A block a tile is cut from (`Terrain::cut`'s): its footprint, level, grid and `e*`.
+#[derive(Clone, Debug)]
+pub struct CutBlock {
+    /// Inclusive samples.
+    pub rect: SampleRect,
+    /// Its level in its file's tree.
+    pub level: u8,
+    /// Samples between grid points.
+    pub stride: u64,
+    /// Grid points along a row of `heights`.
+    pub width: u32,
+    /// Rows of `heights`.
+    pub height: u32,
+    /// The grid, row-major from the north-west corner.
+    pub heights: std::sync::Arc<[f32]>,
+    /// Its measured error `e*`.
+    pub error: f64,
+}
 
 /// The [`Edges`] of tiles already meshed, for one state of one terrain and one tileset:
 /// a tile cut after its neighbours takes their edges from here instead of meshing them
@@ -86,9 +119,10 @@ impl EdgeCache {
 }
 
 impl Tileset {
-    /// The tileset of a terrain described by `info`; `max_error` caps every level's TIN
+    /// The tileset of a terrain shaped as `data`; `max_error` caps every level's TIN
     /// budget. An error when the data cannot be placed on the globe.
-    pub fn new(info: &Info, max_error: Option<f64>, datum: VerticalDatum) -> Result<Tileset> {
+    pub fn new(data: &DataShape, max_error: Option<f64>, datum: VerticalDatum) -> Result<Tileset> {
+        let info = data;
         let georeference = info.georeference.as_ref().ok_or_else(|| {
             Error::InvalidArgument(
                 "no georeference: the data cannot be placed on the globe, so it has no \
@@ -319,10 +353,15 @@ impl Tileset {
         (rect.col0 <= rect.col1 && rect.row0 <= rect.row1).then_some(rect)
     }
 
-    /// Cuts tile `t` from `terrain`: the blocks within the level's bound over the tile and
-    /// its neighbours, meshed within its budget, with its metadata (what it measured, and
+    /// Cuts tile `t` from the blocks `cut(window, bound)` gives (`Terrain::cut`): the
+    /// blocks within the level's bound over the tile and its neighbours, meshed within its budget, with its metadata (what it measured, and
     /// for a root the availability of every level below it).
-    pub fn cut(&self, terrain: &Terrain, t: GeodeticTile, edges: &EdgeCache) -> Result<TinTile> {
+    pub fn cut(
+        &self,
+        t: GeodeticTile,
+        cut: impl FnOnce(SampleRect, f64) -> Result<Vec<CutBlock>>,
+        edges: &EdgeCache,
+    ) -> Result<TinTile> {
         if !self.has(t) {
             return Err(Error::InvalidArgument(format!(
                 "tile {}/{}/{} is not in the tileset",
@@ -331,13 +370,12 @@ impl Tileset {
         }
         let cut_bound = self.cut_bound(t.z);
         let budget = self.budget(t.z);
-        let scene = match self.window(t) {
-            Some(w) => Some(terrain.cut(w, cut_bound)?),
-            None => None,
+        let cut_blocks = match self.window(t) {
+            Some(w) => cut(w, cut_bound)?,
+            None => Vec::new(),
         };
-        let blocks: Vec<GridBlock<'_>> = scene
+        let blocks: Vec<GridBlock<'_>> = cut_blocks
             .iter()
-            .flat_map(|s| &s.blocks)
             .map(|b| GridBlock {
                 rect: b.rect,
                 stride: b.stride,
@@ -347,8 +385,7 @@ impl Tileset {
                 error: b.error,
             })
             .collect();
-        let levels: std::collections::BTreeSet<u8> =
-            scene.iter().flat_map(|s| &s.blocks).map(|b| b.level).collect();
+        let levels: std::collections::BTreeSet<u8> = cut_blocks.iter().map(|b| b.level).collect();
         let surface = Surface::new(blocks);
         let (mut tin, learnt) = tin_tile::tin_tile(
             t,

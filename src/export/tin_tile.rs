@@ -48,19 +48,32 @@ impl Quanta {
     /// `[min, max]`.
     pub fn for_range(min: f64, max: f64) -> Quanta {
         // A tile's step covers its range plus `Q` each way in 32766 steps; with `Q` at
-        // least the whole range over 32764, that step is never past `Q`.
+        // least the whole range over 32764, that step is never past `Q`. And the header
+        // stores the range as binary32: a step fine enough for a flat tile would put `lo`
+        // between two f32 values, so a step is never below 2^-23 of the heights' size
+        // ([`f32_exact`]), nor `Q` below 2^-22 of it, which no tile's step then passes.
         let span = (max - min).abs();
+        let size = min.abs().max(max.abs()) + 1.0;
         Quanta {
-            corner: power_of_two_at_least(span / 32764.0),
+            corner: power_of_two_at_least(span / 32764.0)
+                .max(power_of_two_at_least(size / f64::from(1u32 << 22))),
         }
     }
 
-    /// A tile's own step and base `(s, lo)` for grid heights in `[min, max]`.
+    /// A tile's own step and base `(s, lo)` for grid heights in `[min, max]`: `lo` and
+    /// `lo + 32767 s` are exact in binary32, as the header stores them.
     fn of_tile(&self, min: f64, max: f64) -> (f64, f64) {
         let (lo_raw, hi_raw) = (min - self.corner, max + self.corner);
-        let s = power_of_two_at_least((hi_raw - lo_raw) / 32766.0);
+        let s = power_of_two_at_least((hi_raw - lo_raw) / 32766.0)
+            .max(f32_exact(lo_raw.abs().max(hi_raw.abs())));
         (s, (lo_raw / s).floor() * s)
     }
+}
+
+/// The finest power-of-two step whose multiples up to `size` are all exact in binary32
+/// (24 significant bits, one to spare).
+fn f32_exact(size: f64) -> f64 {
+    power_of_two_at_least(size / f64::from(1u32 << 23))
 }
 
 fn power_of_two_at_least(x: f64) -> f64 {
@@ -405,5 +418,29 @@ impl Locator {
             }
         }
         best.map_or(f64::INFINITY, |(_, value)| value)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Regression (found by `tests/tin_tiles.rs`): a flat tile at 500 m got a step of
+    /// 2^-20 m, and a base the binary32 header could not hold, so two tiles decoded a
+    /// shared vertex 2e-6 m apart. Every tile's base and top are now exact in binary32,
+    /// and no tile's step passes the corner step.
+    #[test]
+    fn tile_ranges_are_exact_in_binary32() {
+        for (gmin, gmax) in [(0.0, 500.0), (-110.0, 8938.0), (10.0, 500.0), (-1e6, 1e6)] {
+            let q = Quanta::for_range(gmin, gmax);
+            for (min, max) in [(500.0, 500.0), (gmin, gmin), (gmax, gmax), (gmin, gmax)] {
+                let (s, lo) = q.of_tile(min, max);
+                let hi = lo + f64::from(QUANTIZED_MAX) * s;
+                assert_eq!(f64::from(lo as f32), lo, "{min}..{max} in {gmin}..{gmax}");
+                assert_eq!(f64::from(hi as f32), hi, "{min}..{max} in {gmin}..{gmax}");
+                assert!(lo <= min - q.corner && hi >= max + q.corner);
+                assert!(s <= q.corner, "step {s} past the corner step {}", q.corner);
+            }
+        }
     }
 }

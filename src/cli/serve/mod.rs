@@ -160,7 +160,11 @@ pub fn run(args: &ServeArgs) -> Result<ExitCode, Error> {
                     let datum = args.vertical_datum.unwrap_or_else(|| {
                         crate::geoid::VerticalDatum::of_source_format(&i.source_format)
                     });
-                    crate::export::tileset::Tileset::new(&i, args.max_error, datum)
+                    crate::export::tileset::Tileset::new(
+                        &terrain::shape_of(&i),
+                        args.max_error,
+                        datum,
+                    )
                 });
             if let Ok(tileset) = placeable {
                 let _ = writeln!(

@@ -26,7 +26,7 @@ use std::io::Write;
 use std::sync::{Arc, Mutex};
 
 use crate::export::geodetic::GeodeticTile;
-use crate::export::tileset::{EdgeCache, Tileset};
+use crate::export::tileset::{CutBlock, DataShape, EdgeCache, Tileset};
 use crate::geoid::VerticalDatum;
 use crate::http::{Body, Request, Response};
 use crate::terrain::Terrain;
@@ -249,7 +249,7 @@ fn answer(
     let datum = options
         .datum
         .unwrap_or_else(|| VerticalDatum::of_source_format(&info.source_format));
-    let tileset = Tileset::new(&info, options.max_error, datum)?;
+    let tileset = Tileset::new(&shape_of(&info), options.max_error, datum)?;
     let version = version(item, info.txn_id);
     match asked {
         Asked::Layer => {
@@ -299,7 +299,7 @@ fn answer(
                 Some(hit) => (hit.plain, hit.gzip, hit.tag),
                 None => {
                     let edges = cache.edges(&item.name, &version);
-                    let cut = tileset.cut(&terrain, *t, &edges)?;
+                    let cut = tileset.cut(*t, |w, bound| cut_blocks(&terrain, w, bound), &edges)?;
                     let plain = Tileset::encode(&cut, ext.normals, ext.metadata)?;
                     let mut h = std::collections::hash_map::DefaultHasher::new();
                     plain.hash(&mut h);
@@ -354,6 +354,38 @@ fn answer(
             Ok(with_cors(r))
         }
     }
+}
+
+/// What the tileset needs of a terrain's [`Info`](crate::terrain::Info).
+pub fn shape_of(info: &crate::terrain::Info) -> DataShape {
+    DataShape {
+        georeference: info.georeference.clone(),
+        width: info.width,
+        height: info.height,
+        height_range: info.height_range,
+    }
+}
+
+/// The blocks of `terrain`'s cut over `window` within `bound`, as the tileset takes them.
+fn cut_blocks(
+    terrain: &Terrain,
+    window: crate::model::SampleRect,
+    bound: f64,
+) -> Result<Vec<CutBlock>, Error> {
+    Ok(terrain
+        .cut(window, bound)?
+        .blocks
+        .into_iter()
+        .map(|b| CutBlock {
+            rect: b.rect,
+            level: b.level,
+            stride: b.stride,
+            width: b.width,
+            height: b.height,
+            heights: b.heights,
+            error: b.error,
+        })
+        .collect())
 }
 
 /// The extensions an `Accept` header asks for; `None` when it takes neither
