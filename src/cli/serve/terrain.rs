@@ -20,7 +20,7 @@
 //! answer carries CORS headers (`Access-Control-Allow-Origin: *`), and `OPTIONS` answers
 //! a preflight.
 
-use std::collections::{HashMap, VecDeque};
+use std::collections::HashMap;
 use std::hash::{Hash, Hasher};
 use std::io::Write;
 use std::sync::{Arc, Mutex};
@@ -87,18 +87,26 @@ pub struct TileCache {
 
 #[derive(Default)]
 struct CacheState {
-    map: HashMap<Key, Cached>,
-    order: VecDeque<Key>,
+    /// Each tile, with the tick it was last used at.
+    map: HashMap<Key, (Cached, u64)>,
+    /// The tiles by the tick they were last used at: the first is the least recent.
+    order: std::collections::BTreeMap<u64, Key>,
+    tick: u64,
     bytes: usize,
 }
 
 impl TileCache {
     fn get(&self, key: &Key) -> Option<Cached> {
         let mut s = self.inner.lock().unwrap_or_else(|p| p.into_inner());
-        let hit = s.map.get(key).cloned()?;
-        if let Some(i) = s.order.iter().position(|k| k == key) {
-            let k = s.order.remove(i);
-            s.order.extend(k);
+        s.tick += 1;
+        let tick = s.tick;
+        let (hit, old) = {
+            let (c, used) = s.map.get_mut(key)?;
+            let old = std::mem::replace(used, tick);
+            (c.clone(), old)
+        };
+        if let Some(k) = s.order.remove(&old) {
+            s.order.insert(tick, k);
         }
         Some(hit)
     }
@@ -126,16 +134,18 @@ impl TileCache {
             return;
         }
         while s.bytes + size > CACHE_BYTES {
-            let Some(old) = s.order.pop_front() else {
+            let Some((_, old)) = s.order.pop_first() else {
                 break;
             };
-            if let Some(c) = s.map.remove(&old) {
+            if let Some((c, _)) = s.map.remove(&old) {
                 s.bytes -= c.plain.len() + c.gzip.len();
             }
         }
+        s.tick += 1;
+        let tick = s.tick;
         s.bytes += size;
-        s.order.push_back(key.clone());
-        s.map.insert(key, Cached { plain, gzip, tag });
+        s.order.insert(tick, key.clone());
+        s.map.insert(key, (Cached { plain, gzip, tag }, tick));
     }
 }
 
@@ -436,6 +446,38 @@ fn accepted(accept: Option<&str>) -> Option<Extensions> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The cache keeps at most `CACHE_BYTES`, dropping the least recently used first: a
+    /// tile asked for again outlives those put after it.
+    #[test]
+    fn the_cache_drops_the_least_recently_used() {
+        let cache = TileCache::default();
+        // Counted twice (plain and gzip): 10 MiB an entry, six fit in 64 MiB.
+        let body = Arc::new(vec![0u8; 5 << 20]);
+        let key = |x: u32| -> Key {
+            (
+                "t".into(),
+                "1".into(),
+                GeodeticTile { z: 3, x, y: 0 },
+                Extensions {
+                    normals: true,
+                    metadata: true,
+                },
+            )
+        };
+        for x in 0..6 {
+            cache.put(key(x), body.clone(), body.clone(), u64::from(x));
+        }
+        assert!(cache.get(&key(0)).is_some());
+        cache.put(key(6), body.clone(), body.clone(), 6);
+        // Tile 1 was the least recently used; tile 0 was asked for again.
+        assert!(cache.get(&key(1)).is_none());
+        assert_eq!(cache.get(&key(0)).map(|c| c.tag), Some(0));
+        assert_eq!(cache.get(&key(6)).map(|c| c.tag), Some(6));
+        let s = cache.inner.lock().unwrap();
+        assert!(s.bytes <= CACHE_BYTES);
+        assert_eq!(s.map.len(), s.order.len());
+    }
 
     #[test]
     fn accept_headers() {
