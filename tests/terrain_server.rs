@@ -8,7 +8,8 @@
 //! * every tile of the pyramid's deepest three levels (and both roots) decodes; at every
 //!   source sample inside it the height it draws is within the error its metadata declares;
 //!   two neighbours have the same vertices at the same heights along their common edge; the
-//!   header's sphere holds every vertex and its height range every height;
+//!   header's sphere holds every vertex, its height range every height, and its horizon
+//!   occlusion point is above the horizon from any camera that sees a vertex;
 //! * answers carry `ETag`, CORS headers, `Vary`, gzip when asked; a matching
 //!   `If-None-Match` gets `304` and no body;
 //! * after an edit (`Terrain::edit`, a committed replace) the layer's version changes, a
@@ -25,7 +26,7 @@ use std::collections::BTreeMap;
 use std::io::Read;
 use std::path::{Path, PathBuf};
 
-use common::quantized_mesh::{decode, Source, Tile};
+use common::quantized_mesh::{decode, ecef, scaled, visible, Source, Tile};
 use common::serve::Served;
 use fmrh::heightfield::Georeference;
 use fmrh::{CreateOptions, Heightfield, Terrain};
@@ -74,17 +75,6 @@ fn gunzip(bytes: &[u8]) -> Vec<u8> {
         .read_to_end(&mut out)
         .expect("a gzip body");
     out
-}
-
-fn ecef(lon: f64, lat: f64, h: f64) -> [f64; 3] {
-    let (a, e2) = (6_378_137.0f64, 6.694_379_990_14e-3f64);
-    let (l, p) = (lon.to_radians(), lat.to_radians());
-    let n = a / (1.0 - e2 * p.sin().powi(2)).sqrt();
-    [
-        (n + h) * p.cos() * l.cos(),
-        (n + h) * p.cos() * l.sin(),
-        (n * (1.0 - e2) + h) * p.sin(),
-    ]
 }
 
 /// The tiles `available` lists at level `z`.
@@ -220,6 +210,7 @@ fn a_served_pyramid_keeps_its_promises() {
         assert_eq!(tile.meta()["measured_samples"].as_u64(), Some(measured));
         // Header: the sphere holds every vertex, the range every height.
         let d = &tile.d;
+        let mut points = Vec::new();
         for k in 0..d.u.len() {
             let lon = w + f64::from(d.u[k]) / 32767.0 * (e - w);
             let lat = s + f64::from(d.v[k]) / 32767.0 * (n - s);
@@ -234,6 +225,22 @@ fn a_served_pyramid_keeps_its_promises() {
                 dist <= d.sphere[3] + 1e-3,
                 "a vertex outside the bounding sphere"
             );
+            points.push(p);
+        }
+        // The horizon occlusion point is above the horizon whenever a vertex is (Cesium's
+        // test), from cameras anywhere from 10 m to 30,000 km up.
+        let mut rng =
+            common::fields::Rng::new(u64::from(z) << 40 | u64::from(x) << 20 | u64::from(y));
+        for _ in 0..40 {
+            let (lon, lat) = (-180.0 + 360.0 * rng.unit(), -90.0 + 180.0 * rng.unit());
+            let h = 10.0 * 10f64.powf(6.5 * rng.unit());
+            let camera = scaled(ecef(lon, lat, h));
+            if points.iter().any(|&p| visible(camera, scaled(p))) {
+                assert!(
+                    visible(camera, d.horizon),
+                    "tile {z}/{x}/{y}: occlusion point hidden from {lon},{lat},{h}"
+                );
+            }
         }
     }
     // Shared edges, east and north neighbours.

@@ -327,3 +327,34 @@ impl Source {
         }
     }
 }
+
+// The WGS 84 formulas a client on the globe uses, written here from the textbook and
+// Cesium's "Horizon culling" article (Ring, 2013), sharing no code with fmrh's.
+
+pub const A: f64 = 6_378_137.0;
+pub const B: f64 = 6_356_752.314_245_179;
+
+/// ECEF of a longitude, latitude (degrees) and height, on WGS 84.
+pub fn ecef(lon: f64, lat: f64, h: f64) -> [f64; 3] {
+    let e2 = 1.0 - B * B / (A * A);
+    let (l, p) = (lon.to_radians(), lat.to_radians());
+    let n = A / (1.0 - e2 * p.sin() * p.sin()).sqrt();
+    [
+        (n + h) * p.cos() * l.cos(),
+        (n + h) * p.cos() * l.sin(),
+        (n * (1.0 - e2) + h) * p.sin(),
+    ]
+}
+
+/// Cesium's `isScaledSpacePointVisible`, from the "Horizon culling" article.
+pub fn visible(camera: [f64; 3], p: [f64; 3]) -> bool {
+    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let vh2 = dot(camera, camera) - 1.0;
+    let vt = [p[0] - camera[0], p[1] - camera[1], p[2] - camera[2]];
+    let vt_dot_vc = -dot(vt, camera);
+    !(vt_dot_vc > vh2 && vt_dot_vc * vt_dot_vc / dot(vt, vt) > vh2)
+}
+
+pub fn scaled(p: [f64; 3]) -> [f64; 3] {
+    [p[0] / A, p[1] / A, p[2] / B]
+}
