@@ -225,48 +225,14 @@ impl Dataset {
             let Some(p) = window.intersect(&r) else {
                 return Ok(None);
             };
-            let local = SampleRect {
-                col0: p.col0 - r.col0,
-                row0: p.row0 - r.row0,
-                col1: p.col1 - r.col0,
-                row1: p.row1 - r.row0,
-            };
+            let local = unshifted(&p, &r);
             let store = self.open_tile(tile)?;
             let before = store.read_stats();
             let scene = Terrain::with_spacing(&store, None)?.cut(local, max_error, DEFAULT_GAP)?;
             let reads = store.read_stats().since(&before);
             Ok(Some((store, scene, reads)))
         })?;
-        let mut blocks = Vec::new();
-        let mut parts = Vec::new();
-        let mut stats = SceneStats::default();
-        let mut finest = Vec::new();
-        for (tile, done) in tiles.iter().zip(per_tile) {
-            let Some((store, scene, reads)) = done else {
-                continue;
-            };
-            let r = tile.rect();
-            stats.merge(&scene.stats);
-            parts.push(TilePart {
-                tile: tile.index,
-                name: tile.name().to_string(),
-                window: scene.window.map(|w| shifted(&w, &r)),
-                blocks: scene.blocks.len() as u64,
-                cluster: scene.stats.cluster,
-                reads,
-            });
-            let fl = store.domain().finest_level();
-            for mut block in scene.blocks {
-                let w = shifted(&block.rect(), &r);
-                (block.col0, block.row0, block.col1, block.row1) = (w.col0, w.row0, w.col1, w.row1);
-                blocks.push(DatasetBlock {
-                    tile: tile.index,
-                    block,
-                });
-                finest.push((fl, store.domain().block_size(), r));
-            }
-        }
-        set_border_neighbours(&mut blocks, &finest);
+        let (blocks, parts, mut stats) = assemble(&tiles, per_tile);
         stats.schedule_ns = started.elapsed().as_nanos() as u64;
         Ok(DatasetScene {
             mode: Mode::Uniform,
@@ -310,22 +276,13 @@ impl Dataset {
                 })
                 .fold(f64::INFINITY, f64::min)
         });
-        let mut blocks = Vec::new();
-        let mut parts = Vec::new();
-        let mut stats = SceneStats::default();
-        let mut finest = Vec::new();
         // Each tile's scene: one after another from local files; from a remote dataset, up
         // to [`TILE_WORKERS`] tiles at once, so that their rounds overlap.
         let per_tile = self.for_tiles(&tiles, |tile| {
             let r = tile.rect();
             let local_window = match options.window {
                 Some(w) => match w.intersect(&r) {
-                    Some(p) => Some(SampleRect {
-                        col0: p.col0 - r.col0,
-                        row0: p.row0 - r.row0,
-                        col1: p.col1 - r.col0,
-                        row1: p.row1 - r.row0,
-                    }),
+                    Some(p) => Some(unshifted(&p, &r)),
                     None => return Ok(None),
                 },
                 None => None,
@@ -354,34 +311,7 @@ impl Dataset {
             let reads = store.read_stats().since(&before);
             Ok(Some((store, scene, reads)))
         })?;
-        for (tile, done) in tiles.iter().zip(per_tile) {
-            let Some((store, scene, reads)) = done else {
-                continue;
-            };
-            let r = tile.rect();
-            let s = &scene.stats;
-            stats.merge(s);
-            parts.push(TilePart {
-                tile: tile.index,
-                name: tile.name().to_string(),
-                window: scene.window.map(|w| shifted(&w, &r)),
-                blocks: scene.blocks.len() as u64,
-                cluster: s.cluster,
-                reads,
-            });
-            let fl = store.domain().finest_level();
-            for b in scene.blocks {
-                let mut block = b;
-                let w = shifted(&b.rect(), &r);
-                (block.col0, block.row0, block.col1, block.row1) = (w.col0, w.row0, w.col1, w.row1);
-                blocks.push(DatasetBlock {
-                    tile: tile.index,
-                    block,
-                });
-                finest.push((fl, store.domain().block_size(), r));
-            }
-        }
-        set_border_neighbours(&mut blocks, &finest);
+        let (blocks, parts, mut stats) = assemble(&tiles, per_tile);
         let window = parts
             .iter()
             .filter_map(|p| p.window)
@@ -415,6 +345,55 @@ pub fn in_tile(camera: &Camera, tile: &SampleRect, frame: &WorldFrame) -> Camera
         eye: camera.eye - shift,
         target: camera.target - shift,
         ..*camera
+    }
+}
+
+/// Each tile's scene (`None`: the tile had no part) as one dataset scene's blocks (moved
+/// into dataset samples, border neighbours set), tile parts and summed stats.
+fn assemble<S: std::ops::Deref<Target = crate::store::Store<crate::store::AnySource>>>(
+    tiles: &[Tile],
+    per_tile: Vec<Option<(S, crate::scene::Scene, ReadStats)>>,
+) -> (Vec<DatasetBlock>, Vec<TilePart>, SceneStats) {
+    let mut blocks = Vec::new();
+    let mut parts = Vec::new();
+    let mut stats = SceneStats::default();
+    let mut finest = Vec::new();
+    for (tile, done) in tiles.iter().zip(per_tile) {
+        let Some((store, scene, reads)) = done else {
+            continue;
+        };
+        let r = tile.rect();
+        stats.merge(&scene.stats);
+        parts.push(TilePart {
+            tile: tile.index,
+            name: tile.name().to_string(),
+            window: scene.window.map(|w| shifted(&w, &r)),
+            blocks: scene.blocks.len() as u64,
+            cluster: scene.stats.cluster,
+            reads,
+        });
+        let fl = store.domain().finest_level();
+        for mut block in scene.blocks {
+            let w = shifted(&block.rect(), &r);
+            (block.col0, block.row0, block.col1, block.row1) = (w.col0, w.row0, w.col1, w.row1);
+            blocks.push(DatasetBlock {
+                tile: tile.index,
+                block,
+            });
+            finest.push((fl, store.domain().block_size(), r));
+        }
+    }
+    set_border_neighbours(&mut blocks, &finest);
+    (blocks, parts, stats)
+}
+
+/// `rect` (dataset samples, inside `tile`) in the tile's own samples.
+fn unshifted(rect: &SampleRect, tile: &SampleRect) -> SampleRect {
+    SampleRect {
+        col0: rect.col0 - tile.col0,
+        row0: rect.row0 - tile.row0,
+        col1: rect.col1 - tile.col0,
+        row1: rect.row1 - tile.row0,
     }
 }
 

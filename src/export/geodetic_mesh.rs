@@ -170,6 +170,24 @@ impl Placement {
         }
     }
 
+    /// The surface positions `[col0, row0, col1, row1]` spanned by the longitude and
+    /// latitude box `[west, south, east, north]`: its boundary placed at 16 points a side
+    /// (a projected box's edges bow between them: callers leave a margin). `None` when no
+    /// boundary point can be placed.
+    pub fn span_of(&self, lon_lat_box: [f64; 4]) -> Option<[f64; 4]> {
+        let [w, s, e, n] = lon_lat_box;
+        let mut edge = Vec::with_capacity(68);
+        for k in 0..=16 {
+            let t = f64::from(k) / 16.0;
+            let (lon, lat) = (w + (e - w) * t, s + (n - s) * t);
+            edge.extend([[lon, s], [lon, n], [w, lat], [e, lat]]);
+        }
+        self.positions(&edge).into_iter().flatten().fold(None, |b, [c, r]| {
+            let [c0, r0, c1, r1] = b.unwrap_or([c, r, c, r]);
+            Some([c0.min(c), r0.min(r), c1.max(c), r1.max(r)])
+        })
+    }
+
     /// The longitude and latitude box `[west, south, east, north]` of the closed rectangle
     /// `rect` (surface units): its boundary taken at 16 points a side (a projected
     /// rectangle's image is curved). `None` when no boundary point can be placed.
@@ -236,7 +254,7 @@ pub fn tiles_for(areas: &[([f64; 4], u8)]) -> BTreeSet<GeodeticTile> {
 }
 
 /// The quantized position of grid line `i` across a tile.
-fn grid_code(i: usize) -> u16 {
+pub(crate) fn grid_code(i: usize) -> u16 {
     ((f64::from(QUANTIZED_MAX) * i as f64 / CELLS as f64).round()) as u16
 }
 
@@ -403,7 +421,6 @@ pub fn sample_tile(
     placement: &Placement,
     data_box: [f64; 4],
 ) -> Result<SampledTile> {
-    let bounds = tile.bounds();
     const A: usize = APRON;
     let GridSample {
         lon_lat,
@@ -460,65 +477,20 @@ pub fn sample_tile(
     let mut normals = Vec::with_capacity(GRID * GRID);
     for j in 0..GRID {
         for i in 0..GRID {
-            let k = index(i, j);
-            let (e, w, n, s) = (ecef[k + 1], ecef[k - 1], ecef[k + A], ecef[k - A]);
-            let east = [e[0] - w[0], e[1] - w[1], e[2] - w[2]];
-            let north = [n[0] - s[0], n[1] - s[1], n[2] - s[2]];
-            let c = [
-                east[1] * north[2] - east[2] * north[1],
-                east[2] * north[0] - east[0] * north[2],
-                east[0] * north[1] - east[1] * north[0],
-            ];
-            let len = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
-            let unit = if len > 0.0 && len.is_finite() {
-                [c[0] / len, c[1] / len, c[2] / len]
-            } else {
-                geodetic::up(lon_lat[k][0], lon_lat[k][1])
-            };
-            normals.push(quantized_mesh::oct_encode(unit));
+            normals.push(apron_normal(&ecef, &lon_lat, index(i, j)));
         }
     }
     let points: Vec<[f64; 3]> = (0..GRID)
         .flat_map(|j| (0..GRID).map(move |i| (i, j)))
         .map(|(i, j)| ecef[index(i, j)])
         .collect();
-    let mut lo3 = [f64::INFINITY; 3];
-    let mut hi3 = [f64::NEG_INFINITY; 3];
-    for p in &points {
-        for a in 0..3 {
-            lo3[a] = lo3[a].min(p[a]);
-            hi3[a] = hi3[a].max(p[a]);
-        }
-    }
-    let sphere_centre = [
-        (lo3[0] + hi3[0]) / 2.0,
-        (lo3[1] + hi3[1]) / 2.0,
-        (lo3[2] + hi3[2]) / 2.0,
-    ];
-    let radius = points
-        .iter()
-        .map(|p| {
-            ((p[0] - sphere_centre[0]).powi(2)
-                + (p[1] - sphere_centre[1]).powi(2)
-                + (p[2] - sphere_centre[2]).powi(2))
-            .sqrt()
-        })
-        .fold(0.0f64, f64::max);
-    let [w, s, e, n] = bounds;
-    let centre = geodetic::ecef(
-        (w + e) / 2.0,
-        (s + n) / 2.0,
+    let header = header_of(
+        &tile,
+        &points,
+        lo,
+        hi,
         (f64::from(lo) + f64::from(hi)) / 2.0,
     );
-    let header = Header {
-        centre,
-        min_height: lo,
-        max_height: hi,
-        sphere_centre,
-        // Past the rounding of the distances above.
-        sphere_radius: radius * (1.0 + 1e-12) + 1e-6,
-        horizon: geodetic::horizon_occlusion_point(sphere_centre, &points),
-    };
     let (resampling, error, measured, block_error) =
         measure(
             &tile,
@@ -546,6 +518,71 @@ pub fn sample_tile(
         measured,
         block_error,
     })
+}
+
+/// The oct-encoded normal at point `k` of a tile's grid and apron (`APRON` a side): across
+/// the ECEF positions `ecef` of its east and west, north and south neighbours, or the
+/// ellipsoid's up where they give no direction.
+pub(crate) fn apron_normal(ecef: &[[f64; 3]], lon_lat: &[[f64; 2]], k: usize) -> [u8; 2] {
+    let (e, w, n, s) = (ecef[k + 1], ecef[k - 1], ecef[k + APRON], ecef[k - APRON]);
+    let east = [e[0] - w[0], e[1] - w[1], e[2] - w[2]];
+    let north = [n[0] - s[0], n[1] - s[1], n[2] - s[2]];
+    let c = [
+        east[1] * north[2] - east[2] * north[1],
+        east[2] * north[0] - east[0] * north[2],
+        east[0] * north[1] - east[1] * north[0],
+    ];
+    let len = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
+    let unit = if len > 0.0 && len.is_finite() {
+        [c[0] / len, c[1] / len, c[2] / len]
+    } else {
+        geodetic::up(lon_lat[k][0], lon_lat[k][1])
+    };
+    quantized_mesh::oct_encode(unit)
+}
+
+/// The header of tile `tile` whose vertices are `points` (ECEF), heights quantized over
+/// `[lo, hi]`: its centre on the tile's middle at `centre_height`, the bounding sphere of
+/// the points' box centre, and the horizon occlusion point.
+pub(crate) fn header_of(
+    tile: &GeodeticTile,
+    points: &[[f64; 3]],
+    lo: f32,
+    hi: f32,
+    centre_height: f64,
+) -> Header {
+    let mut lo3 = [f64::INFINITY; 3];
+    let mut hi3 = [f64::NEG_INFINITY; 3];
+    for p in points {
+        for a in 0..3 {
+            lo3[a] = lo3[a].min(p[a]);
+            hi3[a] = hi3[a].max(p[a]);
+        }
+    }
+    let sphere_centre = [
+        (lo3[0] + hi3[0]) / 2.0,
+        (lo3[1] + hi3[1]) / 2.0,
+        (lo3[2] + hi3[2]) / 2.0,
+    ];
+    let radius = points
+        .iter()
+        .map(|p| {
+            ((p[0] - sphere_centre[0]).powi(2)
+                + (p[1] - sphere_centre[1]).powi(2)
+                + (p[2] - sphere_centre[2]).powi(2))
+            .sqrt()
+        })
+        .fold(0.0f64, f64::max);
+    let [w, s, e, n] = tile.bounds();
+    Header {
+        centre: geodetic::ecef((w + e) / 2.0, (s + n) / 2.0, centre_height),
+        min_height: lo,
+        max_height: hi,
+        sphere_centre,
+        // Past the rounding of the distances above.
+        sphere_radius: radius * (1.0 + 1e-12) + 1e-6,
+        horizon: geodetic::horizon_occlusion_point(sphere_centre, points),
+    }
 }
 
 /// The height a tile with vertex heights `heights` (row-major from the south-west) draws
@@ -600,35 +637,11 @@ pub(crate) fn measure(
     if !(clip[0] <= clip[2] && clip[1] <= clip[3]) {
         return (0.0, 0.0, 0, 0.0);
     }
-    // The samples that may lie in the clipped box: its boundary placed, 16 points a side.
-    let mut edge = Vec::new();
-    for k in 0..=16 {
-        let t = f64::from(k) / 16.0;
-        let (lon, lat) = (
-            clip[0] + (clip[2] - clip[0]) * t,
-            clip[1] + (clip[3] - clip[1]) * t,
-        );
-        edge.extend([
-            [lon, clip[1]],
-            [lon, clip[3]],
-            [clip[0], lat],
-            [clip[2], lat],
-        ]);
-    }
-    let placed: Vec<[f64; 2]> = placement.positions(&edge).into_iter().flatten().collect();
-    if placed.is_empty() {
+    // The samples that may lie in the clipped box.
+    let Some([c0, r0, c1, r1]) = placement.span_of(clip) else {
         return (0.0, 0.0, 0, 0.0);
-    }
+    };
     let units = placement.units;
-    let (mut c0, mut r0, mut c1, mut r1) = (
-        f64::INFINITY,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        f64::NEG_INFINITY,
-    );
-    for [c, r] in placed {
-        (c0, r0, c1, r1) = (c0.min(c), r0.min(r), c1.max(c), r1.max(r));
-    }
     // A projected box's edges bow between the points placed: a sample of margin.
     let margin = if placement.is_geographic() { 0.0 } else { 1.0 };
     let to_sample = |x: f64, lo: u64, hi: u64, up: bool| {

@@ -313,33 +313,7 @@ impl Tileset {
             return None;
         }
         let clip = [b[0].max(dw0), b[1].max(ds0), b[2].min(de0), b[3].min(dn0)];
-        let mut edge = Vec::with_capacity(68);
-        for k in 0..=16 {
-            let f = f64::from(k) / 16.0;
-            let (lon, lat) = (
-                clip[0] + (clip[2] - clip[0]) * f,
-                clip[1] + (clip[3] - clip[1]) * f,
-            );
-            edge.extend([[lon, clip[1]], [lon, clip[3]], [clip[0], lat], [clip[2], lat]]);
-        }
-        let placed: Vec<[f64; 2]> = self
-            .placement
-            .positions(&edge)
-            .into_iter()
-            .flatten()
-            .collect();
-        if placed.is_empty() {
-            return None;
-        }
-        let (mut c0, mut r0, mut c1, mut r1) = (
-            f64::INFINITY,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::NEG_INFINITY,
-        );
-        for [c, r] in placed {
-            (c0, r0, c1, r1) = (c0.min(c), r0.min(r), c1.max(c), r1.max(r));
-        }
+        let [c0, r0, c1, r1] = self.placement.span_of(clip)?;
         // A projected box's edges bow between the points placed: two samples of margin.
         let d = self.data;
         let lo = |x: f64, max: u64| ((x - 2.0).floor().max(0.0) as u64).min(max);
@@ -354,8 +328,9 @@ impl Tileset {
     }
 
     /// Cuts tile `t` from the blocks `cut(window, bound)` gives (`Terrain::cut`): the
-    /// blocks within the level's bound over the tile and its neighbours, meshed within its budget, with its metadata (what it measured, and
-    /// for a root the availability of every level below it).
+    /// blocks within the level's bound over the tile and its neighbours, meshed within its
+    /// budget, with its metadata (what it measured, and for a root the availability of
+    /// every level below it).
     pub fn cut(
         &self,
         t: GeodeticTile,

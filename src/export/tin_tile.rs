@@ -25,7 +25,7 @@
 
 use super::geodetic::{self, GeodeticTile};
 use super::geodetic_mesh::{self, sample_grid, GridSample, Placement, APRON, GRID};
-use super::quantized_mesh::{self, Header, TileData, QUANTIZED_MAX};
+use super::quantized_mesh::{self, TileData, QUANTIZED_MAX};
 use crate::error::Result;
 use crate::mesh::rtin::{Grid, Rtin, RtinMesh};
 use crate::scene::surface::Surface;
@@ -217,8 +217,7 @@ pub fn tin_tile(
         h.push(code);
         heights.push(quantized_mesh::dequantize_height(lo as f32, hi as f32, code));
     }
-    let grid_code =
-        |k: u32| ((f64::from(QUANTIZED_MAX) * f64::from(k) / CELLS as f64).round()) as u16;
+    let grid_code = |k: u32| geodetic_mesh::grid_code(k as usize);
     let u: Vec<u16> = mesh.vertices.iter().map(|v| grid_code(v[0])).collect();
     let v: Vec<u16> = mesh.vertices.iter().map(|v| grid_code(v[1])).collect();
     // Normals from the unquantized grid and its apron (the same at a shared vertex in
@@ -231,27 +230,7 @@ pub fn tin_tile(
         .iter()
         .map(|&[i, j]| {
             let k = GridSample::index(i as usize, j as usize);
-            let (e, w, no, so) = (
-                ecef_apron[k + 1],
-                ecef_apron[k - 1],
-                ecef_apron[k + APRON],
-                ecef_apron[k - APRON],
-            );
-            let east = [e[0] - w[0], e[1] - w[1], e[2] - w[2]];
-            let north = [no[0] - so[0], no[1] - so[1], no[2] - so[2]];
-            let c = [
-                east[1] * north[2] - east[2] * north[1],
-                east[2] * north[0] - east[0] * north[2],
-                east[0] * north[1] - east[1] * north[0],
-            ];
-            let len = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
-            let unit = if len > 0.0 && len.is_finite() {
-                [c[0] / len, c[1] / len, c[2] / len]
-            } else {
-                let [lon, lat] = sample.lon_lat[k];
-                geodetic::up(lon, lat)
-            };
-            quantized_mesh::oct_encode(unit)
+            geodetic_mesh::apron_normal(&ecef_apron, &sample.lon_lat, k)
         })
         .collect();
     let points: Vec<[f64; 3]> = mesh
@@ -263,7 +242,8 @@ pub fn tin_tile(
             geodetic::ecef(lon, lat, hh)
         })
         .collect();
-    let header = header_of(&tile, &points, lo as f32, hi as f32);
+    let (vlo, vhi) = range(&heights);
+    let header = geodetic_mesh::header_of(&tile, &points, lo as f32, hi as f32, (vlo + vhi) / 2.0);
     let locate = Locator::new(&u, &v, &mesh.triangles);
     let (resampling, error, measured, block_error) = geodetic_mesh::measure(
         &tile,
@@ -291,51 +271,6 @@ pub fn tin_tile(
     },
         learnt,
     ))
-}
-
-/// The header of a tile whose vertices are `points` (ECEF).
-fn header_of(tile: &GeodeticTile, points: &[[f64; 3]], lo: f32, hi: f32) -> Header {
-    let mut lo3 = [f64::INFINITY; 3];
-    let mut hi3 = [f64::NEG_INFINITY; 3];
-    for p in points {
-        for a in 0..3 {
-            lo3[a] = lo3[a].min(p[a]);
-            hi3[a] = hi3[a].max(p[a]);
-        }
-    }
-    let sphere_centre = [
-        (lo3[0] + hi3[0]) / 2.0,
-        (lo3[1] + hi3[1]) / 2.0,
-        (lo3[2] + hi3[2]) / 2.0,
-    ];
-    let radius = points
-        .iter()
-        .map(|p| {
-            ((p[0] - sphere_centre[0]).powi(2)
-                + (p[1] - sphere_centre[1]).powi(2)
-                + (p[2] - sphere_centre[2]).powi(2))
-            .sqrt()
-        })
-        .fold(0.0f64, f64::max);
-    let [w, s, e, n] = tile.bounds();
-    let (vlo, vhi) = points.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |r, p| {
-        let (_, _, h) = crate::globe::geodetic(glam::DVec3::from_array(*p));
-        (r.0.min(h), r.1.max(h))
-    });
-    let mid = if vlo <= vhi {
-        (vlo + vhi) / 2.0
-    } else {
-        (f64::from(lo) + f64::from(hi)) / 2.0
-    };
-    Header {
-        centre: geodetic::ecef((w + e) / 2.0, (s + n) / 2.0, mid),
-        min_height: lo,
-        max_height: hi,
-        sphere_centre,
-        // Past the rounding of the distances above.
-        sphere_radius: radius * (1.0 + 1e-12) + 1e-6,
-        horizon: geodetic::horizon_occlusion_point(sphere_centre, points),
-    }
 }
 
 /// Which triangles may hold a point: buckets of a 64 × 64 grid over `(u, v)`.

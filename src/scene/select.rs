@@ -40,37 +40,57 @@ impl<S: Source> Terrain<'_, S> {
             ..Camera::looking_at(glam::DVec3::ONE, glam::DVec3::ZERO)
         };
         let view = nominal.view()?;
-        let d = *self.domain();
         let (quadrants, window) = self.region(&view, Some(window))?;
+        let (mut blocks, mut stats) = self.search(&view, 0.0, &quadrants, window, |search| {
+            search.uniform_within(&quadrants, max_error, gap)
+        })?;
+        for block in &mut blocks {
+            block.distance = 0.0;
+            block.screen_error = 0.0;
+        }
+        // Screen errors were counted from the nominal camera: there are none.
+        stats.max_screen_error = 0.0;
+        stats.schedule_ns = started.elapsed().as_nanos() as u64;
+        Ok(Scene {
+            mode: Mode::Uniform,
+            tau: 0.0,
+            window,
+            blocks,
+            stats,
+        })
+    }
+
+    /// Runs one mode's search (`run`) over `quadrants` seen from `view`, then finishes the
+    /// blocks (sorted, culled unless `window` decides the region, neighbour levels) and
+    /// counts them.
+    fn search(
+        &self,
+        view: &super::camera::View,
+        tau: f64,
+        quadrants: &[super::ranges::Quadrant],
+        window: Option<SampleRect>,
+        run: impl FnOnce(&mut Search<'_, '_, S>) -> Result<()>,
+    ) -> Result<(Vec<super::result::SceneBlock>, SceneStats)> {
         let mut search = Search {
             terrain: self,
-            view: &view,
-            tau: 0.0,
+            view,
+            tau,
             out: Vec::new(),
             stats: SceneStats {
                 quadrants: quadrants.len() as u64,
                 ..SceneStats::default()
             },
         };
-        search.uniform_within(&quadrants, max_error, gap)?;
+        run(&mut search)?;
         let Search {
             mut out, mut stats, ..
         } = search;
-        self.finish(&view, window, &mut out);
-        let side = u64::from(d.block_size());
-        for block in &mut out {
-            block.distance = 0.0;
-            block.screen_error = 0.0;
+        self.finish(view, window, &mut out);
+        let side = u64::from(self.domain().block_size());
+        for block in &out {
             stats.add_block(block, side);
         }
-        stats.schedule_ns = started.elapsed().as_nanos() as u64;
-        Ok(Scene {
-            mode: Mode::Uniform,
-            tau: 0.0,
-            window,
-            blocks: out,
-            stats,
-        })
+        Ok((out, stats))
     }
 
     /// Selects the blocks `camera` needs at tolerance `options.tau`.
@@ -95,42 +115,26 @@ impl<S: Source> Terrain<'_, S> {
                 options.tau
             )));
         }
-        let d = *self.domain();
         let (quadrants, window) = self.region(&view, options.window)?;
-        let mut search = Search {
-            terrain: self,
-            view: &view,
-            tau: options.tau,
-            out: Vec::new(),
-            stats: SceneStats {
-                quadrants: quadrants.len() as u64,
-                ..SceneStats::default()
-            },
-        };
-        match options.mode {
-            Mode::Uniform => {
-                let p_min = match (p_min, options.window) {
-                    (Some(p), _) => p,
-                    (None, Some(w)) => self
-                        .rect_box(&w, self.root().min_height, self.root().max_height)
-                        .distance(view.eye),
-                    (None, None) => quadrants
-                        .iter()
-                        .map(|q| self.quadrant_box(q).distance(view.eye))
-                        .fold(f64::INFINITY, f64::min),
-                };
-                search.uniform(&quadrants, p_min, options.gap)?;
-            }
-            Mode::View => search.view_dependent(&quadrants, options.gap)?,
-        }
-        let Search {
-            mut out, mut stats, ..
-        } = search;
-        self.finish(&view, options.window, &mut out);
-        let side = u64::from(d.block_size());
-        for block in &out {
-            stats.add_block(block, side);
-        }
+        let (out, mut stats) =
+            self.search(&view, options.tau, &quadrants, options.window, |search| {
+                match options.mode {
+                    Mode::Uniform => {
+                        let p_min = match (p_min, options.window) {
+                            (Some(p), _) => p,
+                            (None, Some(w)) => self
+                                .rect_box(&w, self.root().min_height, self.root().max_height)
+                                .distance(view.eye),
+                            (None, None) => quadrants
+                                .iter()
+                                .map(|q| self.quadrant_box(q).distance(view.eye))
+                                .fold(f64::INFINITY, f64::min),
+                        };
+                        search.uniform(&quadrants, p_min, options.gap)
+                    }
+                    Mode::View => search.view_dependent(&quadrants, options.gap),
+                }
+            })?;
         stats.schedule_ns = started.elapsed().as_nanos() as u64;
         Ok(Scene {
             mode: options.mode,

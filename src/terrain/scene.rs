@@ -171,43 +171,14 @@ impl Terrain {
                     None => crate::scene::Terrain::on_globe(store)?,
                 };
                 let scene = selector.scene(camera, options)?;
-                let loaded = load_blocks(store, &scene.blocks, PAYLOAD_GAP)?;
-                let data_spacing = spacing.or(store.header().metadata.spacing_m);
-                let d = store.domain();
-                let blocks = scene
-                    .blocks
-                    .iter()
-                    .zip(loaded)
-                    .map(|(b, l)| block(b, None, d.stride(b.level), data_spacing, l))
-                    .collect();
-                Ok(Scene {
-                    mode: scene.mode,
-                    tau: scene.tau,
-                    window: scene.window,
-                    blocks,
-                    stats: scene.stats,
-                })
+                decoded(store, scene, spacing.or(store.header().metadata.spacing_m))
             }
             Source::Dataset(ds) => {
                 let scene = match spacing {
                     Some(s) => ds.scene(camera, options, Some(s))?,
                     None => ds.scene_on_globe(camera, options)?,
                 };
-                let loaded = ds.load_blocks(&scene)?;
-                let data_spacing = spacing.or(ds.spacing_m());
-                let blocks = scene
-                    .blocks
-                    .iter()
-                    .zip(loaded)
-                    .map(|(b, (l, stride))| block(&b.block, Some(b.tile), stride, data_spacing, l))
-                    .collect();
-                Ok(Scene {
-                    mode: scene.mode,
-                    tau: scene.tau,
-                    window: scene.window,
-                    blocks,
-                    stats: scene.stats,
-                })
+                decoded_dataset(ds, scene, spacing.or(ds.spacing_m()))
             }
         }
     }
@@ -242,40 +213,15 @@ impl Terrain {
             Source::Container(store) => {
                 let selector = crate::scene::Terrain::with_spacing(store, None)?;
                 let scene = selector.cut(window, max_error, crate::scene::DEFAULT_GAP)?;
-                let loaded = load_blocks(store, &scene.blocks, PAYLOAD_GAP)?;
-                let spacing = self.spacing_m.or(store.header().metadata.spacing_m);
-                let d = store.domain();
-                let blocks = scene
-                    .blocks
-                    .iter()
-                    .zip(loaded)
-                    .map(|(b, l)| block(b, None, d.stride(b.level), spacing, l))
-                    .collect();
-                Ok(Scene {
-                    mode: scene.mode,
-                    tau: scene.tau,
-                    window: scene.window,
-                    blocks,
-                    stats: scene.stats,
-                })
+                decoded(
+                    store,
+                    scene,
+                    self.spacing_m.or(store.header().metadata.spacing_m),
+                )
             }
             Source::Dataset(ds) => {
                 let scene = ds.cut(window, max_error)?;
-                let loaded = ds.load_blocks(&scene)?;
-                let spacing = self.spacing_m.or(ds.spacing_m());
-                let blocks = scene
-                    .blocks
-                    .iter()
-                    .zip(loaded)
-                    .map(|(b, (l, stride))| block(&b.block, Some(b.tile), stride, spacing, l))
-                    .collect();
-                Ok(Scene {
-                    mode: scene.mode,
-                    tau: scene.tau,
-                    window: scene.window,
-                    blocks,
-                    stats: scene.stats,
-                })
+                decoded_dataset(ds, scene, self.spacing_m.or(ds.spacing_m()))
             }
         }
     }
@@ -296,6 +242,51 @@ impl Terrain {
             ))
         })
     }
+}
+
+/// A container's scene with its blocks read and decoded, samples `spacing_m` apart.
+fn decoded(
+    store: &crate::store::Store<crate::store::AnySource>,
+    scene: crate::scene::Scene,
+    spacing_m: Option<[f64; 2]>,
+) -> Result<Scene> {
+    let loaded = load_blocks(store, &scene.blocks, PAYLOAD_GAP)?;
+    let d = store.domain();
+    let blocks = scene
+        .blocks
+        .iter()
+        .zip(loaded)
+        .map(|(b, l)| block(b, None, d.stride(b.level), spacing_m, l))
+        .collect();
+    Ok(Scene {
+        mode: scene.mode,
+        tau: scene.tau,
+        window: scene.window,
+        blocks,
+        stats: scene.stats,
+    })
+}
+
+/// A dataset's scene with its blocks read and decoded, samples `spacing_m` apart.
+fn decoded_dataset(
+    ds: &crate::dataset::Dataset,
+    scene: crate::dataset::DatasetScene,
+    spacing_m: Option<[f64; 2]>,
+) -> Result<Scene> {
+    let loaded = ds.load_blocks(&scene)?;
+    let blocks = scene
+        .blocks
+        .iter()
+        .zip(loaded)
+        .map(|(b, (l, stride))| block(&b.block, Some(b.tile), stride, spacing_m, l))
+        .collect();
+    Ok(Scene {
+        mode: scene.mode,
+        tau: scene.tau,
+        window: scene.window,
+        blocks,
+        stats: scene.stats,
+    })
 }
 
 /// The door's block of scene block `b` with its decoded grid `l`.
