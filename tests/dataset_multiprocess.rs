@@ -373,3 +373,42 @@ fn a_tile_mid_commit_makes_the_dataset_verify_busy_not_invalid() {
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
     assert_eq!(verify().status.code(), Some(0));
 }
+
+/// Regression (found as a rare failure of the stress test above): a reader opens the
+/// MANIFEST and takes its length, a writer then commits a state that grows the file, and
+/// only then does the reader choose a slot. The newest slot names a length past the one the
+/// reader saw; that is a newer state, not damage (D-1), so the reader must look at the
+/// length again before it calls the manifest corrupt.
+#[test]
+fn a_manifest_that_grew_after_the_reader_took_its_length_is_read_not_called_corrupt() {
+    use fmrh::dataset::manifest::{ManifestState, MANIFEST_NAME};
+    use fmrh::store::{FileSource, Source};
+    let work = tempfile::tempdir().unwrap();
+    let field = Heightfield::from_fn(65, 33, |x, y| ((x * 7 + y * 3) % 41) as f32).unwrap();
+    let rects = tiles::split(&field, &[32], &[], &[]);
+    let dir = tiles::build(work.path(), &field, &rects, &tiles::options(None));
+    let manifest = dir.join(MANIFEST_NAME);
+    let stale = FileSource::open(&manifest).unwrap();
+    let before = stale.len();
+    let mut grown = 0;
+    for i in 0..8u32 {
+        let terrain = Terrain::open(&dir).unwrap();
+        let mut edit = terrain.edit().unwrap();
+        let patch = Heightfield::from_fn(6, 4, |x, y| 500.0 + (i * 13 + x + y) as f32).unwrap();
+        edit.replace(29, 10, patch).unwrap();
+        edit.commit().unwrap();
+        grown = std::fs::metadata(&manifest).unwrap().len();
+        if grown > before {
+            break;
+        }
+    }
+    assert!(
+        grown > before,
+        "no commit grew the manifest ({before} bytes)"
+    );
+    assert_eq!(stale.len(), before, "the source still holds the old length");
+    let state = ManifestState::read(&stale).expect("a newer state, not a corrupt manifest");
+    let fresh = ManifestState::read(&FileSource::open(&manifest).unwrap()).unwrap();
+    assert_eq!(state.record.txn_id.get(), fresh.record.txn_id.get());
+    assert_eq!(state.record.file_length.get(), grown);
+}

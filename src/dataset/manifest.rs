@@ -141,7 +141,12 @@ impl ManifestState {
     /// Reads the state a reader takes: the slots and the head, nothing else.
     pub fn read<S: Source + ?Sized>(src: &S) -> Result<ManifestState> {
         let (slot, record) = choose_state(src)?;
-        if record.file_length.get() > src.len() {
+        // The state may be newer than the length the source saw when it was opened: a
+        // writer grows the file before it publishes a record (as `store::open` does for a
+        // container). Only a length still short after a fresh look is a fault.
+        if record.file_length.get() > src.len()
+            && record.file_length.get() > src.refresh_len().map_err(|e| Error::io(src.name(), e))?
+        {
             return Err(superseded_or_corrupt(
                 src,
                 &record,
