@@ -142,6 +142,7 @@ fn main() {
                     step: [1.0 / 3600.0, -1.0 / 3600.0],
                 }),
                 seam: SEAM_STRICT,
+                vertical_datum: Some(fmrh::types::VerticalDatum::Egm96),
                 // The stand-ins have no edge lists to merge: no tables (what the tables
                 // cost is measured on the real 64-tile mosaic, benches/dataset_scale.rs).
                 adjacency: Default::default(),

@@ -19,19 +19,41 @@
 
 use std::sync::OnceLock;
 
-/// What a terrain's heights are above.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+/// What a terrain's heights are above: recorded in a container's dataset header
+/// (`format-spec/container.md` §5, format 6.1) and shown by `fmrh info`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum VerticalDatum {
     /// The EGM96 geoid (mean sea level): SRTM's and DTED's heights.
     Egm96,
+    /// The EGM2008 geoid (Copernicus DEM's heights). fmrh bundles no EGM2008 grid, so it
+    /// cannot lift such heights to the ellipsoid ([`VerticalDatum::lift`] says so).
+    Egm2008,
     /// The WGS 84 ellipsoid.
     Ellipsoid,
     /// Not known: heights are placed as they are, as if above the ellipsoid.
+    #[default]
     Unknown,
 }
 
+/// How heights of a [`VerticalDatum`] become heights above the WGS 84 ellipsoid.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Lift {
+    /// As they are: they are above the ellipsoid, or nothing better is known.
+    None,
+    /// Plus the EGM96 undulation ([`egm96_undulation`]).
+    Egm96,
+}
+
 impl VerticalDatum {
+    /// Every datum, in the order of their stored codes.
+    pub const ALL: [VerticalDatum; 4] = [
+        VerticalDatum::Unknown,
+        VerticalDatum::Ellipsoid,
+        VerticalDatum::Egm96,
+        VerticalDatum::Egm2008,
+    ];
+
     /// What a reader's heights are above, when the file says nothing else: EGM96 for SRTM
     /// (`.hgt`) and DTED, unknown for the rest.
     pub fn of_source_format(format: &str) -> VerticalDatum {
@@ -41,27 +63,66 @@ impl VerticalDatum {
         }
     }
 
-    /// A datum by name: `egm96`, `ellipsoid` or `unknown`. EGM2008 is refused by name: no
-    /// grid of it is bundled.
-    pub fn parse(name: &str) -> Result<VerticalDatum, String> {
-        match name.to_ascii_lowercase().as_str() {
-            "egm96" => Ok(VerticalDatum::Egm96),
-            "ellipsoid" | "wgs84" => Ok(VerticalDatum::Ellipsoid),
-            "unknown" => Ok(VerticalDatum::Unknown),
-            "egm2008" => Err("egm2008: fmrh bundles no EGM2008 grid (EGM96's only); give                               egm96, ellipsoid or unknown"
-                .into()),
-            other => Err(format!(
-                "`{other}`: expected egm96, ellipsoid or unknown"
-            )),
+    /// The datum an EPSG vertical CRS code names (a GeoTIFF's `VerticalCSTypeGeoKey`):
+    /// 5773 EGM96 height, 3855 EGM2008 height, 5030 (GeoTIFF 1.0's "WGS 84 ellipsoid") and
+    /// 4979 (WGS 84, 3-D) the ellipsoid; any other is unknown to fmrh (NAVD88, say: its
+    /// heights are placed as they are).
+    pub fn of_epsg(code: u32) -> VerticalDatum {
+        match code {
+            5773 => VerticalDatum::Egm96,
+            3855 => VerticalDatum::Egm2008,
+            5030 | 4979 => VerticalDatum::Ellipsoid,
+            _ => VerticalDatum::Unknown,
         }
+    }
+
+    /// A datum by name: `egm96`, `egm2008`, `ellipsoid` (or `wgs84`) or `unknown`.
+    pub fn parse(name: &str) -> Result<VerticalDatum, String> {
+        VerticalDatum::ALL
+            .into_iter()
+            .find(|d| d.name() == name.to_ascii_lowercase())
+            .or((name.eq_ignore_ascii_case("wgs84")).then_some(VerticalDatum::Ellipsoid))
+            .ok_or_else(|| format!("`{name}`: expected egm96, egm2008, ellipsoid or unknown"))
     }
 
     /// Its name, as [`VerticalDatum::parse`] reads it.
     pub fn name(&self) -> &'static str {
         match self {
             VerticalDatum::Egm96 => "egm96",
+            VerticalDatum::Egm2008 => "egm2008",
             VerticalDatum::Ellipsoid => "ellipsoid",
             VerticalDatum::Unknown => "unknown",
+        }
+    }
+
+    /// Its code in a dataset header (byte 156, format 6.1): 1 unknown, 2 ellipsoid, 3 EGM96,
+    /// 4 EGM2008. 0 is "not recorded" (files before 6.1), which [`VerticalDatum::from_code`]
+    /// leaves to the caller.
+    pub fn code(&self) -> u8 {
+        match self {
+            VerticalDatum::Unknown => 1,
+            VerticalDatum::Ellipsoid => 2,
+            VerticalDatum::Egm96 => 3,
+            VerticalDatum::Egm2008 => 4,
+        }
+    }
+
+    /// The datum of a stored code 1..=4; `None` for 0 (not recorded) and codes fmrh does
+    /// not know.
+    pub fn from_code(code: u8) -> Option<VerticalDatum> {
+        VerticalDatum::ALL.into_iter().find(|d| d.code() == code)
+    }
+
+    /// How its heights become ellipsoidal heights (globe scenes, Cesium tiles, glTF in
+    /// ECEF), or why they cannot: EGM2008 heights need a grid fmrh does not bundle.
+    pub fn lift(&self) -> Result<Lift, String> {
+        match self {
+            VerticalDatum::Egm96 => Ok(Lift::Egm96),
+            VerticalDatum::Ellipsoid | VerticalDatum::Unknown => Ok(Lift::None),
+            VerticalDatum::Egm2008 => Err("its heights are above the EGM2008 geoid, and fmrh \
+                 bundles no EGM2008 grid (EGM96's only) to place them on the ellipsoid; \
+                 `--vertical-datum egm96` places them with EGM96's undulation instead"
+                .into()),
         }
     }
 }
@@ -125,6 +186,44 @@ pub fn egm96_undulation(lat: f64, lon: f64) -> f64 {
     north + fy * (south - north)
 }
 
+/// The least and greatest EGM96 undulation over the box `[lon_a, lon_b] x [lat_a, lat_b]`
+/// (degrees, either order): bounds that hold every value [`egm96_undulation`] gives inside
+/// it. Bilinear interpolation stays within the values of its cell's four nodes, so the
+/// nodes of the cells the box meets bound it; a box over more than 64 × 64 cells takes
+/// the whole grid's range instead (-106.99 m, +85.39 m), looser but found at once.
+pub fn egm96_range(lon_a: f64, lon_b: f64, lat_a: f64, lat_b: f64) -> (f64, f64) {
+    const WHOLE: (f64, f64) = (-106.99, 85.39);
+    if ![lon_a, lon_b, lat_a, lat_b].iter().all(|v| v.is_finite()) {
+        return WHOLE;
+    }
+    let (lon_lo, lon_hi) = (lon_a.min(lon_b), lon_a.max(lon_b));
+    let (lat_lo, lat_hi) = (lat_a.min(lat_b), lat_a.max(lat_b));
+    // Rows from 90° N down; columns from 0° E, wrapping.
+    let row_of = |lat: f64| (90.0 - lat.clamp(-90.0, 90.0)) / STEP;
+    let (r0, r1) = (
+        (row_of(lat_hi).floor() as usize).min(ROWS - 1),
+        (row_of(lat_lo).ceil() as usize).min(ROWS - 1),
+    );
+    let c0 = (lon_lo / STEP).floor();
+    let c1 = (lon_hi / STEP).ceil();
+    if c1 - c0 > 64.0 || r1 - r0 > 64 {
+        return WHOLE;
+    }
+    let g = grid();
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for r in r0..=r1 {
+        let mut c = c0;
+        while c <= c1 {
+            let col = (c.rem_euclid(COLS as f64) as usize).min(COLS - 1);
+            let v = f64::from(g[r * COLS + col]) / 100.0;
+            lo = lo.min(v);
+            hi = hi.max(v);
+            c += 1.0;
+        }
+    }
+    (lo, hi)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -169,5 +268,59 @@ mod tests {
             f64::from(g[180 * COLS + 29]) / 100.0
         );
         assert!(egm96_undulation(f64::NAN, 0.0).is_nan());
+    }
+
+    /// Every datum's name parses back to it, and its stored code back to it; 0 (not
+    /// recorded) and unknown codes are no datum; names are case-blind, and a wrong one is
+    /// refused with the list.
+    #[test]
+    fn names_and_codes_round_trip() {
+        for d in VerticalDatum::ALL {
+            assert_eq!(VerticalDatum::parse(d.name()), Ok(d));
+            assert_eq!(VerticalDatum::parse(&d.name().to_uppercase()), Ok(d));
+            assert_eq!(VerticalDatum::from_code(d.code()), Some(d));
+        }
+        let codes: std::collections::BTreeSet<u8> =
+            VerticalDatum::ALL.iter().map(|d| d.code()).collect();
+        assert_eq!(codes.len(), 4);
+        assert!(!codes.contains(&0));
+        assert_eq!(VerticalDatum::from_code(0), None);
+        assert_eq!(VerticalDatum::from_code(5), None);
+        assert_eq!(VerticalDatum::parse("WGS84"), Ok(VerticalDatum::Ellipsoid));
+        assert!(VerticalDatum::parse("navd88").is_err_and(|e| e.contains("egm2008")));
+        assert_eq!(VerticalDatum::of_epsg(5773), VerticalDatum::Egm96);
+        assert_eq!(VerticalDatum::of_epsg(3855), VerticalDatum::Egm2008);
+        assert_eq!(VerticalDatum::of_epsg(5703), VerticalDatum::Unknown);
+        assert!(VerticalDatum::Egm2008.lift().is_err());
+        assert_eq!(VerticalDatum::Egm96.lift(), Ok(Lift::Egm96));
+        assert_eq!(VerticalDatum::Unknown.lift(), Ok(Lift::None));
+    }
+
+    /// The range over a box holds every interpolated value inside it, and is the nodes'
+    /// range when the box is a cell; a huge box takes the grid's range, which holds all.
+    #[test]
+    fn ranges_hold_what_is_inside() {
+        let g = grid();
+        let (lo, hi) = (
+            f64::from(*g.iter().min().unwrap()) / 100.0,
+            f64::from(*g.iter().max().unwrap()) / 100.0,
+        );
+        assert_eq!(egm96_range(-180.0, 180.0, -90.0, 90.0), (-106.99, 85.39));
+        assert_eq!((lo, hi), (-106.99, 85.39));
+        let mut seed = 7u64;
+        let mut next = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for _ in 0..300 {
+            let lon = next() * 360.0 - 180.0;
+            let lat = next() * 170.0 - 85.0;
+            let (dlon, dlat) = (next() * 3.0, next() * 3.0);
+            let (a, b) = egm96_range(lon, lon + dlon, lat, lat + dlat);
+            for _ in 0..50 {
+                let n = egm96_undulation(lat + next() * dlat, lon + next() * dlon);
+                assert!(a <= n && n <= b, "{n} outside {a}..{b} at {lon}, {lat}");
+            }
+        }
     }
 }

@@ -7,6 +7,7 @@
 //! is an error, not an out-of-memory abort.
 
 use crate::error::{Error, Result};
+use crate::geoid::VerticalDatum;
 
 /// The longest side, in samples, that fmrh accepts.
 pub const MAX_SIDE: u64 = 1 << 20;
@@ -38,6 +39,10 @@ pub struct Metadata {
     pub units: Option<String>,
     /// The reader that produced this heightfield (`f32`, `srtm-hgt`, `geotiff`, ...).
     pub source_format: String,
+    /// What the heights are above (the geoid, the ellipsoid, or not known): what the
+    /// source said (a GeoTIFF's vertical CRS), the reader's convention (SRTM and DTED:
+    /// EGM96), or what the user said (`--vertical-datum`).
+    pub vertical_datum: VerticalDatum,
 }
 
 /// A grid of heights with voids (NaN), row-major from the north-west corner, and what is

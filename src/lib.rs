@@ -147,6 +147,7 @@ pub use glam;
 pub mod types {
     pub use crate::dataset::{DatasetReport, TileReport};
     pub use crate::error::Invariant;
+    pub use crate::geoid::VerticalDatum;
     pub use crate::heightfield::{Georeference, Metadata};
     pub use crate::ingest::{ColorEncoding, Format, IngestLimits, IngestOptions};
     pub use crate::model::{SampleRect, ThinByArea, Thresholds};

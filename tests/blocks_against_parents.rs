@@ -57,7 +57,7 @@ fn a_lattice_field_codes_blocks_against_parents_and_is_smaller() {
     let store = Store::from_bytes(with.clone()).unwrap();
     assert_eq!(
         store.state().format_version,
-        (fmrh::format::FORMAT_MAJOR, 0)
+        (fmrh::format::FORMAT_MAJOR, fmrh::format::FORMAT_MINOR)
     );
     let (against, all) = coded_against(&store);
     assert!(against * 2 > all, "{against} of {all} blocks");

@@ -633,15 +633,54 @@ proptest! {
     }
 }
 
+/// A two-tile dataset (49 × 25 hills cut at column 24) that verifies, in `dir`.
+fn two_tiles(dir: &std::path::Path) -> std::path::PathBuf {
+    let field = fields::make(49, 25, Character::Hills, 0.0, 4);
+    let rects = tiles::split(&field, &[24], &[], &[]);
+    let ds_dir = tiles::build(dir, &field, &rects, &tiles::options(None));
+    assert!(tiles::verify(&ds_dir, fmrh::store::VerifyMode::Fast).valid);
+    ds_dir
+}
+
+/// Commits a new manifest state of the dataset in `ds_dir`: its current contents as
+/// `change` leaves them (every checksum right, whatever the content).
+fn rewrite_manifest(
+    ds_dir: &std::path::Path,
+    change: impl FnOnce(&mut fmrh::dataset::manifest::Contents),
+) {
+    use fmrh::dataset::manifest::{write_state, Contents, ManifestState};
+    let all = Dataset::open(ds_dir).unwrap().tiles().unwrap();
+    let src = fmrh::store::FileSource::open(&ds_dir.join("MANIFEST")).unwrap();
+    let state = ManifestState::read(&src).unwrap();
+    let adjacency = all
+        .iter()
+        .map(|t| {
+            (
+                t.name().to_string(),
+                state.adjacency(&src, &t.record).unwrap(),
+            )
+        })
+        .filter(|(_, blob)| !blob.is_empty())
+        .collect();
+    let mut contents = Contents {
+        tiles: all.iter().map(|t| t.record).collect(),
+        spacing_m: state.record.spacing_m(),
+        georeference: state.georeference(),
+        seam: state.record.seam,
+        vertical_datum: state.vertical_datum(),
+        adjacency,
+    };
+    change(&mut contents);
+    let io = fmrh::store::io::FileIo::open(&ds_dir.join("MANIFEST")).unwrap();
+    write_state(&io, Some((state.slot, &state.record)), &contents).unwrap();
+}
+
 #[test]
 fn tables_that_are_not_the_merge_are_reported() {
-    use fmrh::dataset::manifest::{write_state, Contents, ManifestState};
-    let field = fields::make(49, 25, Character::Hills, 0.0, 4);
+    use fmrh::dataset::manifest::ManifestState;
     let dir = tempfile::tempdir().unwrap();
-    let rects = tiles::split(&field, &[24], &[], &[]);
-    let ds_dir = tiles::build(dir.path(), &field, &rects, &tiles::options(None));
+    let ds_dir = two_tiles(dir.path());
     let verify = || tiles::verify(&ds_dir, fmrh::store::VerifyMode::Fast);
-    assert!(verify().valid);
     // Rewrite the manifest with one pair dropped from the west tile's tables: checksums
     // right, content wrong.
     let ds = Dataset::open(&ds_dir).unwrap();
@@ -650,29 +689,11 @@ fn tables_that_are_not_the_merge_are_reported() {
     let mut borders = ds.borders(west).unwrap();
     assert_eq!(borders.len(), 1);
     borders[0].tables[0].2.pop();
-    let src = fmrh::store::FileSource::open(&ds_dir.join("MANIFEST")).unwrap();
-    let state = ManifestState::read(&src).unwrap();
-    let mut adjacency = std::collections::HashMap::new();
-    for t in &all {
-        let blob = if t.index == west.index {
-            fmrh::dataset::adjacency::encode(&borders)
-        } else {
-            state.adjacency(&src, &t.record).unwrap()
-        };
-        if !blob.is_empty() {
-            adjacency.insert(t.name().to_string(), blob);
-        }
-    }
-    let contents = Contents {
-        tiles: all.iter().map(|t| t.record).collect(),
-        spacing_m: state.record.spacing_m(),
-        georeference: state.georeference(),
-        seam: state.record.seam,
-        adjacency,
-    };
-    let io = fmrh::store::io::FileIo::open(&ds_dir.join("MANIFEST")).unwrap();
-    write_state(&io, Some((state.slot, &state.record)), &contents).unwrap();
-    drop(io);
+    let name = west.name().to_string();
+    rewrite_manifest(&ds_dir, |c| {
+        c.adjacency
+            .insert(name, fmrh::dataset::adjacency::encode(&borders));
+    });
     assert_eq!(failed(&verify()), vec![Invariant::AdjacentClusters]);
     // A flipped bit in the tables: their CRC.
     let bytes = std::fs::read(ds_dir.join("MANIFEST")).unwrap();
@@ -816,5 +837,26 @@ fn prefetch_works_across_tiles() {
     assert!(
         hits * 4 >= loaded,
         "the tiles' prefetchers warmed {hits} of the {loaded} blocks later frames loaded"
+    );
+}
+
+/// D-4 (manifest 1.1): the head records what every tile's heights are above. A head that
+/// names another datum than its tiles' (rewritten here with every checksum right) fails
+/// D-4 alone, and a reader takes the head's word without opening a tile.
+#[test]
+fn a_head_datum_that_is_not_its_tiles_is_reported() {
+    use fmrh::types::VerticalDatum;
+    let dir = tempfile::tempdir().unwrap();
+    let ds_dir = two_tiles(dir.path());
+    let ds = Dataset::open(&ds_dir).unwrap();
+    assert_eq!(ds.state().vertical_datum(), Some(VerticalDatum::Unknown));
+    drop(ds);
+    rewrite_manifest(&ds_dir, |c| c.vertical_datum = Some(VerticalDatum::Egm96));
+    let ds = Dataset::open(&ds_dir).unwrap();
+    assert_eq!(ds.vertical_datum().unwrap(), VerticalDatum::Egm96);
+    assert_eq!(ds.tiles_opened(), 0, "the head answered");
+    assert_eq!(
+        failed(&tiles::verify(&ds_dir, fmrh::store::VerifyMode::Fast)),
+        vec![Invariant::TilePins]
     );
 }

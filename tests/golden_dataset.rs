@@ -184,7 +184,7 @@ fn the_manifest_fields_lie_where_the_spec_says() {
     assert_eq!(&m[0..8], b"FMDS\r\n\x1a\n");
     assert_eq!(
         (u16_at(&m, 8), u16_at(&m, 10), u32_at(&m, 12)),
-        (1, 0, 4096)
+        (1, 1, 4096)
     );
     assert_eq!(u64_at(&m, 16), 1, "txn_id");
     assert_eq!(u32_at(&m, 252), crc32(&m[..252]), "the record's CRC");
@@ -216,6 +216,9 @@ fn the_manifest_fields_lie_where_the_spec_says() {
         (10.0, 45.0, 0.001, -0.001)
     );
     assert_eq!(&h[56..65], b"EPSG:4326");
+    // Minor 1: the tiles' vertical datum (synthetic tiles: 1, unknown), then zeros.
+    assert_eq!(h[20], 1, "vertical datum");
+    assert!(h[21..24].iter().all(|&b| b == 0), "reserved");
     let body = head - adjacency_len - P;
     let e = &h[256..320];
     assert_eq!(u64_at(e, 0) as usize, body, "the tile page opens the body");

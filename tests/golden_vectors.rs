@@ -6,9 +6,9 @@
 //! regenerate with `FMRH_BLESS=1 cargo test --release --test golden_vectors`.
 //!
 //! Files of older versions stay readable: `format-spec/vectors/v1.1/`, `v1.2/`, `v2.0/`,
-//! `v2.1/`, `v3.0/`, `v4.0/` and `v5.0/` keep the same vectors as those versions wrote them.
-//! They must read and verify exactly as the current ones do; 2.x to 5.x files accept a
-//! transaction (which makes them 6.0), 1.x files refuse one. The polar vector (format 6.0: a
+//! `v2.1/`, `v3.0/`, `v4.0/`, `v5.0/` and `v6.0/` keep the same vectors as those versions
+//! wrote them. They must read and verify exactly as the current ones do; 2.x to 6.0 files
+//! accept a transaction (which makes them 6.1), 1.x files refuse one. The polar vector (format 6.0: a
 //! longitude-latitude grid at 80° N whose coarse grids are thinned by area) has no older copy.
 //!
 //! Three more pins: a crafted vector (`slot-1-beside-invalid-slot-0.fmrh`: where slot 1 lies
@@ -23,6 +23,7 @@ use std::process::Command;
 use fmrh::heightfield::{Georeference, Metadata};
 use fmrh::model::{BuildOptions, Model, Thresholds};
 use fmrh::store::{write_to, WriteOptions};
+use fmrh::types::VerticalDatum;
 use fmrh::Heightfield;
 
 struct Vector {
@@ -59,6 +60,8 @@ fn vectors() -> Vec<Vector> {
         }),
         units: Some("metres".into()),
         source_format: "test".into(),
+        // Format 6.1 records it (byte 156 of the dataset header: 3).
+        vertical_datum: VerticalDatum::Egm96,
     };
     let hills_paged = hills.clone();
     let cliff = Heightfield::from_fn(33, 33, |x, _| if x < 11 { 10.0 } else { 500.0 }).unwrap();
@@ -83,6 +86,7 @@ fn vectors() -> Vec<Vector> {
         }),
         units: Some("metres".into()),
         source_format: "test".into(),
+        vertical_datum: VerticalDatum::Ellipsoid,
     };
     vec![
         Vector {
@@ -353,7 +357,7 @@ fn vector_commit_record_fields_sit_where_the_spec_says() {
     let bytes = build(&vectors()[1]);
     assert_eq!(&bytes[0..8], b"FMRH\r\n\x1a\n");
     assert_eq!(u16::from_le_bytes([bytes[8], bytes[9]]), 6); // major
-    assert_eq!(u16::from_le_bytes([bytes[10], bytes[11]]), 0); // minor
+    assert_eq!(u16::from_le_bytes([bytes[10], bytes[11]]), 1); // minor
     assert_eq!(u32::from_le_bytes(bytes[12..16].try_into().unwrap()), 1024); // page size
     assert_eq!(u64::from_le_bytes(bytes[16..24].try_into().unwrap()), 1); // txn id
     assert_eq!(
@@ -454,7 +458,7 @@ fn format_1_vectors_read_verify_and_refuse_writes() {
 /// them, no grid thinned) read sample for sample, pass `verify --full`, and accept a
 /// transaction, whose commit makes them 6.0 (format §8) with their metadata in a bundle.
 #[test]
-fn format_2_to_5_vectors_read_verify_and_take_a_transaction() {
+fn format_2_to_6_0_vectors_read_verify_and_take_a_transaction() {
     let old_vectors = lossless_vectors()
         .into_iter()
         .map(|v| ((2u16, 0u16), v))
@@ -466,13 +470,20 @@ fn format_2_to_5_vectors_read_verify_and_take_a_transaction() {
         )
         .chain(old_vectors().into_iter().map(|v| ((3, 0), v)))
         .chain(old_vectors().into_iter().map(|v| ((4, 0), v)))
-        .chain(old_vectors().into_iter().map(|v| ((5, 0), v)));
+        .chain(old_vectors().into_iter().map(|v| ((5, 0), v)))
+        .chain(vectors().into_iter().map(|v| ((6, 0), v)));
     for ((major, minor), v) in old_vectors {
         let old = dir()
             .join(format!("v{major}.{minor}"))
             .join(format!("{}.fmrh", v.name));
         let store = fmrh::store::Store::open(&old).unwrap();
         assert_eq!(store.state().format_version, (major, minor), "{}", v.name);
+        // Before 6.1 the datum is not recorded: the reader's convention says (a test
+        // source: unknown), whatever the field was built with.
+        assert_eq!(
+            store.header().metadata.vertical_datum,
+            VerticalDatum::Unknown
+        );
         assert_eq!(
             store.header().precision.map(|p| p.step()),
             v.precision.filter(|_| (major, minor) > (2, 0))
@@ -504,7 +515,12 @@ fn format_2_to_5_vectors_read_verify_and_take_a_transaction() {
         txn.commit().unwrap();
         drop(c);
         let store = fmrh::store::Store::open(&copy).unwrap();
-        assert_eq!(store.state().format_version, (6, 0), "{}", v.name);
+        assert_eq!(
+            store.state().format_version,
+            (fmrh::format::FORMAT_MAJOR, fmrh::format::FORMAT_MINOR),
+            "{}",
+            v.name
+        );
         assert!(store.layout().unwrap().bundle_bytes > 0, "{}", v.name);
         let got = store
             .read_window(fmrh::model::SampleRect {
@@ -541,7 +557,8 @@ fn precision_field_sits_where_the_spec_says() {
         f64::from_le_bytes(raw[h + 148..h + 156].try_into().unwrap()),
         0.3
     );
-    assert!(raw[h + 156..h + 160].iter().all(|&b| b == 0));
+    assert_eq!(raw[h + 156], 1, "vertical datum: unknown");
+    assert!(raw[h + 157..h + 160].iter().all(|&b| b == 0));
     let store = fmrh::store::Store::from_bytes(bytes).unwrap();
     let got = store.read_window(store.domain().data_rect()).unwrap();
     for (a, b) in got.samples().iter().zip(v.field.samples()) {
@@ -550,6 +567,67 @@ fn precision_field_sits_where_the_spec_says() {
             "{a} vs {b}"
         );
     }
+}
+
+/// The vertical datum (format 6.1) is byte 156 of the dataset header (§5): the hills vector
+/// records EGM96 (3), the polar one the ellipsoid (2), the ramp says nothing and records
+/// unknown (1); bytes 157..160 stay zero. Read back, each is what was built.
+#[test]
+fn vertical_datum_sits_where_the_spec_says() {
+    for (name, code, datum) in [
+        ("hills-20x13-voids", 3u8, VerticalDatum::Egm96),
+        ("polar-33x33-thinned", 2, VerticalDatum::Ellipsoid),
+        ("ramp-9x9", 1, VerticalDatum::Unknown),
+    ] {
+        let v = vectors().into_iter().find(|v| v.name == name).unwrap();
+        let bytes = build(&v);
+        let raw = bundle_of(&bytes);
+        let h = 24;
+        assert_eq!(&raw[h - 24..h - 20], b"FMHD", "{name}");
+        assert_eq!(raw[h + 156], code, "{name}");
+        assert!(raw[h + 157..h + 160].iter().all(|&b| b == 0), "{name}");
+        let store = fmrh::store::Store::from_bytes(bytes).unwrap();
+        assert_eq!(store.header().metadata.vertical_datum, datum, "{name}");
+    }
+}
+
+/// The rules for byte 156 (§5, §8), on the hills vector's header blob: 0 is "not recorded"
+/// (the reader's convention, here unknown); a known code in a 6.1 file is its datum; an
+/// unknown code is I-6 damage in a 6.1 file and unknown in a newer minor's; any code but 0
+/// in a 6.0 (or older) file is a reserved byte set, I-6; bytes 157..160 likewise.
+#[test]
+fn vertical_datum_codes_follow_the_version_rules() {
+    use fmrh::format::DatasetHeader;
+    let v = vectors()
+        .into_iter()
+        .find(|v| v.name == "hills-20x13-voids")
+        .unwrap();
+    let raw = bundle_of(&build(&v));
+    let lens: usize = (0..3)
+        .map(|i| {
+            let at = 24 + 136 + 4 * i;
+            u32::from_le_bytes(raw[at..at + 4].try_into().unwrap()) as usize
+        })
+        .sum();
+    let blob = raw[24..24 + 160 + lens].to_vec();
+    let with = |at: usize, value: u8| {
+        let mut b = blob.clone();
+        b[at] = value;
+        b
+    };
+    let datum = |b: &[u8], version: (u16, u16)| {
+        DatasetHeader::decode(b, version).map(|h| h.metadata.vertical_datum)
+    };
+    assert_eq!(datum(&blob, (6, 1)), Ok(VerticalDatum::Egm96));
+    assert_eq!(datum(&with(156, 0), (6, 1)), Ok(VerticalDatum::Unknown));
+    assert_eq!(datum(&with(156, 0), (6, 0)), Ok(VerticalDatum::Unknown));
+    assert_eq!(datum(&with(156, 4), (6, 1)), Ok(VerticalDatum::Egm2008));
+    assert!(datum(&with(156, 9), (6, 1)).is_err());
+    assert_eq!(datum(&with(156, 9), (6, 2)), Ok(VerticalDatum::Unknown));
+    assert!(datum(&blob, (6, 0)).is_err());
+    assert!(datum(&blob, (5, 0)).is_err());
+    assert!(datum(&with(158, 1), (6, 1)).is_err());
+    assert_eq!(datum(&with(158, 1), (6, 2)), Ok(VerticalDatum::Egm96));
 }
 
 /// Format 6's thinned grids, read by the spec alone (container §7 "Thinned grids", model

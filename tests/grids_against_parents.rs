@@ -54,7 +54,10 @@ fn grids_decode_through_their_chains_to_the_heights_coded_alone() {
         let plain = bytes_of(&field, 33, &alone());
         let a = Store::from_bytes(with.clone()).unwrap();
         let b = Store::from_bytes(plain.clone()).unwrap();
-        assert_eq!(a.state().format_version, (fmrh::format::FORMAT_MAJOR, 0));
+        assert_eq!(
+            a.state().format_version,
+            (fmrh::format::FORMAT_MAJOR, fmrh::format::FORMAT_MINOR)
+        );
         let nodes = a.nodes().unwrap();
         let finest = a.domain().finest_level();
         let flagged: HashSet<u32> = (0..nodes.len() as u32)

@@ -39,6 +39,7 @@ fn placed(mut field: Heightfield, lat0: f64, dlon: f64) -> Heightfield {
         }),
         units: None,
         source_format: "test".into(),
+        ..Metadata::default()
     };
     field
 }

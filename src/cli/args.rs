@@ -61,6 +61,12 @@ pub struct IngestArgs {
     /// ceiling). A header that claims far more than its bytes could be a decompression bomb.
     #[arg(long, value_name = "N")]
     max_samples_per_byte: Option<f64>,
+    /// What the heights are above: egm96, egm2008, ellipsoid or unknown. Recorded in the
+    /// container (`info` shows it); globe outputs lift EGM96 heights onto the ellipsoid.
+    /// Default: the file's vertical CRS (a GeoTIFF's), else EGM96 for SRTM and DTED, else
+    /// unknown.
+    #[arg(long, value_name = "DATUM", value_parser = crate::geoid::VerticalDatum::parse)]
+    vertical_datum: Option<crate::geoid::VerticalDatum>,
 }
 
 impl IngestArgs {
@@ -77,6 +83,7 @@ impl IngestArgs {
                 max_memory: self.max_memory,
                 max_samples_per_byte: self.max_samples_per_byte,
             },
+            vertical_datum: self.vertical_datum,
         }
     }
 }

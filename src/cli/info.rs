@@ -6,6 +6,7 @@ use std::process::ExitCode;
 use crate::crs::Crs;
 use serde::Serialize;
 
+use crate::geoid::VerticalDatum;
 use crate::heightfield::Georeference;
 use crate::store::Layout;
 use crate::Error;
@@ -47,6 +48,8 @@ struct Info {
     georeference: Option<GeoInfo>,
     units: Option<String>,
     source_format: String,
+    /// What the heights are above (format 6.1; older files: the reader's convention).
+    vertical_datum: VerticalDatum,
     delta_min: f64,
     max_error: f64,
     /// The storage step heights were kept to (format 2.1), or null when bit for bit.
@@ -230,6 +233,8 @@ struct DatasetInfo {
     tile_count: u64,
     spacing_m: Option<[f64; 2]>,
     georeference: Option<GeoInfo>,
+    /// What the heights are above (its tiles', which agree).
+    vertical_datum: VerticalDatum,
     seam: &'static str,
     /// The manifest and every tile file, as the file system says now (a commit in progress
     /// may have appended to them); `None` for a remote dataset, whose tiles' sizes would
@@ -292,6 +297,7 @@ fn run_dataset(args: &InfoArgs) -> Result<ExitCode, Error> {
         georeference: ds
             .georeference()
             .map(|g| GeoInfo::of(&g, to_u32(grid.col1 + 1), to_u32(grid.row1 + 1))),
+        vertical_datum: ds.vertical_datum()?,
         seam: match record.seam {
             SEAM_FIRST => "first",
             SEAM_MEAN => "mean",
@@ -318,6 +324,7 @@ fn run_dataset(args: &InfoArgs) -> Result<ExitCode, Error> {
             .map_or("remote".to_string(), |b| format!("{b} bytes in all"))
     );
     println!("  grid        {} x {} samples", info.columns, info.rows);
+    println!("  heights     above {}", datum_label(info.vertical_datum));
     match info.spacing_m {
         Some(s) => println!("  spacing     {} m x {} m", s[0], s[1]),
         None => println!("  spacing     unknown (scenes need --spacing)"),
@@ -435,6 +442,7 @@ fn report<S: crate::store::Source>(
             .map(|g| GeoInfo::of(g, d.width(), d.height())),
         units: h.metadata.units.clone(),
         source_format: h.metadata.source_format.clone(),
+        vertical_datum: h.metadata.vertical_datum,
         delta_min: h.delta_min,
         max_error: h.max_error,
         precision: h.precision.map(|p| p.step()),
@@ -473,8 +481,9 @@ fn print_info(path: &std::path::Path, i: &Info) {
     );
     match i.height_range {
         Some([lo, hi]) => println!(
-            "  heights     {lo} .. {hi} {}",
-            i.units.as_deref().unwrap_or("(units unknown)")
+            "  heights     {lo} .. {hi} {} above {}",
+            i.units.as_deref().unwrap_or("(units unknown)"),
+            datum_label(i.vertical_datum)
         ),
         None => println!("  heights     none (every sample is void)"),
     }
@@ -570,5 +579,15 @@ fn print_info(path: &std::path::Path, i: &Info) {
                 "read whole on open"
             }
         );
+    }
+}
+
+/// What heights above `datum` are said to be above, in `info`'s text.
+fn datum_label(datum: VerticalDatum) -> &'static str {
+    match datum {
+        VerticalDatum::Egm96 => "the EGM96 geoid",
+        VerticalDatum::Egm2008 => "the EGM2008 geoid",
+        VerticalDatum::Ellipsoid => "the WGS 84 ellipsoid",
+        VerticalDatum::Unknown => "an unknown datum (--vertical-datum at build says which)",
     }
 }

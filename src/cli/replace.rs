@@ -64,6 +64,27 @@ fn parse_at(text: &str) -> Result<[u64; 2], Error> {
 pub fn run(args: &ReplaceArgs) -> Result<ExitCode, Error> {
     let [col0, row0] = parse_at(&args.at)?;
     let patch = ingest::load(&args.patch, &args.ingest.options())?;
+    // A patch whose file says what its heights are above must say what the terrain's are
+    // above: EGM96 heights written over ellipsoidal ones would be tens of metres off. A
+    // patch that says nothing (a raw grid) is taken as the terrain's.
+    let theirs = patch.metadata.vertical_datum;
+    if theirs != crate::geoid::VerticalDatum::Unknown {
+        let ours = crate::terrain::Terrain::open(&args.file)?
+            .info()?
+            .vertical_datum;
+        if ours != theirs {
+            return Err(Error::input(
+                &args.patch,
+                format!(
+                    "its heights are above {}, {}'s above {} (--vertical-datum says what \
+                     the patch's are)",
+                    theirs.name(),
+                    args.file.display(),
+                    ours.name()
+                ),
+            ));
+        }
+    }
     if super::is_dataset(&args.file)? {
         let started = Instant::now();
         let r =

@@ -105,6 +105,20 @@ fn add_or_replace(
     let all = records(&state, &src)?;
     let reader = Dataset::open(dir)?;
     let hf = crate::ingest::load(input, &options.ingest)?;
+    if !all.is_empty() {
+        let (ours, theirs) = (hf.metadata.vertical_datum, reader.vertical_datum()?);
+        if ours != theirs {
+            return Err(Error::input(
+                input,
+                format!(
+                    "its heights are above {}, the dataset's above {}: a dataset's tiles \
+                     share one vertical datum (--vertical-datum says what this file's are)",
+                    ours.name(),
+                    theirs.name()
+                ),
+            ));
+        }
+    }
     let (col0, row0) = match at {
         Some((c, r)) => (c as i64, r as i64),
         None => match (&hf.metadata.georeference, state.georeference()) {

@@ -27,6 +27,7 @@ use super::manifest::{write_state, Contents, MANIFEST_NAME};
 use super::placement::{check_tiling, place_by_georeference, rect, PlacementError};
 use super::seams::{settle, Placed, SeamPolicy};
 use crate::error::{Error, Result};
+use crate::geoid::VerticalDatum;
 use crate::format::manifest::{
     tile_name_is_valid, TileRecord, SEAM_FIRST, SEAM_MEAN, SEAM_STRICT, TILE_NAME_LEN,
 };
@@ -392,9 +393,27 @@ pub fn build(
         options: &options.ingest,
         open: None,
     };
+    let mut datum = None;
     for (i, p) in pieces.iter().enumerate() {
         on_tile("scanning", i, n, &inputs[p.input].path);
         let hf = reader.load(p)?;
+        let this = hf.metadata.vertical_datum;
+        match datum {
+            None => datum = Some((this, &inputs[p.input].path)),
+            Some((first, first_path)) if first != this => {
+                return Err(Error::input(
+                    &inputs[p.input].path,
+                    format!(
+                        "its heights are above {}, {}'s above {}: a dataset's tiles share \
+                         one vertical datum (--vertical-datum says which, for every input)",
+                        this.name(),
+                        first_path.display(),
+                        first.name()
+                    ),
+                ));
+            }
+            Some(_) => {}
+        }
         scans.push(Scanned::of(&hf));
     }
     // 2. Place.
@@ -600,6 +619,7 @@ pub fn build(
                 spacing_m: spacing,
                 georeference,
                 seam: seam_byte(options.seam),
+                vertical_datum: Some(datum.map_or(VerticalDatum::Unknown, |(d, _)| d)),
                 adjacency,
             },
         )?;

@@ -400,6 +400,7 @@ pub(crate) fn publish<F: Files>(
                 SEAM_MEAN => SEAM_MEAN,
                 _ => SEAM_STRICT,
             },
+            vertical_datum: state.vertical_datum(),
             adjacency,
         };
         write_state(&**manifest, Some((state.slot, &state.record)), &contents)

@@ -16,6 +16,7 @@ use crate::format::manifest::{
 };
 use crate::format::{crc32, Invariant, Violation};
 use crate::heightfield::Georeference;
+use crate::geoid::VerticalDatum;
 use crate::model::SampleRect;
 use crate::store::io::Io;
 use crate::store::slots::SlotsNow;
@@ -252,6 +253,11 @@ impl ManifestState {
             step: f.step.map(|v| v.get()),
         })
     }
+
+    /// What every tile's heights are above, when the head records it (manifest 1.1).
+    pub fn vertical_datum(&self) -> Option<VerticalDatum> {
+        VerticalDatum::from_code(self.head.fixed.vertical_datum)
+    }
 }
 
 /// What a dataset state holds, before it is written.
@@ -265,6 +271,9 @@ pub struct Contents {
     pub georeference: Option<Georeference>,
     /// The seam policy (`SEAM_*`).
     pub seam: u8,
+    /// What every tile's heights are above; `None`: not recorded (a dataset written before
+    /// manifest 1.1, whose readers ask its first tile).
+    pub vertical_datum: Option<VerticalDatum>,
     /// Each tile's adjacent-cluster tables (`format-spec/dataset.md` §3.5), by file name;
     /// a tile with none has no entry.
     pub adjacency: std::collections::HashMap<String, Vec<u8>>,
@@ -403,7 +412,8 @@ pub fn write_state(
                 0
             })
             .into(),
-            reserved0: 0.into(),
+            vertical_datum: contents.vertical_datum.map_or(0, |d| d.code()),
+            reserved0: [0; 3],
             origin: g.map_or([0.0; 2], |g| g.origin).map(Into::into),
             step: g.map_or([0.0; 2], |g| g.step).map(Into::into),
             crs,

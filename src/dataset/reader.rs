@@ -8,6 +8,7 @@ use std::sync::{Arc, Mutex};
 
 use super::manifest::{pages_meeting, ManifestState, MANIFEST_NAME};
 use crate::error::{Error, Result};
+use crate::geoid::VerticalDatum;
 use crate::format::manifest::{StatePin, TileRecord};
 use crate::heightfield::{Georeference, Heightfield, Metadata};
 use crate::model::SampleRect;
@@ -164,6 +165,31 @@ impl Dataset {
     /// The georeference of dataset sample (0, 0), when known.
     pub fn georeference(&self) -> Option<Georeference> {
         self.state.georeference()
+    }
+
+    /// Its first tile in manifest order, reading one tile page; `None` for a dataset of no
+    /// tiles.
+    pub fn first_tile(&self) -> Result<Option<Tile>> {
+        if self.state.head.pages.is_empty() {
+            return Ok(None);
+        }
+        Ok(self.state.page(&self.src, 0)?.first().map(|record| Tile {
+            index: u64::from(self.state.head.pages[0].first_tile.get()),
+            record: *record,
+        }))
+    }
+
+    /// What the heights are above: as the manifest records it, or (a manifest before 1.1)
+    /// its first tile's datum, opening that tile (`dataset build` and `add` keep a
+    /// dataset's tiles to one); unknown for a dataset of no tiles.
+    pub fn vertical_datum(&self) -> Result<VerticalDatum> {
+        if let Some(datum) = self.state.vertical_datum() {
+            return Ok(datum);
+        }
+        match self.first_tile()? {
+            Some(tile) => Ok(self.open_tile(&tile)?.header().metadata.vertical_datum),
+            None => Ok(VerticalDatum::Unknown),
+        }
     }
 
     /// What opening read from the manifest.
@@ -441,6 +467,7 @@ impl Dataset {
             }),
             units: None,
             source_format: "fmrh-dataset".into(),
+            vertical_datum: self.vertical_datum()?,
         };
         Ok(Heightfield::new(w as u32, h as u32, samples)?.with_metadata(metadata))
     }

@@ -104,7 +104,7 @@ impl Dataset {
     /// The dataset's grid on the WGS 84 ellipsoid: sample `(col, row)` of the dataset at the
     /// longitude and latitude its georeference gives. An error unless the dataset has a
     /// geographic georeference (its tiles were placed by SRTM names or geographic
-    /// GeoTIFFs).
+    /// GeoTIFFs). Heights above the EGM96 geoid are placed on the ellipsoid.
     pub fn globe_frame(&self) -> Result<GlobeFrame> {
         let g = self.georeference().ok_or_else(|| {
             Error::InvalidArgument(format!(
@@ -113,7 +113,7 @@ impl Dataset {
                 self.dir().display()
             ))
         })?;
-        GlobeFrame::of(&g)
+        GlobeFrame::of(&g)?.with_datum(self.vertical_datum()?)
     }
 
     /// The tiles a scene may need: those whose boxes meet `window` (dataset samples), or the

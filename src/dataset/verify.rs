@@ -246,6 +246,18 @@ fn check_state(
             None
         };
         if let Some(s) = &store {
+            // The head's datum, when recorded (manifest 1.1), is every tile's.
+            let theirs = s.header().metadata.vertical_datum;
+            if let Some(ours) = dataset.state().vertical_datum().filter(|d| *d != theirs) {
+                checks.fail(
+                    Invariant::TilePins,
+                    format!(
+                        "{at}heights above {}, where the manifest says {}",
+                        theirs.name(),
+                        ours.name()
+                    ),
+                );
+            }
             match s.node(0) {
                 Ok(root) => {
                     let (lo, hi) = (tile.record.min_height.get(), tile.record.max_height.get());

@@ -69,6 +69,7 @@ use rayon::prelude::*;
 
 use crate::crs::{Crs, CrsKind};
 use crate::error::{Error, Result};
+use crate::geoid::VerticalDatum;
 use crate::heightfield::Heightfield;
 
 /// GeoKey ids (GeoTIFF 1.0 §6.3) and values this writer uses.
@@ -77,6 +78,7 @@ mod key {
     pub const GT_RASTER_TYPE: u16 = 1025;
     pub const GEOGRAPHIC_TYPE: u16 = 2048;
     pub const PROJECTED_CS_TYPE: u16 = 3072;
+    pub const VERTICAL_CS_TYPE: u16 = 4096;
     pub const MODEL_PROJECTED: u16 = 1;
     pub const MODEL_GEOGRAPHIC: u16 = 2;
     pub const RASTER_PIXEL_IS_AREA: u16 = 1;
@@ -479,11 +481,21 @@ fn geo_fields(hf: &Heightfield, written: &mut Written) -> Vec<Field> {
     };
     match model {
         Some((model, key_id, c)) => {
-            let keys = [
+            let mut keys = vec![
                 [key::GT_MODEL_TYPE, 0, 1, model],
                 [key::GT_RASTER_TYPE, 0, 1, key::RASTER_PIXEL_IS_AREA],
                 [key_id, 0, 1, c as u16],
             ];
+            // The heights' vertical CRS, when it is a geoid's (EPSG 5773 EGM96 height,
+            // 3855 EGM2008 height): GDAL reads the pair as a compound CRS.
+            let vertical = match hf.metadata.vertical_datum {
+                VerticalDatum::Egm96 => Some(5773),
+                VerticalDatum::Egm2008 => Some(3855),
+                VerticalDatum::Ellipsoid | VerticalDatum::Unknown => None,
+            };
+            if let Some(v) = vertical {
+                keys.push([key::VERTICAL_CS_TYPE, 0, 1, v]);
+            }
             let mut directory: Vec<u16> = vec![1, 1, 0, keys.len() as u16];
             directory.extend(keys.iter().flatten());
             fields.push(Field::shorts(tag::GEO_KEY_DIRECTORY, &directory));

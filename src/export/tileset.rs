@@ -33,7 +33,7 @@ use super::tin_tile::{self, Edges, Quanta, TinTile};
 use crate::error::{Error, Result};
 use crate::model::SampleRect;
 use crate::scene::surface::{GridBlock, Surface};
-use crate::geoid::VerticalDatum;
+use crate::geoid::{Lift, VerticalDatum};
 use crate::heightfield::Georeference;
 
 /// The deepest level a tileset goes to, whatever the data (a 65² grid at level 24 is 7 cm
@@ -137,8 +137,10 @@ impl Tileset {
                 )));
             }
         }
-        let placement =
-            Placement::new(georeference, 1.0)?.with_geoid(datum == VerticalDatum::Egm96);
+        let lift = datum
+            .lift()
+            .map_err(|why| Error::InvalidArgument(format!("no Cesium terrain: {why}")))?;
+        let placement = Placement::new(georeference, 1.0)?.with_geoid(lift == Lift::Egm96);
         if info.width == 0 || info.height == 0 {
             return Err(Error::InvalidArgument("the terrain has no samples".into()));
         }
@@ -164,7 +166,7 @@ impl Tileset {
         let [lo, hi] = info.height_range.unwrap_or([0.0, 0.0]);
         // Heights and sea level off the data, lifted by the geoid where they are (EGM96's
         // undulations lie within -107 m and +86 m).
-        let (lift_lo, lift_hi) = if datum == VerticalDatum::Egm96 {
+        let (lift_lo, lift_hi) = if lift == Lift::Egm96 {
             (-110.0, 90.0)
         } else {
             (0.0, 0.0)
@@ -291,6 +293,8 @@ impl Tileset {
                     VerticalDatum::Egm96 => "above the WGS 84 ellipsoid: the data's heights above \
                         the EGM96 geoid plus its undulation N (NGA's 15' grid, bilinear)",
                     VerticalDatum::Ellipsoid => "above the WGS 84 ellipsoid, as stored",
+                    // `new` refuses a datum it cannot lift.
+                    VerticalDatum::Egm2008 => "above the EGM2008 geoid, as stored",
                     VerticalDatum::Unknown => "as stored: the data does not say what they are \
                         above (serve --vertical-datum says)",
                 },

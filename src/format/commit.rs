@@ -343,14 +343,7 @@ pub fn classify(bytes: &[u8], slot: u8, offset: u64) -> Slot {
             r.txn_id.get()
         ));
     }
-    let newer_minor = match r.major.get() {
-        FORMAT_MAJOR => r.minor.get() > FORMAT_MINOR,
-        5 => r.minor.get() > LAST_MINOR_OF_5,
-        4 => r.minor.get() > LAST_MINOR_OF_4,
-        3 => r.minor.get() > LAST_MINOR_OF_3,
-        2 => r.minor.get() > LAST_MINOR_OF_2,
-        _ => r.minor.get() > LAST_MINOR_OF_1,
-    };
+    let newer_minor = is_newer_minor(r.major.get(), r.minor.get());
     let has_bundle = r.major.get() >= 3;
     if !newer_minor
         && (r.flags.get() & !COMMIT_FLAGS_KNOWN != 0
@@ -368,6 +361,20 @@ pub fn classify(bytes: &[u8], slot: u8, offset: u64) -> Slot {
         }
     }
     Slot::Valid(Box::new(r))
+}
+
+/// Whether `major.minor` is a minor of its major newer than this reader knows: its
+/// reserved bytes may then hold fields this reader ignores (§8).
+pub fn is_newer_minor(major: u16, minor: u16) -> bool {
+    minor
+        > match major {
+            FORMAT_MAJOR => FORMAT_MINOR,
+            5 => LAST_MINOR_OF_5,
+            4 => LAST_MINOR_OF_4,
+            3 => LAST_MINOR_OF_3,
+            2 => LAST_MINOR_OF_2,
+            _ => LAST_MINOR_OF_1,
+        }
 }
 
 /// Where to look for slot 1 when slot 0 names no page size: one page in, for every allowed

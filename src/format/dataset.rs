@@ -8,6 +8,7 @@ use zerocopy::byteorder::little_endian::{F64, U16, U32, U64};
 use zerocopy::{FromBytes, IntoBytes};
 
 use super::{Invariant, Violation, MAX_STRING_LEN, VOID_BITS};
+use crate::geoid::VerticalDatum;
 use crate::heightfield::{Georeference, Metadata};
 use crate::model::{Domain, Model, Precision};
 
@@ -55,7 +56,8 @@ on_disk! {
         units_len: U32,
         source_format_len: U32,
         precision: F64,
-        reserved: [u8; 4],
+        vertical_datum: u8,
+        reserved: [u8; 3],
     }
 }
 
@@ -179,7 +181,8 @@ impl DatasetHeader {
             units_len: U32::new(string_len(units)),
             source_format_len: U32::new(string_len(source_format)),
             precision: F64::new(self.precision.map_or(0.0, Precision::step)),
-            reserved: [0; 4],
+            vertical_datum: m.vertical_datum.code(),
+            reserved: [0; 3],
         };
         let mut out = fixed.as_bytes().to_vec();
         for s in [crs, units, source_format] {
@@ -188,8 +191,12 @@ impl DatasetHeader {
         out
     }
 
-    /// Parses and checks a blob (invariant I-6).
-    pub fn decode(bytes: &[u8]) -> Result<DatasetHeader, Violation> {
+    /// Parses and checks a blob (invariant I-6) of a file of format `version` (its commit
+    /// record's major and minor). Byte 156, the vertical datum, is reserved before 6.1. A
+    /// minor newer than this reader's may hold what it does not know in reserved bytes, and
+    /// a vertical datum code it does not know (read as unknown); any other must not.
+    pub fn decode(bytes: &[u8], version: (u16, u16)) -> Result<DatasetHeader, Violation> {
+        let newer_minor = super::commit::is_newer_minor(version.0, version.1);
         let bad =
             |detail: String| Violation::new(Invariant::DatasetHeader, "dataset header", detail);
         let (f, rest) = Fixed::read_from_prefix(bytes).map_err(|_| {
@@ -299,8 +306,24 @@ impl DatasetHeader {
                 step: pair(f.step),
             }),
             units: (flags & HAS_UNITS != 0).then_some(units),
+            vertical_datum: match (f.vertical_datum, VerticalDatum::from_code(f.vertical_datum)) {
+                // Not recorded (a file before 6.1): what its reader's convention says.
+                (0, _) => VerticalDatum::of_source_format(&source_format),
+                _ if version < (6, 1) && !newer_minor => {
+                    return Err(bad(format!(
+                        "reserved byte 156 is {} in a {}.{} file",
+                        f.vertical_datum, version.0, version.1
+                    )))
+                }
+                (_, Some(datum)) => datum,
+                (_, None) if newer_minor => VerticalDatum::Unknown,
+                (code, None) => return Err(bad(format!("vertical datum code {code}"))),
+            },
             source_format,
         };
+        if !newer_minor && f.reserved != [0; 3] {
+            return Err(bad("reserved bytes 157..160 are not zero".into()));
+        }
         let thinned_by_area = flags & THINNED_BY_AREA != 0;
         if thinned_by_area
             && metadata

@@ -29,8 +29,9 @@ pub const MANIFEST_MAGIC: [u8; 8] = *b"FMDS\r\n\x1a\n";
 /// The manifest's major version: a reader refuses another.
 pub const MANIFEST_MAJOR: u16 = 1;
 
-/// The manifest's minor version. Minors add fields in bytes that older minors keep zero.
-pub const MANIFEST_MINOR: u16 = 0;
+/// The manifest's minor version. Minors add fields in bytes that older minors keep zero:
+/// 1 records the tiles' vertical datum in the head (byte 20).
+pub const MANIFEST_MINOR: u16 = 1;
 
 /// The manifest's page size: slots, tile pages and the head are aligned to it.
 pub const MANIFEST_PAGE: u32 = 4096;
@@ -377,8 +378,11 @@ on_disk! {
         pub tile_count: U64,
         /// [`HEAD_HAS_GEOREFERENCE`].
         pub flags: U32,
+        /// Minor 1: what every tile's heights are above, as a container records it
+        /// (`container.md` §5: 1 unknown, 2 ellipsoid, 3 EGM96, 4 EGM2008); 0 not recorded.
+        pub vertical_datum: u8,
         /// Zero.
-        pub reserved0: U32,
+        pub reserved0: [u8; 3],
         /// CRS coordinates of the centre of dataset sample (0, 0).
         pub origin: [F64; 2],
         /// CRS units from one column to the next and one row to the next.
@@ -477,10 +481,23 @@ impl Head {
                 format!("unknown flags {:#x}", fixed.flags.get()),
             ));
         }
-        if known && !(fixed.reserved0.get() == 0 && is_zero(&fixed.reserved)) {
+        if known && !(is_zero(&fixed.reserved0) && is_zero(&fixed.reserved)) {
             return Err(bad(
                 "manifest head".into(),
                 "reserved bytes not zero".into(),
+            ));
+        }
+        let datum = fixed.vertical_datum;
+        if known
+            && datum != 0
+            && (record.minor.get() < 1 || crate::geoid::VerticalDatum::from_code(datum).is_none())
+        {
+            return Err(bad(
+                "manifest head".into(),
+                format!(
+                    "vertical datum code {datum} in a {MANIFEST_MAJOR}.{} manifest",
+                    record.minor.get()
+                ),
             ));
         }
         if crs_name(&fixed).is_none() {

@@ -139,8 +139,9 @@ pub const MAGIC: [u8; 8] = *b"FMRH\r\n\x1a\n";
 /// for writing (it would mix raw and coded payloads): rebuild it with `fmrh build`.
 pub const FORMAT_MAJOR: u16 = 6;
 
-/// Compatible additions within [`FORMAT_MAJOR`]: none yet.
-pub const FORMAT_MINOR: u16 = 0;
+/// Compatible additions within [`FORMAT_MAJOR`]: 1 records the heights' vertical datum in
+/// the dataset header (byte 156, formerly reserved); a 6.0 reader ignores it.
+pub const FORMAT_MINOR: u16 = 1;
 
 /// The last minor version of major 5.
 pub const LAST_MINOR_OF_5: u16 = 0;

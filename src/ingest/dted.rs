@@ -147,7 +147,8 @@ pub fn read(path: &Path, options: &IngestOptions) -> Result<Heightfield> {
             step: [step[0], -step[1]],
         }),
         units: Some("metres".into()),
-        source_format: String::new(),
+        // The datum is the reader's convention, which `ingest` applies.
+        ..Metadata::default()
     };
     finish(path, columns as u32, rows as u32, samples, metadata)
 }

@@ -18,6 +18,7 @@ use tiff::ColorType;
 use super::{finish, IngestOptions};
 use crate::crs::{Crs, CrsKind};
 use crate::error::{Error, Result};
+use crate::geoid::VerticalDatum;
 use crate::heightfield::{check_dimensions, Georeference, Heightfield, Metadata, MAX_SAMPLES};
 
 /// GeoKey GTModelTypeGeoKey: 1 = projected, 2 = geographic, 3 = geocentric.
@@ -34,6 +35,9 @@ const PROJECTED_CS_TYPE: u16 = 3072;
 const PROJ_LINEAR_UNITS: u16 = 3076;
 /// GeoKey ProjLinearUnitSizeGeoKey: metres per unit of a user-defined linear unit (a double).
 const PROJ_LINEAR_UNIT_SIZE: u16 = 3077;
+/// GeoKey VerticalCSTypeGeoKey: the heights' vertical CRS, an EPSG code (5773 EGM96 height,
+/// 3855 EGM2008 height, ...).
+const VERTICAL_CS_TYPE: u16 = 4096;
 
 fn tiff_error(path: &Path, e: tiff::TiffError) -> Error {
     match e {
@@ -450,6 +454,10 @@ fn georeference<R: std::io::Read + std::io::Seek>(
             .filter(|k| k[1] == Tag::GeoDoubleParamsTag.to_u16())
             .and_then(|k| doubles.get(usize::from(k[3])).copied())
     };
+    // What the heights are above, when the file says (a code fmrh does not know: unknown).
+    metadata.vertical_datum = key(VERTICAL_CS_TYPE)
+        .filter(|&c| c != 0 && c != USER_DEFINED)
+        .map_or(VerticalDatum::Unknown, |c| VerticalDatum::of_epsg(u32::from(c)));
     // Pixel-is-area: the tie point is the corner of pixel (i, j), half a pixel from its centre.
     let half = if key(GT_RASTER_TYPE) == Some(2) {
         0.0

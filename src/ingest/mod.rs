@@ -31,6 +31,7 @@ use std::io::Read;
 use std::path::Path;
 
 use crate::error::{Error, Result};
+use crate::geoid::VerticalDatum;
 use crate::heightfield::{Georeference, Heightfield, Metadata};
 pub use limits::IngestLimits;
 pub use window::WindowedRaster;
@@ -184,6 +185,9 @@ pub struct IngestOptions {
     /// What a file may declare before it is believed: the memory a build may take and the
     /// samples a byte of input may claim ([`IngestLimits`]).
     pub limits: IngestLimits,
+    /// What the heights are above, overriding what the source says (a GeoTIFF's vertical
+    /// CRS) and the reader's convention (SRTM and DTED: EGM96; the others: unknown).
+    pub vertical_datum: Option<VerticalDatum>,
 }
 
 impl Default for IngestOptions {
@@ -196,6 +200,7 @@ impl Default for IngestOptions {
             nodata: None,
             tile: None,
             limits: IngestLimits::default(),
+            vertical_datum: None,
         }
     }
 }
@@ -257,8 +262,19 @@ pub fn load(path: &Path, options: &IngestOptions) -> Result<Heightfield> {
         Format::UsgsDem => usgs_dem::read(path, options)?,
         Format::Dted => dted::read(path, options)?,
     };
-    hf.metadata.source_format = format.name().to_string();
+    settle_source(&mut hf.metadata, format, options);
     Ok(hf)
+}
+
+/// Names the reader in `metadata` and settles what its heights are above: the user's word,
+/// else what the file said, else the reader's convention.
+fn settle_source(metadata: &mut Metadata, format: Format, options: &IngestOptions) {
+    metadata.source_format = format.name().to_string();
+    metadata.vertical_datum = match options.vertical_datum {
+        Some(datum) => datum,
+        None if metadata.vertical_datum != VerticalDatum::Unknown => metadata.vertical_datum,
+        None => VerticalDatum::of_source_format(format.name()),
+    };
 }
 
 /// Guesses the format from the file name, then from the first bytes.

@@ -275,7 +275,8 @@ pub fn read(path: &Path, options: &IngestOptions) -> Result<Heightfield> {
             2 => Some("metres".into()),
             _ => None,
         },
-        source_format: String::new(),
+        // The datum is the reader's convention, which `ingest` applies.
+        ..Metadata::default()
     };
     finish(path, width as u32, height as u32, samples, metadata)
 }

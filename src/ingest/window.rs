@@ -101,7 +101,7 @@ impl WindowedRaster {
             None => [false, false],
         };
         super::check_metadata(path, &metadata)?;
-        metadata.source_format = format.name().to_string();
+        super::settle_source(&mut metadata, format, options);
         Ok(WindowedRaster {
             path: path.to_path_buf(),
             options: options.clone(),

@@ -435,6 +435,8 @@ pub struct GlobeFrame {
     pub dlon: f64,
     /// Degrees of latitude from one row to the next (negative for a north-up grid).
     pub dlat: f64,
+    /// Heights are above the EGM96 geoid: each is placed `N` higher, on the ellipsoid.
+    pub geoid: bool,
 }
 
 impl GlobeFrame {
@@ -459,7 +461,30 @@ impl GlobeFrame {
             lat0: g.origin[1],
             dlon: g.step[0],
             dlat: g.step[1],
+            geoid: false,
         })
+    }
+
+    /// This frame with heights above `datum` placed on the ellipsoid: EGM96 heights `N`
+    /// higher. An error for a datum fmrh cannot place (EGM2008: no grid of it is bundled).
+    pub fn with_datum(self, datum: crate::geoid::VerticalDatum) -> Result<GlobeFrame> {
+        let lift = datum.lift().map_err(|why| {
+            Error::InvalidArgument(format!("the terrain cannot be placed on the globe: {why}"))
+        })?;
+        Ok(GlobeFrame {
+            geoid: lift == crate::geoid::Lift::Egm96,
+            ..self
+        })
+    }
+
+    /// The least and greatest amount heights over the box between `(lon_a, lat_a)` and
+    /// `(lon_b, lat_b)` are raised by to place them on the ellipsoid.
+    fn lift_range(&self, lon_a: f64, lon_b: f64, lat_a: f64, lat_b: f64) -> (f64, f64) {
+        if self.geoid {
+            crate::geoid::egm96_range(lon_a, lon_b, lat_a, lat_b)
+        } else {
+            (0.0, 0.0)
+        }
     }
 
     /// The same grid counted from sample `(col, row)`: where a tile starting there lies.
@@ -480,7 +505,13 @@ impl GlobeFrame {
     /// The ECEF point of sample position `(col, row)` at height `z`.
     pub fn point(&self, col: f64, row: f64, z: f64) -> DVec3 {
         let (lon, lat) = self.lon_lat(col, row);
-        crate::globe::ecef_point(lon, lat.clamp(-90.0, 90.0), z)
+        let lat = lat.clamp(-90.0, 90.0);
+        let lift = if self.geoid {
+            crate::geoid::egm96_undulation(lat, lon)
+        } else {
+            0.0
+        };
+        crate::globe::ecef_point(lon, lat, z + lift)
     }
 
     /// The ECEF box holding samples `rect` (closed, between its grid lines) between heights
@@ -488,7 +519,9 @@ impl GlobeFrame {
     pub fn rect_box(&self, rect: &crate::model::SampleRect, zmin: f64, zmax: f64) -> Aabb {
         let (lon_a, lat_a) = self.lon_lat(rect.col0 as f64, rect.row0 as f64);
         let (lon_b, lat_b) = self.lon_lat(rect.col1 as f64, rect.row1 as f64);
-        let (min, max) = crate::globe::shell_box(lon_a, lon_b, lat_a, lat_b, zmin, zmax);
+        let (lo, hi) = self.lift_range(lon_a, lon_b, lat_a, lat_b);
+        let (min, max) =
+            crate::globe::shell_box(lon_a, lon_b, lat_a, lat_b, zmin + lo, zmax + hi);
         Aabb { min, max }
     }
 
@@ -497,7 +530,8 @@ impl GlobeFrame {
     pub fn hidden(&self, eye: DVec3, rect: &crate::model::SampleRect, zmax: f64) -> bool {
         let (lon_a, lat_a) = self.lon_lat(rect.col0 as f64, rect.row0 as f64);
         let (lon_b, lat_b) = self.lon_lat(rect.col1 as f64, rect.row1 as f64);
-        crate::globe::shell_hidden(eye, lon_a, lon_b, lat_a, lat_b, zmax)
+        let (_, hi) = self.lift_range(lon_a, lon_b, lat_a, lat_b);
+        crate::globe::shell_hidden(eye, lon_a, lon_b, lat_a, lat_b, zmax + hi)
     }
 }
 

@@ -57,7 +57,8 @@ impl<'s, S: Source> Terrain<'s, S> {
 
     /// The store's terrain on the WGS 84 ellipsoid: cameras in ECEF metres, boxes the ECEF
     /// boxes of the cells' shells, and blocks below the horizon culled. The store's
-    /// georeference must be geographic ([`GlobeFrame::of`]).
+    /// georeference must be geographic ([`GlobeFrame::of`]); heights above the EGM96 geoid
+    /// are placed on the ellipsoid ([`GlobeFrame::with_datum`]).
     pub fn on_globe(store: &'s Store<S>) -> Result<Self> {
         let g = store
             .header()
@@ -70,7 +71,7 @@ impl<'s, S: Source> Terrain<'s, S> {
                         .into(),
                 )
             })?;
-        let globe = GlobeFrame::of(g)?;
+        let globe = GlobeFrame::of(g)?.with_datum(store.header().metadata.vertical_datum)?;
         let frame = WorldFrame::new(store.header().metadata.spacing_m);
         Terrain::with_frame(store, frame, TerrainFrame::Globe(globe))
     }

@@ -285,7 +285,8 @@ fn open_once<S: Source>(src: &S, walk: Walk, pin: Option<StatePin>) -> Result<Op
         "dataset header",
         &mut seen,
     )?;
-    let header = DatasetHeader::decode(&header_bytes).map_err(|v| pages.corrupt(v))?;
+    let version = (commit.major.get(), commit.minor.get());
+    let header = DatasetHeader::decode(&header_bytes, version).map_err(|v| pages.corrupt(v))?;
     let dir = read_blob(
         &pages,
         &commit.roots.cluster_directory,

@@ -31,6 +31,7 @@ pub use verify::Verification;
 
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
+use crate::geoid::VerticalDatum;
 use crate::heightfield::{Georeference, Heightfield};
 use crate::model::SampleRect;
 use crate::store::{is_url, AnySource, Store};
@@ -152,6 +153,7 @@ impl Terrain {
                     georeference: h.metadata.georeference.clone(),
                     units: h.metadata.units.clone(),
                     source_format: h.metadata.source_format.clone(),
+                    vertical_datum: h.metadata.vertical_datum,
                     height_range: valid.then_some([root.min_height, root.max_height]),
                     max_error: Some(h.max_error),
                     storage_error: h.storage_error(),
@@ -186,10 +188,11 @@ impl Terrain {
                     spacing_m: ds.spacing_m(),
                     georeference: ds.georeference(),
                     units: None,
-                    source_format: match ds.tiles()?.first() {
-                        Some(t) => ds.open_tile(t)?.header().metadata.source_format.clone(),
+                    source_format: match ds.first_tile()? {
+                        Some(t) => ds.open_tile(&t)?.header().metadata.source_format.clone(),
                         None => String::new(),
                     },
+                    vertical_datum: ds.vertical_datum()?,
                     height_range: range,
                     max_error: None,
                     storage_error: 0.0,
@@ -297,6 +300,8 @@ pub struct Info {
     /// The reader that made it (`srtm-hgt`, `dted`, `geotiff`, …; a dataset's: its first
     /// tile's), which says what the heights are above when nothing else does.
     pub source_format: String,
+    /// What the heights are above (a dataset's: its first tile's, as every tile's is).
+    pub vertical_datum: VerticalDatum,
     /// The lowest and highest real height; `None` when every sample is void.
     pub height_range: Option<[f32; 2]>,
     /// The coarsest level's measured error, in height units (a container's: its root's `e*`).

@@ -112,6 +112,7 @@ pub(super) fn run(
             georeference: ds.georeference(),
             units: None,
             source_format: "fmrh-dataset".into(),
+            vertical_datum: ds.vertical_datum()?,
         };
         let hf = rec.to_heightfield(&metadata)?;
         out.write_dataset(&hf, window, &args.file, ds.txn_id())?;

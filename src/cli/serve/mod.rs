@@ -153,32 +153,37 @@ pub fn run(args: &ServeArgs) -> Result<ExitCode, Error> {
                 item.name,
                 if item.dataset { "/" } else { "" }
             );
-            // Cesium terrain for what can be placed on the globe.
-            let placeable = crate::terrain::Terrain::open(&item.path)
-                .and_then(|t| t.info())
-                .and_then(|i| {
-                    let datum = args.vertical_datum.unwrap_or_else(|| {
-                        crate::geoid::VerticalDatum::of_source_format(&i.source_format)
-                    });
-                    crate::export::tileset::Tileset::new(
-                        &terrain::shape_of(&i),
-                        args.max_error,
-                        datum,
-                    )
-                });
-            if let Ok(tileset) = placeable {
-                let _ = writeln!(
-                    out,
-                    "  {:<9} /{}/layer.json (Cesium quantized-mesh, levels 0..={}, heights {})",
-                    "terrain",
-                    item.name,
-                    tileset.maxzoom(),
-                    match tileset.datum() {
-                        crate::geoid::VerticalDatum::Egm96 => "EGM96 + N: above the ellipsoid",
-                        crate::geoid::VerticalDatum::Ellipsoid => "above the ellipsoid",
-                        crate::geoid::VerticalDatum::Unknown => "as stored (datum unknown)",
-                    }
-                );
+            // Cesium terrain for what can be placed on the globe; for what has a
+            // georeference but cannot be, why not.
+            let Ok(info) = crate::terrain::Terrain::open(&item.path).and_then(|t| t.info()) else {
+                continue;
+            };
+            let datum = args.vertical_datum.unwrap_or(info.vertical_datum);
+            match crate::export::tileset::Tileset::new(
+                &terrain::shape_of(&info),
+                args.max_error,
+                datum,
+            ) {
+                Ok(tileset) => {
+                    let _ = writeln!(
+                        out,
+                        "  {:<9} /{}/layer.json (Cesium quantized-mesh, levels 0..={}, heights {})",
+                        "terrain",
+                        item.name,
+                        tileset.maxzoom(),
+                        match tileset.datum() {
+                            crate::geoid::VerticalDatum::Egm96 => "EGM96 + N: above the ellipsoid",
+                            crate::geoid::VerticalDatum::Ellipsoid => "above the ellipsoid",
+                            crate::geoid::VerticalDatum::Unknown => "as stored (datum unknown)",
+                            // `Tileset::new` refuses it.
+                            crate::geoid::VerticalDatum::Egm2008 => "above EGM2008",
+                        }
+                    );
+                }
+                Err(e) if info.georeference.is_some() => {
+                    let _ = writeln!(out, "  {:<9} none: {e}", "terrain");
+                }
+                Err(_) => {}
             }
         }
         let _ = out.flush();

@@ -256,9 +256,7 @@ fn answer(
 ) -> Result<Response, Error> {
     let terrain = Terrain::open(&item.path)?;
     let info = terrain.info()?;
-    let datum = options
-        .datum
-        .unwrap_or_else(|| VerticalDatum::of_source_format(&info.source_format));
+    let datum = options.datum.unwrap_or(info.vertical_datum);
     let tileset = Tileset::new(&shape_of(&info), options.max_error, datum)?;
     let version = version(item, info.txn_id);
     match asked {
