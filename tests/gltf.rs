@@ -4,15 +4,15 @@
 //! key and error, positions that are the library's mesh in the documented axes (X east, Y
 //! up, Z south, from the origin the scene's `extras` give), with POSITION's min and max
 //! exact, unit normals pointing up, and indices in range. Both ways of closing cracks
-//! write; an existing file is kept without --force, and a camera that sees no terrain is a
-//! clear error. (The Khronos validator checks the same files in the large-data suite,
-//! `tests/mesh_real.rs`.)
+//! write, and so does a TIN within `--max-error`; an existing file is kept without
+//! --force, and a camera that sees no terrain is a clear error. (The Khronos validator
+//! checks the same files in the large-data suite, `tests/mesh_real.rs`.)
 
 mod common;
 
 use std::path::Path;
 
-use fmrh::mesh::{build, build_in, Cracks};
+use fmrh::mesh::{build, build_in, build_tin_in, Cracks};
 use fmrh::scene::surface::GridBlock;
 use fmrh::scene::{
     load_blocks, Camera, SceneOptions, Terrain, TerrainFrame, WorldFrame, PAYLOAD_GAP,
@@ -296,6 +296,97 @@ fn mesh_refuses_what_it_cannot_do_and_keeps_what_exists() {
     let bad = mesh_cli(&file, &dir.path().join("x.glb"), &["--cracks", "glue"]);
     assert!(!bad.status.success());
     assert!(!dir.path().join("x.glb").exists());
+}
+
+/// `--max-error M` writes the library's TINs (`build_tin_in`): each node's triangles and
+/// vertices are the TIN's, its `extras` carry the TIN's measured error (≤ M), the scene's
+/// carry the budget and `skirts`; a larger budget draws fewer triangles. A budget that is
+/// not a number of metres ≥ 0, or one asked with `--cracks stitch`, is refused and writes
+/// nothing.
+#[test]
+fn max_error_writes_the_library_tins_within_their_budget() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = container(dir.path());
+    let store = fmrh::store::Store::open(&file).unwrap();
+    let camera = Camera::looking_at(
+        glam::DVec3::new(-2000.0, 4000.0, 2500.0),
+        glam::DVec3::new(1000.0, 700.0, 0.0),
+    );
+    let scene = Terrain::new(&store)
+        .unwrap()
+        .scene(&camera, &SceneOptions::new(6.0))
+        .unwrap();
+    let loaded = load_blocks(&store, &scene.blocks, PAYLOAD_GAP).unwrap();
+    let d = store.domain();
+    let grids: Vec<GridBlock<'_>> = scene
+        .blocks
+        .iter()
+        .zip(&loaded)
+        .map(|(b, l)| GridBlock::of(b, l, d.stride(b.level)))
+        .collect();
+    let frame = TerrainFrame::Flat(WorldFrame::new(Some([10.0, 10.0])));
+    let mut drawn = Vec::new();
+    for budget in ["0", "0.5", "4"] {
+        let m: f64 = budget.parse().unwrap();
+        let meshes = build_tin_in(&grids, &frame, m).unwrap();
+        let out = dir.path().join(format!("tin{budget}.glb"));
+        let run = mesh_cli(&file, &out, &["--max-error", budget]);
+        assert!(
+            run.status.success(),
+            "{}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+        let (json, bin) = chunks(&std::fs::read(&out).unwrap());
+        let extras = &json["scenes"][0]["extras"]["fmrh"];
+        assert_eq!(extras["cracks"], "skirts");
+        assert_eq!(extras["tin_max_error_m"].as_f64(), Some(m));
+        let nodes = json["nodes"].as_array().unwrap();
+        assert_eq!(nodes.len(), meshes.len());
+        let mut triangles = 0;
+        for (node, mesh) in nodes.iter().zip(&meshes) {
+            let e = node["extras"]["fmrh"]["tin_error"].as_f64().unwrap();
+            assert_eq!(e, mesh.tin_error);
+            assert!(e <= m, "{e} past {m}");
+            let prim = &json["meshes"][node["mesh"].as_u64().unwrap() as usize]["primitives"][0];
+            let positions = read_accessor(
+                &json,
+                &bin,
+                prim["attributes"]["POSITION"].as_u64().unwrap(),
+            );
+            let indices = read_accessor(&json, &bin, prim["indices"].as_u64().unwrap());
+            assert_eq!(positions.len(), 3 * mesh.vertices.len());
+            let want: Vec<f64> = mesh
+                .triangles
+                .iter()
+                .flatten()
+                .map(|&i| f64::from(i))
+                .collect();
+            assert_eq!(indices, want);
+            triangles += mesh
+                .triangles
+                .iter()
+                .filter(|t| t.iter().all(|&i| !mesh.vertices[i as usize].skirt))
+                .count();
+        }
+        drawn.push(triangles);
+    }
+    assert!(drawn[0] > drawn[1] && drawn[1] > drawn[2], "{drawn:?}");
+    for bad in [
+        vec!["--max-error=-1"],
+        vec!["--max-error", "nan"],
+        vec!["--max-error", "inf"],
+        vec!["--max-error", "2", "--cracks", "stitch"],
+    ] {
+        let out = dir.path().join("refused.glb");
+        let run = mesh_cli(&file, &out, &bad);
+        assert!(!run.status.success(), "{bad:?} was taken");
+        assert!(
+            String::from_utf8_lossy(&run.stderr).contains("--max-error"),
+            "{bad:?}: {}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+        assert!(!out.exists());
+    }
 }
 
 /// `--refine fractal`: `scene --json` and `mesh` name the same synthetic nodes, every one

@@ -8,18 +8,21 @@
 //! fall between the coarse block's vertices), and where blocks' grids are offset (tiles of a
 //! dataset). Skirts hang at least as deep as the gap to the neighbour's surface along every
 //! shared edge. The `.glb` that `fmrh mesh` writes holds those meshes: one node per scene
-//! block with its level, key and error, positions in the documented axes.
+//! block with its level, key and error, positions in the documented axes. TIN meshes
+//! (`build_tin_in`, `--max-error`) tile each block's footprint with triangles whose corners
+//! are its grid points, are within their measured error (no more than the budget) of every
+//! grid point, and hang skirts below the neighbouring TINs along every shared edge.
 
 mod common;
 
 use std::collections::{BTreeSet, HashMap};
 
-use fmrh::mesh::{build, BlockMesh, Cracks};
+use fmrh::mesh::{build, build_tin_in, BlockMesh, Cracks};
 use fmrh::model::surface::surface;
 use fmrh::model::{BuildOptions, SampleRect};
 use fmrh::scene::surface::GridBlock;
 use fmrh::scene::{
-    load_blocks, LoadedBlock, Scene, SceneOptions, Terrain, WorldFrame, PAYLOAD_GAP,
+    load_blocks, LoadedBlock, Scene, SceneOptions, Terrain, TerrainFrame, WorldFrame, PAYLOAD_GAP,
 };
 use fmrh::store::Source;
 use fmrh::store::Store;
@@ -270,6 +273,131 @@ fn check_skirts(grids: &[Grid], meshes: &[BlockMesh]) -> usize {
     hung
 }
 
+fn tin(grids: &[Grid], budget: f64) -> Vec<BlockMesh> {
+    let blocks: Vec<GridBlock<'_>> = grids.iter().map(Grid::block).collect();
+    let frame = TerrainFrame::Flat(WorldFrame::new(Some([10.0, 10.0])));
+    build_tin_in(&blocks, &frame, budget).unwrap()
+}
+
+/// The height a mesh's surface triangles draw at sample `(col, row)`, from the first
+/// triangle holding it (closed); `None` where none does.
+fn drawn(m: &BlockMesh, col: u64, row: u64) -> Option<f64> {
+    let p = |i: u32| {
+        let v = &m.vertices[i as usize];
+        (i128::from(v.col), i128::from(v.row), v.height)
+    };
+    let (x, y) = (i128::from(col), i128::from(row));
+    m.triangles
+        .iter()
+        .filter(|t| t.iter().all(|&i| !m.vertices[i as usize].skirt))
+        .find_map(|t| {
+            let [a, b, c] = t.map(p);
+            let area = (b.0 - a.0) * (c.1 - a.1) - (b.1 - a.1) * (c.0 - a.0);
+            let w = |o: (i128, i128, f64), q: (i128, i128, f64)| {
+                (q.0 - o.0) * (y - o.1) - (q.1 - o.1) * (x - o.0)
+            };
+            let (wa, wb, wc) = (w(b, c), w(c, a), w(a, b));
+            let inside = if area < 0 {
+                wa <= 0 && wb <= 0 && wc <= 0
+            } else {
+                false
+            };
+            inside.then(|| (wa as f64 * a.2 + wb as f64 * b.2 + wc as f64 * c.2) / area as f64)
+        })
+}
+
+/// Checks TIN `meshes` of `grids` cut within `budget`: corners on the grid at its heights,
+/// triangles counter-clockwise from above tiling each footprint, every grid point within
+/// the block's measured error (itself within the budget), and skirts reaching below the
+/// neighbouring TIN at every sample of every shared edge. Returns the blocks with a skirt.
+fn check_tins(grids: &[Grid], meshes: &[BlockMesh], budget: f64) -> usize {
+    let mut hung = 0;
+    for m in meshes {
+        let g = &grids[m.block];
+        let r = g.rect;
+        assert!(m.tin_error <= budget, "{} > {budget}", m.tin_error);
+        let mut area = 0i128;
+        for t in m
+            .triangles
+            .iter()
+            .filter(|t| t.iter().all(|&i| !m.vertices[i as usize].skirt))
+        {
+            let [a, b, c] = t.map(|i| (m.vertices[i as usize].col, m.vertices[i as usize].row));
+            let turned = turn(a, b, c);
+            assert!(
+                turned < 0,
+                "a triangle of {r:?} is not counter-clockwise from above"
+            );
+            area -= turned;
+        }
+        let footprint = i128::from(r.col1 - r.col0) * i128::from(r.row1 - r.row0) * 2;
+        assert_eq!(area, footprint, "the triangles of {r:?} tile it");
+        for v in m.vertices.iter().filter(|v| !v.skirt) {
+            assert!(g.holds(v.col, v.row));
+            assert_eq!(
+                v.height,
+                g.surface(v.col, v.row),
+                "a corner off the grid's height"
+            );
+        }
+        // Every grid point (and the footprint's far edges) against the TIN.
+        let lattice = |lo: u64, hi: u64| {
+            let mut out: Vec<u64> = (lo..=hi).step_by(g.stride as usize).collect();
+            if out.last() != Some(&hi) {
+                out.push(hi);
+            }
+            out
+        };
+        let mut worst = 0.0f64;
+        for row in lattice(r.row0, r.row1) {
+            for col in lattice(r.col0, r.col1) {
+                let d = (drawn(m, col, row).expect("the TIN covers its grid")
+                    - g.surface(col, row))
+                .abs();
+                worst = worst.max(d);
+            }
+        }
+        assert!(
+            worst <= m.tin_error + 1e-9 * (1.0 + worst),
+            "{r:?}: {worst} past the measured {}",
+            m.tin_error
+        );
+        hung += usize::from(m.skirts.iter().any(|&d| d > 0.0));
+        for n in meshes.iter().filter(|n| n.block != m.block) {
+            let b = grids[n.block].rect;
+            let (c0, c1) = (r.col0.max(b.col0), r.col1.min(b.col1));
+            let (r0, r1) = (r.row0.max(b.row0), r.row1.min(b.row1));
+            let e = if c0 == c1 && r0 < r1 {
+                if c0 == r.col1 {
+                    1
+                } else {
+                    3
+                }
+            } else if r0 == r1 && c0 < c1 {
+                if r0 == r.row0 {
+                    0
+                } else {
+                    2
+                }
+            } else {
+                continue;
+            };
+            for col in c0..=c1 {
+                for row in r0..=r1 {
+                    let (Some(top), Some(there)) = (drawn(m, col, row), drawn(n, col, row)) else {
+                        panic!("({col}, {row}) on a shared edge is not drawn by both sides");
+                    };
+                    assert!(
+                        top - m.skirts[e] <= there + 1e-9 * (1.0 + there.abs()),
+                        "the skirt of {r:?} ends above the TIN of {b:?} at ({col}, {row})"
+                    );
+                }
+            }
+        }
+    }
+    hung
+}
+
 fn random_scene(
     side: u32,
     character: fields::Character,
@@ -325,6 +453,20 @@ proptest! {
         let meshes = mesh(&grids, Cracks::Skirts);
         check_skirts(&grids, &meshes);
     }
+
+    #[test]
+    fn tins_are_within_their_budget_and_skirted_against_their_neighbours(
+        side in 20u32..160,
+        character in fields::character(),
+        seed in any::<u64>(),
+        tau in 0.2f64..4.0,
+        budget in prop_oneof![Just(0.0), 0.0f64..50.0],
+    ) {
+        let (f, scene) = random_scene(side, character, seed, tau);
+        let grids = grids_of(&f.store, &scene);
+        let meshes = tin(&grids, budget);
+        check_tins(&grids, &meshes, budget);
+    }
 }
 
 /// Puget Sound 1k under the README's camera: levels 2 to 4 meet, and the stitched mesh is
@@ -359,6 +501,53 @@ fn puget_sound_meshes_stitch_where_levels_meet() {
     let failed = std::panic::catch_unwind(|| check_stitched(&grids, &plain, &|_, _| None));
     assert!(failed.is_err(), "unstitched meshes passed the crack check");
     assert!(check_skirts(&grids, &mesh(&grids, Cracks::Skirts)) >= 10);
+}
+
+/// Puget Sound 1k under the same camera as TINs: fewer triangles the larger the budget,
+/// each block within it, and skirts where the TINs of neighbours part.
+#[test]
+fn puget_sound_tins_shrink_with_their_budget() {
+    let f = views::fixture(views::puget_1k(), &BuildOptions::default());
+    let terrain = Terrain::new(&f.store).unwrap();
+    let camera = fmrh::scene::Camera {
+        fov_y_deg: 55.0,
+        viewport: [640, 360],
+        ..fmrh::scene::Camera::looking_at(
+            glam::DVec3::new(60000.0, 175000.0, 9000.0),
+            glam::DVec3::new(80000.0, 90000.0, 0.0),
+        )
+    };
+    let scene = terrain.scene(&camera, &SceneOptions::new(1.0)).unwrap();
+    let grids = grids_of(&f.store, &scene);
+    let count = |m: &[BlockMesh]| -> usize {
+        m.iter()
+            .map(|b| {
+                b.triangles
+                    .iter()
+                    .filter(|t| t.iter().all(|&i| !b.vertices[i as usize].skirt))
+                    .count()
+            })
+            .sum()
+    };
+    let full = count(&mesh(&grids, Cracks::Skirts));
+    let mut last = usize::MAX;
+    for budget in [0.0, 1.0, 5.0, 20.0] {
+        let meshes = tin(&grids, budget);
+        let hung = check_tins(&grids, &meshes, budget);
+        let n = count(&meshes);
+        assert!(
+            n <= full && n < last,
+            "{budget} m: {n} triangles (grid {full}, before {last})"
+        );
+        if budget > 0.0 {
+            assert!(hung >= 10, "{budget} m: {hung} blocks skirted");
+        }
+        last = n;
+    }
+    // Measured: 20 m keeps 54 % of this view's triangles (its blocks are already decimated
+    // to about a pixel, and the Cascades are steep); a quarter saved is the floor.
+    assert!(last * 4 < full * 3, "20 m keeps {last} of {full} triangles");
+    assert!(build_tin_in(&[], &TerrainFrame::Flat(WorldFrame::new(None)), f64::NAN).is_err());
 }
 
 fn rect(col0: u64, row0: u64, col1: u64, row1: u64) -> SampleRect {

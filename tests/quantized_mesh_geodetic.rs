@@ -23,7 +23,7 @@
 //! Run on the bundled SRTM tile N43E006 (geographic) and Mount St Helens (UTM zone 10 on
 //! NAD27, voids included), and on a two-tile dataset; a property test does the same for
 //! random georeferenced fields and cameras through the library, and the CLI refuses what it
-//! cannot place on the globe.
+//! cannot place on the globe, and a TIN budget for these grid tiles.
 
 mod common;
 
@@ -474,6 +474,55 @@ fn tiles_need_a_placeable_georeference() {
         String::from_utf8_lossy(&r.stderr)
     );
     assert!(!out2.exists());
+}
+
+/// Geodetic tiles from `fmrh mesh` are grids (TINs are `fmrh serve`'s): `--max-error` with
+/// them is refused by name and writes nothing, while node tiles take it.
+#[test]
+fn geodetic_tiles_refuse_max_error_and_node_tiles_take_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let field = field_at(6.0, 43.5, 5);
+    let file = dir.path().join("geo.fmrh");
+    fmrh::create(&file, field.clone(), &fmrh::CreateOptions::default()).unwrap();
+    let [dx, dy] = field.metadata.spacing_m.unwrap();
+    let (w, h) = (97.0 * dx, 81.0 * dy);
+    let (eye, target) = (
+        format!("{},{},{}", -0.3 * w, -0.3 * h, 2000.0),
+        format!("{},{},0", w / 2.0, h / 2.0),
+    );
+    let run = |tiling: &str, out: &Path| {
+        common::fmrh(&[
+            "mesh",
+            file.to_str().unwrap(),
+            "--eye",
+            &eye,
+            "--target",
+            &target,
+            "--tau",
+            "2",
+            "--format",
+            "quantized-mesh",
+            "--tiling",
+            tiling,
+            "--max-error",
+            "3",
+            "-o",
+            out.to_str().unwrap(),
+        ])
+    };
+    let out = dir.path().join("geodetic");
+    let r = run("geodetic", &out);
+    assert!(!r.status.success());
+    assert!(
+        String::from_utf8_lossy(&r.stderr).contains("--max-error"),
+        "{}",
+        String::from_utf8_lossy(&r.stderr)
+    );
+    assert!(!out.exists());
+    let out = dir.path().join("nodes");
+    let r = run("nodes", &out);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    assert!(out.join("layer.json").exists());
 }
 
 /// A georeferenced field (geographic, 1/1200° steps) with its north-west sample at

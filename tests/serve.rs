@@ -2,9 +2,9 @@
 //! and multiple ranges, with an ETag that changes when a commit does and `If-Match` that
 //! refuses a changed file; fmrh's own remote reader reads a served container and a served
 //! dataset to the same scenes as the local files; the scene API answers what `fmrh scene`
-//! answers, its mesh is the scene's; and nothing outside the served paths, nothing but GET
-//! and HEAD, and no malformed query gets anything but a clear error. (The page itself is
-//! tested in Chromium by tests/viewer.rs.)
+//! answers, its mesh is the scene's (grid or TIN, as `fmrh mesh` writes it); and nothing
+//! outside the served paths, nothing but GET and HEAD, and no malformed query gets
+//! anything but a clear error. (The page itself is tested in Chromium by tests/viewer.rs.)
 
 mod common;
 
@@ -381,6 +381,18 @@ fn the_scene_api_answers_what_fmrh_scene_answers() {
         String::from_utf8_lossy(&out.stderr)
     );
     assert_eq!(mesh.body, std::fs::read(&glb).unwrap());
+    // And with `max_error`, the TINs `fmrh mesh --max-error` writes.
+    let tin = served.get(&format!("/api/mesh?{query}&max_error=2.5"));
+    assert_eq!(tin.status, 200);
+    args.extend(["--max-error", "2.5", "--force"]);
+    let out = fmrh(&args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(tin.body, std::fs::read(&glb).unwrap());
+    assert!(tin.body.len() < mesh.body.len());
 
     // Bad queries: 400 and a message that names the problem.
     for (query, says) in [
@@ -410,6 +422,18 @@ fn the_scene_api_answers_what_fmrh_scene_answers() {
         ),
         ("item=ps1k.fmrh&eye=1,2,3&target=1,2,3&tau=1", ""),
         ("item=%ff&eye=1,2,3&target=4,5,6&tau=1", "percent-encoded"),
+        (
+            "item=ps1k.fmrh&eye=1,2,3&target=4,5,6&tau=1&max_error=-1",
+            "`max_error` -1",
+        ),
+        (
+            "item=ps1k.fmrh&eye=1,2,3&target=4,5,6&tau=1&max_error=low",
+            "`max_error`: `low`",
+        ),
+        (
+            "item=ps1k.fmrh&eye=1,2,3&target=4,5,6&tau=1&max_error=1&cracks=stitch",
+            "`cracks=stitch`",
+        ),
     ] {
         for api in ["scene", "mesh"] {
             let a = served.get(&format!("/api/{api}?{query}"));

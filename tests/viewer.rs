@@ -1,12 +1,13 @@
 //! The viewer in a real browser: headless Chromium (Debian's, driven by playwright-core from
 //! tests/js) loads the page `fmrh serve` serves for Puget Sound 1k, waits for the first
-//! scene, takes a screenshot, flies forward and moves the tolerance slider. Checked: the
-//! screenshot shows terrain (not a blank sky), every stat the page shows is the server's
-//! scene JSON for the page's own query, that JSON is what `fmrh scene` says for the same
-//! camera, the page asked again when its camera moved, and a looser tolerance drew no more
-//! blocks within it; and the same for a two-tile dataset, whose first view draws both
-//! tiles. Run by name (`.ci/run` installs Chromium and playwright-core); without
-//! them it fails saying what to install.
+//! scene, takes a screenshot, flies forward, moves the tolerance slider and picks TINs.
+//! Checked: the screenshot shows terrain (not a blank sky), every stat the page shows is
+//! the server's scene JSON for the page's own query, that JSON is what `fmrh scene` says
+//! for the same camera, the page asked again when its camera moved, a looser tolerance
+//! drew no more blocks within it, and the page drew the triangles of the server's mesh,
+//! grid or TIN; and the same for a two-tile dataset, whose first view draws both tiles.
+//! Run by name (`.ci/run` installs Chromium and playwright-core); without them it fails
+//! saying what to install.
 
 mod common;
 
@@ -247,6 +248,38 @@ fn the_viewer_draws_terrain_and_shows_the_servers_scene() {
     assert!(api_tau4["max_screen_error_px"].as_f64().unwrap() <= 4.0);
     // A looser tolerance is a coarser cut of the same tree for the same camera.
     assert!(api_tau4["blocks"].as_u64().unwrap() <= api_moved["blocks"].as_u64().unwrap());
+
+    // The mesh select: TINs within 5 m, same camera and tolerance; the page drew the
+    // triangles the server's mesh for its query holds, and the grid's before it.
+    let tin = step(&report["tin"]);
+    check_step(&served, &file, &tin);
+    assert_eq!(eye(&tin.query), eye(&tau4.query));
+    assert!(
+        tin.query.contains("max_error=5") && !tin.query.contains("cracks="),
+        "{}",
+        tin.query
+    );
+    for (name, s) in [("tau4", &tau4), ("tin", &tin)] {
+        let glb = served.get(&format!("/api/mesh?{}", s.query));
+        assert_eq!(glb.status, 200);
+        let (json, _) = common::gltf::chunks(&glb.body);
+        let indices: u64 = json["meshes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|m| {
+                let a = m["primitives"][0]["indices"].as_u64().unwrap() as usize;
+                json["accessors"][a]["count"].as_u64().unwrap()
+            })
+            .sum();
+        assert_eq!(
+            report[name]["triangles"].as_u64(),
+            Some(indices / 3),
+            "{name}"
+        );
+        let budget = &json["scenes"][0]["extras"]["fmrh"]["tin_max_error_m"];
+        assert_eq!(budget.as_f64(), (name == "tin").then_some(5.0), "{name}");
+    }
 
     // The screenshot: terrain in it, shaded (many colours).
     assert_terrain(&shot);

@@ -389,6 +389,7 @@ mod tests {
             triangles: vec![[0, 3, 1], [1, 3, 2]],
             stitched: [false; 4],
             skirts: [0.0; 4],
+            tin_error: 0.0,
         };
         let tile = QuantizedTile {
             mesh: &mesh,

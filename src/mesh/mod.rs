@@ -101,6 +101,10 @@ pub struct BlockMesh {
     pub stitched: [bool; 4],
     /// The depth of the skirt below each edge, in metres (0: none).
     pub skirts: [f64; 4],
+    /// The largest vertical distance, in metres, between the mesh and the block's grid
+    /// points, measured at every grid point: 0 for a mesh of the grid itself, at most the
+    /// budget for a TIN ([`build_tin_in`]).
+    pub tin_error: f64,
 }
 
 /// The meshes of `blocks` (disjoint, meeting only along edges) in the world frame `frame`,
@@ -121,6 +125,40 @@ pub fn build_in(
     frame: &TerrainFrame,
     cracks: Cracks,
 ) -> Result<Vec<BlockMesh>> {
+    build_with(blocks, frame, cracks, None)
+}
+
+/// [`build_in`] with each block a TIN within `budget` metres of its grid: the coarsest
+/// right-triangulated irregular network ([`rtin`]) of the block's grid whose every triangle
+/// is within `budget` of every grid point it holds, measured ([`BlockMesh::tin_error`]).
+/// A block whose grid is not a square of `2^k` cells (one clipped at the data's edge) keeps
+/// its grid's triangles.
+///
+/// *Cracks.* Two neighbouring TINs keep different vertices along the edge they share, so
+/// the gaps are closed with skirts, measured against the neighbour's TIN: each edge hangs a
+/// curtain as deep as it lies above the neighbour's edge at the most, taken at every sample
+/// along it (both edges are linear between samples, so that is exact). Stitching TINs
+/// edge to edge (a shared edge's vertices forced into both sides' hierarchies) is not done:
+/// [`rtin`] says why a hierarchy's splits make that a matter of blocks far away.
+pub fn build_tin_in(
+    blocks: &[GridBlock<'_>],
+    frame: &TerrainFrame,
+    budget: f64,
+) -> Result<Vec<BlockMesh>> {
+    if !(budget >= 0.0 && budget.is_finite()) {
+        return Err(crate::error::Error::InvalidArgument(format!(
+            "a TIN's max error must be a finite number of metres from 0 up, not {budget}"
+        )));
+    }
+    build_with(blocks, frame, Cracks::Skirts, Some(budget))
+}
+
+fn build_with(
+    blocks: &[GridBlock<'_>],
+    frame: &TerrainFrame,
+    cracks: Cracks,
+    tin: Option<f64>,
+) -> Result<Vec<BlockMesh>> {
     for (i, b) in blocks.iter().enumerate() {
         b.check(i)?;
     }
@@ -135,11 +173,39 @@ pub fn build_in(
         lines: &lines,
         cracks,
     };
-    let mut meshes: Vec<(BlockMesh, Vec<DVec3>)> = (0..inputs.len())
+    let unskirted: Vec<BlockMesh> = match tin {
+        None => (0..inputs.len())
+            .into_par_iter()
+            .map(|i| {
+                let (mut m, ring) = mesher.block(i);
+                if cracks == Cracks::Skirts {
+                    mesher.hang_skirts(i, &ring, &mut m);
+                }
+                m
+            })
+            .collect(),
+        Some(budget) => {
+            let tins: Vec<BlockMesh> = (0..inputs.len())
+                .into_par_iter()
+                .map(|i| mesher.tin_block(i, budget))
+                .collect();
+            // Skirts against the neighbours' TINs, once every TIN is cut.
+            let profiles: Vec<[EdgeProfile; 4]> = tins
+                .iter()
+                .map(|m| std::array::from_fn(|e| EdgeProfile::of(m, &inputs[m.block].rect, e)))
+                .collect();
+            tins.into_par_iter()
+                .map(|mut m| {
+                    mesher.hang_tin_skirts(&mut m, &profiles);
+                    m
+                })
+                .collect()
+        }
+    };
+    let mut meshes: Vec<(BlockMesh, Vec<DVec3>)> = unskirted
         .into_par_iter()
-        .map(|i| {
-            let mut m = mesher.block(i);
-            m.block = with_area[i];
+        .map(|mut m| {
+            m.block = with_area[m.block];
             let sums = face_normals(&m, frame);
             (m, sums)
         })
@@ -302,8 +368,9 @@ impl Mesher<'_, '_> {
         out
     }
 
-    /// The mesh of block `x`.
-    fn block(&self, x: usize) -> BlockMesh {
+    /// The mesh of block `x`, and the indices of its edges' vertices, each edge going
+    /// clockwise round the block (skirts are hung by the caller).
+    fn block(&self, x: usize) -> (BlockMesh, [Vec<u32>; 4]) {
         let b = &self.blocks[x];
         let r = b.rect;
         let cols = lattice(r.col0, r.col1, b.stride);
@@ -338,11 +405,77 @@ impl Mesher<'_, '_> {
                 .collect()
         });
         tri.fill(&ring, stitched.iter().any(|&s| s));
-        let mut mesh = tri.finish(x, stitched);
-        if self.cracks == Cracks::Skirts {
-            self.hang_skirts(x, &ring, &mut mesh);
+        (tri.finish(x, stitched), ring)
+    }
+
+    /// Block `x` as the coarsest RTIN of its grid within `budget` (its grid's own triangles
+    /// where the grid is not a square of `2^k` cells), without skirts.
+    fn tin_block(&self, x: usize, budget: f64) -> BlockMesh {
+        let b = &self.blocks[x];
+        let r = b.rect;
+        let s = b.stride;
+        let (across, down) = (r.col1 - r.col0, r.row1 - r.row0);
+        let cells = across / s;
+        let square = across == down
+            && across.is_multiple_of(s)
+            && cells >= 2
+            && cells.is_power_of_two()
+            && u64::from(b.grid_width) > cells
+            && u64::from(b.grid_height) > cells;
+        if !square {
+            return self.block(x).0;
         }
-        mesh
+        let (n, w) = (cells as usize, b.grid_width as usize);
+        let heights: Vec<f64> = (0..=n)
+            .flat_map(|j| (0..=n).map(move |i| (i, j)))
+            .map(|(i, j)| f64::from(b.heights[j * w + i]))
+            .collect();
+        let Some(grid) = rtin::Grid::new(n, &heights) else {
+            return self.block(x).0;
+        };
+        let tin = rtin::Rtin::new(&grid).mesh(budget);
+        let tin_error = tin.max_error(&grid);
+        let vertices = tin
+            .vertices
+            .iter()
+            .map(|&[i, j]| MeshVertex {
+                col: r.col0 + u64::from(i) * s,
+                row: r.row0 + u64::from(j) * s,
+                height: heights[j as usize * (n + 1) + i as usize],
+                skirt: false,
+            })
+            .collect();
+        BlockMesh {
+            block: x,
+            vertices,
+            normals: Vec::new(),
+            // Counter-clockwise with `i` right and `j` up is clockwise from above, where
+            // rows run south: turned over.
+            triangles: tin.triangles.iter().map(|&[a, b, c]| [a, c, b]).collect(),
+            stitched: [false; 4],
+            skirts: [0.0; 4],
+            tin_error,
+        }
+    }
+
+    /// Skirts below each edge of TIN `mesh` that meets another block, as deep as its edge
+    /// lies above the other block's edge (`profiles`, by block) at the most, at every
+    /// sample along the piece they share.
+    fn hang_tin_skirts(&self, mesh: &mut BlockMesh, profiles: &[[EdgeProfile; 4]]) {
+        let x = mesh.block;
+        for e in 0..4 {
+            let own = &profiles[x][e];
+            let mut depth = 0.0f64;
+            for span in self.lines.across(&self.blocks[x].rect, e) {
+                let other = &profiles[span.block][(e + 2) % 4];
+                for t in span.lo..=span.hi {
+                    depth = depth.max(own.height(t) - other.height(t));
+                }
+            }
+            if depth > 0.0 && depth.is_finite() {
+                hang_curtain(mesh, e, &own.clockwise(e), depth);
+            }
+        }
     }
 
     /// Skirts below each edge of block `x` that meets another block, as deep as the block's
@@ -363,27 +496,85 @@ impl Mesher<'_, '_> {
                     depth = depth.max(b.height_at(col, row) - other.height_at(col, row));
                 }
             }
-            if !(depth > 0.0 && depth.is_finite()) {
-                continue;
+            if depth > 0.0 && depth.is_finite() {
+                hang_curtain(mesh, e, edge, depth);
             }
-            mesh.skirts[e] = depth;
-            let first = mesh.vertices.len() as u32;
-            for &i in edge {
-                let top = mesh.vertices[i as usize];
-                mesh.vertices.push(MeshVertex {
-                    height: top.height - depth,
-                    skirt: true,
-                    ..top
-                });
+        }
+    }
+}
+
+/// Hangs a curtain `depth` below edge `e` of `mesh`, whose vertices `edge` run clockwise
+/// round the block.
+fn hang_curtain(mesh: &mut BlockMesh, e: usize, edge: &[u32], depth: f64) {
+    mesh.skirts[e] = depth;
+    let first = mesh.vertices.len() as u32;
+    for &i in edge {
+        let top = mesh.vertices[i as usize];
+        mesh.vertices.push(MeshVertex {
+            height: top.height - depth,
+            skirt: true,
+            ..top
+        });
+    }
+    // The edge runs clockwise round the block; (top a, top b, bottom b) and (top a,
+    // bottom b, bottom a) then face away from it.
+    for k in 0..edge.len().saturating_sub(1) {
+        let (a, z) = (edge[k], edge[k + 1]);
+        let (a2, z2) = (first + k as u32, first + k as u32 + 1);
+        mesh.triangles.push([a, z, z2]);
+        mesh.triangles.push([a, z2, a2]);
+    }
+}
+
+/// The vertices of a mesh along one edge of its block, by position along it (columns on
+/// the north and south edges, rows on the others): the edge's height, linear between them.
+struct EdgeProfile {
+    /// Position, height and vertex index, by position.
+    points: Vec<(u64, f64, u32)>,
+}
+
+impl EdgeProfile {
+    /// Edge `e` (0 north, 1 east, 2 south, 3 west) of `mesh`, whose block covers `rect`.
+    fn of(mesh: &BlockMesh, rect: &SampleRect, e: usize) -> EdgeProfile {
+        let mut points: Vec<(u64, f64, u32)> = mesh
+            .vertices
+            .iter()
+            .enumerate()
+            .filter(|(_, v)| !v.skirt)
+            .filter_map(|(k, v)| {
+                let on = match e {
+                    0 => (v.row == rect.row0).then_some(v.col),
+                    1 => (v.col == rect.col1).then_some(v.row),
+                    2 => (v.row == rect.row1).then_some(v.col),
+                    _ => (v.col == rect.col0).then_some(v.row),
+                };
+                on.map(|t| (t, v.height, k as u32))
+            })
+            .collect();
+        points.sort_by_key(|p| p.0);
+        points.dedup_by_key(|p| p.0);
+        EdgeProfile { points }
+    }
+
+    /// The edge's height at position `t` (NaN off its ends).
+    fn height(&self, t: u64) -> f64 {
+        let k = self.points.partition_point(|p| p.0 < t);
+        match (self.points.get(k), k.checked_sub(1).and_then(|j| self.points.get(j))) {
+            (Some(&(at, h, _)), _) if at == t => h,
+            (Some(&(t1, h1, _)), Some(&(t0, h0, _))) => {
+                h0 + (h1 - h0) * ((t - t0) as f64 / (t1 - t0) as f64)
             }
-            // The edge runs clockwise round the block; (top a, top b, bottom b) and (top a,
-            // bottom b, bottom a) then face away from it.
-            for k in 0..edge.len().saturating_sub(1) {
-                let (a, z) = (edge[k], edge[k + 1]);
-                let (a2, z2) = (first + k as u32, first + k as u32 + 1);
-                mesh.triangles.push([a, z, z2]);
-                mesh.triangles.push([a, z2, a2]);
-            }
+            _ => f64::NAN,
+        }
+    }
+
+    /// The edge's vertex indices going clockwise round the block when it is edge `e`.
+    fn clockwise(&self, e: usize) -> Vec<u32> {
+        let ordered = self.points.iter().map(|p| p.2);
+        if e < 2 {
+            ordered.collect()
+        } else {
+            ordered.rev().collect()
         }
     }
 }

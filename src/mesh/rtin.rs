@@ -113,36 +113,42 @@ impl Triangle {
     /// The largest `|height - plane|` over the grid points in the closed triangle, the
     /// plane through its corners' heights; infinite where a height is NaN.
     fn error(&self, grid: &Grid<'_>) -> f64 {
-        let [a, b, c] = [self.a, self.b, self.c].map(|p| [i64::from(p[0]), i64::from(p[1])]);
-        let area = cross(a, b, c);
-        if area == 0 {
-            return 0.0;
-        }
-        let (ha, hb, hc) = (grid.at(self.a), grid.at(self.b), grid.at(self.c));
-        let (x0, x1) = (a[0].min(b[0]).min(c[0]), a[0].max(b[0]).max(c[0]));
-        let (y0, y1) = (a[1].min(b[1]).min(c[1]), a[1].max(b[1]).max(c[1]));
-        let inv = 1.0 / area as f64;
-        let mut worst = 0.0f64;
-        for y in y0..=y1 {
-            for x in x0..=x1 {
-                let p = [x, y];
-                let (wa, wb, wc) = (cross(b, c, p), cross(c, a, p), cross(a, b, p));
-                let inside = if area > 0 {
-                    wa >= 0 && wb >= 0 && wc >= 0
-                } else {
-                    wa <= 0 && wb <= 0 && wc <= 0
-                };
-                if !inside {
-                    continue;
-                }
-                let plane = (wa as f64 * ha + wb as f64 * hb + wc as f64 * hc) * inv;
-                let d = (grid.at([x as i32, y as i32]) - plane).abs();
-                // NaN (a hole in what the caller gave) must split, never pass.
-                worst = if d.is_nan() { f64::INFINITY } else { worst.max(d) };
-            }
-        }
-        worst
+        plane_error(grid, [self.a, self.b, self.c])
     }
+}
+
+/// The largest `|height - plane|` over the grid points in the closed triangle `corners`,
+/// the plane through the corners' heights; infinite where a height is NaN.
+fn plane_error(grid: &Grid<'_>, corners: [[i32; 2]; 3]) -> f64 {
+    let [a, b, c] = corners.map(|p| [i64::from(p[0]), i64::from(p[1])]);
+    let area = cross(a, b, c);
+    if area == 0 {
+        return 0.0;
+    }
+    let [ha, hb, hc] = corners.map(|p| grid.at(p));
+    let (x0, x1) = (a[0].min(b[0]).min(c[0]), a[0].max(b[0]).max(c[0]));
+    let (y0, y1) = (a[1].min(b[1]).min(c[1]), a[1].max(b[1]).max(c[1]));
+    let inv = 1.0 / area as f64;
+    let mut worst = 0.0f64;
+    for y in y0..=y1 {
+        for x in x0..=x1 {
+            let p = [x, y];
+            let (wa, wb, wc) = (cross(b, c, p), cross(c, a, p), cross(a, b, p));
+            let inside = if area > 0 {
+                wa >= 0 && wb >= 0 && wc >= 0
+            } else {
+                wa <= 0 && wb <= 0 && wc <= 0
+            };
+            if !inside {
+                continue;
+            }
+            let plane = (wa as f64 * ha + wb as f64 * hb + wc as f64 * hc) * inv;
+            let d = (grid.at([x as i32, y as i32]) - plane).abs();
+            // NaN (a hole in what the caller gave) must split, never pass.
+            worst = if d.is_nan() { f64::INFINITY } else { worst.max(d) };
+        }
+    }
+    worst
 }
 
 /// Twice the signed area of `o, p, q`: positive when they turn counter-clockwise (`i`
@@ -252,6 +258,20 @@ impl Rtin {
 }
 
 impl RtinMesh {
+    /// The largest vertical distance between the mesh and `grid` (the grid it was cut
+    /// from) at any grid point, each taken against the plane of a triangle holding it:
+    /// measured afresh, not read from the split errors.
+    pub fn max_error(&self, grid: &Grid<'_>) -> f64 {
+        self.triangles
+            .iter()
+            .map(|t| {
+                let corners =
+                    t.map(|i| self.vertices[i as usize]).map(|[i, j]| [i as i32, j as i32]);
+                plane_error(grid, corners)
+            })
+            .fold(0.0, f64::max)
+    }
+
     /// Where a vertex lies along side `side` ([`SIDES`]), if it lies on it.
     fn along(&self, side: usize, v: [u32; 2]) -> Option<u32> {
         let n = self.cells;

@@ -202,6 +202,7 @@ impl Triangles {
             triangles: self.triangles,
             stitched,
             skirts: [0.0; 4],
+            tin_error: 0.0,
         }
     }
 }

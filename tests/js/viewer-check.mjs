@@ -1,6 +1,7 @@
 // Drives fmrh's viewer in headless Chromium (tests/viewer.rs runs it): loads the page,
-// waits for the first scene, takes a screenshot, then flies forward and moves the tolerance
-// slider, and prints what the page showed after each step as JSON on standard output.
+// waits for the first scene, takes a screenshot, then flies forward, moves the tolerance
+// slider and picks TINs within 5 m, and prints what the page showed after each step as JSON
+// on standard output.
 //
 //   node viewer-check.mjs URL SCREENSHOT.png
 //
@@ -84,8 +85,12 @@ try {
   });
   const tau4 = await settled(moved.scenes);
 
+  // The mesh select, to TINs within 5 m.
+  await page.selectOption('#tin', '5');
+  const tin = await settled(tau4.scenes);
+
   if (problems.length) throw new Error(problems.join('\n'));
-  console.log(JSON.stringify({ renderer, first, moved, tau4 }));
+  console.log(JSON.stringify({ renderer, first, moved, tau4, tin }));
 } catch (e) {
   console.error(String(e && e.stack ? e.stack : e));
   status = 1;

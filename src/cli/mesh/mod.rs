@@ -12,7 +12,7 @@ use serde_json::{json, Value};
 use super::args::RefineArg;
 use crate::export::gltf::{glb_in, GltfBlock, GltfFrame};
 use crate::heightfield::Georeference;
-use crate::mesh::{build_in, fractal, BlockMesh, Cracks};
+use crate::mesh::{build_in, build_tin_in, fractal, BlockMesh, Cracks};
 use crate::model::SampleRect;
 use crate::scene::surface::GridBlock;
 use crate::scene::{load_blocks, LoadedBlock, SceneBlock, Terrain, WorldFrame, PAYLOAD_GAP};
@@ -66,9 +66,15 @@ pub struct MeshArgs {
     /// sees).
     #[arg(long)]
     window: Option<String>,
-    /// How cracks between blocks of different levels are closed.
-    #[arg(long, value_enum, default_value = "stitch")]
-    cracks: CracksArg,
+    /// How cracks between blocks of different levels are closed (default: stitch; skirts
+    /// with --max-error).
+    #[arg(long, value_enum)]
+    cracks: Option<CracksArg>,
+    /// Mesh each block as a TIN within this many metres of its grid (the coarsest
+    /// right-triangulated network; each block's measured error is in its extras) instead
+    /// of every grid point. TINs keep their own edge vertices, so cracks close with skirts.
+    #[arg(long, value_name = "METRES")]
+    max_error: Option<f64>,
     /// What to write.
     #[arg(long, value_enum, default_value = "glb")]
     format: MeshFormat,
@@ -296,10 +302,7 @@ pub fn run(args: &MeshArgs) -> Result<ExitCode, Error> {
         ));
     }
     let options = args.view.options_in(args.window.as_deref())?;
-    let cracks = match args.cracks {
-        CracksArg::Stitch => Cracks::Stitch,
-        CracksArg::Skirts => Cracks::Skirts,
-    };
+    let style = args.style()?;
     if args.format == MeshFormat::QuantizedMesh {
         return tiles::run_tiles(args, &camera, &options);
     }
@@ -313,7 +316,7 @@ pub fn run(args: &MeshArgs) -> Result<ExitCode, Error> {
         &args.view,
         &camera,
         &options,
-        cracks,
+        style,
         args.refine,
         globe,
     )?;
@@ -335,10 +338,16 @@ pub fn run(args: &MeshArgs) -> Result<ExitCode, Error> {
             bytes.len() as u64
         }
     };
+    let how = match style {
+        MeshStyle::Grid(_) => format!("{stitched} stitched to a neighbour"),
+        MeshStyle::Tin(budget) => format!(
+            "TINs within {budget} m, measured {} m at most",
+            meshes.iter().map(|m| m.tin_error).fold(0.0, f64::max)
+        ),
+    };
     eprintln!(
-        "fmrh: meshed {} blocks ({} stitched to a neighbour{}) as {} triangles, {} bytes{}",
+        "fmrh: meshed {} blocks ({how}{}) as {} triangles, {} bytes{}",
         meshes.len(),
-        stitched,
         if args.refine.is_some() {
             format!(", {synthetic} synthetic")
         } else {
@@ -355,19 +364,69 @@ pub fn run(args: &MeshArgs) -> Result<ExitCode, Error> {
     Ok(ExitCode::SUCCESS)
 }
 
+impl MeshArgs {
+    /// The mesh style `--cracks` and `--max-error` ask for.
+    fn style(&self) -> Result<MeshStyle, Error> {
+        let cracks = match self.cracks {
+            Some(CracksArg::Skirts) => Cracks::Skirts,
+            Some(CracksArg::Stitch) | None => Cracks::Stitch,
+        };
+        match self.max_error {
+            None => Ok(MeshStyle::Grid(cracks)),
+            Some(_) if self.cracks == Some(CracksArg::Stitch) => Err(Error::InvalidArgument(
+                "--max-error meshes TINs, whose cracks close with skirts: leave out \
+                 --cracks stitch"
+                    .into(),
+            )),
+            Some(m) => MeshStyle::tin(m, "--max-error"),
+        }
+    }
+}
+
+/// How a block becomes triangles.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum MeshStyle {
+    /// Every grid point, cracks closed as the value says.
+    Grid(Cracks),
+    /// A TIN within the value's metres of the block's grid, with skirts
+    /// ([`crate::mesh::build_tin_in`]).
+    Tin(f64),
+}
+
+impl MeshStyle {
+    /// A TIN within `metres`, which `name` gave: a finite number from 0 up.
+    pub fn tin(metres: f64, name: &str) -> Result<MeshStyle, Error> {
+        if metres >= 0.0 && metres.is_finite() {
+            Ok(MeshStyle::Tin(metres))
+        } else {
+            Err(Error::InvalidArgument(format!(
+                "{name} {metres}: must be a number of metres >= 0"
+            )))
+        }
+    }
+
+    /// How cracks are closed.
+    fn cracks(self) -> Cracks {
+        match self {
+            MeshStyle::Grid(c) => c,
+            MeshStyle::Tin(_) => Cracks::Skirts,
+        }
+    }
+}
+
 /// A scene meshed: its parts (blocks and synthetic nodes), their meshes, and what the
 /// extras say. `fmrh mesh` writes it; `fmrh serve` sends it to the viewer.
 pub struct Meshed {
     parts: Vec<Part>,
     meshes: Vec<BlockMesh>,
     context: Context,
-    cracks: Cracks,
+    style: MeshStyle,
 }
 
 impl Meshed {
     /// The scene as one glTF 2.0 binary.
     pub fn glb(&self) -> Result<Vec<u8>, Error> {
-        encode(&self.parts, &self.meshes, &self.context, self.cracks)
+        encode(&self.parts, &self.meshes, &self.context, self.style)
     }
 
     /// Triangles of all the meshes.
@@ -382,7 +441,7 @@ impl Meshed {
 }
 
 /// Meshes the scene `camera` sees of `file` (a container, a dataset, or a URL of either)
-/// with `options`, its cracks closed as `cracks` says, refined past the data as `refine`
+/// with `options`, each block meshed as `style` says, refined past the data as `refine`
 /// says; `globe`: the camera is in ECEF and the data on the WGS 84 ellipsoid. An error when
 /// the camera sees no terrain.
 pub fn mesh_scene(
@@ -390,21 +449,21 @@ pub fn mesh_scene(
     view: &super::args::ViewArgs,
     camera: &crate::scene::Camera,
     options: &crate::scene::SceneOptions,
-    cracks: Cracks,
+    style: MeshStyle,
     refine: Option<RefineArg>,
     globe: bool,
 ) -> Result<Meshed, Error> {
     let (parts, _, context) = scene_parts(file, view, camera, options, |_| false, globe)?;
-    finish_meshes(parts, context, camera, cracks, refine)
+    finish_meshes(parts, context, camera, style, refine)
 }
 
 /// Meshes the scene blocks `parts` (refined past the data as `refine` says) with their
-/// cracks closed as `cracks` says.
+/// each meshed as `style` says.
 fn finish_meshes(
     parts: Vec<Part>,
     mut context: Context,
     camera: &crate::scene::Camera,
-    cracks: Cracks,
+    style: MeshStyle,
     refine: Option<RefineArg>,
 ) -> Result<Meshed, Error> {
     if parts.is_empty() {
@@ -426,12 +485,15 @@ fn finish_meshes(
         }
         None => crate::scene::TerrainFrame::Flat(context.mesh_frame()),
     };
-    let meshes = build_in(&grids, &frame, cracks)?;
+    let meshes = match style {
+        MeshStyle::Grid(cracks) => build_in(&grids, &frame, cracks)?,
+        MeshStyle::Tin(budget) => build_tin_in(&grids, &frame, budget)?,
+    };
     Ok(Meshed {
         parts,
         meshes,
         context,
-        cracks,
+        style,
     })
 }
 
@@ -450,6 +512,7 @@ fn block_extras(p: &Part, m: &BlockMesh, units: u64) -> Value {
         "footprint": [r.col0 as f64 / k, r.row0 as f64 / k, r.col1 as f64 / k, r.row1 as f64 / k],
         "synthetic": p.synthetic.is_some(),
         "stitched": m.stitched,
+        "tin_error": m.tin_error,
     });
     if let Some((depth, ..)) = p.synthetic {
         // Generated below a physical block (its key and level), never stored.
@@ -634,7 +697,7 @@ fn encode(
     parts: &[Part],
     meshes: &[BlockMesh],
     context: &Context,
-    cracks: Cracks,
+    style: MeshStyle,
 ) -> Result<Vec<u8>, Error> {
     let frame = &context.mesh_frame();
     let col0 = meshes.iter().map(|m| parts[m.block].rect.col0).min();
@@ -714,7 +777,11 @@ fn encode(
             "origin": origin_extras,
             "spacing_m": [context.frame.dx, context.frame.dy],
             "refine": if context.units > 1 { "fractal" } else { "none" },
-            "cracks": cracks,
+            "cracks": style.cracks(),
+            "tin_max_error_m": match style {
+                MeshStyle::Tin(budget) => json!(budget),
+                MeshStyle::Grid(_) => Value::Null,
+            },
             "tau": context.tau,
             "mode": context.mode,
             "blocks": meshes.len(),

@@ -24,14 +24,13 @@ use super::super::args::RefineArg;
 use crate::export::geodetic::{self, GeodeticTile};
 use crate::export::geodetic_mesh::{self, Placement, GRID};
 use crate::export::quantized_mesh::{self, QuantizedTile};
-use crate::mesh::{BlockMesh, Cracks};
+use crate::mesh::BlockMesh;
 use crate::model::SampleRect;
 use crate::scene::surface::{GridBlock, Surface};
 use crate::Error;
 
 use super::{
-    block_extras, finish_meshes, refine_fractal, scene_parts, Context, CracksArg, MeshArgs, Part,
-    TilingArg,
+    block_extras, finish_meshes, refine_fractal, scene_parts, Context, MeshArgs, Part, TilingArg,
 };
 
 /// The most tiles a geodetic tileset is written with: past it, the scene asks for more
@@ -87,11 +86,7 @@ pub(super) fn run_tiles(
                 .into(),
         ));
     }
-    let cracks = match args.cracks {
-        CracksArg::Stitch => Cracks::Stitch,
-        CracksArg::Skirts => Cracks::Skirts,
-    };
-    let meshed = finish_meshes(parts, context, camera, cracks, args.refine)?;
+    let meshed = finish_meshes(parts, context, camera, args.style()?, args.refine)?;
     let bytes = write_tile_dir(args, |dir| {
         write_node_tiles(
             dir,
@@ -323,6 +318,14 @@ fn run_geodetic(
     cover: Vec<Part>,
     mut context: Context,
 ) -> Result<ExitCode, Error> {
+    if args.max_error.is_some() {
+        return Err(Error::InvalidArgument(
+            "--max-error: `fmrh mesh` writes geodetic quantized-mesh tiles as regular grids; \
+             `fmrh serve` cuts them as TINs within --max-error (or --tiling nodes meshes \
+             fmrh's blocks as TINs)"
+                .into(),
+        ));
+    }
     let parts = match args.refine {
         Some(RefineArg::Fractal) => refine_fractal(parts, camera, &mut context)?,
         None => parts,

@@ -35,6 +35,7 @@ mod terrain;
 
 use super::args::RefineArg;
 use super::args::{ModeArg, ViewArgs};
+use super::mesh::MeshStyle;
 use crate::http::{self, ranges, Body, Request, Response};
 
 /// The viewer page and its script, served at `/` and `/viewer.js`.
@@ -487,7 +488,7 @@ struct ViewQuery<'a> {
     item: &'a Item,
     camera: Camera,
     view: ViewArgs,
-    cracks: Cracks,
+    style: MeshStyle,
     refine: Option<RefineArg>,
 }
 
@@ -498,8 +499,18 @@ fn parse_view<'a>(items: &'a [Item], query: &str) -> Result<ViewQuery<'a>, Error
         let bad = || Error::InvalidArgument(format!("`{pair}`: not valid percent-encoded UTF-8"));
         let k = percent_decode(k, true).ok_or_else(bad)?;
         let v = percent_decode(v, true).ok_or_else(bad)?;
-        const KNOWN: [&str; 10] = [
-            "item", "eye", "target", "up", "tau", "fov", "viewport", "mode", "cracks", "refine",
+        const KNOWN: [&str; 11] = [
+            "item",
+            "eye",
+            "target",
+            "up",
+            "tau",
+            "fov",
+            "viewport",
+            "mode",
+            "cracks",
+            "refine",
+            "max_error",
         ];
         if !KNOWN.contains(&k.as_str()) {
             return Err(Error::InvalidArgument(format!(
@@ -547,6 +558,23 @@ fn parse_view<'a>(items: &'a [Item], query: &str) -> Result<ViewQuery<'a>, Error
             )))
         }
     };
+    // `max_error`: each block a TIN within that many metres, closed with skirts.
+    let style = match params.get("max_error").map(String::as_str) {
+        None | Some("") => MeshStyle::Grid(cracks),
+        Some(_) if params.get("cracks").map(String::as_str) == Some("stitch") => {
+            return Err(Error::InvalidArgument(
+                "`max_error` meshes TINs, whose cracks close with skirts: leave out \
+                 `cracks=stitch`"
+                    .into(),
+            ))
+        }
+        Some(m) => {
+            let metres = m.parse().map_err(|_| {
+                Error::InvalidArgument(format!("`max_error`: `{m}` is not a number of metres"))
+            })?;
+            MeshStyle::tin(metres, "`max_error`")?
+        }
+    };
     let refine = match params.get("refine").map(String::as_str) {
         None | Some("none") => None,
         Some("fractal") => Some(RefineArg::Fractal),
@@ -580,7 +608,7 @@ fn parse_view<'a>(items: &'a [Item], query: &str) -> Result<ViewQuery<'a>, Error
         item,
         camera,
         view,
-        cracks,
+        style,
         refine,
     })
 }
@@ -660,7 +688,7 @@ fn mesh(q: &ViewQuery<'_>) -> Result<Answer, Error> {
         &q.view,
         &q.camera,
         &options,
-        q.cracks,
+        q.style,
         q.refine,
         false,
     )?;

@@ -299,8 +299,10 @@ function query() {
     tau: $('tau').value,
     fov: String(FOV_DEG),
     viewport: `${canvas.width}x${canvas.height}`,
-    cracks: $('cracks').value,
   });
+  // A TIN's cracks close with skirts; the grid's as the Cracks control says.
+  if ($('tin').value) q.set('max_error', $('tin').value);
+  else q.set('cracks', $('cracks').value);
   return q.toString();
 }
 
@@ -454,6 +456,7 @@ function fromHash() {
   if (p.get('tau')) $('tau').value = p.get('tau');
   if (p.get('colour')) $('colour').value = p.get('colour');
   if (p.get('cracks')) $('cracks').value = p.get('cracks');
+  if (p.get('max_error')) $('tin').value = p.get('max_error');
   return { item: p.get('item'), eye: vec('eye'), target: vec('target') };
 }
 
@@ -489,6 +492,10 @@ async function start() {
     showTau();
     tau.addEventListener('input', () => { showTau(); moved(); });
     $('cracks').addEventListener('change', moved);
+    const tin = $('tin');
+    const showTin = () => { $('cracks').disabled = tin.value !== ''; };
+    showTin();
+    tin.addEventListener('change', () => { showTin(); moved(); });
     requestAnimationFrame(frame);
   } catch (e) {
     fail(e.message || e);
