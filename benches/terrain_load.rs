@@ -8,7 +8,10 @@
 //! The fly-over: a camera path across the tile from south-west to north-east, at each of 40
 //! stops asking the tiles a Cesium globe asks near the ground: the deepest level's 3 × 3
 //! around the camera, and the coarser levels' tiles above them (as Cesium walks from the
-//! roots). Run: `cargo bench --bench terrain_load`.
+//! roots). Run: `cargo bench --bench terrain_load`. To compare two builds side by side in
+//! one run, name the other's binary in `FMRH_BASELINE` (for example a worktree of an older
+//! commit built into its own target directory): each row is then measured for both, the
+//! baseline first, each on a fresh server.
 
 use std::collections::BTreeSet;
 use std::io::{BufRead, BufReader, Read, Write};
@@ -29,8 +32,8 @@ struct Server {
 }
 
 impl Server {
-    fn start(path: &Path) -> Server {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_fmrh"))
+    fn start(binary: &str, path: &Path) -> Server {
+        let mut child = Command::new(binary)
             .args(["serve", path.to_str().unwrap(), "--port", "0"])
             .stdout(Stdio::piped())
             .stderr(Stdio::null())
@@ -255,50 +258,63 @@ fn main() {
     assert!(built.success());
     let name = "n43.fmrh";
     println!("fmrh serve, Cesium terrain, SRTM3 N43E006 (bundled); 2-core machine");
-    println!("| tiles | clients | tiles/s | p50 ms | p99 ms | server CPU s | peak RSS MiB | refused or failed |");
-    println!("|---|---|---|---|---|---|---|---|");
+    let mut servers = Vec::new();
+    if let Ok(baseline) = std::env::var("FMRH_BASELINE") {
+        servers.push(("baseline", baseline));
+    }
+    servers.push(("this build", env!("CARGO_BIN_EXE_fmrh").to_string()));
+    println!("| server | tiles | clients | tiles/s | p50 ms | p99 ms | server CPU s | peak RSS MiB | refused or failed |");
+    println!("|---|---|---|---|---|---|---|---|---|");
     for clients in [1usize, 4, 16, 64] {
-        let server = Server::start(&container);
-        let mut c = Client::new(&server.address);
-        let layer = {
-            let request = format!(
-                "GET /{name}/layer.json HTTP/1.1\r\nHost: {}\r\n\r\n",
-                server.address
-            );
-            c.reader.get_mut().write_all(request.as_bytes()).unwrap();
-            let mut head = String::new();
-            let mut length = 0;
-            loop {
-                head.clear();
-                c.reader.read_line(&mut head).unwrap();
-                if head.trim().is_empty() {
-                    break;
-                }
-                if let Some(v) = head.to_ascii_lowercase().strip_prefix("content-length:") {
-                    length = v.trim().parse().unwrap();
-                }
+        for (who, binary) in &servers {
+            load(who, binary, &container, name, clients);
+        }
+    }
+}
+
+/// One row pair: `clients` clients on a fresh server (`binary`), cold then repeated.
+fn load(who: &str, binary: &str, container: &Path, name: &str, clients: usize) {
+    let server = Server::start(binary, container);
+    let mut c = Client::new(&server.address);
+    let layer = {
+        let request = format!(
+            "GET /{name}/layer.json HTTP/1.1\r\nHost: {}\r\n\r\n",
+            server.address
+        );
+        c.reader.get_mut().write_all(request.as_bytes()).unwrap();
+        let mut head = String::new();
+        let mut length = 0;
+        loop {
+            head.clear();
+            c.reader.read_line(&mut head).unwrap();
+            if head.trim().is_empty() {
+                break;
             }
-            let mut body = vec![0u8; length];
-            c.reader.read_exact(&mut body).unwrap();
-            serde_json::from_slice::<serde_json::Value>(&body).unwrap()
-        };
-        drop(c);
-        let tiles = fly_over(&layer);
-        for (kind, rounds) in [("cold", 1usize), ("repeated", 20)] {
-            let (cpu0, _) = server.usage();
-            let mut latencies = Vec::new();
-            let mut wall = 0.0;
-            let mut bad = 0;
-            for _ in 0..rounds {
-                let (l, w, b) = run(&server.address, &tiles, name, clients);
-                latencies.extend(l);
-                wall += w;
-                bad += b;
+            if let Some(v) = head.to_ascii_lowercase().strip_prefix("content-length:") {
+                length = v.trim().parse().unwrap();
             }
-            let (cpu1, rss) = server.usage();
-            latencies.sort_by(f64::total_cmp);
-            println!(
-                "| {kind} ({} tiles) | {clients} | {:.0} | {:.2} | {:.2} | {:.2} | {:.0} | {bad} |",
+        }
+        let mut body = vec![0u8; length];
+        c.reader.read_exact(&mut body).unwrap();
+        serde_json::from_slice::<serde_json::Value>(&body).unwrap()
+    };
+    drop(c);
+    let tiles = fly_over(&layer);
+    for (kind, rounds) in [("cold", 1usize), ("repeated", 20)] {
+        let (cpu0, _) = server.usage();
+        let mut latencies = Vec::new();
+        let mut wall = 0.0;
+        let mut bad = 0;
+        for _ in 0..rounds {
+            let (l, w, b) = run(&server.address, &tiles, name, clients);
+            latencies.extend(l);
+            wall += w;
+            bad += b;
+        }
+        let (cpu1, rss) = server.usage();
+        latencies.sort_by(f64::total_cmp);
+        println!(
+                "| {who} | {kind} ({} tiles) | {clients} | {:.0} | {:.2} | {:.2} | {:.2} | {:.0} | {bad} |",
                 tiles.len(),
                 latencies.len() as f64 / wall,
                 percentile(&latencies, 0.5),
@@ -306,6 +322,5 @@ fn main() {
                 cpu1 - cpu0,
                 rss
             );
-        }
     }
 }

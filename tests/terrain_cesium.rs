@@ -12,7 +12,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::quantized_mesh::{decode, Source, Tile};
+use common::quantized_mesh::Source;
 use common::serve::Served;
 
 fn fmrh_ok(args: &[&str]) {
@@ -27,23 +27,6 @@ fn fmrh_ok(args: &[&str]) {
 
 fn load(p: &Path) -> fmrh::Heightfield {
     fmrh::ingest::load(p, &fmrh::ingest::IngestOptions::default()).expect("the DEM loads")
-}
-
-/// The deepest tile holding `(lon, lat)`, decoded, from the server.
-fn tile_at(served: &Served, name: &str, z: u32, lon: f64, lat: f64) -> Tile {
-    let d = 180.0 / f64::from(1u32 << z);
-    let x = ((lon + 180.0) / d).floor() as u32;
-    let y = ((lat + 90.0) / d).floor() as u32;
-    let a = served.ask(
-        "GET",
-        &format!("/{name}/{z}/{x}/{y}.terrain"),
-        &[(
-            "Accept",
-            "application/vnd.quantized-mesh;extensions=octvertexnormals-metadata",
-        )],
-    );
-    assert_eq!(a.status, 200, "{}", String::from_utf8_lossy(&a.body));
-    Tile::new(z, x, y, decode(&a.body))
 }
 
 #[test]
@@ -93,38 +76,17 @@ fn cesium_reads_the_served_terrain_within_its_errors() {
         let layer = served.get(&format!("/{name}/layer.json")).json();
         let maxzoom = layer["maxzoom"].as_u64().unwrap() as u32;
         assert_eq!(layer["fmrh"]["vertical_datum"], "egm96");
-        let mut rng = common::fields::Rng::new(0xce51 ^ name.len() as u64);
-        let (mut points, mut want) = (Vec::new(), Vec::new());
-        while points.len() < 240 {
-            let k = (rng.next_u64() % source.samples.len() as u64) as usize;
-            if !source.samples[k].is_nan() {
-                // SRTM heights are above the EGM96 geoid; served, above the ellipsoid.
-                let [lon, lat] = source.lon_lat[k];
-                points.push([lon, lat]);
-                want.push(f64::from(source.samples[k]) + fmrh::geoid::egm96_undulation(lat, lon));
-            }
-        }
+        let (points, want) = common::cesium::random_points(source, 240, 0xce51 ^ name.len() as u64);
         let url = format!("{}/{name}/", served.base());
         let (heights, levels) = common::cesium::samples(&url, dir.path(), &points);
-        let mut worst = 0.0f64;
-        for (i, &[lon, lat]) in points.iter().enumerate() {
-            assert_eq!(levels[i], maxzoom, "{name}: Cesium's level at {lon},{lat}");
-            let tile = tile_at(&served, name, maxzoom, lon, lat);
-            let error = tile.meta()["error"].as_f64().unwrap();
-            let ours = tile.height_at(lon, lat);
-            assert!(
-                (heights[i] - ours).abs() <= 1e-3,
-                "{name}: at {lon},{lat} Cesium draws {} where the tile draws {ours}",
-                heights[i]
-            );
-            assert!(
-                (heights[i] - want[i]).abs() <= error + 1e-3,
-                "{name}: at {lon},{lat} Cesium draws {} where the source has {} (declared error {error})",
-                heights[i],
-                want[i]
-            );
-            worst = worst.max((heights[i] - want[i]).abs());
-        }
+        let worst = common::cesium::check_samples(
+            &served,
+            name,
+            maxzoom,
+            &points,
+            &want,
+            (&heights, &levels),
+        );
         eprintln!(
             "{name}: maxzoom {maxzoom}, largest |Cesium - source| at 240 samples: {worst:.2} m"
         );
