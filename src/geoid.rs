@@ -170,20 +170,63 @@ fn grid() -> &'static [i16] {
 /// The EGM96 undulation `N` at latitude `lat` and longitude `lon` (degrees, any longitude;
 /// latitudes clamped to ±90°): metres of geoid above the WGS 84 ellipsoid. NaN in, NaN out.
 pub fn egm96_undulation(lat: f64, lon: f64) -> f64 {
-    if !(lat.is_finite() && lon.is_finite()) {
-        return f64::NAN;
+    Egm96Row::new(lat).at(lon)
+}
+
+/// [`egm96_undulation`] along one parallel: the two grid rows around latitude `lat` and
+/// the weight between them found once, for the many longitudes a row of samples asks.
+/// Gives the same value as [`egm96_undulation`], bit for bit.
+#[derive(Clone, Copy, Debug)]
+pub struct Egm96Row {
+    /// The grid row north of the parallel (`None`: the latitude is not finite).
+    r0: Option<usize>,
+    /// How far south of row `r0` the parallel lies, in rows.
+    fy: f64,
+}
+
+impl Egm96Row {
+    /// The parallel at `lat` (degrees, clamped to ±90°).
+    pub fn new(lat: f64) -> Egm96Row {
+        if !lat.is_finite() {
+            return Egm96Row { r0: None, fy: 0.0 };
+        }
+        let y = ((90.0 - lat.clamp(-90.0, 90.0)) / STEP).clamp(0.0, (ROWS - 1) as f64);
+        let r0 = (y.floor() as usize).min(ROWS - 2);
+        Egm96Row {
+            r0: Some(r0),
+            fy: y - r0 as f64,
+        }
     }
-    let g = grid();
-    let y = ((90.0 - lat.clamp(-90.0, 90.0)) / STEP).clamp(0.0, (ROWS - 1) as f64);
-    let x = lon.rem_euclid(360.0) / STEP;
-    let r0 = (y.floor() as usize).min(ROWS - 2);
-    let c0 = (x.floor() as usize).min(COLS - 1);
-    let c1 = (c0 + 1) % COLS;
-    let (fy, fx) = (y - r0 as f64, x - c0 as f64);
-    let at = |r: usize, c: usize| f64::from(g[r * COLS + c]) / 100.0;
-    let north = at(r0, c0) + fx * (at(r0, c1) - at(r0, c0));
-    let south = at(r0 + 1, c0) + fx * (at(r0 + 1, c1) - at(r0 + 1, c0));
-    north + fy * (south - north)
+
+    /// The undulation at longitude `lon` (degrees, any) on this parallel; NaN for a
+    /// longitude or latitude that is not finite.
+    pub fn at(&self, lon: f64) -> f64 {
+        let Some(r0) = self.r0 else {
+            return f64::NAN;
+        };
+        if !lon.is_finite() {
+            return f64::NAN;
+        }
+        let g = grid();
+        // `rem_euclid` is a call to fmod; a longitude within one turn of [0, 360) needs at
+        // most one addition, which is what `rem_euclid` computes for it.
+        let east = if (0.0..360.0).contains(&lon) {
+            lon
+        } else if (-360.0..0.0).contains(&lon) {
+            lon + 360.0
+        } else {
+            lon.rem_euclid(360.0)
+        };
+        let x = east / STEP;
+        // `x >= 0`: truncation is its floor, without a call.
+        let c0 = (x as usize).min(COLS - 1);
+        let c1 = (c0 + 1) % COLS;
+        let fx = x - c0 as f64;
+        let at = |r: usize, c: usize| f64::from(g[r * COLS + c]) / 100.0;
+        let north = at(r0, c0) + fx * (at(r0, c1) - at(r0, c0));
+        let south = at(r0 + 1, c0) + fx * (at(r0 + 1, c1) - at(r0 + 1, c0));
+        north + self.fy * (south - north)
+    }
 }
 
 /// The least and greatest EGM96 undulation over the box `[lon_a, lon_b] x [lat_a, lat_b]`
@@ -227,6 +270,51 @@ pub fn egm96_range(lon_a: f64, lon_b: f64, lat_a: f64, lat_b: f64) -> (f64, f64)
 #[cfg(test)]
 mod tests {
     use super::*;
+    use proptest::prelude::*;
+
+    /// The undulation as first written, with `rem_euclid` and `floor` at every call: what
+    /// [`Egm96Row`] must give bit for bit.
+    fn reference(lat: f64, lon: f64) -> f64 {
+        if !(lat.is_finite() && lon.is_finite()) {
+            return f64::NAN;
+        }
+        let g = grid();
+        let y = ((90.0 - lat.clamp(-90.0, 90.0)) / STEP).clamp(0.0, (ROWS - 1) as f64);
+        let x = lon.rem_euclid(360.0) / STEP;
+        let r0 = (y.floor() as usize).min(ROWS - 2);
+        let c0 = (x.floor() as usize).min(COLS - 1);
+        let c1 = (c0 + 1) % COLS;
+        let (fy, fx) = (y - r0 as f64, x - c0 as f64);
+        let at = |r: usize, c: usize| f64::from(g[r * COLS + c]) / 100.0;
+        let north = at(r0, c0) + fx * (at(r0, c1) - at(r0, c0));
+        let south = at(r0 + 1, c0) + fx * (at(r0 + 1, c1) - at(r0 + 1, c0));
+        north + fy * (south - north)
+    }
+
+    proptest! {
+        /// One parallel's rows found once give every longitude's undulation as the
+        /// per-call formula does, bit for bit: within a turn of [0, 360), far outside it,
+        /// and at the edges.
+        #[test]
+        fn a_parallel_gives_the_per_point_values(
+            lat in -95.0f64..95.0,
+            lons in proptest::collection::vec(-1000.0f64..1000.0, 1..40),
+        ) {
+            let row = Egm96Row::new(lat);
+            let edges = [-360.0, -180.0, -1e-300, -0.0, 0.0, 1e-300, 359.999_999_999, 360.0, 720.0, -720.5];
+            for lon in lons.iter().chain(&edges) {
+                prop_assert_eq!(row.at(*lon).to_bits(), reference(lat, *lon).to_bits(), "{} {}", lat, lon);
+                prop_assert_eq!(egm96_undulation(lat, *lon).to_bits(), reference(lat, *lon).to_bits());
+            }
+        }
+    }
+
+    #[test]
+    fn not_finite_in_nan_out() {
+        assert!(Egm96Row::new(f64::NAN).at(10.0).is_nan());
+        assert!(Egm96Row::new(10.0).at(f64::INFINITY).is_nan());
+        assert!(egm96_undulation(f64::NEG_INFINITY, 0.0).is_nan());
+    }
 
     /// NGA's test values for EGM96 (the distribution's `readme.txt`: latitude, longitude
     /// east, undulation in metres, from the spherical-harmonic model to degree 360), and how

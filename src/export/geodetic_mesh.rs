@@ -120,6 +120,12 @@ impl Placement {
         }
     }
 
+    /// [`Placement::lift`] along the parallel at `lat`, for many longitudes: the geoid's
+    /// grid rows found once (the same values, bit for bit).
+    pub fn lift_along(&self, lat: f64) -> ParallelLift {
+        ParallelLift(self.geoid.then(|| crate::geoid::Egm96Row::new(lat)))
+    }
+
     /// Whether the CRS is geographic (samples are affine in longitude and latitude).
     pub fn is_geographic(&self) -> bool {
         self.crs.kind == CrsKind::Geographic
@@ -614,6 +620,17 @@ pub fn tile_height(tile: &GeodeticTile, heights: &[f64], lon: f64, lat: f64) -> 
     }
 }
 
+/// What [`Placement::lift`] gives along one parallel: the EGM96 undulation, or 0 where
+/// heights are not lifted.
+pub struct ParallelLift(Option<crate::geoid::Egm96Row>);
+
+impl ParallelLift {
+    /// The lift at longitude `lon` on this parallel.
+    pub fn at(&self, lon: f64) -> f64 {
+        self.0.as_ref().map_or(0.0, |row| row.at(lon))
+    }
+}
+
 /// `(resampling, error, samples, block error)` of a tile that draws `height(lon, lat)`:
 /// over the data samples inside it, the largest `|tile - surface|`, `|tile - surface| +
 /// e*` and `e*`.
@@ -663,6 +680,8 @@ pub(crate) fn measure(
     );
     let (mut resampling, mut error, mut measured, mut block_error) = (0.0f64, 0.0f64, 0u64, 0.0f64);
     let mut row_points = Vec::new();
+    // The geoid along the last parallel asked (a geographic row shares one latitude).
+    let mut lift = (f64::NAN, placement.lift_along(f64::NAN));
     for row in sr0..=sr1 {
         row_points.clear();
         row_points.extend((sc0..=sc1).map(|col| [(col as f64) * units, (row as f64) * units]));
@@ -675,7 +694,10 @@ pub(crate) fn measure(
             let Some(sampled) = surface.at(p[0], p[1]) else {
                 continue;
             };
-            let d = (height(lon, lat) - (sampled.height + placement.lift(lon, lat))).abs();
+            if lift.0.to_bits() != lat.to_bits() {
+                lift = (lat, placement.lift_along(lat));
+            }
+            let d = (height(lon, lat) - (sampled.height + lift.1.at(lon))).abs();
             resampling = resampling.max(d);
             let e = surface.blocks()[sampled.block].error;
             error = error.max(d + e);

@@ -273,12 +273,43 @@ pub fn tin_tile(
     ))
 }
 
-/// Which triangles may hold a point: buckets of a 64 × 64 grid over `(u, v)`.
+/// Which triangles may hold a point: buckets of a 64 × 64 grid over `(u, v)`; and, for the
+/// row of points last asked (one `v`: a geographic row of samples), the TIN cut along it.
 struct Locator {
     buckets: Vec<Vec<u32>>,
     /// The triangle the last point was in: the next point (along a row of samples) is
     /// most often in it too.
     last: std::cell::Cell<u32>,
+    /// The TIN along the line `v` last asked: a measurement asks every sample of a row in
+    /// turn, and one cut of the row's triangles answers them all by a walk, where finding
+    /// each point's triangle costs tens of barycentric tests.
+    row: std::cell::RefCell<Row>,
+}
+
+/// The TIN along one line `v = const`: the pieces the triangles it crosses cut it into, in
+/// order of `u`, each linear in `u`.
+#[derive(Default)]
+struct Row {
+    v: Option<f64>,
+    spans: Vec<Span>,
+    /// The span the last point was in.
+    at: usize,
+}
+
+/// One triangle's piece of a row: from `u0` (height `h0`) to `u1`, rising `slope` per
+/// unit of `u`.
+#[derive(Clone, Copy)]
+struct Span {
+    u0: f64,
+    u1: f64,
+    h0: f64,
+    slope: f64,
+}
+
+impl Span {
+    fn holds(&self, fu: f64) -> bool {
+        self.u0 <= fu && fu <= self.u1
+    }
 }
 
 const BUCKETS: usize = 64;
@@ -301,7 +332,71 @@ impl Locator {
         Locator {
             buckets,
             last: std::cell::Cell::new(0),
+            row: std::cell::RefCell::new(Row::default()),
         }
+    }
+
+    /// The pieces of the line `v = fv` in the triangles the buckets of its row hold,
+    /// sorted by `u`. The mesh is conforming, so they meet end to end; a triangle that the
+    /// line only touches at a point gives none.
+    fn cut_row(
+        &self,
+        fv: f64,
+        u: &[u16],
+        v: &[u16],
+        heights: &[f64],
+        triangles: &[[u32; 3]],
+    ) -> Vec<Span> {
+        let q = f64::from(QUANTIZED_MAX);
+        let j = ((fv / (q + 1.0) * BUCKETS as f64) as usize).min(BUCKETS - 1);
+        let mut ks: Vec<u32> = self.buckets[j * BUCKETS..(j + 1) * BUCKETS]
+            .iter()
+            .flatten()
+            .copied()
+            .collect();
+        ks.sort_unstable();
+        ks.dedup();
+        let mut spans = Vec::with_capacity(ks.len());
+        for k in ks {
+            let Some(t) = triangles.get(k as usize) else {
+                continue;
+            };
+            let p = t.map(|i| {
+                (
+                    f64::from(u[i as usize]),
+                    f64::from(v[i as usize]),
+                    heights[i as usize],
+                )
+            });
+            let (mut lo, mut hi) = ((f64::INFINITY, 0.0), (f64::NEG_INFINITY, 0.0));
+            for (a, b) in [(p[0], p[1]), (p[1], p[2]), (p[2], p[0])] {
+                let mut meet = |x: f64, h: f64| {
+                    if x < lo.0 {
+                        lo = (x, h);
+                    }
+                    if x > hi.0 {
+                        hi = (x, h);
+                    }
+                };
+                if a.1 == fv {
+                    meet(a.0, a.2);
+                }
+                if (a.1 < fv && fv < b.1) || (b.1 < fv && fv < a.1) {
+                    let t = (fv - a.1) / (b.1 - a.1);
+                    meet(a.0 + t * (b.0 - a.0), a.2 + t * (b.2 - a.2));
+                }
+            }
+            if lo.0 < hi.0 {
+                spans.push(Span {
+                    u0: lo.0,
+                    u1: hi.0,
+                    h0: lo.1,
+                    slope: (hi.1 - lo.1) / (hi.0 - lo.0),
+                });
+            }
+        }
+        spans.sort_by(|a, b| a.u0.total_cmp(&b.u0));
+        spans
     }
 
     /// The height the tile draws at `(lon, lat)`: linear in `(u, v)` over the triangle
@@ -321,6 +416,53 @@ impl Locator {
         let q = f64::from(QUANTIZED_MAX);
         let fu = ((lon - w) / (e - w) * q).clamp(0.0, q);
         let fv = ((lat - s) / (n - s) * q).clamp(0.0, q);
+        self.along_row(fu, fv, u, v, heights, triangles)
+            .unwrap_or_else(|| self.search(fu, fv, u, v, heights, triangles))
+    }
+
+    /// The height at `(fu, fv)` from the cut of the row `v = fv` (made when the row
+    /// changes): the span holding `fu`, from the last one on. `None` when no span holds
+    /// it (a point the row's triangles only touch).
+    fn along_row(
+        &self,
+        fu: f64,
+        fv: f64,
+        u: &[u16],
+        v: &[u16],
+        heights: &[f64],
+        triangles: &[[u32; 3]],
+    ) -> Option<f64> {
+        let mut row = self.row.borrow_mut();
+        if row.v.map(f64::to_bits) != Some(fv.to_bits()) {
+            row.spans = self.cut_row(fv, u, v, heights, triangles);
+            row.v = Some(fv);
+            row.at = 0;
+        }
+        let found = match row.spans.get(row.at) {
+            Some(span) if span.holds(fu) => Some(row.at),
+            _ => {
+                let i = row.spans.partition_point(|span| span.u0 <= fu);
+                i.checked_sub(1).filter(|&i| row.spans[i].holds(fu))
+            }
+        };
+        let i = found?;
+        row.at = i;
+        let span = row.spans[i];
+        Some(span.h0 + (fu - span.u0) * span.slope)
+    }
+
+    /// The height at `(fu, fv)` by finding its triangle: the first of the bucket's that
+    /// holds it, else the nearest by barycentric margin.
+    fn search(
+        &self,
+        fu: f64,
+        fv: f64,
+        u: &[u16],
+        v: &[u16],
+        heights: &[f64],
+        triangles: &[[u32; 3]],
+    ) -> f64 {
+        let q = f64::from(QUANTIZED_MAX);
         let cell = |f: f64| ((f / (q + 1.0) * BUCKETS as f64) as usize).min(BUCKETS - 1);
         let mut best: Option<(f64, f64)> = None;
         let hint = self.last.get();
@@ -359,6 +501,63 @@ impl Locator {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        /// Walking a row's cut gives the height finding each point's triangle gives, on
+        /// RTINs of random grids at random budgets: at random points, at rows through
+        /// vertices, and at the edges of the tile.
+        #[test]
+        fn a_row_walk_draws_what_the_triangle_search_draws(
+            k in 1u32..5,
+            seed in any::<u64>(),
+            budget in 0.0f64..30.0,
+            rows in proptest::collection::vec((0.0f64..=1.0, any::<bool>()), 1..12),
+            cols in proptest::collection::vec(0.0f64..=1.0, 1..40),
+        ) {
+            let n = 1usize << k;
+            let mut x = seed | 1;
+            let heights: Vec<f64> = (0..(n + 1) * (n + 1))
+                .map(|_| {
+                    x ^= x << 13;
+                    x ^= x >> 7;
+                    x ^= x << 17;
+                    (x % 10_000) as f64 / 100.0
+                })
+                .collect();
+            let grid = crate::mesh::rtin::Grid::new(n, &heights).unwrap();
+            let mesh = crate::mesh::rtin::Rtin::new(&grid).mesh(budget);
+            let q = f64::from(QUANTIZED_MAX);
+            let scale = |i: u32| (f64::from(i) * q / n as f64).round() as u16;
+            let u: Vec<u16> = mesh.vertices.iter().map(|p| scale(p[0])).collect();
+            let v: Vec<u16> = mesh.vertices.iter().map(|p| scale(p[1])).collect();
+            let h: Vec<f64> = mesh
+                .vertices
+                .iter()
+                .map(|p| heights[p[1] as usize * (n + 1) + p[0] as usize])
+                .collect();
+            let locate = Locator::new(&u, &v, &mesh.triangles);
+            let mut walked = 0;
+            for &(fv, on_vertex) in &rows {
+                // A row through a line of vertices, or anywhere.
+                let fv = if on_vertex { f64::from(scale((fv * n as f64).round() as u32)) } else { fv * q };
+                let mut fus: Vec<f64> = cols.iter().map(|c| c * q).chain([0.0, q]).collect();
+                fus.sort_by(f64::total_cmp);
+                for fu in fus {
+                    let searched = locate.search(fu, fv, &u, &v, &h, &mesh.triangles);
+                    if let Some(along) = locate.along_row(fu, fv, &u, &v, &h, &mesh.triangles) {
+                        walked += 1;
+                        prop_assert!(
+                            (along - searched).abs() <= 1e-9 * (1.0 + searched.abs()),
+                            "at ({}, {}): the row gives {} where the triangle gives {}", fu, fv, along, searched
+                        );
+                    }
+                }
+            }
+            // Every point of a row is in some span (the spans tile the row).
+            prop_assert_eq!(walked, rows.len() * (cols.len() + 2));
+        }
+    }
 
     /// Regression (found by `tests/tin_tiles.rs`): a flat tile at 500 m got a step of
     /// 2^-20 m, and a base the binary32 header could not hold, so two tiles decoded a
