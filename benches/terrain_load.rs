@@ -1,9 +1,11 @@
 //! `fmrh serve`'s Cesium terrain under load: N concurrent clients (keep-alive HTTP/1.1,
 //! Cesium's `Accept` and gzip) fetching the tiles a fly-over asks for, on the bundled SRTM
 //! tile N43E006. Prints, for 1, 4, 16 and 64 clients: tiles a second, p50 and p99
-//! latency, the server's CPU seconds and its peak memory, first for cold tiles (every tile
-//! cut on the fly: each client count gets a fresh server) and then for repeated tiles (the
-//! same fly-over again, from the cache).
+//! latency, the server's CPU seconds and its peak memory, first for cold tiles (asked as
+//! soon as a fresh server listens: every tile cut on the fly but those its warming, which
+//! starts with it, has cut already), then for repeated tiles (the same fly-over again,
+//! from the cache), then cold again on another fresh server once it says it has cut its
+//! coarse tiles ahead (`fmrh: warmed ...`; a build that does not warm has no such row).
 //!
 //! The fly-over: a camera path across the tile from south-west to north-east, at each of 40
 //! stops asking the tiles a Cesium globe asks near the ground: the deepest level's 3 × 3
@@ -27,8 +29,9 @@ const ACCEPT: &str = "application/vnd.quantized-mesh;extensions=octvertexnormals
 struct Server {
     child: Child,
     address: String,
-    /// The server's stdout, kept open: the server writes its listing after the first line.
-    _stdout: BufReader<std::process::ChildStdout>,
+    /// The server's standard output after its first line, a line at a time (read on a
+    /// thread of its own, so the server never blocks on a full pipe).
+    lines: std::sync::mpsc::Receiver<String>,
 }
 
 impl Server {
@@ -39,9 +42,16 @@ impl Server {
             .stderr(Stdio::null())
             .spawn()
             .expect("fmrh serve starts");
-        let mut line = String::new();
-        let mut stdout = BufReader::new(child.stdout.take().unwrap());
-        stdout.read_line(&mut line).unwrap();
+        let stdout = BufReader::new(child.stdout.take().unwrap());
+        let (send, lines) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            for line in stdout.lines().map_while(Result::ok) {
+                if send.send(line).is_err() {
+                    break;
+                }
+            }
+        });
+        let line = lines.recv().expect("fmrh serve prints its address");
         let address = line
             .trim()
             .trim_start_matches("fmrh: serving on http://")
@@ -50,8 +60,22 @@ impl Server {
         Server {
             child,
             address,
-            _stdout: stdout,
+            lines,
         }
+    }
+
+    /// Waits (at most a minute) for the server to say it has cut its coarse tiles ahead:
+    /// the line, or `None` (a build that does not warm says nothing).
+    fn warmed(&self) -> Option<String> {
+        let until = Instant::now() + Duration::from_secs(60);
+        while let Some(left) = until.checked_duration_since(Instant::now()) {
+            match self.lines.recv_timeout(left) {
+                Ok(line) if line.starts_with("fmrh: warmed") => return Some(line),
+                Ok(_) => continue,
+                Err(_) => return None,
+            }
+        }
+        None
     }
 
     /// CPU seconds (user + system) and peak resident memory (MiB) so far.
@@ -272,9 +296,19 @@ fn main() {
     }
 }
 
-/// One row pair: `clients` clients on a fresh server (`binary`), cold then repeated.
+/// The rows of `clients` clients on a fresh server (`binary`): cold tiles asked at once
+/// (the server's warming, if it warms, racing them) then repeated; and, on another fresh
+/// server that says it warmed its coarse tiles, cold tiles asked after that.
 fn load(who: &str, binary: &str, container: &Path, name: &str, clients: usize) {
+    fly(who, binary, container, name, clients, false);
+    fly(who, binary, container, name, clients, true);
+}
+
+fn fly(who: &str, binary: &str, container: &Path, name: &str, clients: usize, warmed: bool) {
     let server = Server::start(binary, container);
+    if warmed && server.warmed().is_none() {
+        return;
+    }
     let mut c = Client::new(&server.address);
     let layer = {
         let request = format!(
@@ -300,7 +334,12 @@ fn load(who: &str, binary: &str, container: &Path, name: &str, clients: usize) {
     };
     drop(c);
     let tiles = fly_over(&layer);
-    for (kind, rounds) in [("cold", 1usize), ("repeated", 20)] {
+    let phases: &[(&str, usize)] = if warmed {
+        &[("cold after warming", 1)]
+    } else {
+        &[("cold", 1), ("repeated", 20)]
+    };
+    for &(kind, rounds) in phases {
         let (cpu0, _) = server.usage();
         let mut latencies = Vec::new();
         let mut wall = 0.0;

@@ -15,6 +15,8 @@
 //! * after an edit (`Terrain::edit`, a committed replace) the layer's version changes, a
 //!   tile the edit did not touch keeps its `ETag`, and a tile over it draws the new heights
 //!   under a new one;
+//! * the coarse levels are cut ahead at start and after each commit, with every
+//!   combination of extensions, the same bytes a server that does not warm cuts on request;
 //! * with `--vertical-datum egm96` every height is lifted by the EGM96 undulation, within
 //!   the declared error of the source plus `N`; `egm2008` is refused (no grid bundled);
 //! * bad requests (unknown names, levels past the deepest, columns past the level, wrong
@@ -357,6 +359,97 @@ fn an_edit_changes_the_tiles_it_touches_and_only_those() {
         kept > 0,
         "no tile was far from the edit: the field is too small for the check"
     );
+}
+
+/// Asks tile `path` of `served` with each combination of extensions: per combination,
+/// whether the cache held it, its `ETag` and its bytes.
+fn every_extension(served: &Served, path: &str) -> Vec<(String, String, Vec<u8>)> {
+    [
+        None,
+        Some("octvertexnormals"),
+        Some("metadata"),
+        Some("octvertexnormals-metadata"),
+    ]
+    .iter()
+    .map(|ext| {
+        let accept = ext.map(|e| format!("application/vnd.quantized-mesh;extensions={e}"));
+        let headers: Vec<(&str, &str)> = accept.iter().map(|a| ("Accept", a.as_str())).collect();
+        let a = served.ask("GET", path, &headers);
+        assert_eq!(a.status, 200, "{path} {ext:?}");
+        (
+            a.header("x-fmrh-cache").unwrap_or("").to_string(),
+            a.header("etag").unwrap().to_string(),
+            a.body,
+        )
+    })
+    .collect()
+}
+
+/// The coarse levels (up to five above the deepest) are cut ahead, at start and at the
+/// first request after a commit, with every combination of extensions: once the server
+/// says so (`fmrh: warmed ...`), each of their tiles is answered from the cache, the same
+/// bytes and `ETag` a server that does not warm (`--no-warm`) cuts on request; a finer
+/// tile is cut when asked.
+#[test]
+fn coarse_tiles_are_cut_ahead_at_start_and_after_each_commit() {
+    let dir = tempfile::tempdir().unwrap();
+    let f = field(-122.3, 47.2);
+    let path = container(dir.path(), "sound.fmrh", &f);
+    let warming = Served::start(&[&path]);
+    let line = warming.wait_line("fmrh: warmed");
+    let layer = warming.get("/sound.fmrh/layer.json").json();
+    let maxzoom = layer["maxzoom"].as_u64().unwrap() as usize;
+    let top = maxzoom - 5;
+    let version = layer["version"].as_str().unwrap().to_string();
+    assert!(
+        line.contains(&format!("levels 0..={top}, state {version})")),
+        "{line}"
+    );
+    let check = |warming: &Served, asking: &Served, layer: &serde_json::Value| {
+        let mut tiles = 0;
+        for z in 0..=top {
+            for (x, y) in level(&layer["available"], z) {
+                let tile = format!("/sound.fmrh/{z}/{x}/{y}.terrain");
+                let warm = every_extension(warming, &tile);
+                let cut = every_extension(asking, &tile);
+                for (w, c) in warm.iter().zip(&cut) {
+                    assert_eq!(w.0, "hit", "{tile}: not cut ahead");
+                    assert_eq!(c.0, "miss", "{tile}: --no-warm cut it ahead");
+                    assert_eq!((&w.1, &w.2), (&c.1, &c.2), "{tile}");
+                }
+                tiles += 1;
+            }
+        }
+        tiles
+    };
+    let asking = Served::start_with(&[&path], &["--no-warm"]);
+    let tiles = check(&warming, &asking, &layer);
+    assert!(
+        line.starts_with(&format!("fmrh: warmed {tiles} tiles")),
+        "{line}"
+    );
+    let (x, y) = level(&layer["available"], top + 1)[0];
+    let finer = every_extension(
+        &warming,
+        &format!("/sound.fmrh/{}/{x}/{y}.terrain", top + 1),
+    );
+    assert_eq!(finer[0].0, "miss");
+    assert_eq!(finer[1].0, "miss", "another extension is another cut");
+
+    // A commit: the first request at the new state starts its warming.
+    let patch = Heightfield::from_fn(12, 12, |x, y| f.get(x, y).unwrap() + 250.0).unwrap();
+    let terrain = Terrain::open(&path).unwrap();
+    let mut edit = terrain.edit().unwrap();
+    edit.replace(0, 0, patch).unwrap();
+    edit.commit().unwrap();
+    let after = warming.get("/sound.fmrh/layer.json").json();
+    let (x, y) = level(&after["available"], maxzoom)[0];
+    let deep = every_extension(&warming, &format!("/sound.fmrh/{maxzoom}/{x}/{y}.terrain"));
+    assert_eq!(deep[0].0, "miss");
+    let line = warming.wait_line("fmrh: warmed");
+    let version = after["version"].as_str().unwrap();
+    assert!(line.contains(&format!("state {version})")), "{line}");
+    assert_eq!(check(&warming, &asking, &after), tiles);
 }
 
 #[test]

@@ -36,6 +36,8 @@ pub struct Served {
     child: Child,
     /// `host:port`.
     pub address: String,
+    /// What it printed after its address, a line at a time.
+    lines: std::sync::Mutex<std::sync::mpsc::Receiver<String>>,
 }
 
 impl Served {
@@ -68,8 +70,35 @@ impl Served {
             .unwrap_or_else(|| panic!("unexpected first line from fmrh serve: {line:?}"))
             .to_string();
         // Keep reading its stdout, so it never blocks on a full pipe.
-        std::thread::spawn(move || std::io::copy(&mut reader, &mut std::io::sink()));
-        Served { child, address }
+        let (send, lines) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            for line in reader.lines().map_while(Result::ok) {
+                // Nobody listening: keep draining.
+                let _ = send.send(line);
+            }
+        });
+        Served {
+            child,
+            address,
+            lines: std::sync::Mutex::new(lines),
+        }
+    }
+
+    /// The next line the server prints that starts with `prefix` (the lines before it are
+    /// passed over); panics after two minutes without one.
+    pub fn wait_line(&self, prefix: &str) -> String {
+        let lines = self.lines.lock().unwrap();
+        let until = std::time::Instant::now() + std::time::Duration::from_secs(120);
+        loop {
+            let left = until
+                .checked_duration_since(std::time::Instant::now())
+                .unwrap_or_default();
+            match lines.recv_timeout(left) {
+                Ok(line) if line.starts_with(prefix) => return line,
+                Ok(_) => {}
+                Err(e) => panic!("fmrh serve printed no line starting {prefix:?}: {e}"),
+            }
+        }
     }
 
     /// `http://host:port`.

@@ -67,6 +67,11 @@ pub struct ServeArgs {
     /// Default: what the data's format says (SRTM and DTED: egm96), else unknown.
     #[arg(long, value_name = "DATUM", value_parser = crate::geoid::VerticalDatum::parse)]
     vertical_datum: Option<crate::geoid::VerticalDatum>,
+    /// Cesium terrain: cut each state's coarse tiles only when asked. By default they are
+    /// cut ahead on a thread of their own, at start and at the first request after each
+    /// commit (each measures its mesh against every sample under it: tens of ms).
+    #[arg(long)]
+    no_warm: bool,
 }
 
 /// A timeout in seconds: finite, more than 0, at most a day.
@@ -80,6 +85,7 @@ fn positive_seconds(text: &str) -> Result<f64, String> {
 }
 
 /// One served path.
+#[derive(Clone)]
 struct Item {
     /// Its address under `/files/` and its name in the API: the file or directory name.
     name: String,
@@ -193,11 +199,17 @@ pub fn run(args: &ServeArgs) -> Result<ExitCode, Error> {
         timeout: std::time::Duration::from_secs_f64(args.timeout),
         ..http::Limits::default()
     };
-    let cache = terrain::TileCache::default();
+    let cache = std::sync::Arc::new(terrain::TileCache::default());
     let options = terrain::Options {
         max_error: args.max_error,
         datum: args.vertical_datum,
+        warm: !args.no_warm,
     };
+    if options.warm {
+        for item in &items {
+            terrain::spawn_warm(item, &cache, options);
+        }
+    }
     http::serve(listener, limits, move |request| {
         answer(&items, &cache, options, request)
     });
@@ -233,7 +245,7 @@ fn fmrh_error(e: &Error) -> Answer {
 
 fn answer(
     items: &[Item],
-    cache: &terrain::TileCache,
+    cache: &std::sync::Arc<terrain::TileCache>,
     options: terrain::Options,
     request: &Request,
 ) -> Answer {

@@ -46,7 +46,34 @@ pub struct Options {
     pub max_error: Option<f64>,
     /// What the heights are above; `None`: what each terrain's format says.
     pub datum: Option<VerticalDatum>,
+    /// Whether each state's coarse tiles are cut ahead ([`warm`]).
+    pub warm: bool,
 }
+
+/// Levels at least this many above the deepest are the coarse ones [`warm`] cuts ahead:
+/// each of their tiles holds 2^10 or more of the deepest level's tiles, and measures its
+/// TIN against every data sample under it.
+const WARM_ABOVE_DEEPEST: u8 = 5;
+
+/// Every combination of extensions a client may ask: a tile warmed is encoded for each.
+const ALL_EXTENSIONS: [Extensions; 4] = [
+    Extensions {
+        normals: false,
+        metadata: false,
+    },
+    Extensions {
+        normals: true,
+        metadata: false,
+    },
+    Extensions {
+        normals: false,
+        metadata: true,
+    },
+    Extensions {
+        normals: true,
+        metadata: true,
+    },
+];
 
 /// The extensions a tile is written with.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -182,15 +209,16 @@ impl TileCache {
         Some(hit)
     }
 
-    /// The edge cache of `item` at state `version` (a new one when the state changed).
-    fn edges(&self, item: &str, version: &str) -> Arc<EdgeCache> {
+    /// The edge cache of `item` at state `version` (a new one when the state changed), and
+    /// whether this call made it: the first look at a new state.
+    fn edges(&self, item: &str, version: &str) -> (Arc<EdgeCache>, bool) {
         let mut all = self.edges.lock().unwrap_or_else(|p| p.into_inner());
         match all.get(item) {
-            Some((v, cache)) if v == version => cache.clone(),
+            Some((v, cache)) if v == version => (cache.clone(), false),
             _ => {
                 let cache = Arc::new(EdgeCache::default());
                 all.insert(item.to_string(), (version.to_string(), cache.clone()));
-                cache
+                (cache, true)
             }
         }
     }
@@ -251,7 +279,7 @@ pub fn is_address(items: &[Item], path: &str) -> bool {
 /// a terrain address (`/NAME/layer.json`, `/NAME/Z/X/Y.terrain`) of a served item.
 pub fn route(
     items: &[Item],
-    cache: &TileCache,
+    cache: &Arc<TileCache>,
     options: Options,
     path: &str,
     query: &str,
@@ -319,7 +347,7 @@ fn version(item: &Item, txn: u64) -> String {
 
 fn answer(
     item: &Item,
-    cache: &TileCache,
+    cache: &Arc<TileCache>,
     options: Options,
     asked: &Asked,
     query: &str,
@@ -377,27 +405,23 @@ fn answer(
             let mut slot = None;
             let hit = cache.get(&key).or_else(|| {
                 slot = Some(cache.gate.enter());
-                // Another request may have cut it while this one waited.
+                // Another request (or the warming) may have cut it while this one waited.
                 cache.get(&key)
             });
-            let (plain, zipped, tag) = match hit {
-                Some(hit) => (hit.plain, hit.gzip, hit.tag),
+            let from_cache = hit.is_some();
+            let Cached {
+                plain,
+                gzip: zipped,
+                tag,
+            } = match hit {
+                Some(hit) => hit,
                 None => {
-                    let edges = cache.edges(&item.name, &version);
+                    let (edges, new_state) = cache.edges(&item.name, &version);
+                    if new_state && options.warm {
+                        spawn_warm(item, cache, options);
+                    }
                     let cut = tileset.cut(*t, |w, bound| cut_blocks(&terrain, w, bound), &edges)?;
-                    let plain = Tileset::encode(&cut, ext.normals, ext.metadata)?;
-                    let mut h = std::collections::hash_map::DefaultHasher::new();
-                    plain.hash(&mut h);
-                    let tag = h.finish();
-                    let mut enc =
-                        flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::new(5));
-                    let zipped = enc
-                        .write_all(&plain)
-                        .and_then(|()| enc.finish())
-                        .map_err(|e| Error::InvalidArgument(format!("gzip: {e}")))?;
-                    let (plain, zipped) = (Arc::new(plain), Arc::new(zipped));
-                    cache.put(key, plain.clone(), zipped.clone(), tag);
-                    (plain, zipped, tag)
+                    put_encoded(cache, &item.name, &version, *t, &cut, &[ext])?.0
                 }
             };
             drop(slot);
@@ -431,6 +455,7 @@ fn answer(
                 plain.as_ref().clone()
             };
             let mut r = Response::new(status, &content_type, Body::Bytes(body))
+                .with("X-Fmrh-Cache", if from_cache { "hit" } else { "miss" })
                 .with("ETag", etag)
                 .with("Cache-Control", cache_control)
                 .with("Vary", "Accept, Accept-Encoding");
@@ -440,6 +465,121 @@ fn answer(
             Ok(with_cors(r))
         }
     }
+}
+
+/// Encodes cut tile `t` of `item` at `version` with each of `exts`, puts each (with its
+/// gzip form and tag) in the cache, and returns the first.
+fn put_encoded(
+    cache: &TileCache,
+    item: &str,
+    version: &str,
+    t: GeodeticTile,
+    cut: &crate::export::tin_tile::TinTile,
+    exts: &[Extensions],
+) -> Result<(Cached, usize), Error> {
+    let mut first = None;
+    let mut bytes = 0;
+    for &ext in exts {
+        let plain = Tileset::encode(cut, ext.normals, ext.metadata)?;
+        let mut h = std::collections::hash_map::DefaultHasher::new();
+        plain.hash(&mut h);
+        let tag = h.finish();
+        let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::new(5));
+        let zipped = enc
+            .write_all(&plain)
+            .and_then(|()| enc.finish())
+            .map_err(|e| Error::InvalidArgument(format!("gzip: {e}")))?;
+        bytes += plain.len() + zipped.len();
+        let (plain, gzip) = (Arc::new(plain), Arc::new(zipped));
+        let key: Key = (item.to_string(), version.to_string(), t, ext);
+        cache.put(key, plain.clone(), gzip.clone(), tag);
+        first.get_or_insert(Cached { plain, gzip, tag });
+    }
+    let first = first
+        .ok_or_else(|| Error::InvalidArgument("no extensions to encode a tile with".into()))?;
+    Ok((first, bytes))
+}
+
+/// Cuts `item`'s warming ([`warm`]) on a thread of its own, and says on standard output
+/// what it cut: `fmrh: warmed N tiles of NAME (levels 0..=K, state V) in S s`, or why not.
+pub fn spawn_warm(item: &Item, cache: &Arc<TileCache>, options: Options) {
+    let (item, cache) = (item.clone(), Arc::clone(cache));
+    let spawned = std::thread::Builder::new()
+        .name(format!("warm {}", item.name))
+        .spawn(move || {
+            let started = std::time::Instant::now();
+            let line = match warm(&item, &cache, options) {
+                Ok(Some((n, top, version))) => format!(
+                    "fmrh: warmed {n} tiles of {} (levels 0..={top}, state {version}) in {:.2} s",
+                    item.name,
+                    started.elapsed().as_secs_f64()
+                ),
+                Ok(None) => return,
+                Err(e) => format!("fmrh: warming {} stopped: {e}", item.name),
+            };
+            let mut out = std::io::stdout().lock();
+            let _ = writeln!(out, "{line}");
+            let _ = out.flush();
+        });
+    // No thread to be had: the tiles are cut when asked, as without warming.
+    drop(spawned);
+}
+
+/// Cuts the coarse tiles of `item`'s current state (levels up to the deepest less
+/// [`WARM_ABOVE_DEEPEST`], where the data is, coarsest first) into the cache, encoded with
+/// every combination of extensions, each through the gate in its turn like a client's. A
+/// coarse tile measures its TIN against every sample under it (tens of milliseconds of a
+/// core); over one SRTM tile they are few (about one a level, then four, then sixteen),
+/// and cut ahead no client waits for them. Over a wide dataset they are many: the warming
+/// stops once it has put a quarter of the cache's bytes in, so it never pushes out what
+/// clients asked, and the finer of them are cut when asked. Returns how many were cut, the
+/// last level and the state; `None` when the item has no terrain or no level is coarse.
+fn warm(
+    item: &Item,
+    cache: &TileCache,
+    options: Options,
+) -> Result<Option<(usize, u8, String)>, Error> {
+    let terrain = Terrain::open(&item.path)?;
+    let info = terrain.info()?;
+    let datum = options.datum.unwrap_or(info.vertical_datum);
+    let Ok(tileset) = Tileset::new(&shape_of(&info), options.max_error, datum) else {
+        return Ok(None);
+    };
+    let version = version(item, info.txn_id);
+    let Some(top) = tileset.maxzoom().checked_sub(WARM_ABOVE_DEEPEST) else {
+        return Ok(None);
+    };
+    let (edges, _) = cache.edges(&item.name, &version);
+    let (mut n, mut bytes) = (0, 0);
+    for z in 0..=top {
+        let Some((x0, y0, x1, y1)) = tileset.available(z) else {
+            continue;
+        };
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                let t = GeodeticTile { z, x, y };
+                if !tileset.has(t) {
+                    continue;
+                }
+                let _slot = cache.gate.enter();
+                let asked = ALL_EXTENSIONS.iter().all(|&e| {
+                    cache
+                        .get(&(item.name.clone(), version.clone(), t, e))
+                        .is_some()
+                });
+                if asked {
+                    continue;
+                }
+                if bytes > CACHE_BYTES / 4 {
+                    return Ok(Some((n, z, version)));
+                }
+                let cut = tileset.cut(t, |w, bound| cut_blocks(&terrain, w, bound), &edges)?;
+                bytes += put_encoded(cache, &item.name, &version, t, &cut, &ALL_EXTENSIONS)?.1;
+                n += 1;
+            }
+        }
+    }
+    Ok(Some((n, top, version)))
 }
 
 /// What the tileset needs of a terrain's [`Info`](crate::terrain::Info).
