@@ -19,20 +19,6 @@ use std::process::Command;
 use common::quantized_mesh::Source;
 use common::serve::Served;
 
-fn fmrh_ok(args: &[&str]) {
-    let out = common::fmrh(args);
-    assert!(
-        out.status.success(),
-        "fmrh {}: {}",
-        args.join(" "),
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
-
-fn load(p: &Path) -> fmrh::Heightfield {
-    fmrh::ingest::load(p, &fmrh::ingest::IngestOptions::default()).expect("the DEM loads")
-}
-
 /// Runs `tests/js/cesium-globe.mjs` on the layer at `url`: its JSON report.
 fn globe(
     url: &str,
@@ -96,7 +82,7 @@ fn cesium_in_chromium_draws_the_served_globe_and_samples_it_within_its_errors() 
     let srtm = common::bundled_dir().join("srtm3-pyhgtmap");
     let (west, east) = (srtm.join("N43E006.hgt.gz"), srtm.join("N43E007.hgt.gz"));
     let tile = dir.path().join("n43e006.fmrh");
-    fmrh_ok(&[
+    common::fmrh_ok(&[
         "build",
         "-q",
         west.to_str().unwrap(),
@@ -104,7 +90,7 @@ fn cesium_in_chromium_draws_the_served_globe_and_samples_it_within_its_errors() 
         tile.to_str().unwrap(),
     ]);
     let ds = dir.path().join("alps");
-    fmrh_ok(&[
+    common::fmrh_ok(&[
         "dataset",
         "build",
         "-q",
@@ -116,10 +102,14 @@ fn cesium_in_chromium_draws_the_served_globe_and_samples_it_within_its_errors() 
         ds.to_str().unwrap(),
     ]);
     let cases: Vec<(PathBuf, Source, &str)> = vec![
-        (tile, Source::of(&load(&west)), "6.55,43.05,14000,0,-30"),
+        (
+            tile,
+            Source::of(&common::load_dem(&west)),
+            "6.55,43.05,14000,0,-30",
+        ),
         (
             ds,
-            Source::beside(&load(&west), &load(&east)),
+            Source::beside(&common::load_dem(&west), &common::load_dem(&east)),
             "7.0,42.95,26000,0,-25",
         ),
     ];

@@ -15,20 +15,6 @@ use std::path::{Path, PathBuf};
 use common::quantized_mesh::Source;
 use common::serve::Served;
 
-fn fmrh_ok(args: &[&str]) {
-    let out = common::fmrh(args);
-    assert!(
-        out.status.success(),
-        "fmrh {}: {}",
-        args.join(" "),
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
-
-fn load(p: &Path) -> fmrh::Heightfield {
-    fmrh::ingest::load(p, &fmrh::ingest::IngestOptions::default()).expect("the DEM loads")
-}
-
 #[test]
 fn cesium_reads_the_served_terrain_within_its_errors() {
     let dir = tempfile::tempdir().unwrap();
@@ -40,18 +26,18 @@ fn cesium_reads_the_served_terrain_within_its_errors() {
     ] {
         let dem = common::data(rel);
         let out = dir.path().join(rel.replace(['/', '.'], "_") + ".fmrh");
-        fmrh_ok(&[
+        common::fmrh_ok(&[
             "build",
             "-q",
             dem.to_str().unwrap(),
             "-o",
             out.to_str().unwrap(),
         ]);
-        cases.push((out, Source::of(&load(&dem))));
+        cases.push((out, Source::of(&common::load_dem(&dem))));
     }
     let tiles = data.join("srtm3-pyhgtmap");
     let ds = dir.path().join("ds");
-    fmrh_ok(&[
+    common::fmrh_ok(&[
         "dataset",
         "build",
         "-q",
@@ -65,8 +51,8 @@ fn cesium_reads_the_served_terrain_within_its_errors() {
     cases.push((
         ds,
         Source::beside(
-            &load(&tiles.join("N43E006.hgt")),
-            &load(&tiles.join("N43E007.hgt")),
+            &common::load_dem(&tiles.join("N43E006.hgt")),
+            &common::load_dem(&tiles.join("N43E007.hgt")),
         ),
     ));
     let paths: Vec<&Path> = cases.iter().map(|(p, _)| p.as_path()).collect();

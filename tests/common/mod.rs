@@ -72,6 +72,22 @@ pub fn fmrh(args: &[&str]) -> std::process::Output {
         .expect("the fmrh binary runs")
 }
 
+/// Runs `fmrh` and fails the test, with its stderr, unless it succeeds.
+pub fn fmrh_ok(args: &[&str]) {
+    let out = fmrh(args);
+    assert!(
+        out.status.success(),
+        "fmrh {}: {}",
+        args.join(" "),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// A DEM file read as `build` reads it, with the default options.
+pub fn load_dem(p: &std::path::Path) -> fmrh::Heightfield {
+    fmrh::ingest::load(p, &fmrh::ingest::IngestOptions::default()).expect("the DEM loads")
+}
+
 /// The JSON a successful `fmrh` run printed; fails the test with its stderr otherwise.
 pub fn ok_json(out: &std::process::Output) -> serde_json::Value {
     assert!(

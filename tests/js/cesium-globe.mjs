@@ -19,7 +19,7 @@ import os from 'os';
 import path from 'path';
 import { fileURLToPath } from 'url';
 import * as esbuild from 'esbuild';
-import { chromium } from 'playwright-core';
+import { launch } from './chromium.mjs';
 
 const [layerUrl, pointsFile, cameraArg, screenshot] = process.argv.slice(2);
 if (!layerUrl || !pointsFile || !cameraArg || !screenshot) {
@@ -88,23 +88,7 @@ const server = http.createServer((req, res) => {
 await new Promise((resolve) => server.listen(0, '127.0.0.1', resolve));
 const origin = `http://127.0.0.1:${server.address().port}`;
 
-const browser = await chromium.launch({
-  executablePath: process.env.CHROMIUM || '/usr/bin/chromium',
-  headless: true,
-  args: [
-    '--no-sandbox',
-    // WebGL on the CPU: this machine has no GPU.
-    '--use-angle=swiftshader',
-    '--enable-unsafe-swiftshader',
-    '--ignore-gpu-blocklist',
-    // The machine's network is closed: no background connections to Google.
-    '--disable-background-networking',
-    '--disable-component-update',
-    '--disable-sync',
-    '--disable-quic',
-    '--no-first-run',
-  ],
-});
+const browser = await launch();
 let status = 0;
 try {
   const tab = await browser.newPage({ viewport: { width: 960, height: 600 } });

@@ -7,7 +7,7 @@
 //
 // CHROMIUM names the browser (default /usr/bin/chromium). Exit status 1 with a message on
 // standard error when the page fails or times out.
-import { chromium } from 'playwright-core';
+import { launch } from './chromium.mjs';
 
 const [url, screenshot, pointsJson] = process.argv.slice(2);
 if (!url || !screenshot) {
@@ -16,23 +16,7 @@ if (!url || !screenshot) {
 }
 const points = JSON.parse(pointsJson || '[]');
 
-const browser = await chromium.launch({
-  executablePath: process.env.CHROMIUM || '/usr/bin/chromium',
-  headless: true,
-  args: [
-    '--no-sandbox',
-    // WebGL on the CPU: this machine has no GPU.
-    '--use-angle=swiftshader',
-    '--enable-unsafe-swiftshader',
-    '--ignore-gpu-blocklist',
-    // The machine's network is closed: no background connections to Google.
-    '--disable-background-networking',
-    '--disable-component-update',
-    '--disable-sync',
-    '--disable-quic',
-    '--no-first-run',
-  ],
-});
+const browser = await launch();
 let status = 0;
 try {
   const page = await browser.newPage({ viewport: { width: 960, height: 600 } });
