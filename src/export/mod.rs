@@ -9,5 +9,6 @@ pub mod geodetic_mesh;
 pub mod geotiff;
 pub mod gltf;
 pub mod quantized_mesh;
+pub mod terrain_rgb;
 pub mod tileset;
 pub mod tin_tile;

@@ -32,6 +32,7 @@ use crate::scene::{Camera, SceneStats, Terrain, DEFAULT_GAP};
 use crate::Error;
 
 mod terrain;
+mod terrain_rgb;
 
 use super::args::RefineArg;
 use super::args::{ModeArg, ViewArgs};
@@ -262,6 +263,9 @@ fn answer(
         && terrain::is_address(items, &path);
     match (method, terrain) {
         ("GET" | "HEAD" | "OPTIONS", true) => {
+            if let Some(r) = terrain_rgb::route(items, &path, query, request) {
+                return r;
+            }
             if let Some(r) = terrain::route(items, cache, options, &path, query, request) {
                 return r;
             }

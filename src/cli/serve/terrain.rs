@@ -248,12 +248,12 @@ impl TileCache {
     }
 }
 
-fn with_cors(r: Response) -> Response {
+pub(super) fn with_cors(r: Response) -> Response {
     r.with("Access-Control-Allow-Origin", "*")
         .with("Access-Control-Expose-Headers", "ETag, Content-Encoding")
 }
 
-fn text_error(status: u16, message: impl Into<String>) -> Response {
+pub(super) fn text_error(status: u16, message: impl Into<String>) -> Response {
     let body =
         serde_json::to_vec(&serde_json::json!({ "error": message.into() })).unwrap_or_default();
     with_cors(
@@ -333,7 +333,7 @@ pub fn route(
 }
 
 /// The state's version: its transaction id and the identity of the file that holds it.
-fn version(item: &Item, txn: u64) -> String {
+pub(super) fn version(item: &Item, txn: u64) -> String {
     let file = if item.dataset {
         item.path.join("MANIFEST")
     } else {
@@ -593,7 +593,7 @@ pub fn shape_of(info: &crate::terrain::Info) -> DataShape {
 }
 
 /// The blocks of `terrain`'s cut over `window` within `bound`, as the tileset takes them.
-fn cut_blocks(
+pub(super) fn cut_blocks(
     terrain: &Terrain,
     window: crate::model::SampleRect,
     bound: f64,
