@@ -23,7 +23,7 @@ use serde_json::{json, Value};
 
 use crate::error::{Error, Result};
 use crate::export::geodetic_mesh::Placement;
-use crate::export::tileset::{CutBlock, DataShape};
+use crate::export::tileset::{window_in, CutBlock, DataShape};
 use crate::model::SampleRect;
 use crate::scene::surface::{GridBlock, Surface};
 
@@ -211,39 +211,13 @@ impl RgbTiles {
     /// The samples tile `t` draws from (its box placed, with two samples of margin);
     /// `None` off the data.
     pub fn window(&self, t: MercatorTile) -> Option<SampleRect> {
-        let [w, s, e, n] = t.bounds();
-        let [dw, ds, de, dn] = self.data_box;
-        let clip = [w.max(dw), s.max(ds), e.min(de), n.min(dn)];
-        if !(clip[0] <= clip[2] && clip[1] <= clip[3]) {
-            return None;
-        }
-        let [c0, r0, c1, r1] = self.placement.span_of(clip)?;
-        let d = self.data;
-        let lo = |x: f64, max: u64| ((x - 2.0).floor().max(0.0) as u64).min(max);
-        let hi = |x: f64, max: u64| ((x + 2.0).ceil().max(0.0) as u64).min(max);
-        let rect = SampleRect {
-            col0: lo(c0, d.col1),
-            row0: lo(r0, d.row1),
-            col1: hi(c1, d.col1),
-            row1: hi(r1, d.row1),
-        };
-        (rect.col0 <= rect.col1 && rect.row0 <= rect.row1).then_some(rect)
+        window_in(&self.placement, self.data, self.data_box, t.bounds())
     }
 
     /// The height at each pixel centre of tile `t` (`size × size`, rows from the north),
     /// drawn by `blocks`; NaN where none holds the point.
     pub fn heights(&self, t: MercatorTile, size: u32, blocks: &[CutBlock]) -> Vec<f64> {
-        let grids: Vec<GridBlock<'_>> = blocks
-            .iter()
-            .map(|b| GridBlock {
-                rect: b.rect,
-                stride: b.stride,
-                grid_width: b.width,
-                grid_height: b.height,
-                heights: &b.heights,
-                error: b.error,
-            })
-            .collect();
+        let grids: Vec<GridBlock<'_>> = blocks.iter().map(CutBlock::grid).collect();
         let surface = Surface::new(grids);
         let k = f64::from(size);
         let centres: Vec<[f64; 2]> = (0..size)

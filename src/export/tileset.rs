@@ -92,6 +92,46 @@ pub struct CutBlock {
     pub error: f64,
 }
 
+impl CutBlock {
+    /// The block as the surface reads it.
+    pub fn grid(&self) -> GridBlock<'_> {
+        GridBlock {
+            rect: self.rect,
+            stride: self.stride,
+            grid_width: self.width,
+            grid_height: self.height,
+            heights: &self.heights,
+            error: self.error,
+        }
+    }
+}
+
+/// The samples of `data` (placed by `placement`) under the longitude and latitude box
+/// `b`, widened by two samples (a projected box's edges bow between the points placed);
+/// `None` when the box misses `data_box` or cannot be placed.
+pub(crate) fn window_in(
+    placement: &Placement,
+    data: SampleRect,
+    data_box: [f64; 4],
+    b: [f64; 4],
+) -> Option<SampleRect> {
+    let [dw0, ds0, de0, dn0] = data_box;
+    if b[0] > de0 || b[2] < dw0 || b[1] > dn0 || b[3] < ds0 {
+        return None;
+    }
+    let clip = [b[0].max(dw0), b[1].max(ds0), b[2].min(de0), b[3].min(dn0)];
+    let [c0, r0, c1, r1] = placement.span_of(clip)?;
+    let lo = |x: f64, max: u64| ((x - 2.0).floor().max(0.0) as u64).min(max);
+    let hi = |x: f64, max: u64| ((x + 2.0).ceil().max(0.0) as u64).min(max);
+    let rect = SampleRect {
+        col0: lo(c0, data.col1),
+        row0: lo(r0, data.row1),
+        col1: hi(c1, data.col1),
+        row1: hi(r1, data.row1),
+    };
+    (rect.col0 <= rect.col1 && rect.row0 <= rect.row1).then_some(rect)
+}
+
 /// The [`Edges`] of tiles already meshed, for one state of one terrain and one tileset:
 /// a tile cut after its neighbours takes their edges from here instead of meshing them
 /// again. Dropped whole past [`EdgeCache::MAX`] tiles.
@@ -312,23 +352,7 @@ impl Tileset {
         let (dw, dh) = (e - w, n - s);
         let pad = 1.0 + 2.0 / 64.0;
         let b = [w - dw * pad, s - dh * pad, e + dw * pad, n + dh * pad];
-        let [dw0, ds0, de0, dn0] = self.data_box;
-        if b[0] > de0 || b[2] < dw0 || b[1] > dn0 || b[3] < ds0 {
-            return None;
-        }
-        let clip = [b[0].max(dw0), b[1].max(ds0), b[2].min(de0), b[3].min(dn0)];
-        let [c0, r0, c1, r1] = self.placement.span_of(clip)?;
-        // A projected box's edges bow between the points placed: two samples of margin.
-        let d = self.data;
-        let lo = |x: f64, max: u64| ((x - 2.0).floor().max(0.0) as u64).min(max);
-        let hi = |x: f64, max: u64| ((x + 2.0).ceil().max(0.0) as u64).min(max);
-        let rect = SampleRect {
-            col0: lo(c0, d.col1),
-            row0: lo(r0, d.row1),
-            col1: hi(c1, d.col1),
-            row1: hi(r1, d.row1),
-        };
-        (rect.col0 <= rect.col1 && rect.row0 <= rect.row1).then_some(rect)
+        window_in(&self.placement, self.data, self.data_box, b)
     }
 
     /// Cuts tile `t` from the blocks `cut(window, bound)` gives (`Terrain::cut`): the
@@ -353,17 +377,7 @@ impl Tileset {
             Some(w) => cut(w, cut_bound)?,
             None => Vec::new(),
         };
-        let blocks: Vec<GridBlock<'_>> = cut_blocks
-            .iter()
-            .map(|b| GridBlock {
-                rect: b.rect,
-                stride: b.stride,
-                grid_width: b.width,
-                grid_height: b.height,
-                heights: &b.heights,
-                error: b.error,
-            })
-            .collect();
+        let blocks: Vec<GridBlock<'_>> = cut_blocks.iter().map(CutBlock::grid).collect();
         let levels: std::collections::BTreeSet<u8> = cut_blocks.iter().map(|b| b.level).collect();
         let surface = Surface::new(blocks);
         let (mut tin, learnt) = tin_tile::tin_tile(

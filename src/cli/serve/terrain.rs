@@ -296,12 +296,7 @@ pub fn route(
             return None;
         };
         let y = y.strip_suffix(".terrain")?;
-        let number = |s: &str| -> Option<u32> {
-            (!s.is_empty() && s.len() <= 10 && s.bytes().all(|b| b.is_ascii_digit()))
-                .then(|| s.parse().ok())
-                .flatten()
-        };
-        match (number(z), number(x), number(y)) {
+        match (tile_number(z), tile_number(x), tile_number(y)) {
             (Some(z), Some(x), Some(y)) if z <= 255 => {
                 Asked::Tile(GeodeticTile { z: z as u8, x, y })
             }
@@ -319,17 +314,25 @@ pub fn route(
                 .with("Access-Control-Max-Age", "86400"),
         ));
     }
-    Some(match answer(item, cache, options, &asked, query, request) {
-        Ok(r) => r,
-        Err(e) => {
-            let status = match &e {
-                Error::InvalidArgument(_) => 404,
-                Error::Input { .. } | Error::Unsupported { .. } | Error::Corrupt { .. } => 422,
-                _ => 500,
-            };
-            text_error(status, e.to_string())
-        }
-    })
+    Some(answer(item, cache, options, &asked, query, request).unwrap_or_else(failed))
+}
+
+/// A tile address's number: decimal digits only, at most ten of them.
+pub(super) fn tile_number(s: &str) -> Option<u32> {
+    (!s.is_empty() && s.len() <= 10 && s.bytes().all(|b| b.is_ascii_digit()))
+        .then(|| s.parse().ok())
+        .flatten()
+}
+
+/// The answer for a tile that could not be made: the request's fault (404: nothing
+/// there), a file that is not a usable container (422), or the server's (500).
+pub(super) fn failed(e: Error) -> Response {
+    let status = match &e {
+        Error::InvalidArgument(_) => 404,
+        Error::Input { .. } | Error::Unsupported { .. } | Error::Corrupt { .. } => 422,
+        _ => 500,
+    };
+    text_error(status, e.to_string())
 }
 
 /// The state's version: its transaction id and the identity of the file that holds it.

@@ -15,7 +15,7 @@ use crate::http::{Body, Request, Response};
 use crate::terrain::Terrain;
 use crate::Error;
 
-use super::terrain::{cut_blocks, shape_of, text_error, version, with_cors};
+use super::terrain::{cut_blocks, failed, shape_of, text_error, tile_number, version, with_cors};
 use super::Item;
 
 /// What was asked of one item.
@@ -47,12 +47,7 @@ pub fn route(items: &[Item], path: &str, query: &str, request: &Request) -> Opti
                 format!("`{tail}`: terrain-RGB tiles are PNG (Z/X/Y.png)"),
             ));
         };
-        let number = |s: &str| -> Option<u32> {
-            (!s.is_empty() && s.len() <= 10 && s.bytes().all(|b| b.is_ascii_digit()))
-                .then(|| s.parse().ok())
-                .flatten()
-        };
-        match (number(z), number(x), number(y)) {
+        match (tile_number(z), tile_number(x), tile_number(y)) {
             (Some(z), Some(x), Some(y)) if z <= 255 => {
                 Asked::Tile(MercatorTile { z: z as u8, x, y })
             }
@@ -72,17 +67,7 @@ pub fn route(items: &[Item], path: &str, query: &str, request: &Request) -> Opti
                 .with("Access-Control-Max-Age", "86400"),
         ));
     }
-    Some(match answer(item, &asked, query, request) {
-        Ok(r) => r,
-        Err(e) => {
-            let status = match &e {
-                Error::InvalidArgument(_) => 404,
-                Error::Input { .. } | Error::Unsupported { .. } | Error::Corrupt { .. } => 422,
-                _ => 500,
-            };
-            text_error(status, e.to_string())
-        }
-    })
+    Some(answer(item, &asked, query, request).unwrap_or_else(failed))
 }
 
 /// The encoding, size and version a query names; an error names a bad one.
