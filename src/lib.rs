@@ -112,6 +112,7 @@ rooms!(
     mesh,
     model,
     progress,
+    pyramid,
     render,
     scene,
     store,

@@ -18,6 +18,7 @@ const LAYERS: &[&[&str]] = &[
     &["mesh", "render", "export"],
     &["dataset"],
     &["terrain"],
+    &["pyramid"],
     &["cli"],
 ];
 

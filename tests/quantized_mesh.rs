@@ -207,7 +207,7 @@ fn quantized_mesh_refuses_what_it_cannot_write() {
     let strays: Vec<_> = std::fs::read_dir(dir.path())
         .unwrap()
         .filter_map(|e| e.ok())
-        .filter(|e| e.file_name().to_string_lossy().starts_with(".fmrh-tiles"))
+        .filter(|e| e.file_name().to_string_lossy().starts_with('.'))
         .collect();
     assert!(strays.is_empty());
 }

@@ -9,8 +9,9 @@
 //!   encodings and both sizes, the height is within the tile's bound (its smallest pixel on
 //!   the ground: the blocks it is cut from are within it) plus half the encoding's step of
 //!   the source's own surface at the pixel's centre (each sample cell's two triangles, as
-//!   fmrh's surface draws them, so the bound holds between samples too), and a pixel is
-//!   transparent exactly when its centre is off the data;
+//!   fmrh's surface draws them, so the bound holds between samples too), and a pixel
+//!   holds the no-data fill (opaque sea level by default, `?nodata=` a height or
+//!   transparent) exactly when its centre is off the data;
 //! * answers carry an `ETag` (a matching `If-None-Match` gets `304`) and CORS headers;
 //! * bad requests (a zoom past the deepest or past Web Mercator's, a column past the
 //!   zoom, a tile off the data, another extension, an unknown encoding, size or
@@ -20,55 +21,7 @@ mod common;
 
 use common::serve::Served;
 
-const EQUATOR_M: f64 = 40_075_016.686;
-
-/// Longitude and latitude (degrees) of the point `(fx, fy)` tiles from tile `z/x/y`'s
-/// north-west corner.
-fn lon_lat(z: u32, x: u32, y: u32, fx: f64, fy: f64) -> [f64; 2] {
-    let n = f64::from(1u32 << z);
-    let lon = (f64::from(x) + fx) / n * 360.0 - 180.0;
-    let m = std::f64::consts::PI * (1.0 - 2.0 * (f64::from(y) + fy) / n);
-    [lon, m.sinh().atan().to_degrees()]
-}
-
-/// The tile holding `(lon, lat)` at zoom `z`.
-fn tile_of(z: u32, lon: f64, lat: f64) -> (u32, u32) {
-    let n = f64::from(1u32 << z);
-    let x = ((lon + 180.0) / 360.0 * n) as u32;
-    let r = lat.to_radians();
-    let y = ((1.0 - (r.tan() + 1.0 / r.cos()).ln() / std::f64::consts::PI) / 2.0 * n) as u32;
-    (x, y)
-}
-
-fn decode(encoding: &str, px: &[u8]) -> Option<f64> {
-    if px[3] == 0 {
-        return None;
-    }
-    let (r, g, b) = (f64::from(px[0]), f64::from(px[1]), f64::from(px[2]));
-    Some(match encoding {
-        "mapbox" => -10_000.0 + (r * 65_536.0 + g * 256.0 + b) * 0.1,
-        _ => r * 256.0 + g + b / 256.0 - 32_768.0,
-    })
-}
-
-/// N43E006 (1201², 3", north-west sample at 6° E, 44° N) drawn between its samples as
-/// each cell's two triangles, split from north-west to south-east: `None` off the data.
-fn source_at(samples: &[f32], lon: f64, lat: f64) -> Option<f64> {
-    let step = 1.0 / 1200.0;
-    let (u, v) = ((lon - 6.0) / step, (44.0 - lat) / step);
-    if !(0.0..=1200.0).contains(&u) || !(0.0..=1200.0).contains(&v) {
-        return None;
-    }
-    let (i, j) = ((u as usize).min(1199), (v as usize).min(1199));
-    let (fu, fv) = (u - i as f64, v - j as f64);
-    let at = |i: usize, j: usize| f64::from(samples[j * 1201 + i]);
-    let (nw, ne, sw, se) = (at(i, j), at(i + 1, j), at(i, j + 1), at(i + 1, j + 1));
-    Some(if fu >= fv {
-        (1.0 - fu) * nw + (fu - fv) * ne + fv * se
-    } else {
-        (1.0 - fv) * nw + (fv - fu) * sw + fu * se
-    })
-}
+use common::mercator::{decode, lon_lat, n43e006_at as source_at, rgba, tile_of, EQUATOR_M};
 
 #[test]
 fn served_tiles_hold_the_source_within_their_pixel() {
@@ -121,16 +74,23 @@ fn served_tiles_hold_the_source_within_their_pixel() {
     assert_eq!(tj512["maxzoom"], 10);
 
     let mut checked = 0usize;
-    for (z, encoding, size, lon, lat) in [
-        (11, "mapbox", 256u32, 6.5, 43.5),
-        (10, "terrarium", 512, 6.93, 43.02),
-        (8, "mapbox", 256, 6.2, 43.9),
-        (5, "terrarium", 256, 6.5, 43.5),
+    for (z, encoding, size, nodata, lon, lat) in [
+        (11, "mapbox", 256u32, "", 6.5, 43.5),
+        (10, "terrarium", 512, "&nodata=transparent", 6.93, 43.02),
+        (8, "mapbox", 256, "&nodata=transparent", 6.2, 43.9),
+        (5, "terrarium", 256, "", 6.5, 43.5),
+        (7, "mapbox", 512, "&nodata=-20.5", 6.5, 43.5),
     ] {
         let (x, y) = tile_of(z, lon, lat);
         let path = format!(
-            "/n6.fmrh/terrain-rgb/{z}/{x}/{y}.png?encoding={encoding}&size={size}&v={version}"
+            "/n6.fmrh/terrain-rgb/{z}/{x}/{y}.png?encoding={encoding}&size={size}{nodata}&v={version}"
         );
+        // What a pixel off the data holds: opaque sea level by default, else as asked.
+        let fill = match nodata {
+            "" => Some(0.0),
+            "&nodata=-20.5" => Some(-20.5),
+            _ => None,
+        };
         let a = served.get(&path);
         assert_eq!(
             a.status,
@@ -145,16 +105,18 @@ fn served_tiles_hold_the_source_within_their_pixel() {
         assert_eq!(again.status, 304);
         assert!(again.body.is_empty());
 
-        let mut reader = png::Decoder::new(std::io::Cursor::new(&a.body))
-            .read_info()
-            .unwrap();
-        let mut buf = vec![0; reader.output_buffer_size().unwrap()];
-        let info = reader.next_frame(&mut buf).unwrap();
-        assert_eq!((info.width, info.height), (size, size));
-        assert_eq!(info.color_type, png::ColorType::Rgba);
-        // The tile's bound: its smallest pixel on the ground, at its poleward edge.
+        let (buf, side, colour) = rgba(&a.body);
+        assert_eq!(side, size);
+
+        // The tile's bound: its smallest pixel on the ground, at its poleward edge; at the
+        // deepest zoom (11 at 256 px, 10 at 512), 0: those tiles hold the data itself.
         let north = lon_lat(z, x, y, 0.0, 0.0)[1];
-        let bound = EQUATOR_M * north.to_radians().cos() / (f64::from(1u32 << z) * f64::from(size));
+        let deepest = if size == 256 { 11 } else { 10 };
+        let bound = if z == deepest {
+            0.0
+        } else {
+            EQUATOR_M * north.to_radians().cos() / (f64::from(1u32 << z) * f64::from(size))
+        };
         let half_step = if encoding == "mapbox" {
             0.05
         } else {
@@ -173,6 +135,7 @@ fn served_tiles_hold_the_source_within_their_pixel() {
                 );
                 let want = source_at(samples, plon, plat);
                 match (decode(encoding, &buf[k..k + 4]), want) {
+                    (got, None) if got == fill => clear += 1,
                     (Some(h), Some(s)) => {
                         let d = (h - s).abs();
                         assert!(
@@ -182,16 +145,23 @@ fn served_tiles_hold_the_source_within_their_pixel() {
                         worst = worst.max(d);
                         opaque += 1;
                     }
-                    (None, None) => clear += 1,
                     (got, want) => panic!("{path}: pixel ({i}, {j}) at {plon}, {plat}: {got:?} where the source has {want:?}"),
                 }
             }
         }
         assert!(opaque > 0, "{path}: no pixel on the data");
+        assert!(z > 9 || clear > 0, "{path}: no pixel off the data");
+        // RGBA only when a pixel is transparent; opaque tiles are RGB.
+        let transparent = fill.is_none() && clear > 0;
+        assert_eq!(
+            colour == png::ColorType::Rgba,
+            transparent,
+            "{path}: {colour:?}"
+        );
         eprintln!("{path}: {opaque} pixels on the data, {clear} off it; largest |pixel - source| {worst:.2} m within a bound of {bound:.1} m");
         checked += opaque;
     }
-    // 172,648 pixels lie on the data in these four tiles.
+    // Over 170,000 pixels lie on the data in these five tiles.
     assert!(checked > 150_000, "{checked}");
 }
 
@@ -244,6 +214,11 @@ fn bad_requests_get_4xx() {
             format!("/n6.fmrh/terrain-rgb/8/{x}/{y}.png?size=300"),
             400,
             "size `300`",
+        ),
+        (
+            format!("/n6.fmrh/terrain-rgb/8/{x}/{y}.png?nodata=inf"),
+            400,
+            "nodata `inf`",
         ),
         (
             format!("/n6.fmrh/terrain-rgb/8/{x}/{y}.png?colour=red"),

@@ -11,6 +11,7 @@ pub mod args;
 pub mod build;
 pub mod compact;
 pub mod dataset;
+pub mod export;
 pub mod extract;
 pub mod fly;
 pub mod info;
@@ -139,6 +140,16 @@ enum Command {
     Verify(self::verify::VerifyArgs),
     /// Write full-resolution samples of a window exactly as stored (.f32 + .json sidecar).
     Extract(self::extract::ExtractArgs),
+    /// Write a whole web tile pyramid for static hosting: Cesium's quantized-mesh terrain or
+    /// terrain-RGB for web maps (MapLibre), to a directory or one PMTiles archive.
+    ///
+    /// Every tile of the zooms (--zoom) meeting the box (--bbox) is cut on every core, with
+    /// the bytes `fmrh serve` answers for it, and written to a directory (`z/x/y.terrain`
+    /// or `z/x/y.png`, with `layer.json` or `tilejson.json`) or, for an output ending in
+    /// `.pmtiles`, to a PMTiles v3 archive (clustered, deduplicated, the JSON as its
+    /// metadata). The output appears only when complete; an existing one is replaced only
+    /// with --force.
+    Export(self::export::ExportArgs),
     /// Range-scan one cluster by Hilbert keys or by ordinal position.
     Scan(self::scan::ScanArgs),
     /// The blocks one view needs: a camera and a tolerance in pixels in, blocks out.
@@ -223,6 +234,7 @@ impl Command {
             Command::Compact(a) => a.json,
             Command::Dataset(c) => c.json(),
             Command::Extract(_)
+            | Command::Export(_)
             | Command::Render(_)
             | Command::Mesh(_)
             | Command::Serve(_)
@@ -271,6 +283,7 @@ pub fn main() -> ExitCode {
         Command::Info(args) => self::info::run(args),
         Command::Verify(args) => self::verify::run(args),
         Command::Extract(args) => self::extract::run(args),
+        Command::Export(args) => self::export::run(args),
         Command::Scan(args) => self::scan::run(args),
         Command::Scene(args) => self::scene::run(args),
         Command::Fly(args) => self::fly::run(args),

@@ -6,7 +6,8 @@
 //! terrain-RGB, `h = −10000 + (R·65536 + G·256 + B)·0.1` (0.1 m steps), and Terrarium,
 //! `h = R·256 + G + B/256 − 32768` (1/256 m steps); each height is rounded to the nearest
 //! step its encoding holds. A pixel with no data under it (off the data, or a void) is
-//! transparent, `(0, 0, 0, 0)`. Heights are the stored ones (orthometric for SRTM: what
+//! opaque sea level by default, or another height, or transparent ([`NoData`]: readers of
+//! `raster-dem` tiles ignore alpha, so a transparent pixel would read as −10 km). Heights are the stored ones (orthometric for SRTM: what
 //! MapLibre expects), never lifted by a geoid.
 //!
 //! **Which blocks.** A tile is cut from the coarsest error level of the FMRH whose every
@@ -17,7 +18,10 @@
 //! sample), so a pixel is within its block's error of the source there.
 //!
 //! **Levels.** `maxzoom` is the first zoom whose pixels at the data's centre latitude are
-//! at most the data's own sample spacing: deeper tiles would only interpolate.
+//! at most the data's own sample spacing: deeper tiles would only interpolate. Its tiles are
+//! cut from the exact blocks (`e* = 0`), not the coarsest within a pixel: a user zoomed in
+//! all the way sees the data itself, as a tiler reading the raster gives it (the pixel
+//! rule alone left 38 m errors in N43E006's deepest tiles; `benches/terrain_rgb_export.rs`).
 
 use serde_json::{json, Value};
 
@@ -35,6 +39,47 @@ pub const MAX_LAT: f64 = 85.051_128_779_806_59;
 
 /// The deepest zoom served (pixels of a few centimetres at 512 px).
 pub const MAX_ZOOM: u8 = 24;
+
+/// What a pixel with no data under it (off the data, or a void) holds.
+///
+/// Web maps' `raster-dem` readers ignore alpha: MapLibre draws a tile through a canvas,
+/// whose premultiplied alpha turns a transparent pixel's colour into `(0, 0, 0)`, which it
+/// decodes as −10,000 m (Mapbox) or −32,768 m (Terrarium), a cliff at every edge of the
+/// data (seen in `tests/maplibre_terrain.rs`). So the default is an opaque height.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum NoData {
+    /// Opaque, encoding this height (metres); the default is 0 (sea level).
+    Height(f64),
+    /// Transparent `(0, 0, 0, 0)`, for readers that honour alpha.
+    Transparent,
+}
+
+impl Default for NoData {
+    fn default() -> NoData {
+        NoData::Height(0.0)
+    }
+}
+
+impl NoData {
+    /// `transparent`, or a height in metres (finite).
+    pub fn parse(text: &str) -> Option<NoData> {
+        if text == "transparent" {
+            return Some(NoData::Transparent);
+        }
+        text.parse::<f64>()
+            .ok()
+            .filter(|h| h.is_finite())
+            .map(NoData::Height)
+    }
+
+    /// What it is, for a TileJSON.
+    pub fn describe(self) -> String {
+        match self {
+            NoData::Height(h) => format!("opaque, encoding {h} m"),
+            NoData::Transparent => "transparent (0, 0, 0, 0)".into(),
+        }
+    }
+}
 
 /// How heights become colours.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -193,6 +238,11 @@ impl RgbTiles {
         self.maxzoom
     }
 
+    /// The data's `[west, south, east, north]`, degrees.
+    pub fn data_box(&self) -> [f64; 4] {
+        self.data_box
+    }
+
     /// Whether tile `t` meets the data.
     pub fn meets(&self, t: MercatorTile) -> bool {
         let [w, s, e, n] = t.bounds();
@@ -201,8 +251,12 @@ impl RgbTiles {
     }
 
     /// The bound on the blocks' measured error a tile of `size` pixels is cut within: its
-    /// smallest pixel on the ground (at its edge nearest a pole).
+    /// smallest pixel on the ground (at its edge nearest a pole); at `maxzoom`, where the
+    /// pixels are as fine as the samples, 0: the deepest tiles hold the data itself.
     pub fn bound(&self, t: MercatorTile, size: u32) -> f64 {
+        if t.z >= self.maxzoom {
+            return 0.0;
+        }
         let [_, s, _, n] = t.bounds();
         let poleward = if s.abs() > n.abs() { s } else { n };
         MercatorTile::pixel_m(t.z, size, poleward.clamp(-MAX_LAT, MAX_LAT))
@@ -235,7 +289,7 @@ impl RgbTiles {
     }
 
     /// TileJSON for tiles at `template` (its `{z}/{x}/{y}` filled in by the client).
-    pub fn tilejson(&self, template: &str, encoding: Encoding, size: u32) -> Value {
+    pub fn tilejson(&self, template: &str, encoding: Encoding, size: u32, nodata: NoData) -> Value {
         let [w, s, e, n] = self.data_box;
         json!({
             "tilejson": "3.0.0",
@@ -250,25 +304,44 @@ impl RgbTiles {
                 "heights": "as stored (orthometric for SRTM and DTED), rounded to the encoding's step",
                 "resampling": "the blocks' surface at each pixel centre (linear over each cell's two triangles)",
                 "blocks": "the coarsest error level whose every block's measured error is within the tile's smallest pixel",
-                "no_data": "transparent (0, 0, 0, 0)",
+                "no_data": nodata.describe(),
             }
         })
     }
 }
 
-/// A `size × size` tile of `heights` (rows from the north) as an RGBA PNG in `encoding`.
-pub fn png(heights: &[f64], size: u32, encoding: Encoding) -> Result<Vec<u8>> {
+/// A `size × size` tile of `heights` (rows from the north; NaN: no data, drawn as
+/// `nodata` says) as a PNG in `encoding`: RGB, or RGBA when a pixel is transparent.
+pub fn png(heights: &[f64], size: u32, encoding: Encoding, nodata: NoData) -> Result<Vec<u8>> {
     if heights.len() != (size as usize) * (size as usize) {
         return Err(Error::InvalidArgument(format!(
             "{} heights for a {size} × {size} tile",
             heights.len()
         )));
     }
-    let pixels: Vec<u8> = heights.iter().flat_map(|&h| encoding.encode(h)).collect();
+    let fill = match nodata {
+        NoData::Height(h) => h,
+        NoData::Transparent => f64::NAN,
+    };
+    // RGB when every pixel is opaque (a quarter fewer bytes to compress), else RGBA.
+    let alpha = fill.is_nan() && heights.iter().any(|h| h.is_nan());
+    let channels = if alpha { 4 } else { 3 };
+    let pixels: Vec<u8> = heights
+        .iter()
+        .flat_map(|&h| encoding.encode(if h.is_nan() { fill } else { h }))
+        .enumerate()
+        .filter(|(k, _)| alpha || k % 4 != 3)
+        .map(|(_, v)| v)
+        .collect();
+    debug_assert_eq!(pixels.len(), heights.len() * channels);
     let mut out = Vec::new();
     {
         let mut encoder = png::Encoder::new(&mut out, size, size);
-        encoder.set_color(png::ColorType::Rgba);
+        encoder.set_color(if alpha {
+            png::ColorType::Rgba
+        } else {
+            png::ColorType::Rgb
+        });
         encoder.set_depth(png::BitDepth::Eight);
         let fail = |e: png::EncodingError| Error::InvalidArgument(format!("png: {e}"));
         let mut writer = encoder.write_header().map_err(fail)?;

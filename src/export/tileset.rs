@@ -232,6 +232,11 @@ impl Tileset {
         self.datum
     }
 
+    /// The data's `[west, south, east, north]`, degrees.
+    pub fn data_box(&self) -> [f64; 4] {
+        self.data_box
+    }
+
     /// The deepest level.
     pub fn maxzoom(&self) -> u8 {
         self.maxzoom

@@ -122,6 +122,7 @@ pub mod cesium;
 pub mod fields;
 pub mod globe;
 pub mod gltf;
+pub mod mercator;
 pub mod oracle;
 pub mod origin;
 pub mod quantized_mesh;

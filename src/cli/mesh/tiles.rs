@@ -14,7 +14,7 @@
 //! renamed into place, so a failure leaves no half-written tileset.
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::ExitCode;
 
 use rayon::prelude::*;
@@ -87,7 +87,7 @@ pub(super) fn run_tiles(
         ));
     }
     let meshed = finish_meshes(parts, context, camera, args.style()?, args.refine)?;
-    let bytes = write_tile_dir(args, |dir| {
+    let bytes = crate::store::write::write_dir_atomically(&args.output, args.force, |dir| {
         write_node_tiles(
             dir,
             &meshed.parts,
@@ -104,38 +104,6 @@ pub(super) fn run_tiles(
         args.output.display()
     );
     Ok(ExitCode::SUCCESS)
-}
-
-/// Creates a directory beside `args.output`, has `fill` write the tileset into it, then
-/// renames it into place; an existing output is replaced only with `--force`.
-fn write_tile_dir<T>(
-    args: &MeshArgs,
-    fill: impl FnOnce(&Path) -> Result<T, Error>,
-) -> Result<T, Error> {
-    let out = &args.output;
-    let parent = match out.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    let temp = tempfile::Builder::new()
-        .prefix(".fmrh-tiles-")
-        .tempdir_in(&parent)
-        .map_err(|e| Error::io(&parent, e))?;
-    let result = fill(temp.path())?;
-    let kept = temp.keep();
-    if out.exists() {
-        if !args.force {
-            let _ = std::fs::remove_dir_all(&kept);
-            return super::super::check_output(out, false).map(|()| result);
-        }
-        let old = parent.join(format!(".fmrh-tiles-old-{}", std::process::id()));
-        std::fs::rename(out, &old).map_err(|e| Error::io(out, e))?;
-        std::fs::rename(&kept, out).map_err(|e| Error::io(out, e))?;
-        let _ = std::fs::remove_dir_all(&old);
-    } else {
-        std::fs::rename(&kept, out).map_err(|e| Error::io(out, e))?;
-    }
-    Ok(result)
 }
 
 /// Writes `bytes` as tile `z/x/y.terrain` under `dir`, gzipped with `gzip`; returns the
@@ -407,7 +375,7 @@ fn run_geodetic(
         Value::Array(available(&levels).into_iter().skip(1).collect())
     };
     let root_availability = [below_root(0), below_root(1)];
-    let summaries = write_tile_dir(args, |dir| {
+    let summaries = crate::store::write::write_dir_atomically(&args.output, args.force, |dir| {
         let summaries: Vec<TileSummary> = tiles
             .par_iter()
             .map(|&t| {

@@ -168,7 +168,7 @@ pub fn run(args: &ServeArgs) -> Result<ExitCode, Error> {
             };
             let datum = args.vertical_datum.unwrap_or(info.vertical_datum);
             match crate::export::tileset::Tileset::new(
-                &terrain::shape_of(&info),
+                &crate::pyramid::shape_of(&info),
                 args.max_error,
                 datum,
             ) {

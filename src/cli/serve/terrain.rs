@@ -28,9 +28,10 @@ use std::io::Write;
 use std::sync::{Arc, Mutex};
 
 use crate::export::geodetic::GeodeticTile;
-use crate::export::tileset::{CutBlock, DataShape, EdgeCache, Tileset};
+use crate::export::tileset::{EdgeCache, Tileset};
 use crate::geoid::VerticalDatum;
 use crate::http::{Body, Request, Response};
+use crate::pyramid::{cut_blocks, shape_of};
 use crate::terrain::Terrain;
 use crate::Error;
 
@@ -487,11 +488,7 @@ fn put_encoded(
         let mut h = std::collections::hash_map::DefaultHasher::new();
         plain.hash(&mut h);
         let tag = h.finish();
-        let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::new(5));
-        let zipped = enc
-            .write_all(&plain)
-            .and_then(|()| enc.finish())
-            .map_err(|e| Error::InvalidArgument(format!("gzip: {e}")))?;
+        let zipped = crate::pyramid::gzip(&plain)?;
         bytes += plain.len() + zipped.len();
         let (plain, gzip) = (Arc::new(plain), Arc::new(zipped));
         let key: Key = (item.to_string(), version.to_string(), t, ext);
@@ -583,38 +580,6 @@ fn warm(
         }
     }
     Ok(Some((n, top, version)))
-}
-
-/// What the tileset needs of a terrain's [`Info`](crate::terrain::Info).
-pub fn shape_of(info: &crate::terrain::Info) -> DataShape {
-    DataShape {
-        georeference: info.georeference.clone(),
-        width: info.width,
-        height: info.height,
-        height_range: info.height_range,
-    }
-}
-
-/// The blocks of `terrain`'s cut over `window` within `bound`, as the tileset takes them.
-pub(super) fn cut_blocks(
-    terrain: &Terrain,
-    window: crate::model::SampleRect,
-    bound: f64,
-) -> Result<Vec<CutBlock>, Error> {
-    Ok(terrain
-        .cut(window, bound)?
-        .blocks
-        .into_iter()
-        .map(|b| CutBlock {
-            rect: b.rect,
-            level: b.level,
-            stride: b.stride,
-            width: b.width,
-            height: b.height,
-            heights: b.heights,
-            error: b.error,
-        })
-        .collect())
 }
 
 /// The extensions an `Accept` header asks for; `None` when it takes neither

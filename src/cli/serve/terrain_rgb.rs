@@ -10,13 +10,14 @@
 
 use std::hash::{Hash, Hasher};
 
-use crate::export::terrain_rgb::{self, Encoding, MercatorTile, RgbTiles};
+use crate::export::terrain_rgb::{self, Encoding, MercatorTile, NoData, RgbTiles};
 use crate::http::{Body, Request, Response};
 use crate::terrain::Terrain;
 use crate::Error;
 
-use super::terrain::{cut_blocks, failed, shape_of, text_error, tile_number, version, with_cors};
+use super::terrain::{failed, text_error, tile_number, version, with_cors};
 use super::Item;
+use crate::pyramid::shape_of;
 
 /// What was asked of one item.
 enum Asked {
@@ -70,9 +71,19 @@ pub fn route(items: &[Item], path: &str, query: &str, request: &Request) -> Opti
     Some(answer(item, &asked, query, request).unwrap_or_else(failed))
 }
 
-/// The encoding, size and version a query names; an error names a bad one.
-fn options(query: &str) -> Result<(Encoding, u32, Option<&str>), String> {
+/// What a query asks of a tile.
+struct Options<'a> {
+    encoding: Encoding,
+    size: u32,
+    nodata: NoData,
+    /// The version it names, `v=`.
+    version: Option<&'a str>,
+}
+
+/// The encoding, size, no-data fill and version a query names; an error names a bad one.
+fn options(query: &str) -> Result<Options<'_>, String> {
     let (mut encoding, mut size, mut v) = (Encoding::Mapbox, 256, None);
+    let mut nodata = NoData::default();
     for pair in query.split('&').filter(|p| !p.is_empty()) {
         let (k, value) = pair.split_once('=').unwrap_or((pair, ""));
         match k {
@@ -87,15 +98,34 @@ fn options(query: &str) -> Result<(Encoding, u32, Option<&str>), String> {
                     _ => return Err(format!("size `{value}`: expected 256 or 512")),
                 }
             }
+            "nodata" => {
+                nodata = NoData::parse(value).ok_or_else(|| {
+                    format!("nodata `{value}`: expected transparent or a height in metres")
+                })?;
+            }
             "v" => v = Some(value),
-            _ => return Err(format!("unknown parameter `{k}` (encoding, size, v)")),
+            _ => {
+                return Err(format!(
+                    "unknown parameter `{k}` (encoding, size, nodata, v)"
+                ))
+            }
         }
     }
-    Ok((encoding, size, v))
+    Ok(Options {
+        encoding,
+        size,
+        nodata,
+        version: v,
+    })
 }
 
 fn answer(item: &Item, asked: &Asked, query: &str, request: &Request) -> Result<Response, Error> {
-    let (encoding, size, asked_version) = match options(query) {
+    let Options {
+        encoding,
+        size,
+        nodata,
+        version: asked_version,
+    } = match options(query) {
         Ok(o) => o,
         Err(why) => return Ok(text_error(400, why)),
     };
@@ -112,6 +142,11 @@ fn answer(item: &Item, asked: &Asked, query: &str, request: &Request) -> Result<
             if size != 256 {
                 params.push_str(&format!("&size={size}"));
             }
+            match nodata {
+                NoData::Height(0.0) => {}
+                NoData::Height(h) => params.push_str(&format!("&nodata={h}")),
+                NoData::Transparent => params.push_str("&nodata=transparent"),
+            }
             // Absolute when the request names its host (MapLibre takes a TileJSON's tile
             // addresses as they are), else relative to the TileJSON.
             let template = match request.header("Host") {
@@ -121,7 +156,7 @@ fn answer(item: &Item, asked: &Asked, query: &str, request: &Request) -> Result<
                 ),
                 _ => format!("terrain-rgb/{{z}}/{{x}}/{{y}}.png?{params}"),
             };
-            let mut json = tiles.tilejson(&template, encoding, size);
+            let mut json = tiles.tilejson(&template, encoding, size, nodata);
             json["name"] = item.name.clone().into();
             json["version"] = version.clone().into();
             let body = serde_json::to_vec_pretty(&json)
@@ -158,12 +193,7 @@ fn answer(item: &Item, asked: &Asked, query: &str, request: &Request) -> Result<
                     "no data in this tile (see terrain-rgb.json's bounds)",
                 ));
             }
-            let blocks = match tiles.window(*t) {
-                Some(w) => cut_blocks(&terrain, w, tiles.bound(*t, size))?,
-                None => Vec::new(),
-            };
-            let heights = tiles.heights(*t, size, &blocks);
-            let png = terrain_rgb::png(&heights, size, encoding)?;
+            let png = crate::pyramid::rgb_tile(&terrain, &tiles, *t, size, encoding, nodata)?;
             let mut h = std::collections::hash_map::DefaultHasher::new();
             png.hash(&mut h);
             let etag = format!("\"{:016x}\"", h.finish());

@@ -26,7 +26,11 @@ fn in_progress() -> std::sync::MutexGuard<'static, Vec<PathBuf>> {
 /// to exit). Best effort: a file it cannot remove is left for the next write's clean-up.
 pub fn remove_temporary_files() {
     for p in in_progress().drain(..) {
-        let _ = std::fs::remove_file(p);
+        if p.is_dir() {
+            let _ = std::fs::remove_dir_all(p);
+        } else {
+            let _ = std::fs::remove_file(p);
+        }
     }
 }
 
@@ -114,6 +118,64 @@ pub fn write_atomically_checked<T>(
     in_progress().push(temp_path.clone());
     // Renamed into place, or removed when `temp` drops: either way no longer ours to clean.
     let result = write_and_persist(temp, path, dir, overwrite, fill, check);
+    in_progress().retain(|p| *p != temp_path);
+    result
+}
+
+/// Creates the directory `path` atomically: `fill` writes its files into a temporary
+/// directory beside it (`.<name>.<random>.fmrh-tmp`), which is then renamed to `path`. An
+/// error or a signal removes the temporary directory and leaves `path` as it was. With
+/// `overwrite`, an existing `path` is first renamed aside and removed once the new one is
+/// in place: a crash between the two renames leaves the old tree beside it under a
+/// temporary name, never a mix of old and new files under `path`.
+pub fn write_dir_atomically<T>(
+    path: &Path,
+    overwrite: bool,
+    fill: impl FnOnce(&Path) -> Result<T>,
+) -> Result<T> {
+    let refuse = || {
+        Error::InvalidArgument(format!(
+            "{} exists; pass --force to replace it",
+            path.display()
+        ))
+    };
+    if !overwrite && path.exists() {
+        return Err(refuse());
+    }
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    let (prefix, suffix) = temp_affixes(path);
+    let temp = tempfile::Builder::new()
+        .prefix(&prefix)
+        .suffix(suffix)
+        .tempdir_in(dir)
+        .map_err(|e| Error::io(dir, e))?;
+    let temp_path = temp.path().to_path_buf();
+    in_progress().push(temp_path.clone());
+    let result = fill(&temp_path).and_then(|value| {
+        let kept = temp.keep();
+        let placed = if path.exists() {
+            if !overwrite {
+                Err(refuse())
+            } else {
+                let old = dir.join(format!("{prefix}old-{}{suffix}", std::process::id()));
+                std::fs::rename(path, &old)
+                    .and_then(|()| std::fs::rename(&kept, path))
+                    .map_err(|e| Error::io(path, e))
+                    .map(|()| {
+                        let _ = std::fs::remove_dir_all(&old);
+                    })
+            }
+        } else {
+            std::fs::rename(&kept, path).map_err(|e| Error::io(path, e))
+        };
+        if placed.is_err() {
+            let _ = std::fs::remove_dir_all(&kept);
+        }
+        placed.and_then(|()| sync_dir(dir)).map(|()| value)
+    });
     in_progress().retain(|p| *p != temp_path);
     result
 }

@@ -18,7 +18,9 @@ use std::sync::Arc;
 
 use serde::Serialize;
 
-pub use atomic::{remove_temporary_files, write_atomically, write_atomically_checked};
+pub use atomic::{
+    remove_temporary_files, write_atomically, write_atomically_checked, write_dir_atomically,
+};
 #[cfg(any(test, feature = "testing"))]
 pub use bulk::write_to;
 
