@@ -14,7 +14,6 @@
 mod common;
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use common::quantized_mesh::Source;
 use common::serve::Served;
@@ -27,26 +26,13 @@ fn globe(
     shot: &Path,
     scratch: &Path,
 ) -> serde_json::Value {
-    let js = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/js");
-    for package in ["@cesium/engine", "esbuild", "playwright-core"] {
-        assert!(
-            js.join("node_modules").join(package).is_dir(),
-            "{package} is not installed: run `npm ci --prefix tests/js` (.ci/run does)"
-        );
-    }
     let file = scratch.join("points.json");
     std::fs::write(&file, serde_json::to_vec(points).unwrap()).unwrap();
-    let out = Command::new("node")
-        .arg(js.join("cesium-globe.mjs"))
-        .args([url, file.to_str().unwrap(), camera, shot.to_str().unwrap()])
-        .output()
-        .expect("node runs (Node.js and Chromium are needed: see docs/testing.md)");
-    assert!(
-        out.status.success(),
-        "cesium-globe.mjs failed:\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).expect("the script's JSON report")
+    common::node_script(
+        "cesium-globe.mjs",
+        &["@cesium/engine", "esbuild", "playwright-core"],
+        &[url, file.to_str().unwrap(), camera, shot.to_str().unwrap()],
+    )
 }
 
 /// The screenshot shows relief: most pixels are the globe (not Chromium's white or the

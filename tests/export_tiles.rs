@@ -19,44 +19,9 @@ mod common;
 use std::collections::BTreeMap;
 use std::path::Path;
 
+use common::pyramids::{export, n43e006 as n43, tiles_in};
 use common::serve::Served;
 use fmrh::export::pmtiles::Archive;
-
-/// Every `z/x/y.ext` file under `dir`: `(z, x, y)` and its bytes.
-fn tiles_in(dir: &Path, ext: &str) -> BTreeMap<(u8, u32, u32), Vec<u8>> {
-    let mut out = BTreeMap::new();
-    for z in std::fs::read_dir(dir).unwrap().flatten() {
-        let Ok(zn) = z.file_name().to_string_lossy().parse::<u8>() else {
-            continue;
-        };
-        for x in std::fs::read_dir(z.path()).unwrap().flatten() {
-            let xn: u32 = x.file_name().to_string_lossy().parse().unwrap();
-            for y in std::fs::read_dir(x.path()).unwrap().flatten() {
-                let name = y.file_name().to_string_lossy().into_owned();
-                let yn: u32 = name
-                    .strip_suffix(&format!(".{ext}"))
-                    .unwrap()
-                    .parse()
-                    .unwrap();
-                out.insert((zn, xn, yn), std::fs::read(y.path()).unwrap());
-            }
-        }
-    }
-    out
-}
-
-fn n43(dir: &Path) -> std::path::PathBuf {
-    let dem = common::bundled_dir().join("srtm3-pyhgtmap/N43E006.hgt.gz");
-    let file = dir.join("n6.fmrh");
-    common::fmrh_ok(&[
-        "build",
-        "-q",
-        dem.to_str().unwrap(),
-        "-o",
-        file.to_str().unwrap(),
-    ]);
-    file
-}
 
 fn gunzip(bytes: &[u8]) -> Vec<u8> {
     use std::io::Read;
@@ -93,21 +58,18 @@ fn terrain_rgb_exports_are_what_the_server_answers() {
     let file = n43(dir.path());
     let out_dir = dir.path().join("rgb");
     let archive = dir.path().join("rgb.pmtiles");
-    for out in [&out_dir, &archive] {
-        common::fmrh_ok(&[
-            "export",
-            "-q",
-            file.to_str().unwrap(),
+    export(
+        &file,
+        &[
             "--tiles",
             "terrain-rgb",
             "--encoding",
             "terrarium",
             "--size",
             "512",
-            "-o",
-            out.to_str().unwrap(),
-        ]);
-    }
+        ],
+        &[&out_dir, &archive],
+    );
     let written = tiles_in(&out_dir, "png");
     // 3" at 43.5° N: zoom 10's 512 px pixels are the first finer; one tile a zoom down to 6.
     assert_eq!(written.keys().map(|t| t.0).max(), Some(10));
@@ -181,25 +143,39 @@ fn quantized_mesh_exports_are_what_the_server_answers() {
     let file = n43(dir.path());
     let out_dir = dir.path().join("qm");
     let archive = dir.path().join("qm.pmtiles");
-    for out in [&out_dir, &archive] {
-        common::fmrh_ok(&[
-            "export",
-            "-q",
-            file.to_str().unwrap(),
-            "--tiles",
-            "quantized-mesh",
-            "--zoom",
-            "2..=9",
-            "-o",
-            out.to_str().unwrap(),
-        ]);
-    }
+    export(
+        &file,
+        &["--tiles", "quantized-mesh", "--zoom", "2..=9"],
+        &[&out_dir, &archive],
+    );
     let written = tiles_in(&out_dir, "terrain");
     assert_eq!(written.keys().map(|t| t.0).min(), Some(2));
     assert_eq!(written.keys().map(|t| t.0).max(), Some(9));
     let layer: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out_dir.join("layer.json")).unwrap()).unwrap();
     assert_eq!(layer["format"], "quantized-mesh-1.0");
+    // A part of the pyramid: its layer.json lists only what is there, and leaves the
+    // tiles' own metadata (the whole pyramid's availability) unread.
+    assert_eq!(layer["maxzoom"], 9);
+    assert!(layer.get("metadataAvailability").is_none());
+    let available = layer["available"].as_array().unwrap();
+    assert_eq!(available.len(), 10);
+    for (z, ranges) in available.iter().enumerate() {
+        let mut listed: Vec<(u8, u32, u32)> = ranges
+            .as_array()
+            .unwrap()
+            .iter()
+            .flat_map(|r| {
+                let n = |k: &str| r[k].as_u64().unwrap() as u32;
+                let (x0, y0, x1, y1) = (n("startX"), n("startY"), n("endX"), n("endY"));
+                (y0..=y1).flat_map(move |y| (x0..=x1).map(move |x| (z as u8, x, y)))
+            })
+            .collect();
+        listed.sort();
+        let here: Vec<(u8, u32, u32)> =
+            written.keys().copied().filter(|t| t.0 == z as u8).collect();
+        assert_eq!(listed, here, "level {z}: available lists the tiles written");
+    }
     assert_eq!(
         layer["extensions"],
         serde_json::json!(["octvertexnormals", "metadata"])
@@ -289,6 +265,13 @@ fn a_box_and_zooms_select_the_tiles_meeting_them() {
         "-o",
         part.to_str().unwrap(),
     ]);
+    let tj: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(part.join("tilejson.json")).unwrap()).unwrap();
+    assert_eq!(
+        (tj["minzoom"].as_u64(), tj["maxzoom"].as_u64()),
+        (Some(9), Some(11))
+    );
+    assert_eq!(tj["bounds"], serde_json::json!([6.1, 43.1, 6.4, 43.3]));
     let all = tiles_in(&all, "png");
     let part = tiles_in(&part, "png");
     assert_eq!(all.keys().map(|t| t.0).min(), Some(9));

@@ -25,7 +25,6 @@ mod common;
 
 use std::collections::HashMap;
 use std::path::Path;
-use std::process::Command;
 
 use common::mercator::{decode, n43e006_at, rgba, world};
 use common::serve::Served;
@@ -34,33 +33,20 @@ const CENTRE: [f64; 2] = [6.5, 43.5];
 
 /// Runs `tests/js/maplibre-terrain.mjs` on `source`: its JSON report.
 fn map(source: &str, points: &[[f64; 2]], shot: &Path, scratch: &Path) -> serde_json::Value {
-    let js = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/js");
-    for package in ["maplibre-gl", "pmtiles", "playwright-core"] {
-        assert!(
-            js.join("node_modules").join(package).is_dir(),
-            "{package} is not installed: run `npm ci --prefix tests/js` (.ci/run does)"
-        );
-    }
     let file = scratch.join("points.json");
     std::fs::write(&file, serde_json::to_vec(points).unwrap()).unwrap();
-    let out = Command::new("node")
-        .arg(js.join("maplibre-terrain.mjs"))
-        .args([
+    let report = common::node_script(
+        "maplibre-terrain.mjs",
+        &["maplibre-gl", "pmtiles", "playwright-core"],
+        &[
             source,
             "mapbox",
             "256",
             file.to_str().unwrap(),
             &format!("{},{}", CENTRE[0], CENTRE[1]),
             shot.to_str().unwrap(),
-        ])
-        .output()
-        .expect("node runs (Node.js and Chromium are needed: see docs/testing.md)");
-    assert!(
-        out.status.success(),
-        "maplibre-terrain.mjs failed:\n{}",
-        String::from_utf8_lossy(&out.stderr)
+        ],
     );
-    let report: serde_json::Value = serde_json::from_slice(&out.stdout).expect("a JSON report");
     assert_eq!(
         report["problems"],
         serde_json::json!([]),
@@ -97,22 +83,10 @@ fn assert_relief(shot: &Path) {
 fn maplibre_reads_served_and_archived_terrain_within_its_declared_error() {
     let dir = tempfile::tempdir().unwrap();
     let dem = common::bundled_dir().join("srtm3-pyhgtmap/N43E006.hgt.gz");
-    let file = dir.path().join("n6.fmrh");
-    let f = file.to_str().unwrap();
-    common::fmrh_ok(&["build", "-q", dem.to_str().unwrap(), "-o", f]);
+    let file = common::pyramids::n43e006(dir.path());
     let tiles_dir = dir.path().join("rgb");
     let archive = dir.path().join("n6.pmtiles");
-    for out in [&tiles_dir, &archive] {
-        common::fmrh_ok(&[
-            "export",
-            "-q",
-            f,
-            "--tiles",
-            "terrain-rgb",
-            "-o",
-            out.to_str().unwrap(),
-        ]);
-    }
+    common::pyramids::export(&file, &["--tiles", "terrain-rgb"], &[&tiles_dir, &archive]);
     let samples = common::load_dem(&dem);
     let samples = samples.samples();
 

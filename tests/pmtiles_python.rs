@@ -15,13 +15,11 @@ mod common;
 use std::collections::BTreeMap;
 use std::path::Path;
 
+use common::pyramids::{export, n43e006 as n43, tiles_in, Tiles};
 use fmrh::export::pmtiles::Archive;
 
 /// What the package read: the header and metadata, and every tile from `out`.
-fn read_with_package(
-    archive: &Path,
-    out: &Path,
-) -> (serde_json::Value, BTreeMap<(u8, u32, u32), Vec<u8>>) {
+fn read_with_package(archive: &Path, out: &Path) -> (serde_json::Value, Tiles) {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/py/pmtiles_read.py");
     let run = std::process::Command::new("python3")
         .arg(&script)
@@ -36,53 +34,18 @@ fn read_with_package(
         String::from_utf8_lossy(&run.stderr)
     );
     let summary: serde_json::Value = serde_json::from_slice(&run.stdout).unwrap();
-    let mut tiles = BTreeMap::new();
-    for z in std::fs::read_dir(out).unwrap().flatten() {
-        let zn: u8 = z.file_name().to_string_lossy().parse().unwrap();
-        for x in std::fs::read_dir(z.path()).unwrap().flatten() {
-            let xn: u32 = x.file_name().to_string_lossy().parse().unwrap();
-            for y in std::fs::read_dir(x.path()).unwrap().flatten() {
-                let name = y.file_name().to_string_lossy().into_owned();
-                let yn: u32 = name.strip_suffix(".bin").unwrap().parse().unwrap();
-                tiles.insert((zn, xn, yn), std::fs::read(y.path()).unwrap());
-            }
-        }
-    }
+    let tiles = tiles_in(out, "bin");
     assert_eq!(summary["tiles"].as_u64(), Some(tiles.len() as u64));
     (summary, tiles)
-}
-
-fn n43(dir: &Path) -> std::path::PathBuf {
-    let dem = common::bundled_dir().join("srtm3-pyhgtmap/N43E006.hgt.gz");
-    let file = dir.join("n6.fmrh");
-    common::fmrh_ok(&[
-        "build",
-        "-q",
-        dem.to_str().unwrap(),
-        "-o",
-        file.to_str().unwrap(),
-    ]);
-    file
 }
 
 #[test]
 fn the_pmtiles_package_reads_terrain_rgb_archives() {
     let dir = tempfile::tempdir().unwrap();
     let file = n43(dir.path());
-    let f = file.to_str().unwrap();
     let archive = dir.path().join("rgb.pmtiles");
     let tiles_dir = dir.path().join("rgb");
-    for out in [&archive, &tiles_dir] {
-        common::fmrh_ok(&[
-            "export",
-            "-q",
-            f,
-            "--tiles",
-            "terrain-rgb",
-            "-o",
-            out.to_str().unwrap(),
-        ]);
-    }
+    export(&file, &["--tiles", "terrain-rgb"], &[&archive, &tiles_dir]);
     let (summary, read) = read_with_package(&archive, &dir.path().join("py"));
     let h = &summary["header"];
     assert_eq!(h["version"], 3);
@@ -112,29 +75,11 @@ fn the_pmtiles_package_reads_terrain_rgb_archives() {
         assert!(png == *bytes, "{z}/{x}/{y}: the package reads other bytes");
         n += 1;
     }
-    let in_dir = walkdir_count(&tiles_dir, "png");
+    let in_dir = tiles_in(&tiles_dir, "png").len();
     assert_eq!(
         n, in_dir,
         "the package finds every tile the directory holds"
     );
-}
-
-fn walkdir_count(dir: &Path, ext: &str) -> usize {
-    let mut n = 0;
-    for z in std::fs::read_dir(dir)
-        .unwrap()
-        .flatten()
-        .filter(|e| e.path().is_dir())
-    {
-        for x in std::fs::read_dir(z.path()).unwrap().flatten() {
-            n += std::fs::read_dir(x.path())
-                .unwrap()
-                .flatten()
-                .filter(|e| e.path().extension().is_some_and(|e| e == ext))
-                .count();
-        }
-    }
-    n
 }
 
 #[test]
@@ -142,15 +87,7 @@ fn the_pmtiles_package_reads_quantized_mesh_archives_with_leaves() {
     let dir = tempfile::tempdir().unwrap();
     let file = n43(dir.path());
     let archive = dir.path().join("qm.pmtiles");
-    common::fmrh_ok(&[
-        "export",
-        "-q",
-        file.to_str().unwrap(),
-        "--tiles",
-        "quantized-mesh",
-        "-o",
-        archive.to_str().unwrap(),
-    ]);
+    export(&file, &["--tiles", "quantized-mesh"], &[&archive]);
     let (summary, read) = read_with_package(&archive, &dir.path().join("py"));
     let h = &summary["header"];
     assert_eq!(h["tile_type"], 0);

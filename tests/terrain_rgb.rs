@@ -12,7 +12,8 @@
 //!   fmrh's surface draws them, so the bound holds between samples too), and a pixel
 //!   holds the no-data fill (opaque sea level by default, `?nodata=` a height or
 //!   transparent) exactly when its centre is off the data;
-//! * answers carry an `ETag` (a matching `If-None-Match` gets `304`) and CORS headers;
+//! * answers carry an `ETag` (a matching `If-None-Match` gets `304`) and CORS headers, and
+//!   a tile asked again comes from the server's cache, the same bytes;
 //! * bad requests (a zoom past the deepest or past Web Mercator's, a column past the
 //!   zoom, a tile off the data, another extension, an unknown encoding, size or
 //!   parameter) get 4xx.
@@ -104,6 +105,11 @@ fn served_tiles_hold_the_source_within_their_pixel() {
         let again = served.ask("GET", &path, &[("If-None-Match", &etag)]);
         assert_eq!(again.status, 304);
         assert!(again.body.is_empty());
+        // Cut once, then from the server's cache, the same bytes.
+        assert_eq!(a.header("x-fmrh-cache"), Some("miss"), "{path}");
+        assert_eq!(again.header("x-fmrh-cache"), Some("hit"), "{path}");
+        let third = served.get(&path);
+        assert!(third.body == a.body && third.header("etag") == Some(etag.as_str()));
 
         let (buf, side, colour) = rgba(&a.body);
         assert_eq!(side, size);

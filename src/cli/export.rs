@@ -183,7 +183,8 @@ pub fn run(args: &ExportArgs) -> Result<ExitCode, Error> {
         None => 0..=pyramid.maxzoom(),
     };
     let bbox = args.bbox.as_deref().map(parse_bbox).transpose()?;
-    let tiles = export::plan(&pyramid, &Selection { zooms, bbox })?;
+    let selection = Selection { zooms, bbox };
+    let tiles = export::plan(&pyramid, &selection)?;
     let name = args.file.file_name().map_or_else(
         || "terrain".to_string(),
         |n| n.to_string_lossy().into_owned(),
@@ -196,18 +197,15 @@ pub fn run(args: &ExportArgs) -> Result<ExitCode, Error> {
             pyramid.extension()
         )
     });
-    let mut description = pyramid.tilejson(&name, &version, template.as_deref());
-    if let Destination::Pmtiles(_) = destination {
-        // A PMTiles client makes its own addresses; the template would mislead.
-        if let Some(o) = description.as_object_mut() {
-            o.remove("tiles");
-        }
-        if pyramid.extension() == "terrain" {
-            description["fmrh"]["pmtiles_zoom"] = "Cesium level z is kept at PMTiles zoom z + 1, \
-                with Cesium's x and y (TMS: y from the south); tiles are gzipped"
-                .into();
-        }
-    }
+    let description = export::describe(
+        &pyramid,
+        &name,
+        &version,
+        template.as_deref(),
+        &selection,
+        &tiles,
+        &destination,
+    );
     let bar = (!args.quiet).then(super::progress::Bar::new);
     let silent = crate::progress::Silent;
     let progress: &dyn crate::progress::Progress = match &bar {

@@ -82,7 +82,7 @@ impl NoData {
 }
 
 /// How heights become colours.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Encoding {
     /// Mapbox terrain-RGB: `−10000 + (R·65536 + G·256 + B)·0.1`.
     Mapbox,

@@ -116,6 +116,78 @@ pub fn plan(pyramid: &Pyramid, selection: &Selection) -> Result<Vec<TileAddress>
     Ok(tiles.into_iter().map(|(_, t)| t).collect())
 }
 
+/// The description written beside `tiles` (or as an archive's metadata): the pyramid's
+/// `layer.json` or TileJSON (`name`, `version`, tile addresses `template`), narrowed to
+/// what `selection` keeps when it keeps less than the whole pyramid (the zooms exported,
+/// each zoom's rectangle of tiles in `available`, the box), so that a client asks only for
+/// tiles that are there. A narrowed `layer.json` drops `metadataAvailability`: the tiles'
+/// own metadata lists the whole pyramid, as the server's do. An archive's has no `tiles`
+/// (its client makes its own addresses) and says where Cesium's levels are kept.
+pub fn describe(
+    pyramid: &Pyramid,
+    name: &str,
+    version: &str,
+    template: Option<&str>,
+    selection: &Selection,
+    tiles: &[TileAddress],
+    destination: &Destination,
+) -> Value {
+    let mut d = pyramid.tilejson(name, version, template);
+    let mesh = pyramid.extension() == "terrain";
+    let whole = selection.bbox.is_none()
+        && *selection.zooms.start() == 0
+        && *selection.zooms.end() >= pyramid.maxzoom();
+    if !whole {
+        let mut rects: std::collections::BTreeMap<u8, (u32, u32, u32, u32)> = Default::default();
+        for t in tiles {
+            let (z, x, y) = t.zxy();
+            let r = rects.entry(z).or_insert((x, y, x, y));
+            *r = (r.0.min(x), r.1.min(y), r.2.max(x), r.3.max(y));
+        }
+        let lo = rects.keys().next().copied().unwrap_or(0);
+        let hi = rects.keys().last().copied().unwrap_or(0);
+        d["minzoom"] = lo.into();
+        d["maxzoom"] = hi.into();
+        if let Some([w, s, e, n]) = selection.bbox {
+            if let Some(b) = d["bounds"].as_array().cloned() {
+                let b: Vec<f64> = b.iter().filter_map(Value::as_f64).collect();
+                if let [bw, bs, be, bn] = b.as_slice() {
+                    d["bounds"] = serde_json::json!([bw.max(w), bs.max(s), be.min(e), bn.min(n)]);
+                }
+            }
+        }
+        if mesh {
+            d["available"] = (0..=hi)
+                .map(|z| match rects.get(&z) {
+                    Some(&(x0, y0, x1, y1)) => {
+                        serde_json::json!([{ "startX": x0, "startY": y0, "endX": x1, "endY": y1 }])
+                    }
+                    None => serde_json::json!([]),
+                })
+                .collect();
+            if let Some(o) = d.as_object_mut() {
+                o.remove("metadataAvailability");
+            }
+        }
+        d["fmrh"]["exported"] = serde_json::json!({
+            "zooms": [lo, hi],
+            "bbox": selection.bbox,
+            "note": "a part of the pyramid: only these tiles are here",
+        });
+    }
+    if let Destination::Pmtiles(_) = destination {
+        if let Some(o) = d.as_object_mut() {
+            o.remove("tiles");
+        }
+        if mesh {
+            d["fmrh"]["pmtiles_zoom"] = "Cesium level z is kept at PMTiles zoom z + 1, with \
+                Cesium's x and y (TMS: y from the south); tiles are gzipped"
+                .into();
+        }
+    }
+    d
+}
+
 /// Cuts `tiles` (in [`plan`]'s order) on every core and writes them to `destination`, with
 /// `description` (the pyramid's `layer.json` or TileJSON) beside them or as the archive's
 /// metadata; `overwrite` replaces an existing destination. Progress counts tiles.

@@ -125,6 +125,7 @@ pub mod gltf;
 pub mod mercator;
 pub mod oracle;
 pub mod origin;
+pub mod pyramids;
 pub mod quantized_mesh;
 pub mod serve;
 pub mod servers;
@@ -133,3 +134,26 @@ pub mod tower;
 pub mod txn;
 pub mod txn_driver;
 pub mod views;
+
+/// Runs the browser script `tests/js/SCRIPT` with `args` under Node.js, once `packages` are
+/// installed in `tests/js` (it fails saying how to install them): its JSON report.
+pub fn node_script(script: &str, packages: &[&str], args: &[&str]) -> serde_json::Value {
+    let js = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/js");
+    for package in packages {
+        assert!(
+            js.join("node_modules").join(package).is_dir(),
+            "{package} is not installed: run `npm ci --prefix tests/js` (.ci/run does)"
+        );
+    }
+    let out = std::process::Command::new("node")
+        .arg(js.join(script))
+        .args(args)
+        .output()
+        .expect("node runs (Node.js and Chromium are needed: see docs/testing.md)");
+    assert!(
+        out.status.success(),
+        "{script} failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("the script's JSON report")
+}

@@ -14,12 +14,11 @@
 // /usr/bin/chromium). Exit status 1 with a message on standard error when the page fails or
 // the globe does not finish loading.
 import fs from 'fs';
-import http from 'http';
 import os from 'os';
 import path from 'path';
 import { fileURLToPath } from 'url';
 import * as esbuild from 'esbuild';
-import { launch } from './chromium.mjs';
+import { launch, servePage } from './chromium.mjs';
 
 const [layerUrl, pointsFile, cameraArg, screenshot] = process.argv.slice(2);
 if (!layerUrl || !pointsFile || !cameraArg || !screenshot) {
@@ -59,34 +58,7 @@ const roots = {
   '/cesium/ThirdParty/': path.join(engine, 'Build/ThirdParty'),
   '/cesium/Assets/': path.join(engine, 'Source/Assets'),
 };
-const types = { '.js': 'text/javascript', '.json': 'application/json', '.wasm': 'application/wasm', '.png': 'image/png', '.jpg': 'image/jpeg' };
-const server = http.createServer((req, res) => {
-  const url = decodeURIComponent(new URL(req.url, 'http://x').pathname);
-  let file = null;
-  if (url === '/') {
-    res.writeHead(200, { 'Content-Type': 'text/html; charset=utf-8' });
-    res.end(page);
-    return;
-  }
-  if (url === '/cesium.js') file = bundle;
-  for (const [prefix, dir] of Object.entries(roots)) {
-    if (url.startsWith(prefix)) {
-      const rel = path.normalize(url.slice(prefix.length));
-      if (!rel.startsWith('..')) file = path.join(dir, rel);
-    }
-  }
-  fs.readFile(file || '/nonexistent', (err, data) => {
-    if (err) {
-      res.writeHead(404);
-      res.end();
-      return;
-    }
-    res.writeHead(200, { 'Content-Type': types[path.extname(file)] || 'application/octet-stream' });
-    res.end(data);
-  });
-});
-await new Promise((resolve) => server.listen(0, '127.0.0.1', resolve));
-const origin = `http://127.0.0.1:${server.address().port}`;
+const { server, origin } = await servePage({ page, files: { '/cesium.js': bundle }, roots });
 
 const browser = await launch();
 let status = 0;

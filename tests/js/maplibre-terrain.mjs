@@ -14,10 +14,9 @@
 // (pitch 0). CHROMIUM names the browser (default /usr/bin/chromium). Exit status 1 with a
 // message on standard error when the page fails or the map does not finish loading.
 import fs from 'fs';
-import http from 'http';
 import path from 'path';
 import { fileURLToPath } from 'url';
-import { launch } from './chromium.mjs';
+import { launch, servePage } from './chromium.mjs';
 
 const [source, encoding, tileSizeArg, pointsFile, centreArg, screenshot] = process.argv.slice(2);
 if (!screenshot) {
@@ -41,53 +40,28 @@ const roots = {
   '/maplibre/': path.join(here, 'node_modules/maplibre-gl/dist'),
   '/pmtiles/': path.join(here, 'node_modules/pmtiles/dist'),
 };
-const types = { '.js': 'text/javascript', '.mjs': 'text/javascript', '.css': 'text/css', '.json': 'application/json' };
-const server = http.createServer((req, res) => {
-  const url = decodeURIComponent(new URL(req.url, 'http://x').pathname);
-  if (url === '/') {
-    res.writeHead(200, { 'Content-Type': 'text/html; charset=utf-8' });
-    res.end(page);
-    return;
+// Range requests, as a CDN answers them: the pmtiles protocol reads only what it needs.
+const serveArchive = (url, req, res) => {
+  if (url !== '/archive.pmtiles' || !archive) return false;
+  const size = fs.statSync(archive).size;
+  const m = /^bytes=(\d+)-(\d*)$/.exec(req.headers.range || '');
+  if (!m) {
+    res.writeHead(200, { 'Content-Length': size, 'Accept-Ranges': 'bytes' });
+    fs.createReadStream(archive).pipe(res);
+    return true;
   }
-  if (url === '/archive.pmtiles' && archive) {
-    // Range requests, as a CDN answers them: the pmtiles protocol reads only what it needs.
-    const size = fs.statSync(archive).size;
-    const m = /^bytes=(\d+)-(\d*)$/.exec(req.headers.range || '');
-    if (!m) {
-      res.writeHead(200, { 'Content-Length': size, 'Accept-Ranges': 'bytes' });
-      fs.createReadStream(archive).pipe(res);
-      return;
-    }
-    const start = Number(m[1]);
-    const end = Math.min(m[2] ? Number(m[2]) : size - 1, size - 1);
-    if (start > end) {
-      res.writeHead(416, { 'Content-Range': `bytes */${size}` });
-      res.end();
-      return;
-    }
-    res.writeHead(206, { 'Content-Range': `bytes ${start}-${end}/${size}`, 'Content-Length': end - start + 1, 'Accept-Ranges': 'bytes' });
-    fs.createReadStream(archive, { start, end }).pipe(res);
-    return;
+  const start = Number(m[1]);
+  const end = Math.min(m[2] ? Number(m[2]) : size - 1, size - 1);
+  if (start > end) {
+    res.writeHead(416, { 'Content-Range': `bytes */${size}` });
+    res.end();
+    return true;
   }
-  let file = null;
-  for (const [prefix, dir] of Object.entries(roots)) {
-    if (url.startsWith(prefix)) {
-      const rel = path.normalize(url.slice(prefix.length));
-      if (!rel.startsWith('..')) file = path.join(dir, rel);
-    }
-  }
-  fs.readFile(file || '/nonexistent', (err, data) => {
-    if (err) {
-      res.writeHead(404);
-      res.end();
-      return;
-    }
-    res.writeHead(200, { 'Content-Type': types[path.extname(file)] || 'application/octet-stream' });
-    res.end(data);
-  });
-});
-await new Promise((resolve) => server.listen(0, '127.0.0.1', resolve));
-const origin = `http://127.0.0.1:${server.address().port}`;
+  res.writeHead(206, { 'Content-Range': `bytes ${start}-${end}/${size}`, 'Content-Length': end - start + 1, 'Accept-Ranges': 'bytes' });
+  fs.createReadStream(archive, { start, end }).pipe(res);
+  return true;
+};
+const { server, origin } = await servePage({ page, roots, extra: serveArchive });
 const sourceUrl = archive ? `pmtiles://${origin}/archive.pmtiles` : source;
 
 const browser = await launch();

@@ -263,7 +263,7 @@ fn answer(
         && terrain::is_address(items, &path);
     match (method, terrain) {
         ("GET" | "HEAD" | "OPTIONS", true) => {
-            if let Some(r) = terrain_rgb::route(items, &path, query, request) {
+            if let Some(r) = terrain_rgb::route(items, cache, &path, query, request) {
                 return r;
             }
             if let Some(r) = terrain::route(items, cache, options, &path, query, request) {

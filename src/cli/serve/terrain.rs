@@ -28,6 +28,7 @@ use std::io::Write;
 use std::sync::{Arc, Mutex};
 
 use crate::export::geodetic::GeodeticTile;
+use crate::export::terrain_rgb::{Encoding, MercatorTile};
 use crate::export::tileset::{EdgeCache, Tileset};
 use crate::geoid::VerticalDatum;
 use crate::http::{Body, Request, Response};
@@ -78,7 +79,7 @@ const ALL_EXTENSIONS: [Extensions; 4] = [
 
 /// The extensions a tile is written with.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-struct Extensions {
+pub(super) struct Extensions {
     normals: bool,
     metadata: bool,
 }
@@ -104,8 +105,18 @@ struct Cached {
     tag: u64,
 }
 
-/// Key: item, state version, tile, extensions.
-type Key = (String, String, GeodeticTile, Extensions);
+/// Key: item, state version, and which tile of which pyramid.
+type Key = (String, String, Tile);
+
+/// A cached tile's own part of the key.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub(super) enum Tile {
+    /// A quantized-mesh tile with its extensions.
+    Mesh(GeodeticTile, Extensions),
+    /// A terrain-RGB tile: its address, encoding, size and no-data fill (as its bits, or
+    /// `u64::MAX` for transparent).
+    Rgb(MercatorTile, Encoding, u32, u64),
+}
 
 /// Cut tiles, least recently used dropped first past [`CACHE_BYTES`].
 #[derive(Default)]
@@ -222,6 +233,33 @@ impl TileCache {
                 (cache, true)
             }
         }
+    }
+
+    /// The bytes of `tile` of `item` at `version` and their tag, from the cache or cut by
+    /// `cut` through the gate (and kept), and whether they came from the cache. For tiles
+    /// sent as they are (no gzip form).
+    pub(super) fn get_or_cut(
+        &self,
+        item: &str,
+        version: &str,
+        tile: Tile,
+        cut: impl FnOnce() -> Result<Vec<u8>, Error>,
+    ) -> Result<(Arc<Vec<u8>>, u64, bool), Error> {
+        let key: Key = (item.to_string(), version.to_string(), tile);
+        if let Some(hit) = self.get(&key) {
+            return Ok((hit.plain, hit.tag, true));
+        }
+        let _slot = self.gate.enter();
+        // Another request may have cut it while this one waited.
+        if let Some(hit) = self.get(&key) {
+            return Ok((hit.plain, hit.tag, true));
+        }
+        let plain = Arc::new(cut()?);
+        let mut h = std::collections::hash_map::DefaultHasher::new();
+        plain.hash(&mut h);
+        let tag = h.finish();
+        self.put(key, plain.clone(), Arc::new(Vec::new()), tag);
+        Ok((plain, tag, false))
     }
 
     fn put(&self, key: Key, plain: Arc<Vec<u8>>, gzip: Arc<Vec<u8>>, tag: u64) {
@@ -405,7 +443,7 @@ fn answer(
                 v.split(',')
                     .any(|e| e.trim().split(';').next() == Some("gzip"))
             });
-            let key: Key = (item.name.clone(), version.clone(), *t, ext);
+            let key: Key = (item.name.clone(), version.clone(), Tile::Mesh(*t, ext));
             let mut slot = None;
             let hit = cache.get(&key).or_else(|| {
                 slot = Some(cache.gate.enter());
@@ -491,7 +529,7 @@ fn put_encoded(
         let zipped = crate::pyramid::gzip(&plain)?;
         bytes += plain.len() + zipped.len();
         let (plain, gzip) = (Arc::new(plain), Arc::new(zipped));
-        let key: Key = (item.to_string(), version.to_string(), t, ext);
+        let key: Key = (item.to_string(), version.to_string(), Tile::Mesh(t, ext));
         cache.put(key, plain.clone(), gzip.clone(), tag);
         first.get_or_insert(Cached { plain, gzip, tag });
     }
@@ -564,7 +602,7 @@ fn warm(
                 let _slot = cache.gate.enter();
                 let asked = ALL_EXTENSIONS.iter().all(|&e| {
                     cache
-                        .get(&(item.name.clone(), version.clone(), t, e))
+                        .get(&(item.name.clone(), version.clone(), Tile::Mesh(t, e)))
                         .is_some()
                 });
                 if asked {
@@ -681,11 +719,13 @@ mod tests {
             (
                 "t".into(),
                 "1".into(),
-                GeodeticTile { z: 3, x, y: 0 },
-                Extensions {
-                    normals: true,
-                    metadata: true,
-                },
+                Tile::Mesh(
+                    GeodeticTile { z: 3, x, y: 0 },
+                    Extensions {
+                        normals: true,
+                        metadata: true,
+                    },
+                ),
             )
         };
         for x in 0..6 {

@@ -1,21 +1,22 @@
 //! `fmrh serve`'s terrain for web maps: `/NAME/terrain-rgb.json` (TileJSON) and
 //! `/NAME/terrain-rgb/{z}/{x}/{y}.png`, Web Mercator tiles whose colours encode heights
 //! (`crate::export::terrain_rgb`), for every served container and dataset that can be
-//! placed on a map. `?encoding=mapbox|terrarium` (default mapbox) and `?size=256|512`
-//! (default 256) pick the tiles; each is cut on request from the current state, from the
-//! coarsest blocks whose measured error is within its smallest pixel. Answers carry an
+//! placed on a map. `?encoding=mapbox|terrarium` (default mapbox), `?size=256|512`
+//! (default 256) and `?nodata=METRES|transparent` (default 0) pick the tiles; each is cut on
+//! request from the current state, from the coarsest blocks whose measured error is within
+//! its smallest pixel (the exact blocks at the deepest zoom), and kept in the server's tile
+//! cache by state, address and options, cut through the same gate as the Cesium tiles
+//! (`X-Fmrh-Cache: hit|miss` says which). Answers carry an
 //! `ETag` (a hash of the bytes; `304` for a matching `If-None-Match`), CORS headers, and
 //! `Cache-Control` as the quantized-mesh tiles do (a day when the address names the
 //! current version, `?v=`, else revalidate).
-
-use std::hash::{Hash, Hasher};
 
 use crate::export::terrain_rgb::{self, Encoding, MercatorTile, NoData, RgbTiles};
 use crate::http::{Body, Request, Response};
 use crate::terrain::Terrain;
 use crate::Error;
 
-use super::terrain::{failed, text_error, tile_number, version, with_cors};
+use super::terrain::{failed, text_error, tile_number, version, with_cors, Tile, TileCache};
 use super::Item;
 use crate::pyramid::shape_of;
 
@@ -27,7 +28,13 @@ enum Asked {
 
 /// The answer for `path` (percent-decoded), or `None` when it is not a terrain-RGB
 /// address of a served item.
-pub fn route(items: &[Item], path: &str, query: &str, request: &Request) -> Option<Response> {
+pub fn route(
+    items: &[Item],
+    cache: &TileCache,
+    path: &str,
+    query: &str,
+    request: &Request,
+) -> Option<Response> {
     let rest = path.strip_prefix('/')?;
     let (name, tail) = rest.split_once('/')?;
     let item = items.iter().find(|i| i.name == name)?;
@@ -68,7 +75,7 @@ pub fn route(items: &[Item], path: &str, query: &str, request: &Request) -> Opti
                 .with("Access-Control-Max-Age", "86400"),
         ));
     }
-    Some(answer(item, &asked, query, request).unwrap_or_else(failed))
+    Some(answer(item, cache, &asked, query, request).unwrap_or_else(failed))
 }
 
 /// What a query asks of a tile.
@@ -119,7 +126,13 @@ fn options(query: &str) -> Result<Options<'_>, String> {
     })
 }
 
-fn answer(item: &Item, asked: &Asked, query: &str, request: &Request) -> Result<Response, Error> {
+fn answer(
+    item: &Item,
+    cache: &TileCache,
+    asked: &Asked,
+    query: &str,
+    request: &Request,
+) -> Result<Response, Error> {
     let Options {
         encoding,
         size,
@@ -193,10 +206,17 @@ fn answer(item: &Item, asked: &Asked, query: &str, request: &Request) -> Result<
                     "no data in this tile (see terrain-rgb.json's bounds)",
                 ));
             }
-            let png = crate::pyramid::rgb_tile(&terrain, &tiles, *t, size, encoding, nodata)?;
-            let mut h = std::collections::hash_map::DefaultHasher::new();
-            png.hash(&mut h);
-            let etag = format!("\"{:016x}\"", h.finish());
+            let fill = match nodata {
+                NoData::Height(h) => h.to_bits(),
+                NoData::Transparent => u64::MAX,
+            };
+            let (png, tag, hit) = cache.get_or_cut(
+                &item.name,
+                &version,
+                Tile::Rgb(*t, encoding, size, fill),
+                || crate::pyramid::rgb_tile(&terrain, &tiles, *t, size, encoding, nodata),
+            )?;
+            let etag = format!("\"{tag:016x}\"");
             let matches = request
                 .header("If-None-Match")
                 .is_some_and(|v| v.split(',').map(str::trim).any(|x| x == etag || x == "*"));
@@ -208,10 +228,11 @@ fn answer(item: &Item, asked: &Asked, query: &str, request: &Request) -> Result<
             let (status, body) = if matches {
                 (304, Vec::new())
             } else {
-                (200, png)
+                (200, png.as_ref().clone())
             };
             Ok(with_cors(
                 Response::new(status, "image/png", Body::Bytes(body))
+                    .with("X-Fmrh-Cache", if hit { "hit" } else { "miss" })
                     .with("ETag", etag)
                     .with("Cache-Control", cache_control),
             ))
