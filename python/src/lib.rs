@@ -1,0 +1,222 @@
+//! `fmrh._fmrh`: the Python extension behind the `fmrh` package (`python/fmrh/__init__.py`).
+//! It holds no algorithm: each method is a call into the fmrh crate's public API (the door,
+//! `fmrh::Terrain`), with the GIL released while fmrh reads and decodes, samples handed to
+//! numpy without a copy, and fmrh's errors turned into exception classes that keep the
+//! CLI's messages (and a corrupt file's invariant).
+
+use std::sync::{Arc, RwLock};
+
+use numpy::{PyArray1, PyArrayMethods};
+use pyo3::create_exception;
+use pyo3::exceptions::PyException;
+use pyo3::prelude::*;
+
+use fmrh::types::SampleRect;
+
+create_exception!(_fmrh, FmrhError, PyException, "Any error fmrh reports.");
+create_exception!(
+    _fmrh,
+    CorruptError,
+    FmrhError,
+    "A file breaks one of the format's numbered invariants (`invariant`, e.g. `I-9`)."
+);
+create_exception!(
+    _fmrh,
+    BusyError,
+    FmrhError,
+    "A writer changed the terrain while it was read: read again (the CLI's exit 75)."
+);
+create_exception!(
+    _fmrh,
+    InputError,
+    FmrhError,
+    "An input that is not what it claims, uses an unsupported feature, or is too large."
+);
+create_exception!(
+    _fmrh,
+    IoError,
+    FmrhError,
+    "Reading or writing failed (disk or network)."
+);
+create_exception!(
+    _fmrh,
+    InvalidArgumentError,
+    FmrhError,
+    "An argument fmrh cannot use (a window outside the data, a bad option)."
+);
+
+/// fmrh's error as a Python exception of its class, with the same message as the CLI's.
+fn to_py(e: fmrh::Error) -> PyErr {
+    let message = e.to_string();
+    match &e {
+        fmrh::Error::Corrupt { invariant, .. } => {
+            let err = CorruptError::new_err(message);
+            let id = invariant.id();
+            Python::attach(|py| {
+                let _ = err.value(py).setattr("invariant", id);
+            });
+            err
+        }
+        fmrh::Error::Superseded { .. } | fmrh::Error::Changed { .. } => BusyError::new_err(message),
+        fmrh::Error::Input { .. }
+        | fmrh::Error::Unsupported { .. }
+        | fmrh::Error::TooLarge { .. } => InputError::new_err(message),
+        fmrh::Error::Io { .. } | fmrh::Error::Poisoned { .. } => IoError::new_err(message),
+        fmrh::Error::InvalidArgument(_) => InvalidArgumentError::new_err(message),
+        _ => FmrhError::new_err(message),
+    }
+}
+
+/// An open container or dataset.
+#[pyclass(module = "fmrh._fmrh", frozen)]
+struct Terrain {
+    inner: RwLock<Option<Arc<fmrh::Terrain>>>,
+    info: fmrh::Info,
+    location: String,
+}
+
+impl Terrain {
+    fn terrain(&self) -> PyResult<Arc<fmrh::Terrain>> {
+        let inner = self.inner.read().unwrap_or_else(|p| p.into_inner());
+        inner
+            .clone()
+            .ok_or_else(|| FmrhError::new_err(format!("{}: the terrain is closed", self.location)))
+    }
+}
+
+#[pymethods]
+impl Terrain {
+    /// `(height, width)`: rows and columns of samples.
+    #[getter]
+    fn shape(&self) -> (u64, u64) {
+        (self.info.height, self.info.width)
+    }
+
+    /// The georeference as `(origin_x, origin_y, step_x, step_y, crs)`: sample (0, 0)'s
+    /// centre and the steps east and south (`None` when the data has none).
+    #[getter]
+    fn georeference(&self) -> Option<(f64, f64, f64, f64, Option<String>)> {
+        self.info.georeference.as_ref().map(|g| {
+            (
+                g.origin[0],
+                g.origin[1],
+                g.step[0],
+                g.step[1],
+                g.crs.clone(),
+            )
+        })
+    }
+
+    /// What the heights are above: `egm96`, `egm2008`, `ellipsoid` or `unknown`.
+    #[getter]
+    fn vertical_datum(&self) -> &'static str {
+        self.info.vertical_datum.name()
+    }
+
+    /// The terrain's description (`fmrh::Info`) as JSON text.
+    fn info_json(&self) -> PyResult<String> {
+        serde_json::to_string(&self.info).map_err(|e| FmrhError::new_err(e.to_string()))
+    }
+
+    /// The samples of the window `(col_off, row_off, width, height)` (or all) as a float32
+    /// array of shape `(height, width)`, voids NaN, exactly as stored. The GIL is released
+    /// while fmrh reads and decodes.
+    #[pyo3(signature = (window=None))]
+    fn read<'py>(
+        &self,
+        py: Python<'py>,
+        window: Option<(i64, i64, i64, i64)>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let terrain = self.terrain()?;
+        let rect = match window {
+            None => None,
+            Some((c, r, w, h)) => {
+                if c < 0 || r < 0 || w <= 0 || h <= 0 {
+                    return Err(InvalidArgumentError::new_err(format!(
+                        "window ({c}, {r}, {w}, {h}): offsets must be >= 0 and sizes > 0"
+                    )));
+                }
+                let (c, r, w, h) = (c as u64, r as u64, w as u64, h as u64);
+                if c + w > self.info.width || r + h > self.info.height {
+                    return Err(InvalidArgumentError::new_err(format!(
+                        "window ({c}, {r}, {w}, {h}) is outside the data ({} x {} samples)",
+                        self.info.width, self.info.height
+                    )));
+                }
+                Some(SampleRect {
+                    col0: c,
+                    row0: r,
+                    col1: c + w - 1,
+                    row1: r + h - 1,
+                })
+            }
+        };
+        let field = py.detach(move || terrain.read(rect)).map_err(to_py)?;
+        let (w, h) = (field.width() as usize, field.height() as usize);
+        let flat = PyArray1::from_vec(py, field.into_samples());
+        Ok(flat.reshape([h, w])?.into_any())
+    }
+
+    /// Closes the terrain: a later use raises. Reads already running finish.
+    fn close(&self) {
+        let mut inner = self.inner.write().unwrap_or_else(|p| p.into_inner());
+        *inner = None;
+    }
+
+    /// Whether `close` was called.
+    #[getter]
+    fn closed(&self) -> bool {
+        self.inner
+            .read()
+            .unwrap_or_else(|p| p.into_inner())
+            .is_none()
+    }
+
+    /// Where it was opened from.
+    #[getter]
+    fn location(&self) -> &str {
+        &self.location
+    }
+}
+
+/// Opens a container file, a dataset directory, or either by `http(s)://` or `s3://` URL.
+#[pyfunction]
+fn open(py: Python<'_>, location: std::path::PathBuf) -> PyResult<Terrain> {
+    let shown = location.display().to_string();
+    let (terrain, info) = py
+        .detach(move || {
+            let t = fmrh::Terrain::open(&location)?;
+            let info = t.info()?;
+            Ok::<_, fmrh::Error>((t, info))
+        })
+        .map_err(to_py)?;
+    Ok(Terrain {
+        inner: RwLock::new(Some(Arc::new(terrain))),
+        info,
+        location: shown,
+    })
+}
+
+/// The crate's format version, `(major, minor)`.
+#[pyfunction]
+fn format_version() -> (u16, u16) {
+    (fmrh::raw::FORMAT_MAJOR, fmrh::raw::FORMAT_MINOR)
+}
+
+#[pymodule]
+fn _fmrh(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    let py = m.py();
+    m.add_function(wrap_pyfunction!(open, m)?)?;
+    m.add_function(wrap_pyfunction!(format_version, m)?)?;
+    m.add_class::<Terrain>()?;
+    m.add("FmrhError", py.get_type::<FmrhError>())?;
+    m.add("CorruptError", py.get_type::<CorruptError>())?;
+    m.add("BusyError", py.get_type::<BusyError>())?;
+    m.add("InputError", py.get_type::<InputError>())?;
+    m.add("IoError", py.get_type::<IoError>())?;
+    m.add(
+        "InvalidArgumentError",
+        py.get_type::<InvalidArgumentError>(),
+    )?;
+    Ok(())
+}
