@@ -62,6 +62,17 @@ def _window(window):
     return tuple(int(p) for p in parts)
 
 
+def _point(p, name):
+    """``(x, y, z)`` floats from any three numbers."""
+    try:
+        xyz = tuple(float(v) for v in p)
+    except (TypeError, ValueError):
+        xyz = ()
+    if len(xyz) != 3:
+        raise InvalidArgumentError(f"{name} {p!r}: expected three numbers (x, y, z)")
+    return xyz
+
+
 class Terrain:
     """An open container or dataset (see :func:`open`). Use it in a ``with`` block, or call
     :meth:`close`; a closed terrain raises :class:`FmrhError` when used."""
@@ -159,6 +170,20 @@ class Terrain:
         """The terrain's description as a dict (kind, size, georeference, datum, height
         range, error levels, transaction id, format version)."""
         return _json.loads(self._t.info_json())
+
+    def scene(self, eye, target, tau=1.0, *, fov=None, viewport=None, mode="view"):
+        """The blocks a camera at ``eye`` looking at ``target`` (``(x, y, z)`` in the
+        terrain's world frame: metres east, north, up from sample (0, 0), as ``fmrh scene
+        --eye/--target`` take them) needs within ``tau`` pixels of error: a list of dicts,
+        each with ``rect`` (``(col0, row0, col1, row1)``, inclusive samples), ``level``,
+        ``tile`` (a dataset's), ``error`` (measured, height units), ``screen_error``
+        (pixels), ``stride`` (samples between grid points), ``spacing_m``, ``width``,
+        ``height`` and ``heights`` (float32 ``(height, width)``). ``fov`` is the vertical
+        field of view in degrees, ``viewport`` ``(width, height)`` in pixels, ``mode``
+        ``"view"`` (each block meets ``tau`` where it is seen) or ``"uniform"``."""
+        return self._t.scene(_point(eye, "eye"), _point(target, "target"), float(tau),
+                             None if fov is None else float(fov),
+                             None if viewport is None else tuple(map(int, viewport)), mode)
 
     def read(self, window=None):
         """Samples as a float32 array of shape ``(height, width)``, voids NaN, exactly as

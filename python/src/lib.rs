@@ -10,6 +10,7 @@ use numpy::{PyArray1, PyArrayMethods};
 use pyo3::create_exception;
 use pyo3::exceptions::PyException;
 use pyo3::prelude::*;
+use pyo3::types::PyDict;
 
 use fmrh::types::SampleRect;
 
@@ -155,6 +156,69 @@ impl Terrain {
         let (w, h) = (field.width() as usize, field.height() as usize);
         let flat = PyArray1::from_vec(py, field.into_samples());
         Ok(flat.reshape([h, w])?.into_any())
+    }
+
+    /// The blocks a camera at `eye` looking at `target` needs at `tau` pixels of error, each
+    /// a dict (its `rect` as `(col0, row0, col1, row1)` inclusive samples, `level`, `tile`,
+    /// `error` (measured, height units), `screen_error` (pixels), `stride`, `spacing_m`,
+    /// `width`, `height`, `heights` (float32 `(height, width)`, copied from fmrh's decoded
+    /// grid). The GIL is released while fmrh selects, reads and decodes.
+    #[pyo3(signature = (eye, target, tau=1.0, fov=None, viewport=None, mode="view"))]
+    #[allow(clippy::too_many_arguments)]
+    fn scene<'py>(
+        &self,
+        py: Python<'py>,
+        eye: (f64, f64, f64),
+        target: (f64, f64, f64),
+        tau: f64,
+        fov: Option<f64>,
+        viewport: Option<(u32, u32)>,
+        mode: &str,
+    ) -> PyResult<Vec<Bound<'py, PyDict>>> {
+        let terrain = self.terrain()?;
+        let mut camera = fmrh::Camera::looking_at(
+            fmrh::glam::DVec3::new(eye.0, eye.1, eye.2),
+            fmrh::glam::DVec3::new(target.0, target.1, target.2),
+        );
+        if let Some(f) = fov {
+            camera.fov_y_deg = f;
+        }
+        if let Some((w, h)) = viewport {
+            camera.viewport = [w, h];
+        }
+        let mut options = fmrh::SceneOptions::new(tau);
+        options.mode = match mode {
+            "view" => fmrh::types::Mode::View,
+            "uniform" => fmrh::types::Mode::Uniform,
+            other => {
+                return Err(InvalidArgumentError::new_err(format!(
+                    "mode `{other}`: expected view or uniform"
+                )))
+            }
+        };
+        let scene = py
+            .detach(move || terrain.scene(&camera, &options))
+            .map_err(to_py)?;
+        scene
+            .blocks
+            .iter()
+            .map(|b| {
+                let d = PyDict::new(py);
+                d.set_item("rect", (b.rect.col0, b.rect.row0, b.rect.col1, b.rect.row1))?;
+                d.set_item("level", b.level)?;
+                d.set_item("tile", b.tile)?;
+                d.set_item("error", b.error)?;
+                d.set_item("screen_error", b.screen_error)?;
+                d.set_item("stride", b.stride)?;
+                d.set_item("spacing_m", b.spacing_m.map(|[x, y]| (x, y)))?;
+                d.set_item("width", b.width)?;
+                d.set_item("height", b.height)?;
+                let heights = PyArray1::from_slice(py, &b.heights)
+                    .reshape([b.height as usize, b.width as usize])?;
+                d.set_item("heights", heights)?;
+                Ok(d)
+            })
+            .collect()
     }
 
     /// Closes the terrain: a later use raises. Reads already running finish.

@@ -48,3 +48,13 @@ def dataset(tmp_path_factory):
     fmrh_cli("dataset", "build", "-q", "--seam", "first",
              SRTM / "N43E006.hgt.gz", SRTM / "N43E007.hgt.gz", "-o", out)
     return out
+
+
+@pytest.fixture(scope="session")
+def puget(tmp_path_factory):
+    """Puget Sound 1k as the README builds it."""
+    d = tmp_path_factory.mktemp("ps1k")
+    out = d / "ps1k.fmrh"
+    png = ROOT / "data" / "puget-sound-1k" / "ps_height_1k.png"
+    fmrh_cli("build", "-q", png, "--z-scale", "0.1", "--spacing", "160", "-o", out)
+    return out
