@@ -185,6 +185,14 @@ class Terrain:
                              None if fov is None else float(fov),
                              None if viewport is None else tuple(map(int, viewport)), mode)
 
+    def verify(self, full=False):
+        """Checks every numbered invariant of the format (``full``: also recomputes every
+        error from the blocks, and every cut and adjacency) and returns the report as a dict,
+        as ``fmrh verify --json`` prints it: ``valid``, and one entry per invariant in
+        ``checks`` (a dataset's: its own and each tile's). A failed check is reported, not
+        raised; a file that cannot be read at all raises."""
+        return _json.loads(self._t.verify_json(bool(full)))
+
     def read(self, window=None):
         """Samples as a float32 array of shape ``(height, width)``, voids NaN, exactly as
         stored: the whole terrain, or ``window`` as ``(col_off, row_off, width, height)`` or

@@ -221,6 +221,24 @@ impl Terrain {
             .collect()
     }
 
+    /// Checks every numbered invariant (`full`: also recomputes every error and cut) and
+    /// returns the report as JSON text: a failed check is in the report, not raised.
+    #[pyo3(signature = (full=false))]
+    fn verify_json(&self, py: Python<'_>, full: bool) -> PyResult<String> {
+        let terrain = self.terrain()?;
+        let mode = if full {
+            fmrh::types::VerifyMode::Full
+        } else {
+            fmrh::types::VerifyMode::Fast
+        };
+        let report = py.detach(move || terrain.verify(mode)).map_err(to_py)?;
+        let json = match &report {
+            fmrh::Verification::Container(r) => serde_json::to_string(r),
+            fmrh::Verification::Dataset(r) => serde_json::to_string(r),
+        };
+        json.map_err(|e| FmrhError::new_err(e.to_string()))
+    }
+
     /// Closes the terrain: a later use raises. Reads already running finish.
     fn close(&self) {
         let mut inner = self.inner.write().unwrap_or_else(|p| p.into_inner());

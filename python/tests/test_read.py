@@ -114,3 +114,27 @@ def test_bad_input_raises_the_package_exceptions(n43, tmp_path):
     assert t.closed
     with pytest.raises(fmrh.FmrhError, match="closed"):
         t.read()
+
+
+def test_verify_reports_as_the_cli(n43, dataset, tmp_path):
+    import json
+    from conftest import fmrh_cli
+    for path in (n43, dataset):
+        with fmrh.open(path) as t:
+            fast = t.verify()
+            full = t.verify(full=True)
+        assert fast["valid"] and full["valid"]
+        assert (fast["mode"], full["mode"]) == ("fast", "full")
+        cli = json.loads(fmrh_cli("verify", "--full", "--json", path))
+        assert [c.get("id") for c in full.get("checks", [])] == [c.get("id") for c in cli.get("checks", [])]
+    # A damaged payload: reported by its invariant, not raised.
+    raw = bytearray(n43.read_bytes())
+    middle = len(raw) // 2
+    raw[middle:middle + 8] = b"\xff" * 8
+    damaged = tmp_path / "damaged.fmrh"
+    damaged.write_bytes(bytes(raw))
+    with fmrh.open(damaged) as t:
+        report = t.verify()
+    assert not report["valid"]
+    failed = [c["id"] for c in report["checks"] if c["status"] == "failed"]
+    assert failed == ["I-9"], failed
