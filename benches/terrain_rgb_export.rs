@@ -155,33 +155,24 @@ fn main() {
         let out_dir = dir.join("fmrh-tiles");
         let out_pm = dir.join("fmrh.pmtiles");
         let out_rio = dir.join("rio.mbtiles");
+        let export = |out: &Path| {
+            run(Command::new(FMRH)
+                .args([
+                    "export",
+                    "-q",
+                    "--force",
+                    "--tiles",
+                    "terrain-rgb",
+                    "--size",
+                    "512",
+                ])
+                .arg(&container)
+                .arg("-o")
+                .arg(out))
+        };
         for _ in 0..2 {
-            fmrh_dir = fmrh_dir.min(run(Command::new(FMRH)
-                .args([
-                    "export",
-                    "-q",
-                    "--force",
-                    "--tiles",
-                    "terrain-rgb",
-                    "--size",
-                    "512",
-                ])
-                .arg(&container)
-                .arg("-o")
-                .arg(&out_dir)));
-            fmrh_pm = fmrh_pm.min(run(Command::new(FMRH)
-                .args([
-                    "export",
-                    "-q",
-                    "--force",
-                    "--tiles",
-                    "terrain-rgb",
-                    "--size",
-                    "512",
-                ])
-                .arg(&container)
-                .arg("-o")
-                .arg(&out_pm)));
+            fmrh_dir = fmrh_dir.min(export(&out_dir));
+            fmrh_pm = fmrh_pm.min(export(&out_pm));
             let _ = std::fs::remove_file(&out_rio);
             rio = rio.min(run(Command::new("rio")
                 .args(["rgbify", "-b", "-10000", "-i", "0.1", "--min-z", "0"])

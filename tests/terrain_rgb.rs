@@ -28,14 +28,7 @@ use common::mercator::{decode, lon_lat, n43e006_at as source_at, rgba, tile_of, 
 fn served_tiles_hold_the_source_within_their_pixel() {
     let dir = tempfile::tempdir().unwrap();
     let dem = common::bundled_dir().join("srtm3-pyhgtmap/N43E006.hgt.gz");
-    let file = dir.path().join("n6.fmrh");
-    common::fmrh_ok(&[
-        "build",
-        "-q",
-        dem.to_str().unwrap(),
-        "-o",
-        file.to_str().unwrap(),
-    ]);
+    let file = common::pyramids::n43e006(dir.path());
     let source = common::load_dem(&dem);
     let samples = source.samples();
     let served = Served::start(&[&file]);
@@ -174,15 +167,7 @@ fn served_tiles_hold_the_source_within_their_pixel() {
 #[test]
 fn bad_requests_get_4xx() {
     let dir = tempfile::tempdir().unwrap();
-    let dem = common::bundled_dir().join("srtm3-pyhgtmap/N43E006.hgt.gz");
-    let file = dir.path().join("n6.fmrh");
-    common::fmrh_ok(&[
-        "build",
-        "-q",
-        dem.to_str().unwrap(),
-        "-o",
-        file.to_str().unwrap(),
-    ]);
+    let file = common::pyramids::n43e006(dir.path());
     let mut field = common::fields::make(40, 30, common::fields::Character::Hills, 0.0, 1);
     field.metadata.spacing_m = Some([10.0, 10.0]);
     let plain = dir.path().join("plain.fmrh");

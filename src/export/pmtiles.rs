@@ -242,8 +242,10 @@ impl Writer {
         }
         self.min_zoom = self.min_zoom.min(z);
         self.max_zoom = self.max_zoom.max(z);
-        let offset = self.stored_at(bytes)?;
-        let offset = match offset {
+        let mut h = std::collections::hash_map::DefaultHasher::new();
+        bytes.hash(&mut h);
+        let key = (h.finish(), length);
+        let offset = match self.stored_at(key, bytes)? {
             Some(o) => o,
             None => {
                 let o = self.data_len;
@@ -251,9 +253,7 @@ impl Writer {
                     .write_all(bytes)
                     .map_err(|e| Error::io("PMTiles tile data (temporary file)", e))?;
                 self.data_len += u64::from(length);
-                let mut h = std::collections::hash_map::DefaultHasher::new();
-                bytes.hash(&mut h);
-                self.stored.entry((h.finish(), length)).or_default().push(o);
+                self.stored.entry(key).or_default().push(o);
                 self.contents += 1;
                 o
             }
@@ -277,11 +277,10 @@ impl Writer {
         Ok(())
     }
 
-    /// The offset of contents already stored equal to `bytes`, if any.
-    fn stored_at(&mut self, bytes: &[u8]) -> Result<Option<u64>> {
-        let mut h = std::collections::hash_map::DefaultHasher::new();
-        bytes.hash(&mut h);
-        let Some(offsets) = self.stored.get(&(h.finish(), bytes.len() as u32)) else {
+    /// The offset of contents already stored equal to `bytes` (whose hash and length are
+    /// `key`), if any.
+    fn stored_at(&mut self, key: (u64, u32), bytes: &[u8]) -> Result<Option<u64>> {
+        let Some(offsets) = self.stored.get(&key) else {
             return Ok(None);
         };
         let offsets = offsets.clone();

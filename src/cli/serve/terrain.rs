@@ -246,20 +246,28 @@ impl TileCache {
         cut: impl FnOnce() -> Result<Vec<u8>, Error>,
     ) -> Result<(Arc<Vec<u8>>, u64, bool), Error> {
         let key: Key = (item.to_string(), version.to_string(), tile);
-        if let Some(hit) = self.get(&key) {
-            return Ok((hit.plain, hit.tag, true));
-        }
-        let _slot = self.gate.enter();
-        // Another request may have cut it while this one waited.
-        if let Some(hit) = self.get(&key) {
-            return Ok((hit.plain, hit.tag, true));
-        }
+        let _slot = match self.get_or_turn(&key) {
+            Ok(hit) => return Ok((hit.plain, hit.tag, true)),
+            Err(slot) => slot,
+        };
         let plain = Arc::new(cut()?);
-        let mut h = std::collections::hash_map::DefaultHasher::new();
-        plain.hash(&mut h);
-        let tag = h.finish();
+        let tag = tag_of(&plain);
         self.put(key, plain.clone(), Arc::new(Vec::new()), tag);
         Ok((plain, tag, false))
+    }
+
+    /// The tile at `key` from the cache, or else this caller's turn to cut it (the slot
+    /// held until dropped): looked up again once the turn comes, since another request (or
+    /// the warming) may have cut it meanwhile.
+    fn get_or_turn(&self, key: &Key) -> Result<Cached, Slot<'_>> {
+        if let Some(hit) = self.get(key) {
+            return Ok(hit);
+        }
+        let slot = self.gate.enter();
+        match self.get(key) {
+            Some(hit) => Ok(hit),
+            None => Err(slot),
+        }
     }
 
     fn put(&self, key: Key, plain: Arc<Vec<u8>>, gzip: Arc<Vec<u8>>, tag: u64) {
@@ -285,6 +293,23 @@ impl TileCache {
         s.order.insert(tick, key.clone());
         s.map.insert(key, (Cached { plain, gzip, tag }, tick));
     }
+}
+
+/// A tile's tag: a hash of its bytes (its `ETag`).
+fn tag_of(bytes: &[u8]) -> u64 {
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    bytes.hash(&mut h);
+    h.finish()
+}
+
+/// The answer to a CORS preflight for tiles: GET and HEAD, with `allow_headers`.
+pub(super) fn preflight(allow_headers: &str) -> Response {
+    with_cors(
+        Response::new(204, "text/plain", Body::Bytes(Vec::new()))
+            .with("Access-Control-Allow-Methods", "GET, HEAD, OPTIONS")
+            .with("Access-Control-Allow-Headers", allow_headers)
+            .with("Access-Control-Max-Age", "86400"),
+    )
 }
 
 pub(super) fn with_cors(r: Response) -> Response {
@@ -343,15 +368,7 @@ pub fn route(
         }
     };
     if request.method == "OPTIONS" {
-        return Some(with_cors(
-            Response::new(204, "text/plain", Body::Bytes(Vec::new()))
-                .with("Access-Control-Allow-Methods", "GET, HEAD, OPTIONS")
-                .with(
-                    "Access-Control-Allow-Headers",
-                    "Accept, Accept-Encoding, If-None-Match",
-                )
-                .with("Access-Control-Max-Age", "86400"),
-        ));
+        return Some(preflight("Accept, Accept-Encoding, If-None-Match"));
     }
     Some(answer(item, cache, options, &asked, query, request).unwrap_or_else(failed))
 }
@@ -444,20 +461,15 @@ fn answer(
                     .any(|e| e.trim().split(';').next() == Some("gzip"))
             });
             let key: Key = (item.name.clone(), version.clone(), Tile::Mesh(*t, ext));
-            let mut slot = None;
-            let hit = cache.get(&key).or_else(|| {
-                slot = Some(cache.gate.enter());
-                // Another request (or the warming) may have cut it while this one waited.
-                cache.get(&key)
-            });
-            let from_cache = hit.is_some();
+            let looked = cache.get_or_turn(&key);
+            let from_cache = looked.is_ok();
             let Cached {
                 plain,
                 gzip: zipped,
                 tag,
-            } = match hit {
-                Some(hit) => hit,
-                None => {
+            } = match looked {
+                Ok(hit) => hit,
+                Err(_slot) => {
                     let (edges, new_state) = cache.edges(&item.name, &version);
                     if new_state && options.warm {
                         spawn_warm(item, cache, options);
@@ -466,7 +478,6 @@ fn answer(
                     put_encoded(cache, &item.name, &version, *t, &cut, &[ext])?.0
                 }
             };
-            drop(slot);
             let etag = format!(
                 "\"{tag:016x}-{}{}\"",
                 ext.names(),
@@ -523,9 +534,7 @@ fn put_encoded(
     let mut bytes = 0;
     for &ext in exts {
         let plain = Tileset::encode(cut, ext.normals, ext.metadata)?;
-        let mut h = std::collections::hash_map::DefaultHasher::new();
-        plain.hash(&mut h);
-        let tag = h.finish();
+        let tag = tag_of(&plain);
         let zipped = crate::pyramid::gzip(&plain)?;
         bytes += plain.len() + zipped.len();
         let (plain, gzip) = (Arc::new(plain), Arc::new(zipped));

@@ -16,7 +16,9 @@ use crate::http::{Body, Request, Response};
 use crate::terrain::Terrain;
 use crate::Error;
 
-use super::terrain::{failed, text_error, tile_number, version, with_cors, Tile, TileCache};
+use super::terrain::{
+    failed, preflight, text_error, tile_number, version, with_cors, Tile, TileCache,
+};
 use super::Item;
 use crate::pyramid::shape_of;
 
@@ -68,12 +70,7 @@ pub fn route(
         }
     };
     if request.method == "OPTIONS" {
-        return Some(with_cors(
-            Response::new(204, "text/plain", Body::Bytes(Vec::new()))
-                .with("Access-Control-Allow-Methods", "GET, HEAD, OPTIONS")
-                .with("Access-Control-Allow-Headers", "If-None-Match")
-                .with("Access-Control-Max-Age", "86400"),
-        ));
+        return Some(preflight("If-None-Match"));
     }
     Some(answer(item, cache, &asked, query, request).unwrap_or_else(failed))
 }
