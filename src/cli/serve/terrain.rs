@@ -678,29 +678,22 @@ fn accepted(accept: Option<&str>) -> Option<Extensions> {
 mod tests {
     use super::*;
 
-    /// The gate lets in at most its slots at once, and the waiting in the order they
-    /// came: threads that enter one after another (each seen waiting before the next
-    /// comes) get in in that order, and never more than two are in.
+    /// The waiting get in in the order they came: threads that enter one after another
+    /// (each seen waiting before the next comes) get in in that order. One slot is held
+    /// by the test throughout, so the threads pass the other one by one and each records
+    /// its turn before it hands the slot on. (With both slots free, two threads are let
+    /// in together and may record their turns in either order: CI saw `[1, 0, …]`.)
     #[test]
-    fn the_gate_keeps_its_slots_and_the_order_of_arrival() {
-        use std::sync::atomic::{AtomicUsize, Ordering};
+    fn the_gate_lets_the_waiting_in_in_the_order_they_came() {
         let gate = Arc::new(CutGate::new(2));
-        let inside = Arc::new(AtomicUsize::new(0));
-        let most = Arc::new(AtomicUsize::new(0));
         let order = Arc::new(Mutex::new(Vec::new()));
-        // Both slots taken, so every thread below waits.
         let (a, b) = (gate.enter(), gate.enter());
         let mut threads = Vec::new();
         for id in 0..8usize {
-            let (g, inside, most, order) =
-                (gate.clone(), inside.clone(), most.clone(), order.clone());
+            let (g, order) = (gate.clone(), order.clone());
             threads.push(std::thread::spawn(move || {
                 let slot = g.enter();
-                let now = inside.fetch_add(1, Ordering::SeqCst) + 1;
-                most.fetch_max(now, Ordering::SeqCst);
                 order.lock().unwrap().push(id);
-                std::thread::sleep(std::time::Duration::from_millis(2));
-                inside.fetch_sub(1, Ordering::SeqCst);
                 drop(slot);
             }));
             // Wait until this thread is in the line before the next one comes.
@@ -708,12 +701,41 @@ mod tests {
                 std::thread::yield_now();
             }
         }
-        drop((a, b));
+        drop(a);
         for t in threads {
             t.join().unwrap();
         }
         assert_eq!(*order.lock().unwrap(), (0..8).collect::<Vec<_>>());
-        assert!(most.load(Ordering::SeqCst) <= 2);
+        drop(b);
+        assert_eq!(gate.state.lock().unwrap().running, 0);
+    }
+
+    /// The gate never lets in more than its slots: eight threads wanting in at once,
+    /// each staying a while, are never more than two inside a two-slot gate.
+    #[test]
+    fn the_gate_keeps_its_slots() {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        let gate = Arc::new(CutGate::new(2));
+        let inside = Arc::new(AtomicUsize::new(0));
+        let most = Arc::new(AtomicUsize::new(0));
+        let threads: Vec<_> = (0..8)
+            .map(|_| {
+                let (g, inside, most) = (gate.clone(), inside.clone(), most.clone());
+                std::thread::spawn(move || {
+                    let slot = g.enter();
+                    let now = inside.fetch_add(1, Ordering::SeqCst) + 1;
+                    most.fetch_max(now, Ordering::SeqCst);
+                    std::thread::sleep(std::time::Duration::from_millis(2));
+                    inside.fetch_sub(1, Ordering::SeqCst);
+                    drop(slot);
+                })
+            })
+            .collect();
+        for t in threads {
+            t.join().unwrap();
+        }
+        let most = most.load(Ordering::SeqCst);
+        assert!((1..=2).contains(&most), "{most} inside at once");
         assert_eq!(gate.state.lock().unwrap().running, 0);
     }
 
