@@ -123,7 +123,10 @@ mod terrain;
 pub use error::{Error, Result};
 pub use heightfield::Heightfield;
 pub use scene::{Camera, SceneOptions};
-pub use terrain::{build, create, Block, CreateOptions, Edit, Info, Scene, Terrain, Verification};
+pub use terrain::{
+    add_tile, build, build_dataset, create, create_with_progress, load, Block, CreateOptions,
+    DatasetBuildOptions, Edit, Flight, FlightFrame, Info, Scene, Terrain, Verification,
+};
 
 /// glam, whose `DVec3` places cameras ([`Camera`]): re-exported so that a caller needs no
 /// second dependency, and gets the version fmrh was built with.
@@ -146,15 +149,20 @@ pub use glam;
 /// # Ok(()) }
 /// ```
 pub mod types {
-    pub use crate::dataset::{DatasetReport, TileReport};
+    pub use crate::dataset::{
+        BuiltTile, DatasetCommit, DatasetReport, DatasetSummary, SeamPolicy, TileCommit, TileReport,
+    };
     pub use crate::error::Invariant;
     pub use crate::geoid::VerticalDatum;
     pub use crate::heightfield::{Georeference, Metadata};
     pub use crate::ingest::{ColorEncoding, Format, IngestLimits, IngestOptions};
     pub use crate::model::{SampleRect, ThinByArea, Thresholds};
+    pub use crate::progress::{Progress, Silent, Unit};
     pub use crate::scene::{Handedness, Mode, NeighbourLevels, SceneStats};
-    pub use crate::store::{CheckReport, CheckStatus, VerifyMode, VerifyReport};
-    pub use crate::terrain::{Committed, Created, ErrorLevel, Kind};
+    pub use crate::store::{CheckReport, CheckStatus, CommitSummary, VerifyMode, VerifyReport};
+    pub use crate::terrain::{
+        Approximation, BlockKey, Committed, Created, ErrorLevel, Kind, Strided, TileAdded,
+    };
 }
 
 /// The `fmrh` command line, run on this process's arguments: the binary's `main` is this one

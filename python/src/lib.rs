@@ -4,6 +4,10 @@
 //! numpy without a copy, and fmrh's errors turned into exception classes that keep the
 //! CLI's messages (and a corrupt file's invariant).
 
+mod build;
+mod edit;
+mod flight;
+
 use std::sync::{Arc, RwLock};
 
 use numpy::{PyArray1, PyArrayMethods};
@@ -68,6 +72,9 @@ fn to_py(e: fmrh::Error) -> PyErr {
     }
 }
 
+/// `(x, y, z)`.
+type Point = (f64, f64, f64);
+
 /// An open container or dataset.
 #[pyclass(module = "fmrh._fmrh", frozen)]
 struct Terrain {
@@ -77,6 +84,32 @@ struct Terrain {
 }
 
 impl Terrain {
+    /// The window `(col_off, row_off, width, height)` as fmrh's inclusive rectangle, checked
+    /// against the data (`None`: all of it).
+    fn rect(&self, window: Option<(i64, i64, i64, i64)>) -> PyResult<Option<SampleRect>> {
+        let Some((c, r, w, h)) = window else {
+            return Ok(None);
+        };
+        if c < 0 || r < 0 || w <= 0 || h <= 0 {
+            return Err(InvalidArgumentError::new_err(format!(
+                "window ({c}, {r}, {w}, {h}): offsets must be >= 0 and sizes > 0"
+            )));
+        }
+        let (c, r, w, h) = (c as u64, r as u64, w as u64, h as u64);
+        if c + w > self.info.width || r + h > self.info.height {
+            return Err(InvalidArgumentError::new_err(format!(
+                "window ({c}, {r}, {w}, {h}) is outside the data ({} x {} samples)",
+                self.info.width, self.info.height
+            )));
+        }
+        Ok(Some(SampleRect {
+            col0: c,
+            row0: r,
+            col1: c + w - 1,
+            row1: r + h - 1,
+        }))
+    }
+
     fn terrain(&self) -> PyResult<Arc<fmrh::Terrain>> {
         let inner = self.inner.read().unwrap_or_else(|p| p.into_inner());
         inner
@@ -129,33 +162,37 @@ impl Terrain {
         window: Option<(i64, i64, i64, i64)>,
     ) -> PyResult<Bound<'py, PyAny>> {
         let terrain = self.terrain()?;
-        let rect = match window {
-            None => None,
-            Some((c, r, w, h)) => {
-                if c < 0 || r < 0 || w <= 0 || h <= 0 {
-                    return Err(InvalidArgumentError::new_err(format!(
-                        "window ({c}, {r}, {w}, {h}): offsets must be >= 0 and sizes > 0"
-                    )));
-                }
-                let (c, r, w, h) = (c as u64, r as u64, w as u64, h as u64);
-                if c + w > self.info.width || r + h > self.info.height {
-                    return Err(InvalidArgumentError::new_err(format!(
-                        "window ({c}, {r}, {w}, {h}) is outside the data ({} x {} samples)",
-                        self.info.width, self.info.height
-                    )));
-                }
-                Some(SampleRect {
-                    col0: c,
-                    row0: r,
-                    col1: c + w - 1,
-                    row1: r + h - 1,
-                })
-            }
-        };
+        let rect = self.rect(window)?;
         let field = py.detach(move || terrain.read(rect)).map_err(to_py)?;
-        let (w, h) = (field.width() as usize, field.height() as usize);
-        let flat = PyArray1::from_vec(py, field.into_samples());
-        Ok(flat.reshape([h, w])?.into_any())
+        array(py, field)
+    }
+
+    /// The surface over the window drawn by the coarsest error level within `max_error`
+    /// (`fmrh::Terrain::read_within`), as `(heights, max_error, stride)`: `heights` at
+    /// every sample of the window, or (`own`) every `stride`-th sample from its first, the
+    /// level's own resolution; `max_error` the largest measured error of the blocks drawn.
+    #[pyo3(signature = (window, max_error, own=false))]
+    fn read_within<'py>(
+        &self,
+        py: Python<'py>,
+        window: Option<(i64, i64, i64, i64)>,
+        max_error: f64,
+        own: bool,
+    ) -> PyResult<(Bound<'py, PyAny>, f64, u64)> {
+        let terrain = self.terrain()?;
+        let rect = self.rect(window)?;
+        let (field, error, stride) = py
+            .detach(move || {
+                let a = terrain.read_within(rect, max_error)?;
+                let field = if own {
+                    a.at_stride()?.heights
+                } else {
+                    a.heights
+                };
+                Ok::<_, fmrh::Error>((field, a.max_error, a.stride))
+            })
+            .map_err(to_py)?;
+        Ok((array(py, field)?, error, stride))
     }
 
     /// The blocks a camera at `eye` looking at `target` needs at `tau` pixels of error, each
@@ -176,49 +213,32 @@ impl Terrain {
         mode: &str,
     ) -> PyResult<Vec<Bound<'py, PyDict>>> {
         let terrain = self.terrain()?;
-        let mut camera = fmrh::Camera::looking_at(
-            fmrh::glam::DVec3::new(eye.0, eye.1, eye.2),
-            fmrh::glam::DVec3::new(target.0, target.1, target.2),
-        );
-        if let Some(f) = fov {
-            camera.fov_y_deg = f;
-        }
-        if let Some((w, h)) = viewport {
-            camera.viewport = [w, h];
-        }
-        let mut options = fmrh::SceneOptions::new(tau);
-        options.mode = match mode {
-            "view" => fmrh::types::Mode::View,
-            "uniform" => fmrh::types::Mode::Uniform,
-            other => {
-                return Err(InvalidArgumentError::new_err(format!(
-                    "mode `{other}`: expected view or uniform"
-                )))
-            }
-        };
+        let camera = camera(eye, target, fov, viewport);
+        let options = scene_options(tau, mode)?;
         let scene = py
             .detach(move || terrain.scene(&camera, &options))
             .map_err(to_py)?;
-        scene
-            .blocks
-            .iter()
-            .map(|b| {
-                let d = PyDict::new(py);
-                d.set_item("rect", (b.rect.col0, b.rect.row0, b.rect.col1, b.rect.row1))?;
-                d.set_item("level", b.level)?;
-                d.set_item("tile", b.tile)?;
-                d.set_item("error", b.error)?;
-                d.set_item("screen_error", b.screen_error)?;
-                d.set_item("stride", b.stride)?;
-                d.set_item("spacing_m", b.spacing_m.map(|[x, y]| (x, y)))?;
-                d.set_item("width", b.width)?;
-                d.set_item("height", b.height)?;
-                let heights = PyArray1::from_slice(py, &b.heights)
-                    .reshape([b.height as usize, b.width as usize])?;
-                d.set_item("heights", heights)?;
-                Ok(d)
-            })
-            .collect()
+        scene.blocks.iter().map(|b| block_dict(py, b)).collect()
+    }
+
+    /// A flight along `cameras` (each `(eye, target)`), run ahead on a thread of its own
+    /// one frame at a time: an iterator of frames (`flight::Flight`).
+    #[pyo3(signature = (cameras, tau=1.0, fov=None, viewport=None, mode="view"))]
+    fn fly(
+        &self,
+        cameras: Vec<(Point, Point)>,
+        tau: f64,
+        fov: Option<f64>,
+        viewport: Option<(u32, u32)>,
+        mode: &str,
+    ) -> PyResult<flight::Flight> {
+        let terrain = self.terrain()?;
+        let options = scene_options(tau, mode)?;
+        let cameras = cameras
+            .into_iter()
+            .map(|(eye, target)| camera(eye, target, fov, viewport))
+            .collect();
+        Ok(flight::Flight::start(terrain, cameras, options))
     }
 
     /// Checks every numbered invariant (`full`: also recomputes every error and cut) and
@@ -237,6 +257,14 @@ impl Terrain {
             fmrh::Verification::Dataset(r) => serde_json::to_string(r),
         };
         json.map_err(|e| FmrhError::new_err(e.to_string()))
+    }
+
+    /// Starts an edit of this terrain's file or dataset (a local one); while a container's
+    /// edit lives, it holds the file's writer lock.
+    fn edit(&self, py: Python<'_>) -> PyResult<edit::Edit> {
+        let terrain = self.terrain()?;
+        let e = py.detach(move || terrain.edit()).map_err(to_py)?;
+        Ok(edit::Edit::new(e, self.location.clone()))
     }
 
     /// Closes the terrain: a later use raises. Reads already running finish.
@@ -259,6 +287,68 @@ impl Terrain {
     fn location(&self) -> &str {
         &self.location
     }
+}
+
+/// A camera at `eye` looking at `target`, with its field of view and viewport if given.
+fn camera(
+    eye: (f64, f64, f64),
+    target: (f64, f64, f64),
+    fov: Option<f64>,
+    viewport: Option<(u32, u32)>,
+) -> fmrh::Camera {
+    let mut camera = fmrh::Camera::looking_at(
+        fmrh::glam::DVec3::new(eye.0, eye.1, eye.2),
+        fmrh::glam::DVec3::new(target.0, target.1, target.2),
+    );
+    if let Some(f) = fov {
+        camera.fov_y_deg = f;
+    }
+    if let Some((w, h)) = viewport {
+        camera.viewport = [w, h];
+    }
+    camera
+}
+
+/// Scene options at `tau` in `mode` (`view` or `uniform`).
+fn scene_options(tau: f64, mode: &str) -> PyResult<fmrh::SceneOptions> {
+    let mut options = fmrh::SceneOptions::new(tau);
+    options.mode = match mode {
+        "view" => fmrh::types::Mode::View,
+        "uniform" => fmrh::types::Mode::Uniform,
+        other => {
+            return Err(InvalidArgumentError::new_err(format!(
+                "mode `{other}`: expected view or uniform"
+            )))
+        }
+    };
+    Ok(options)
+}
+
+/// A decoded block as a dict: `rect` (`(col0, row0, col1, row1)`, inclusive), `level`,
+/// `tile`, `error`, `screen_error`, `stride`, `spacing_m`, `width`, `height`, `heights`.
+fn block_dict<'py>(py: Python<'py>, b: &fmrh::Block) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("rect", (b.rect.col0, b.rect.row0, b.rect.col1, b.rect.row1))?;
+    d.set_item("level", b.level)?;
+    d.set_item("tile", b.tile)?;
+    d.set_item("error", b.error)?;
+    d.set_item("screen_error", b.screen_error)?;
+    d.set_item("stride", b.stride)?;
+    d.set_item("spacing_m", b.spacing_m.map(|[x, y]| (x, y)))?;
+    d.set_item("width", b.width)?;
+    d.set_item("height", b.height)?;
+    let heights =
+        PyArray1::from_slice(py, &b.heights).reshape([b.height as usize, b.width as usize])?;
+    d.set_item("heights", heights)?;
+    Ok(d)
+}
+
+/// A heightfield's samples as a float32 array of shape `(height, width)`, without a copy
+/// (the samples' buffer becomes the array's).
+fn array(py: Python<'_>, field: fmrh::Heightfield) -> PyResult<Bound<'_, PyAny>> {
+    let (w, h) = (field.width() as usize, field.height() as usize);
+    let flat = PyArray1::from_vec(py, field.into_samples());
+    Ok(flat.reshape([h, w])?.into_any())
 }
 
 /// Opens a container file, a dataset directory, or either by `http(s)://` or `s3://` URL.
@@ -290,7 +380,12 @@ fn _fmrh(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();
     m.add_function(wrap_pyfunction!(open, m)?)?;
     m.add_function(wrap_pyfunction!(format_version, m)?)?;
+    m.add_function(wrap_pyfunction!(build::build, m)?)?;
+    m.add_function(wrap_pyfunction!(build::dataset_build, m)?)?;
+    m.add_function(wrap_pyfunction!(build::dataset_add, m)?)?;
     m.add_class::<Terrain>()?;
+    m.add_class::<edit::Edit>()?;
+    m.add_class::<flight::Flight>()?;
     m.add("FmrhError", py.get_type::<FmrhError>())?;
     m.add("CorruptError", py.get_type::<CorruptError>())?;
     m.add("BusyError", py.get_type::<BusyError>())?;

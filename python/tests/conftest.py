@@ -58,3 +58,96 @@ def puget(tmp_path_factory):
     png = ROOT / "data" / "puget-sound-1k" / "ps_height_1k.png"
     fmrh_cli("build", "-q", png, "--z-scale", "0.1", "--spacing", "160", "-o", out)
     return out
+
+
+class RangeHandler(__import__("http.server").server.BaseHTTPRequestHandler):
+    """Serves files of `self.server.root` as an object store does: `Range` (one range, a
+    suffix, or several as multipart/byteranges), an ETag from the file's size and mtime, and
+    `If-Match` answered 412 when the file changed."""
+
+    def log_message(self, *args):
+        pass
+
+    def _file(self):
+        path = pathlib.Path(self.server.root) / self.path.lstrip("/").split("?")[0]
+        if not path.is_file():
+            self.send_error(404)
+            return None, None
+        st = path.stat()
+        return path, f'"{st.st_size:x}-{st.st_mtime_ns:x}"'
+
+    def do_HEAD(self):
+        path, etag = self._file()
+        if path:
+            self.send_response(200)
+            self.send_header("Content-Length", str(path.stat().st_size))
+            self.send_header("ETag", etag)
+            self.send_header("Accept-Ranges", "bytes")
+            self.end_headers()
+
+    def do_GET(self):
+        path, etag = self._file()
+        if not path:
+            return
+        if self.headers.get("If-Match") not in (None, etag):
+            self.send_error(412)
+            return
+        data = path.read_bytes()
+        n = len(data)
+        spec = self.headers.get("Range", "")
+        if not spec.startswith("bytes="):
+            self.send_response(200)
+            self.send_header("Content-Length", str(n))
+            self.send_header("ETag", etag)
+            self.end_headers()
+            self.wfile.write(data)
+            return
+        spans = []
+        for part in spec[len("bytes="):].split(","):
+            a, b = part.strip().split("-")
+            if a == "":
+                start, end = max(0, n - int(b)), n - 1
+            else:
+                start, end = int(a), min(n - 1, int(b)) if b else n - 1
+            if start >= n or start > end:
+                continue
+            spans.append((start, end))
+        if not spans:
+            self.send_response(416)
+            self.send_header("Content-Range", f"bytes */{n}")
+            self.end_headers()
+            return
+        self.send_response(206)
+        self.send_header("ETag", etag)
+        if len(spans) == 1:
+            start, end = spans[0]
+            self.send_header("Content-Range", f"bytes {start}-{end}/{n}")
+            self.send_header("Content-Length", str(end - start + 1))
+            self.end_headers()
+            self.wfile.write(data[start:end + 1])
+            return
+        boundary = "fmrhtestboundary"
+        body = b"".join(
+            f"--{boundary}\r\nContent-Type: application/octet-stream\r\n"
+            f"Content-Range: bytes {s}-{e}/{n}\r\n\r\n".encode() + data[s:e + 1] + b"\r\n"
+            for s, e in spans
+        ) + f"--{boundary}--\r\n".encode()
+        self.send_header("Content-Type", f"multipart/byteranges; boundary={boundary}")
+        self.send_header("Content-Length", str(len(body)))
+        self.end_headers()
+        self.wfile.write(body)
+
+
+@pytest.fixture(scope="session")
+def http_root(tmp_path_factory):
+    """`(directory, base URL)`: files put in the directory are served with byte ranges."""
+    import http.server
+    import threading
+
+    root = tmp_path_factory.mktemp("www")
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), RangeHandler)
+    server.root = str(root)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    yield root, f"http://127.0.0.1:{server.server_address[1]}"
+    server.shutdown()

@@ -27,13 +27,12 @@ pub mod seams;
 pub mod verify;
 
 pub use add::{add, replace_tile};
-pub use build::{build, DatasetOptions, DatasetSummary, TileInput};
-#[cfg(any(test, feature = "testing"))]
-pub use build::BuiltTile;
+pub use build::{build, BuiltTile, DatasetOptions, DatasetSummary, TileInput};
 pub use commit::{recover, replace, DatasetCommit, Dir};
 pub use compact::compact;
+pub use commit::TileCommit;
 #[cfg(any(test, feature = "testing"))]
-pub use commit::{DatasetRecovery, Files, TileCommit};
+pub use commit::{DatasetRecovery, Files};
 pub use fly::DatasetScheduler;
 #[cfg(any(test, feature = "testing"))]
 pub use fly::DatasetFrame;

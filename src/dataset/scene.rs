@@ -609,6 +609,7 @@ impl Dataset {
         let h = (window.row1 - window.row0 + 1) as usize;
         let mut values = vec![f64::NAN; w * h];
         let mut bound = vec![f64::NAN; w * h];
+        let mut stride = 0;
         for part in &scene.tiles {
             let tile = self.tile(part.tile)?;
             let r = tile.rect();
@@ -623,6 +624,9 @@ impl Dataset {
                 row1: p.row1 - r.row0,
             };
             let rec = crate::scene::reconstruct(&store, &scene.tile_scene(part.tile, &r), local)?;
+            if rec.stride != 0 {
+                stride = if stride == 0 { rec.stride } else { stride.min(rec.stride) };
+            }
             let pw = (p.col1 - p.col0 + 1) as usize;
             for y in 0..(p.row1 - p.row0 + 1) as usize {
                 for x in 0..pw {
@@ -644,6 +648,7 @@ impl Dataset {
             values,
             bound,
             uncovered,
+            stride,
         })
     }
 }

@@ -30,6 +30,10 @@ pub struct Reconstruction {
     pub bound: Vec<f64>,
     /// Samples no block owns.
     pub uncovered: u64,
+    /// The finest stride (samples between grid points) of the blocks that own samples:
+    /// the resolution at which the window holds all the detail the scene has; 0 when no
+    /// block owns any.
+    pub stride: u64,
 }
 
 impl Reconstruction {
@@ -70,6 +74,7 @@ pub fn reconstruct<S: Source>(
     // The blocks that own part of the window, with that part; their payloads are read
     // together (coalesced) and decoded once.
     let mut parts = Vec::new();
+    let mut stride = 0;
     for block in &scene.blocks {
         let rect = block.rect();
         // Owned: the half-open footprint, plus the data's last column and row.
@@ -88,6 +93,8 @@ pub fn reconstruct<S: Source>(
             },
         };
         if let Some(part) = owned.intersect(&window) {
+            let s = d.stride(block.level);
+            stride = if stride == 0 { s } else { stride.min(s) };
             parts.push((*block, part));
         }
     }
@@ -141,5 +148,6 @@ pub fn reconstruct<S: Source>(
         values,
         bound,
         uncovered,
+        stride,
     })
 }

@@ -2,6 +2,7 @@
 //! file in any format fmrh reads ([`build`]), written atomically.
 
 use std::path::Path;
+use std::sync::Arc;
 
 use serde::Serialize;
 
@@ -10,6 +11,7 @@ use crate::error::Result;
 use crate::heightfield::Heightfield;
 use crate::ingest::IngestOptions;
 use crate::model::{BuildOptions, Model, Precision, ThinByArea, Thresholds, DEFAULT_BLOCK_SIZE};
+use crate::progress::{Progress, Silent};
 use crate::store::{write_file, WriteOptions};
 
 /// How [`create`] and [`build`] make a container.
@@ -100,9 +102,20 @@ pub struct Created {
 /// # Ok(()) }
 /// ```
 pub fn create(path: &Path, heightfield: Heightfield, options: &CreateOptions) -> Result<Created> {
+    create_with_progress(path, heightfield, options, Arc::new(Silent))
+}
+
+/// [`create`], telling `progress` how each phase advances (the model's levels measured,
+/// then the payload bytes written; [`types::Progress`](crate::types::Progress)).
+pub fn create_with_progress(
+    path: &Path,
+    heightfield: Heightfield,
+    options: &CreateOptions,
+    progress: Arc<dyn Progress>,
+) -> Result<Created> {
     let metadata = heightfield.metadata.clone();
     let samples = u64::from(heightfield.width()) * u64::from(heightfield.height());
-    let model = Model::build(
+    let model = Model::build_with_progress(
         heightfield,
         &BuildOptions {
             block_size: options.block_size,
@@ -110,12 +123,14 @@ pub fn create(path: &Path, heightfield: Heightfield, options: &CreateOptions) ->
             precision: options.precision.map(Precision::new).transpose()?,
             thin: options.thin,
         },
+        &*progress,
     )?;
     let write = WriteOptions {
         page_size: options
             .page_size
             .unwrap_or_else(|| crate::format::page_size_for(samples)),
         against_parents: !options.payloads_alone,
+        progress,
         ..WriteOptions::default()
     };
     let summary = write_file(&model, &metadata, path, &write, options.overwrite)?;
@@ -133,6 +148,13 @@ pub fn create(path: &Path, heightfield: Heightfield, options: &CreateOptions) ->
             })
             .collect(),
     })
+}
+
+/// Reads the DEM at `input` into memory, as [`build`] reads it (`read` says how: its
+/// format, scale, nodata, and the memory it may take): to change its heights or metadata
+/// (a spacing, a CRS) before [`create`].
+pub fn load(input: &Path, read: &IngestOptions) -> Result<Heightfield> {
+    crate::ingest::load(input, read)
 }
 
 /// Reads the DEM at `input` (GeoTIFF, SRTM `.hgt`, PNG, ASCII grids, DTED, USGS DEM, JPEG, or

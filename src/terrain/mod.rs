@@ -3,19 +3,25 @@
 //! A [`Terrain`] is anything fmrh opens — a container file, a dataset directory, or either by
 //! URL — behind one type: [`Terrain::open`] decides which. It describes itself ([`Info`]),
 //! answers a camera and a tolerance with a [`Scene`] whose [`Block`]s carry their decoded
-//! heights beside their rectangle, level, stride and error ([`Terrain::scene`]), reads
-//! full-resolution samples ([`Terrain::read`]), changes samples atomically ([`Terrain::edit`],
-//! an [`Edit`]) and checks every invariant ([`Terrain::verify`]). [`create`] and [`build`] make
-//! containers. The parent chain a payload is coded against, read coalescing and the caches
-//! are inside; [`crate::raw`] is the way down for a tool that wants them.
+//! heights beside their rectangle, level, stride and error ([`Terrain::scene`]), and a moving
+//! camera frame by frame with what entered and left the view ([`Terrain::fly`]), reads
+//! full-resolution samples ([`Terrain::read`]) or the surface within an error bound
+//! ([`Terrain::read_within`]), changes samples atomically ([`Terrain::edit`], an [`Edit`])
+//! and checks every invariant ([`Terrain::verify`]). [`create`] and [`build`] make
+//! containers, [`build_dataset`] and [`add_tile`] datasets. The parent chain a payload is
+//! coded against, read coalescing and the caches are inside; [`crate::raw`] is the way down
+//! for a tool that wants them.
 //!
 //! This room owns no bytes and no algorithm: each method is a few calls into the store, the
 //! scene, the dataset and the model. What it adds is one vocabulary for a container and a
 //! dataset alike, and values that need nothing else to be used (a block's heights come with
 //! the rectangle they cover).
 
+mod approximate;
 mod create;
+mod datasets;
 mod edit;
+mod flight;
 mod scene;
 mod verify;
 
@@ -24,9 +30,12 @@ use std::sync::Arc;
 
 use serde::Serialize;
 
-pub use create::{build, create, CreateOptions, Created};
+pub use approximate::{Approximation, Strided};
+pub use create::{build, create, create_with_progress, load, CreateOptions, Created};
+pub use datasets::{add_tile, build_dataset, DatasetBuildOptions, TileAdded};
 pub use edit::{Committed, Edit};
-pub use scene::{Block, Scene};
+pub use flight::{Flight, FlightFrame};
+pub use scene::{Block, BlockKey, Scene};
 pub use verify::Verification;
 
 use crate::dataset::Dataset;

@@ -159,28 +159,42 @@ impl Terrain {
     }
 
     fn select(&self, camera: &Camera, options: &SceneOptions, globe: bool) -> Result<Scene> {
+        self.selected(camera, options, globe)?
+            .decode(self, |_| true)
+    }
+
+    /// The blocks `camera` needs, selected but not yet read: flat (`globe` false) or on the
+    /// globe.
+    pub(super) fn selected(
+        &self,
+        camera: &Camera,
+        options: &SceneOptions,
+        globe: bool,
+    ) -> Result<Selected> {
         let spacing = if globe {
             None
         } else {
             Some(self.flat_spacing()?)
         };
-        match &self.source {
+        Ok(match &self.source {
             Source::Container(store) => {
                 let selector = match spacing {
                     Some(s) => crate::scene::Terrain::with_spacing(store, Some(s))?,
                     None => crate::scene::Terrain::on_globe(store)?,
                 };
-                let scene = selector.scene(camera, options)?;
-                decoded(store, scene, spacing.or(store.header().metadata.spacing_m))
+                Selected::Container(
+                    selector.scene(camera, options)?,
+                    spacing.or(store.header().metadata.spacing_m),
+                )
             }
             Source::Dataset(ds) => {
                 let scene = match spacing {
                     Some(s) => ds.scene(camera, options, Some(s))?,
                     None => ds.scene_on_globe(camera, options)?,
                 };
-                decoded_dataset(ds, scene, spacing.or(ds.spacing_m()))
+                Selected::Dataset(scene, spacing.or(ds.spacing_m()))
             }
-        }
+        })
     }
 
     /// The *cut* of the terrain within a static bound, decoded: the blocks over `window`
@@ -241,6 +255,81 @@ impl Terrain {
                 self.location.display()
             ))
         })
+    }
+}
+
+/// A scene selected but not read: a container's or a dataset's, with the spacing its
+/// blocks are placed at.
+pub(super) enum Selected {
+    Container(crate::scene::Scene, Option<[f64; 2]>),
+    Dataset(crate::dataset::DatasetScene, Option<[f64; 2]>),
+}
+
+/// Which file a selected block comes from and where it is in that file's tree: the same
+/// block in two frames has the same key (a terrain reads one state).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
+pub struct BlockKey {
+    /// The tile (a dataset's index), or `None` for a container.
+    pub tile: Option<u64>,
+    /// Its level in its file's tree.
+    pub level: u8,
+    /// Its column among the level's nodes.
+    pub x: u32,
+    /// Its row among the level's nodes.
+    pub y: u32,
+}
+
+impl Selected {
+    /// The keys of its blocks, in scene order.
+    pub(super) fn keys(&self) -> Vec<BlockKey> {
+        match self {
+            Selected::Container(s, _) => s
+                .blocks
+                .iter()
+                .map(|b| BlockKey {
+                    tile: None,
+                    level: b.level,
+                    x: b.x,
+                    y: b.y,
+                })
+                .collect(),
+            Selected::Dataset(s, _) => s
+                .blocks
+                .iter()
+                .map(|b| BlockKey {
+                    tile: Some(b.tile),
+                    level: b.block.level,
+                    x: b.block.x,
+                    y: b.block.y,
+                })
+                .collect(),
+        }
+    }
+
+    /// The scene with the blocks `wanted` says yes to (by their index in the scene) read
+    /// and decoded; the others are left out.
+    pub(super) fn decode(self, terrain: &Terrain, wanted: impl Fn(usize) -> bool) -> Result<Scene> {
+        match (self, &terrain.source) {
+            (Selected::Container(mut scene, spacing), Source::Container(store)) => {
+                let mut i = 0;
+                scene.blocks.retain(|_| {
+                    i += 1;
+                    wanted(i - 1)
+                });
+                decoded(store, scene, spacing)
+            }
+            (Selected::Dataset(mut scene, spacing), Source::Dataset(ds)) => {
+                let mut i = 0;
+                scene.blocks.retain(|_| {
+                    i += 1;
+                    wanted(i - 1)
+                });
+                decoded_dataset(ds, scene, spacing)
+            }
+            _ => Err(Error::InvalidArgument(
+                "a scene selected on one terrain cannot be read from another".into(),
+            )),
+        }
     }
 }
 
