@@ -123,6 +123,7 @@ mod terrain;
 pub use error::{Error, Result};
 pub use heightfield::Heightfield;
 pub use scene::{Camera, SceneOptions};
+pub use terrain::distributed;
 pub use terrain::{
     add_tile, build, build_dataset, create, create_with_progress, load, Block, CreateOptions,
     DatasetBuildOptions, Edit, Flight, FlightFrame, Info, Scene, Terrain, Verification,

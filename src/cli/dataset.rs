@@ -29,7 +29,9 @@ pub enum DatasetCommand {
 pub struct AddArgs {
     /// The dataset's directory.
     dir: PathBuf,
-    /// The tile DEM.
+    /// The tile DEM. (Its id is not `tile`: `--tile`, the SRTM tile name of the ingest
+    /// options, has that one; clap refuses two arguments of one id.)
+    #[arg(id = "input", value_name = "TILE")]
     tile: PathBuf,
     /// Where its first sample goes: COL0,ROW0 in dataset samples (default: by its
     /// georeference).

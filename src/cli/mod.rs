@@ -342,3 +342,16 @@ pub fn main() -> ExitCode {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    /// Every command's arguments are well formed as clap checks them (unique ids, valid
+    /// defaults and conflicts). Release builds skip these checks when parsing, so a clash
+    /// would otherwise pass `cargo test --release` and panic only in a debug build: one did,
+    /// `dataset add`'s positional `tile` against `--tile` (regression).
+    #[test]
+    fn every_command_is_well_formed() {
+        use clap::CommandFactory;
+        super::Cli::command().debug_assert();
+    }
+}

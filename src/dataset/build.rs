@@ -22,23 +22,19 @@ use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 
-use super::adjacency::{tables_of, TileEdges};
-use super::manifest::{write_state, Contents, MANIFEST_NAME};
-use super::placement::{check_tiling, place_by_georeference, rect, PlacementError};
-use super::seams::{settle, Placed, SeamPolicy};
+use super::manifest::MANIFEST_NAME;
+use super::plan::{assemble, build_tile, plan, same_datum, settled_edge, PlanTile, TileScan};
+use super::seams::SeamPolicy;
 use crate::error::{Error, Result};
-use crate::geoid::VerticalDatum;
 use crate::format::manifest::{
-    tile_name_is_valid, TileRecord, SEAM_FIRST, SEAM_MEAN, SEAM_STRICT, TILE_NAME_LEN,
+    tile_name_is_valid, TileRecord, TILE_NAME_LEN,
 };
-use crate::format::page_size_for;
-use crate::heightfield::{check_dimensions, Georeference, Heightfield};
+use crate::heightfield::{check_dimensions, Heightfield};
 use crate::ingest::limits::BUILD_BYTES_PER_SAMPLE;
 use crate::ingest::{self, IngestOptions, WindowedRaster};
-use crate::model::{BuildOptions, Model, SampleRect};
+use crate::model::{BuildOptions, SampleRect};
 use crate::progress::Progress;
-use crate::store::io::FileIo;
-use crate::store::{write_file, Store, WriteOptions};
+use crate::store::{Store, WriteOptions};
 
 /// One input tile: its DEM, and where it goes (`None`: by its georeference).
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -116,50 +112,6 @@ pub(super) fn record_of<S: crate::store::Source>(
     ))
 }
 
-/// What the scan keeps of a tile.
-struct Scanned {
-    width: u32,
-    height: u32,
-    georeference: Option<Georeference>,
-    /// North row, south row, west column, east column.
-    borders: [Vec<f32>; 4],
-}
-
-impl Scanned {
-    fn of(hf: &Heightfield) -> Scanned {
-        let (w, h) = (hf.width() as usize, hf.height() as usize);
-        let s = hf.samples();
-        Scanned {
-            width: hf.width(),
-            height: hf.height(),
-            georeference: hf.metadata.georeference.clone(),
-            borders: [
-                s[..w].to_vec(),
-                s[(h - 1) * w..].to_vec(),
-                (0..h).map(|y| s[y * w]).collect(),
-                (0..h).map(|y| s[y * w + w - 1]).collect(),
-            ],
-        }
-    }
-
-    /// The sample at tile `(x, y)`, which lies on a border.
-    fn border(&self, x: u64, y: u64) -> Option<f32> {
-        let (w, h) = (u64::from(self.width), u64::from(self.height));
-        let at = |v: &Vec<f32>, i: u64| v.get(usize::try_from(i).ok()?).copied();
-        if y == 0 {
-            at(&self.borders[0], x)
-        } else if y == h - 1 {
-            at(&self.borders[1], x)
-        } else if x == 0 {
-            at(&self.borders[2], y)
-        } else if x == w - 1 {
-            at(&self.borders[3], y)
-        } else {
-            None
-        }
-    }
-}
-
 /// A tile file name from an input's name: its stem's letters, digits, `.`, `_` and `-`
 /// (others become `_`), at most 43 bytes, then `.fmrh`; `-2`, `-3`, ... when taken (`taken`
 /// holds the names in use, in lower case).
@@ -192,14 +144,6 @@ pub fn tile_name(input: &Path, taken: &std::collections::HashSet<String>) -> Str
     }
     debug_assert!(tile_name_is_valid(&name));
     name
-}
-
-fn seam_byte(p: SeamPolicy) -> u8 {
-    match p {
-        SeamPolicy::Strict => SEAM_STRICT,
-        SeamPolicy::First => SEAM_FIRST,
-        SeamPolicy::Mean => SEAM_MEAN,
-    }
 }
 
 /// The side of the square tiles an input too large for a memory budget of `budget` bytes is
@@ -334,26 +278,18 @@ fn cut(inputs: &[TileInput], options: &DatasetOptions) -> Result<Vec<Piece>> {
     Ok(pieces)
 }
 
-/// The error for a placement that fails, naming tiles by their inputs.
-fn placement_error(e: PlacementError, names: &[String]) -> Error {
-    let name = |i: usize| names.get(i).map_or("?", |n| n.as_str());
-    Error::InvalidArgument(match e {
-        PlacementError::Overlap {
-            a,
-            b,
-            col0,
-            row0,
-            cols,
-            rows,
-        } => format!(
-            "tiles {} and {} overlap in {cols} x {rows} samples from dataset column {col0}, row \
-             {row0}: neighbours may share one edge row or column, no more",
-            name(a),
-            name(b)
-        ),
-        PlacementError::Georeference { tile, detail } => format!("tile {}: {detail}", name(tile)),
-        PlacementError::Layout { line, detail } => format!("layout line {line}: {detail}"),
-    })
+/// A piece as [`plan`] takes it.
+fn plan_tile<'a>(inputs: &'a [TileInput], p: &Piece, scan: &'a TileScan) -> PlanTile<'a> {
+    PlanTile {
+        name: p.name.clone(),
+        input: &inputs[p.input].path,
+        file_hint: p.file_hint.clone(),
+        at: inputs[p.input].at.map(|(c, r)| {
+            let w = p.window.unwrap_or_default();
+            (c + w.col0, r + w.row0)
+        }),
+        scan,
+    }
 }
 
 /// Builds the dataset of `inputs` into the directory `out`, which must not exist. `on_tile`
@@ -384,7 +320,6 @@ pub fn build(
     }
     // 0. Cut.
     let pieces = cut(inputs, options)?;
-    let names: Vec<String> = pieces.iter().map(|p| p.name.clone()).collect();
     // 1. Scan.
     let n = pieces.len();
     let mut scans = Vec::with_capacity(n);
@@ -393,119 +328,29 @@ pub fn build(
         options: &options.ingest,
         open: None,
     };
-    let mut datum = None;
     for (i, p) in pieces.iter().enumerate() {
         on_tile("scanning", i, n, &inputs[p.input].path);
         let hf = reader.load(p)?;
-        let this = hf.metadata.vertical_datum;
-        match datum {
-            None => datum = Some((this, &inputs[p.input].path)),
-            Some((first, first_path)) if first != this => {
-                return Err(Error::input(
-                    &inputs[p.input].path,
-                    format!(
-                        "its heights are above {}, {}'s above {}: a dataset's tiles share \
-                         one vertical datum (--vertical-datum says which, for every input)",
-                        this.name(),
-                        first_path.display(),
-                        first.name()
-                    ),
-                ));
-            }
-            Some(_) => {}
+        let scan = TileScan::of(&hf);
+        // A datum that differs stops the scan at the tile that has it.
+        if let Some(first) = scans.first() {
+            let first_input: &Path = &inputs[pieces[0].input].path;
+            same_datum((first_input, first), (&inputs[p.input].path, &scan))?;
         }
-        scans.push(Scanned::of(&hf));
+        scans.push(scan);
     }
-    // 2. Place.
-    let offsets: Vec<(u64, u64)> = if by_layout == inputs.len() {
-        pieces
-            .iter()
-            .filter_map(|p| {
-                let (c, r) = inputs[p.input].at?;
-                let w = p.window.unwrap_or_default();
-                Some((c + w.col0, r + w.row0))
-            })
-            .collect()
-    } else {
-        let mut geo = Vec::with_capacity(n);
-        for (i, s) in scans.iter().enumerate() {
-            let Some(g) = s.georeference.clone() else {
-                return Err(Error::InvalidArgument(format!(
-                    "tile {} has no georeference: place the tiles with a layout (path,col0,row0)",
-                    names[i]
-                )));
-            };
-            geo.push((g, s.width, s.height));
-        }
-        place_by_georeference(&geo).map_err(|e| placement_error(e, &names))?
-    };
-    let rects: Vec<SampleRect> = offsets
+    // 2. Place, and settle every shared edge before anything is written.
+    let tiles: Vec<PlanTile<'_>> = pieces
         .iter()
         .zip(&scans)
-        .map(|(&(c, r), s)| rect(c, r, s.width, s.height))
+        .map(|(p, s)| plan_tile(inputs, p, s))
         .collect();
-    for (i, r) in rects.iter().enumerate() {
-        if r.col1 >= 1 << 40 || r.row1 >= 1 << 40 {
-            return Err(Error::InvalidArgument(format!(
-                "tile {} at column {}, row {}: a dataset grid is at most 2^40 samples a side",
-                names[i],
-                r.col0,
-                r.row0
-            )));
-        }
-    }
-    let shared = check_tiling(&rects).map_err(|e| placement_error(e, &names))?;
-    let mut settled: Vec<(usize, usize, SampleRect, Vec<f32>)> = Vec::with_capacity(shared.len());
-    for &(a, b, o) in &shared {
-        let field = |t: usize| -> Result<Heightfield> {
-            let (w, h) = (o.col1 - o.col0 + 1, o.row1 - o.row0 + 1);
-            let mut v = Vec::with_capacity((w * h) as usize);
-            for row in o.row0..=o.row1 {
-                for col in o.col0..=o.col1 {
-                    let s = scans[t].border(col - rects[t].col0, row - rects[t].row0);
-                    v.push(s.ok_or_else(|| {
-                        Error::InvalidArgument(format!(
-                            "tiles {} and {} overlap along a line inside {}: neighbours may \
-                             share only an edge row or column of both",
-                            names[a],
-                            names[b],
-                            names[t]
-                        ))
-                    })?);
-                }
-            }
-            Heightfield::new(w as u32, h as u32, v)
-        };
-        let (fa, fb) = (field(a)?, field(b)?);
-        let pa = Placed {
-            field: &fa,
-            col0: o.col0,
-            row0: o.row0,
-        };
-        let pb = Placed {
-            field: &fb,
-            col0: o.col0,
-            row0: o.row0,
-        };
-        match settle(pa, pb, &o, options.seam) {
-            Ok(v) => settled.push((a, b, o, v)),
-            Err(d) => {
-                return Err(Error::InvalidArgument(format!(
-                    "tiles {} and {} disagree on their shared edge: at dataset column {}, row {} \
-                     ({} column {}, row {}) one holds {} and the other {}. Give --seam first or \
-                     --seam mean to settle shared edges (format-spec/dataset.md §1)",
-                    names[a],
-                    names[b],
-                    d.col,
-                    d.row,
-                    names[b],
-                    d.col - rects[b].col0,
-                    d.row - rects[b].row0,
-                    d.a,
-                    d.b
-                )))
-            }
-        }
+    let plan = plan(&tiles, options.spacing_m, options.seam, &Default::default())?;
+    let mut settled: Vec<(usize, usize, SampleRect, Vec<f32>)> =
+        Vec::with_capacity(plan.shared.len());
+    for &(a, b, o) in &plan.shared {
+        let v = settled_edge(&plan, (a, b, o), (&scans[a], &scans[b]))?;
+        settled.push((a, b, o, v));
     }
     // 3. Build, in a temporary directory beside `out`.
     let parent = match out.parent() {
@@ -516,11 +361,7 @@ pub fn build(
         .prefix(".fmrh-dataset-")
         .tempdir_in(&parent)
         .map_err(|e| Error::io(&parent, e))?;
-    let mut taken = std::collections::HashSet::new();
-    let mut records = Vec::with_capacity(n);
     let mut built = Vec::with_capacity(n);
-    let mut spacing = options.spacing_m;
-    let mut georeference = None;
     for (i, p) in pieces.iter().enumerate() {
         let input = &inputs[p.input].path;
         on_tile("building", i, n, input);
@@ -528,102 +369,33 @@ pub fn build(
         if hf.width() != scans[i].width || hf.height() != scans[i].height {
             return Err(Error::input(input, "changed while the dataset was built"));
         }
-        let mut metadata = hf.metadata.clone();
-        if let Some(s) = options.spacing_m {
-            metadata.spacing_m = Some(s);
-        }
-        spacing = spacing.or(metadata.spacing_m);
-        if georeference.is_none() {
-            georeference = metadata.georeference.as_ref().map(|g| Georeference {
-                crs: g.crs.clone(),
-                origin: [
-                    g.origin[0] - rects[i].col0 as f64 * g.step[0],
-                    g.origin[1] - rects[i].row0 as f64 * g.step[1],
-                ],
-                step: g.step,
-            });
-        }
-        let (w, h) = (hf.width(), hf.height());
-        let mut samples = hf.into_samples();
-        let mut changed = 0u64;
-        for (a, b, o, v) in &settled {
-            if *a != i && *b != i {
-                continue;
-            }
-            let mut k = 0;
-            for row in o.row0..=o.row1 {
-                for col in o.col0..=o.col1 {
-                    let at =
-                        ((row - rects[i].row0) * u64::from(w) + (col - rects[i].col0)) as usize;
-                    if samples[at].to_bits() != v[k].to_bits()
-                        && !(samples[at].is_nan() && v[k].is_nan())
-                    {
-                        samples[at] = v[k];
-                        changed += 1;
-                    }
-                    k += 1;
-                }
-            }
-        }
-        let hf = Heightfield::new(w, h, samples)?.with_metadata(metadata.clone());
-        let model = Model::build_with_progress(hf, &options.build, progress)?;
-        let name = tile_name(&p.file_hint, &taken);
-        taken.insert(name.to_ascii_lowercase());
-        let path = tmp.path().join(&name);
-        let mut write = options.write.clone();
-        if write.page_size == 0 {
-            write.page_size = page_size_for(u64::from(w) * u64::from(h));
-        }
-        let summary = write_file(&model, &metadata, &path, &write, false)?;
-        drop(model);
-        records.push(record_of(&Store::open(&path)?, &name, rects[i])?);
+        let edges: Vec<(SampleRect, &[f32])> = settled
+            .iter()
+            .filter(|(a, b, _, _)| *a == i || *b == i)
+            .map(|(_, _, o, v)| (*o, v.as_slice()))
+            .collect();
+        let name = &plan.files[i];
+        let file = build_tile(
+            &plan,
+            i,
+            hf,
+            &edges,
+            options,
+            &tmp.path().join(name),
+            progress,
+        )?;
         built.push(BuiltTile {
             input: p.name.clone(),
-            name,
-            rect: rects[i],
-            file_length: summary.file_length,
-            seam_samples_changed: changed,
+            name: name.clone(),
+            rect: plan.rects[i],
+            file_length: file.file_length,
+            seam_samples_changed: file.seam_samples_changed,
         });
     }
-    // 4. The adjacent-cluster tables, from each tile's edge lists and its east and south
-    // neighbours'.
+    // 4. Stitch and 5. publish.
     on_tile("stitching", 0, n, &inputs[0].path);
-    let mut cache: std::collections::HashMap<usize, std::sync::Arc<TileEdges>> =
-        std::collections::HashMap::new();
-    let mut edges = |k: usize| -> Result<std::sync::Arc<TileEdges>> {
-        if let Some(e) = cache.get(&k) {
-            return Ok(e.clone());
-        }
-        let store = Store::open(&tmp.path().join(records[k].name()))?;
-        let e = std::sync::Arc::new(TileEdges::read(&store, &records[k])?);
-        cache.insert(k, e.clone());
-        Ok(e)
-    };
-    let mut adjacency = std::collections::HashMap::new();
-    for (k, record) in records.iter().enumerate() {
-        let blob = tables_of(k, &rects, &mut edges)?;
-        if !blob.is_empty() {
-            adjacency.insert(record.name().to_string(), blob);
-        }
-    }
-    // 5. Publish.
     let manifest = tmp.path().join(MANIFEST_NAME);
-    std::fs::File::create(&manifest).map_err(|e| Error::io(&manifest, e))?;
-    {
-        let io = FileIo::open(&manifest).map_err(|e| Error::io(&manifest, e))?;
-        write_state(
-            &io,
-            None,
-            &Contents {
-                tiles: records,
-                spacing_m: spacing,
-                georeference,
-                seam: seam_byte(options.seam),
-                vertical_datum: Some(datum.map_or(VerticalDatum::Unknown, |(d, _)| d)),
-                adjacency,
-            },
-        )?;
-    }
+    assemble(&plan, tmp.path(), &manifest, false)?;
     let manifest_bytes = std::fs::metadata(&manifest)
         .map_err(|e| Error::io(&manifest, e))?
         .len();
@@ -634,14 +406,14 @@ pub fn build(
         return Err(Error::io(out, e));
     }
     sync_dir(&parent)?;
-    let columns = rects.iter().map(|r| r.col1 + 1).max().unwrap_or(0);
-    let rows = rects.iter().map(|r| r.row1 + 1).max().unwrap_or(0);
+    let columns = plan.rects.iter().map(|r| r.col1 + 1).max().unwrap_or(0);
+    let rows = plan.rects.iter().map(|r| r.row1 + 1).max().unwrap_or(0);
     let total_bytes = manifest_bytes + built.iter().map(|t| t.file_length).sum::<u64>();
     Ok(DatasetSummary {
         tiles: built,
         columns,
         rows,
-        shared_edges: shared.len(),
+        shared_edges: plan.shared.len(),
         manifest_bytes,
         total_bytes,
     })

@@ -21,6 +21,7 @@ pub mod compact;
 pub mod fly;
 pub mod manifest;
 pub mod placement;
+pub mod plan;
 pub mod reader;
 pub mod scene;
 pub mod seams;

@@ -34,7 +34,7 @@ pub struct DatasetBuildOptions {
 }
 
 impl DatasetBuildOptions {
-    fn inner(&self, seam: SeamPolicy) -> Result<DatasetOptions> {
+    pub(super) fn inner(&self, seam: SeamPolicy) -> Result<DatasetOptions> {
         let c = &self.create;
         Ok(DatasetOptions {
             ingest: self.read.clone(),

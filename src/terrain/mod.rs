@@ -8,9 +8,9 @@
 //! full-resolution samples ([`Terrain::read`]) or the surface within an error bound
 //! ([`Terrain::read_within`]), changes samples atomically ([`Terrain::edit`], an [`Edit`])
 //! and checks every invariant ([`Terrain::verify`]). [`create`] and [`build`] make
-//! containers, [`build_dataset`] and [`add_tile`] datasets. The parent chain a payload is
-//! coded against, read coalescing and the caches are inside; [`crate::raw`] is the way down
-//! for a tool that wants them.
+//! containers, [`build_dataset`] and [`add_tile`] datasets, and [`distributed`] a dataset on
+//! many machines. The parent chain a payload is coded against, read coalescing and the caches
+//! are inside; [`crate::raw`] is the way down for a tool that wants them.
 //!
 //! This room owns no bytes and no algorithm: each method is a few calls into the store, the
 //! scene, the dataset and the model. What it adds is one vocabulary for a container and a
@@ -20,6 +20,7 @@
 mod approximate;
 mod create;
 mod datasets;
+pub mod distributed;
 mod edit;
 mod flight;
 mod scene;
