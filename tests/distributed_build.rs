@@ -27,10 +27,15 @@ fn build_in_phases(
         .iter()
         .map(|(p, _)| distributed::scan_tile(p, options).unwrap().to_bytes())
         .collect();
+    // The planner needs only descriptions (no borders).
     let described: Vec<_> = inputs
         .iter()
         .zip(&scans)
-        .map(|((p, at), s)| (p.clone(), *at, TileScan::from_bytes(s).unwrap()))
+        .map(|((p, at), s)| {
+            let d = TileScan::from_bytes(s).unwrap().description().to_bytes();
+            assert!(d.len() < 400, "{} bytes", d.len());
+            (p.clone(), *at, TileScan::from_bytes(&d).unwrap())
+        })
         .collect();
     let plan = distributed::plan_dataset(&described, options, &[]).unwrap();
     let json = plan.to_json();
@@ -133,6 +138,19 @@ fn the_phases_make_the_dataset_build_dataset_makes_byte_for_byte() {
     .unwrap_err()
     .to_string();
     assert!(err.contains("whose scan was not given"), "{err}");
+    let described: Vec<_> = given.iter().map(|(i, s)| (*i, s.description())).collect();
+    let err = distributed::build_planned_tile(
+        &plan,
+        1,
+        &inputs[1].0,
+        &described,
+        &strict,
+        &dir.path().join("x"),
+        &Silent,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("is a description"), "{err}");
 }
 
 #[test]

@@ -19,7 +19,7 @@ use fmrh::{CreateOptions, DatasetBuildOptions};
 use crate::{to_py, FmrhError, InvalidArgumentError};
 
 /// The options `fmrh build` takes, as the command line's flags give them.
-struct ModelOptions {
+pub struct ModelOptions {
     ingest: IngestOptions,
     create: CreateOptions,
     spacing_m: Option<[f64; 2]>,
@@ -63,7 +63,7 @@ fn whole(name: &str, v: &Bound<'_, PyAny>) -> PyResult<u64> {
 impl ModelOptions {
     /// The options in `dict` (absent: the command line's defaults); an unknown name or a
     /// value of the wrong kind raises `InvalidArgumentError`.
-    fn from_dict(dict: Option<&Bound<'_, PyDict>>) -> PyResult<ModelOptions> {
+    pub fn from_dict(dict: Option<&Bound<'_, PyDict>>) -> PyResult<ModelOptions> {
         let mut o = ModelOptions {
             ingest: IngestOptions::default(),
             create: CreateOptions::default(),
@@ -159,7 +159,7 @@ impl ModelOptions {
     }
 
     /// A dataset's options: each tile built with these.
-    fn dataset(self, seam: Option<SeamPolicy>, tile_size: Option<u32>) -> DatasetBuildOptions {
+    pub fn dataset(self, seam: Option<SeamPolicy>, tile_size: Option<u32>) -> DatasetBuildOptions {
         DatasetBuildOptions {
             read: self.ingest,
             create: self.create,

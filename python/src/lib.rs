@@ -5,6 +5,7 @@
 //! CLI's messages (and a corrupt file's invariant).
 
 mod build;
+mod distributed;
 mod edit;
 mod flight;
 
@@ -383,17 +384,34 @@ fn _fmrh(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(build::build, m)?)?;
     m.add_function(wrap_pyfunction!(build::dataset_build, m)?)?;
     m.add_function(wrap_pyfunction!(build::dataset_add, m)?)?;
+    for f in [
+        wrap_pyfunction!(distributed::scan, m)?,
+        wrap_pyfunction!(distributed::plan, m)?,
+        wrap_pyfunction!(distributed::build_tile, m)?,
+        wrap_pyfunction!(distributed::publish, m)?,
+        wrap_pyfunction!(distributed::tile_files, m)?,
+    ] {
+        m.add_function(f)?;
+    }
     m.add_class::<Terrain>()?;
     m.add_class::<edit::Edit>()?;
     m.add_class::<flight::Flight>()?;
-    m.add("FmrhError", py.get_type::<FmrhError>())?;
-    m.add("CorruptError", py.get_type::<CorruptError>())?;
-    m.add("BusyError", py.get_type::<BusyError>())?;
-    m.add("InputError", py.get_type::<InputError>())?;
-    m.add("IoError", py.get_type::<IoError>())?;
-    m.add(
-        "InvalidArgumentError",
-        py.get_type::<InvalidArgumentError>(),
-    )?;
+    // Each exception names `fmrh` as its module, where the package exports it: so it
+    // pickles by reference (a Dask worker's error arrives as the same class) and prints as
+    // `fmrh.CorruptError`.
+    for (name, class) in [
+        ("FmrhError", py.get_type::<FmrhError>()),
+        ("CorruptError", py.get_type::<CorruptError>()),
+        ("BusyError", py.get_type::<BusyError>()),
+        ("InputError", py.get_type::<InputError>()),
+        ("IoError", py.get_type::<IoError>()),
+        (
+            "InvalidArgumentError",
+            py.get_type::<InvalidArgumentError>(),
+        ),
+    ] {
+        class.setattr("__module__", "fmrh")?;
+        m.add(name, class)?;
+    }
     Ok(())
 }

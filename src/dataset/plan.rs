@@ -72,6 +72,20 @@ impl TileScan {
         }
     }
 
+    /// The scan without its border lines: what planning needs (sizes, places, datums), a
+    /// few hundred bytes whatever the tile's size. It cannot settle an edge.
+    pub fn description(&self) -> TileScan {
+        TileScan {
+            borders: Default::default(),
+            ..self.clone()
+        }
+    }
+
+    /// Whether it holds its border lines (it is not a [`TileScan::description`]).
+    pub fn has_borders(&self) -> bool {
+        !self.borders[0].is_empty()
+    }
+
     /// The sample at tile `(x, y)`, which lies on a border.
     pub(super) fn border(&self, x: u64, y: u64) -> Option<f32> {
         let (w, h) = (u64::from(self.width), u64::from(self.height));
@@ -114,7 +128,8 @@ impl TileScan {
         out
     }
 
-    /// A scan from [`TileScan::to_bytes`]; anything else is an input error.
+    /// A scan (or a description) from [`TileScan::to_bytes`]; anything else is an invalid
+    /// argument.
     pub fn from_bytes(bytes: &[u8]) -> Result<TileScan> {
         let bad = |why: &str| Error::InvalidArgument(format!("not a tile scan: {why}"));
         let mut rest = bytes
@@ -173,10 +188,15 @@ impl TileScan {
             .ok_or_else(|| bad("vertical_datum"))
             .and_then(|d| VerticalDatum::parse(d).map_err(|e| bad(&e)))?;
         let mut borders: [Vec<f32>; 4] = Default::default();
+        let mut described = false;
         for (i, b) in borders.iter_mut().enumerate() {
             let n = len(take(4)?);
             let want = if i < 2 { width } else { height } as usize;
-            if n != want {
+            // A description has all four lines empty; a scan none.
+            if i == 0 {
+                described = n == 0;
+            }
+            if n != if described { 0 } else { want } {
                 return Err(bad("a border line of the wrong length"));
             }
             *b = take(4 * n)?

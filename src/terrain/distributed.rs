@@ -79,7 +79,7 @@ pub fn build_planned_tile(
         )));
     }
     let scan = |k: usize| {
-        scans
+        let s = scans
             .iter()
             .find(|(i, _)| *i == k)
             .map(|(_, s)| s)
@@ -87,7 +87,13 @@ pub fn build_planned_tile(
                 Error::InvalidArgument(format!(
                     "tile {index} shares an edge with tile {k}, whose scan was not given"
                 ))
-            })
+            })?;
+        if !s.has_borders() {
+            return Err(Error::InvalidArgument(format!(
+                "tile {k}'s scan is a description, without the border lines settling needs"
+            )));
+        }
+        Ok(s)
     };
     let mut settled = Vec::new();
     for &(a, b, o) in plan

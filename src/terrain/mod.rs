@@ -242,6 +242,15 @@ impl Terrain {
         }
     }
 
+    /// A dataset's tile files, by the names its manifest gives them (in its order); none
+    /// for a container.
+    pub fn tile_files(&self) -> Result<Vec<String>> {
+        match &self.source {
+            Source::Container(_) => Ok(Vec::new()),
+            Source::Dataset(ds) => Ok(ds.tiles()?.iter().map(|t| t.name().to_string()).collect()),
+        }
+    }
+
     /// The container store, when it is one (the way down to [`crate::raw`]).
     pub fn store(&self) -> Option<&Store<AnySource>> {
         match &self.source {
