@@ -34,13 +34,16 @@ pub fn scan<'py>(
     ))
 }
 
+/// A DEM to plan: its path, its place from a layout or `None`, its description's bytes.
+type Described = (PathBuf, Option<(u64, u64)>, Vec<u8>);
+
 /// Plans the dataset of `tiles` (`(path, (col0, row0) or None, description)`), naming no
 /// file as one of `taken`; returns the plan as JSON text.
 #[pyfunction(name = "distributed_plan")]
 #[pyo3(signature = (tiles, options=None, seam="strict", taken=Vec::new()))]
 pub fn plan(
     py: Python<'_>,
-    tiles: Vec<(PathBuf, Option<(u64, u64)>, Vec<u8>)>,
+    tiles: Vec<Described>,
     options: Option<&Bound<'_, PyDict>>,
     seam: &str,
     taken: Vec<String>,
