@@ -83,39 +83,54 @@ def _window(window):
     return tuple(int(p) for p in parts)
 
 
-def _cameras(path):
-    """``[((ex, ey, ez), (tx, ty, tz))]`` from pairs or a CSV path."""
+def _cameras(path, n):
+    """The cameras of a path: ``n`` = 6, ``((ex, ey, ez), (tx, ty, tz))`` pairs; ``n`` = 5,
+    ``(lat, lon, height, heading, pitch)``; from a list or a CSV of ``n`` numbers a line."""
     if isinstance(path, (str, _os.PathLike)):
-        cameras = []
+        rows = []
         # `open` here is fmrh.open.
         with _builtins.open(path, encoding="utf-8") as f:
-            for n, line in enumerate(f, 1):
+            for k, line in enumerate(f, 1):
                 line = line.strip()
                 if not line or line.startswith("#"):
                     continue
-                parts = line.split(",")
                 try:
-                    v = [float(p) for p in parts]
+                    v = [float(p) for p in line.split(",")]
                 except ValueError:
-                    if n == 1:
+                    if k == 1:
                         continue  # the header
-                    raise InvalidArgumentError(f"{path}: line {n}: expected six numbers") from None
-                if len(v) != 6:
-                    raise InvalidArgumentError(f"{path}: line {n}: expected six numbers, got {len(v)}")
-                cameras.append((tuple(v[:3]), tuple(v[3:])))
-        return cameras
-    try:
-        pairs = list(path)
-    except TypeError:
-        raise InvalidArgumentError(f"path {path!r}: expected (eye, target) pairs or a CSV file") from None
+                    raise InvalidArgumentError(f"{path}: line {k}: expected {n} numbers") from None
+                if len(v) != n:
+                    raise InvalidArgumentError(f"{path}: line {k}: expected {n} numbers, got {len(v)}")
+                rows.append(v)
+    else:
+        try:
+            rows = list(path)
+        except TypeError:
+            raise InvalidArgumentError(f"path {path!r}: expected a list of cameras or a CSV file") from None
+    if n == 5:
+        return [_pose(r) for r in rows]
     out = []
-    for p in pairs:
+    for p in rows:
+        if isinstance(p, list) and len(p) == 6:
+            p = (p[:3], p[3:])
         try:
             eye, target = p
         except (TypeError, ValueError):
             raise InvalidArgumentError(f"camera {p!r}: expected (eye, target)") from None
         out.append((_point(eye, "eye"), _point(target, "target")))
     return out
+
+
+def _pose(p):
+    """``(lat, lon, height, heading, pitch)`` floats."""
+    try:
+        pose = tuple(float(v) for v in p)
+    except (TypeError, ValueError):
+        pose = ()
+    if len(pose) != 5:
+        raise InvalidArgumentError(f"camera {p!r}: expected (lat, lon, height, heading, pitch)")
+    return pose
 
 
 def _point(p, name):
@@ -255,23 +270,37 @@ class Terrain:
         self._info = _json.loads(fresh.info_json())
         old.close()
 
-    def fly(self, path, tau=1.0, *, fov=None, viewport=None, mode="view"):
+    def scene_geo(self, lat, lon, height, heading=0.0, pitch=-30.0, tau=1.0, *, fov=None,
+                  viewport=None, mode="view"):
+        """The blocks a camera on the globe needs, as ``fmrh scene --eye-geo`` gives them:
+        at ``lat``, ``lon`` (degrees), ``height`` metres above the WGS 84 ellipsoid, looking
+        along ``heading`` (degrees clockwise from north) and ``pitch`` (degrees above the
+        horizontal, negative looking down). The data must be on a geographic grid. Blocks
+        are dicts as :meth:`scene` gives them."""
+        pose = _pose((lat, lon, height, heading, pitch))
+        return self._t.scene_geo(*pose, float(tau), None if fov is None else float(fov),
+                                 None if viewport is None else tuple(map(int, viewport)), mode)
+
+    def fly(self, path, tau=1.0, *, geo=False, fov=None, viewport=None, mode="view"):
         """Flies a camera along ``path`` and yields one frame a camera, as ``fmrh fly``
         replays a path: each frame's scene is :meth:`scene`'s for that camera, but only the
         blocks that entered the view are read and decoded; the others are the arrays given
         before. ``path`` is a list of ``(eye, target)`` pairs or the path of a CSV with one
         camera a line, ``eye_x,eye_y,eye_z,target_x,target_y,target_z`` (a header line is
-        skipped), as ``fmrh fly --path`` reads. The next frame is prepared on a thread of
-        its own while the caller works on this one.
+        skipped), as ``fmrh fly --path`` reads. With ``geo``, the cameras are on the globe:
+        ``(lat, lon, height, heading, pitch)`` tuples or such a CSV (``fmrh fly --geo``), as
+        :meth:`scene_geo` takes one. The next frame is prepared on a thread of its own while
+        the caller works on this one.
 
         Each frame is a dict: ``index``; ``blocks``, the scene's blocks (dicts as
         :meth:`scene` gives), in scene order; ``loaded``, those that entered the view;
         ``evicted``, the keys ``(tile, level, x, y)`` of the last frame's blocks that left
         it; ``keys``, every block's key in order; ``max_screen_error`` (pixels) and
         ``schedule_ns``."""
-        cameras = _cameras(path)
-        flight = self._t.fly(cameras, float(tau), None if fov is None else float(fov),
-                             None if viewport is None else tuple(map(int, viewport)), mode)
+        cameras = _cameras(path, 5 if geo else 6)
+        fly = self._t.fly_geo if geo else self._t.fly
+        flight = fly(cameras, float(tau), None if fov is None else float(fov),
+                     None if viewport is None else tuple(map(int, viewport)), mode)
         held = {}
         try:
             for frame in flight:

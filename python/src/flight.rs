@@ -42,15 +42,17 @@ enum State {
 }
 
 impl Flight {
-    /// Starts flying `terrain` along `cameras` on a thread of its own.
+    /// Starts flying `terrain` along `cameras` (flat, or with `globe` in ECEF) on a thread
+    /// of its own.
     pub fn start(
         terrain: Arc<fmrh::Terrain>,
         cameras: Vec<fmrh::Camera>,
         options: fmrh::SceneOptions,
+        globe: bool,
     ) -> Flight {
         let (tx, rx) = sync_channel(1);
         std::thread::spawn(move || {
-            let mut flight = terrain.fly(options, false);
+            let mut flight = terrain.fly(options, globe);
             for camera in cameras {
                 let sent = flight.frame(&camera).map(|f| {
                     let loaded = f

@@ -76,6 +76,9 @@ fn to_py(e: fmrh::Error) -> PyErr {
 /// `(x, y, z)`.
 type Point = (f64, f64, f64);
 
+/// A camera on the globe: latitude, longitude, height, heading, pitch.
+type GeoPose = (f64, f64, f64, f64, f64);
+
 /// An open container or dataset.
 #[pyclass(module = "fmrh._fmrh", frozen)]
 struct Terrain {
@@ -222,6 +225,34 @@ impl Terrain {
         scene.blocks.iter().map(|b| block_dict(py, b)).collect()
     }
 
+    /// The blocks a camera on the globe needs (`fmrh scene --eye-geo`): at latitude and
+    /// longitude `lat`, `lon` (degrees), `height` metres above the WGS 84 ellipsoid,
+    /// looking along `heading` (degrees clockwise from north) and `pitch` (degrees above the
+    /// horizontal); the data must be geographic. Blocks as `scene` gives them.
+    #[pyo3(signature = (lat, lon, height, heading, pitch, tau=1.0, fov=None, viewport=None, mode="view"))]
+    #[allow(clippy::too_many_arguments)]
+    fn scene_geo<'py>(
+        &self,
+        py: Python<'py>,
+        lat: f64,
+        lon: f64,
+        height: f64,
+        heading: f64,
+        pitch: f64,
+        tau: f64,
+        fov: Option<f64>,
+        viewport: Option<(u32, u32)>,
+        mode: &str,
+    ) -> PyResult<Vec<Bound<'py, PyDict>>> {
+        let terrain = self.terrain()?;
+        let camera = geo_camera((lat, lon, height, heading, pitch), fov, viewport);
+        let options = scene_options(tau, mode)?;
+        let scene = py
+            .detach(move || terrain.scene_on_globe(&camera, &options))
+            .map_err(to_py)?;
+        scene.blocks.iter().map(|b| block_dict(py, b)).collect()
+    }
+
     /// A flight along `cameras` (each `(eye, target)`), run ahead on a thread of its own
     /// one frame at a time: an iterator of frames (`flight::Flight`).
     #[pyo3(signature = (cameras, tau=1.0, fov=None, viewport=None, mode="view"))]
@@ -239,7 +270,27 @@ impl Terrain {
             .into_iter()
             .map(|(eye, target)| camera(eye, target, fov, viewport))
             .collect();
-        Ok(flight::Flight::start(terrain, cameras, options))
+        Ok(flight::Flight::start(terrain, cameras, options, false))
+    }
+
+    /// A flight of cameras on the globe (each `(lat, lon, height, heading, pitch)`, as
+    /// `scene_geo` takes one).
+    #[pyo3(signature = (cameras, tau=1.0, fov=None, viewport=None, mode="view"))]
+    fn fly_geo(
+        &self,
+        cameras: Vec<GeoPose>,
+        tau: f64,
+        fov: Option<f64>,
+        viewport: Option<(u32, u32)>,
+        mode: &str,
+    ) -> PyResult<flight::Flight> {
+        let terrain = self.terrain()?;
+        let options = scene_options(tau, mode)?;
+        let cameras = cameras
+            .into_iter()
+            .map(|pose| geo_camera(pose, fov, viewport))
+            .collect();
+        Ok(flight::Flight::start(terrain, cameras, options, true))
     }
 
     /// Checks every numbered invariant (`full`: also recomputes every error and cut) and
@@ -301,6 +352,22 @@ fn camera(
         fmrh::glam::DVec3::new(eye.0, eye.1, eye.2),
         fmrh::glam::DVec3::new(target.0, target.1, target.2),
     );
+    if let Some(f) = fov {
+        camera.fov_y_deg = f;
+    }
+    if let Some((w, h)) = viewport {
+        camera.viewport = [w, h];
+    }
+    camera
+}
+
+/// A camera on the globe at `pose`, with its field of view and viewport if given.
+fn geo_camera(
+    (lat, lon, height, heading, pitch): GeoPose,
+    fov: Option<f64>,
+    viewport: Option<(u32, u32)>,
+) -> fmrh::Camera {
+    let mut camera = fmrh::Camera::on_globe(lat, lon, height, heading, pitch);
     if let Some(f) = fov {
         camera.fov_y_deg = f;
     }

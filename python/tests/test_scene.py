@@ -56,3 +56,27 @@ def test_bad_scene_arguments_raise(puget):
             t.scene((1, 2), TARGET)
         with pytest.raises(fmrh.InvalidArgumentError, match="target"):
             t.scene(EYE, "north")
+
+
+def test_a_camera_on_the_globe_equals_the_cli(n43):
+    """Terrain.scene_geo is `fmrh scene --eye-geo --look`, and a flight of globe cameras
+    gives each one's scene."""
+    out = fmrh_cli("scene", n43, "--eye-geo", "43.3,6.2,6000", "--look", "40,-25", "--tau", "2", "--json")
+    want = json.loads(out)["blocks"]
+    with fmrh.open(n43) as t:
+        got = t.scene_geo(43.3, 6.2, 6000, 40, -25, tau=2)
+        assert len(got) == len(want) > 10
+        for g, w in zip(got, want):
+            assert g["level"] == w["level"]
+            assert g["rect"] == (w["col0"], w["row0"], w["col1"], w["row1"])
+            assert g["screen_error"] == pytest.approx(w["screen_error"], rel=1e-9)
+        poses = [(43.3, 6.2 + 0.01 * i, 6000, 40, -25) for i in range(6)]
+        frames = list(t.fly(poses, 2, geo=True))
+        assert len(frames) == 6
+        for pose, frame in zip(poses, frames):
+            scene = t.scene_geo(*pose, tau=2)
+            assert [b["rect"] for b in frame["blocks"]] == [b["rect"] for b in scene]
+            assert all(np.array_equal(a["heights"], b["heights"]) for a, b in zip(frame["blocks"], scene))
+        assert sum(len(f["loaded"]) for f in frames) < sum(len(f["blocks"]) for f in frames)
+        with pytest.raises(fmrh.InvalidArgumentError, match="lat, lon"):
+            t.scene_geo(43.3, 6.2, "high")
