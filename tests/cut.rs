@@ -8,38 +8,15 @@
 
 mod common;
 
+use common::cuts::{same_block, window};
 use fmrh::types::SampleRect;
-use fmrh::{Block, CreateOptions, Terrain};
+use fmrh::{CreateOptions, Terrain};
 use proptest::prelude::*;
-
-fn window(w: u32, h: u32, a: (f64, f64, f64, f64)) -> SampleRect {
-    let pick = |t: f64, n: u32| ((t * f64::from(n - 1)).floor() as u64).min(u64::from(n - 1));
-    let (c0, c1) = (pick(a.0, w), pick(a.1, w));
-    let (r0, r1) = (pick(a.2, h), pick(a.3, h));
-    SampleRect {
-        col0: c0.min(c1),
-        row0: r0.min(r1),
-        col1: c0.max(c1),
-        row1: r0.max(r1),
-    }
-}
 
 fn overlap_area(a: &SampleRect, b: &SampleRect) -> u64 {
     let w = a.col1.min(b.col1).saturating_sub(a.col0.max(b.col0));
     let h = a.row1.min(b.row1).saturating_sub(a.row0.max(b.row0));
     w * h
-}
-
-fn same_block(a: &Block, b: &Block) -> bool {
-    a.rect == b.rect
-        && a.level == b.level
-        && a.error == b.error
-        && a.stride == b.stride
-        && a.heights.len() == b.heights.len()
-        && a.heights
-            .iter()
-            .zip(b.heights.iter())
-            .all(|(x, y)| x.to_bits() == y.to_bits())
 }
 
 proptest! {

@@ -7,24 +7,12 @@
 
 mod common;
 
+use common::cuts::same_block as same;
 use std::collections::HashSet;
 
 use fmrh::glam::DVec3;
 use fmrh::types::BlockKey;
 use fmrh::{Block, Camera, SceneOptions, Terrain};
-
-fn same(a: &Block, b: &Block) -> bool {
-    a.rect == b.rect
-        && a.level == b.level
-        && a.tile == b.tile
-        && a.error == b.error
-        && a.stride == b.stride
-        && a.heights.len() == b.heights.len()
-        && a.heights
-            .iter()
-            .zip(b.heights.iter())
-            .all(|(x, y)| x.to_bits() == y.to_bits())
-}
 
 fn cameras() -> Vec<Camera> {
     let path =

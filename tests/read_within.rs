@@ -9,23 +9,12 @@
 
 mod common;
 
+use common::cuts::window;
 use common::fields::{self, Character};
 use common::tiles;
 use fmrh::types::SampleRect;
 use fmrh::{CreateOptions, Terrain};
 use proptest::prelude::*;
-
-fn window(w: u32, h: u32, a: (f64, f64, f64, f64)) -> SampleRect {
-    let pick = |t: f64, n: u32| ((t * f64::from(n - 1)).floor() as u64).min(u64::from(n - 1));
-    let (c0, c1) = (pick(a.0, w), pick(a.1, w));
-    let (r0, r1) = (pick(a.2, h), pick(a.3, h));
-    SampleRect {
-        col0: c0.min(c1),
-        row0: r0.min(r1),
-        col1: c0.max(c1),
-        row1: r0.max(r1),
-    }
-}
 
 /// How far an `f64` surface rounded to `f32` may move: half an ulp of the larger value.
 fn rounding(a: f32, b: f32) -> f64 {

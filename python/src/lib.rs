@@ -114,6 +114,23 @@ impl Terrain {
         }))
     }
 
+    /// A flight along `cameras` at `tau` in `mode`, flat or (`globe`) on the globe.
+    fn flight(
+        &self,
+        cameras: Vec<fmrh::Camera>,
+        tau: f64,
+        mode: &str,
+        globe: bool,
+    ) -> PyResult<flight::Flight> {
+        let options = scene_options(tau, mode)?;
+        Ok(flight::Flight::start(
+            self.terrain()?,
+            cameras,
+            options,
+            globe,
+        ))
+    }
+
     fn terrain(&self) -> PyResult<Arc<fmrh::Terrain>> {
         let inner = self.inner.read().unwrap_or_else(|p| p.into_inner());
         inner
@@ -264,13 +281,11 @@ impl Terrain {
         viewport: Option<(u32, u32)>,
         mode: &str,
     ) -> PyResult<flight::Flight> {
-        let terrain = self.terrain()?;
-        let options = scene_options(tau, mode)?;
         let cameras = cameras
             .into_iter()
             .map(|(eye, target)| camera(eye, target, fov, viewport))
             .collect();
-        Ok(flight::Flight::start(terrain, cameras, options, false))
+        self.flight(cameras, tau, mode, false)
     }
 
     /// A flight of cameras on the globe (each `(lat, lon, height, heading, pitch)`, as
@@ -284,13 +299,11 @@ impl Terrain {
         viewport: Option<(u32, u32)>,
         mode: &str,
     ) -> PyResult<flight::Flight> {
-        let terrain = self.terrain()?;
-        let options = scene_options(tau, mode)?;
         let cameras = cameras
             .into_iter()
             .map(|pose| geo_camera(pose, fov, viewport))
             .collect();
-        Ok(flight::Flight::start(terrain, cameras, options, true))
+        self.flight(cameras, tau, mode, true)
     }
 
     /// Checks every numbered invariant (`full`: also recomputes every error and cut) and
@@ -348,10 +361,19 @@ fn camera(
     fov: Option<f64>,
     viewport: Option<(u32, u32)>,
 ) -> fmrh::Camera {
-    let mut camera = fmrh::Camera::looking_at(
+    let camera = fmrh::Camera::looking_at(
         fmrh::glam::DVec3::new(eye.0, eye.1, eye.2),
         fmrh::glam::DVec3::new(target.0, target.1, target.2),
     );
+    with_view(camera, fov, viewport)
+}
+
+/// `camera` with its field of view and viewport, where given.
+fn with_view(
+    mut camera: fmrh::Camera,
+    fov: Option<f64>,
+    viewport: Option<(u32, u32)>,
+) -> fmrh::Camera {
     if let Some(f) = fov {
         camera.fov_y_deg = f;
     }
@@ -367,14 +389,11 @@ fn geo_camera(
     fov: Option<f64>,
     viewport: Option<(u32, u32)>,
 ) -> fmrh::Camera {
-    let mut camera = fmrh::Camera::on_globe(lat, lon, height, heading, pitch);
-    if let Some(f) = fov {
-        camera.fov_y_deg = f;
-    }
-    if let Some((w, h)) = viewport {
-        camera.viewport = [w, h];
-    }
-    camera
+    with_view(
+        fmrh::Camera::on_globe(lat, lon, height, heading, pitch),
+        fov,
+        viewport,
+    )
 }
 
 /// Scene options at `tau` in `mode` (`view` or `uniform`).

@@ -119,6 +119,7 @@ pub fn bytes_of(
 
 pub mod bundle;
 pub mod cesium;
+pub mod cuts;
 pub mod fields;
 pub mod globe;
 pub mod gltf;
