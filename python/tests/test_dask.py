@@ -1,8 +1,8 @@
 """fmrh.dask.build_dataset on a LocalCluster of two worker processes: into a directory and
 into an S3 server (moto), the dataset equals a single-machine `fmrh dataset build` of the
 same tiles (every tile file and the manifest byte for byte; read back by `fmrh extract` and
-`fmrh scene --json` over the S3 URL, sample for sample); a rebuild in place is one manifest
-commit that removes the old state's files; and a build that fails on a worker (a strict
+`fmrh scene --json` over the S3 URL, sample for sample); a rebuild in place, in a directory
+or on S3, is one manifest commit that removes the old state's files; and a build that fails on a worker (a strict
 seam disagreement, found where the tile is built) leaves the old dataset unchanged, byte for
 byte, with no file of the failed build left behind."""
 import json
@@ -94,4 +94,15 @@ def test_into_s3_reads_back_as_the_cli_build(client, reference, tmp_path, s3_env
     local = json.loads(fmrh_cli("scene", reference, *camera))
     assert remote["blocks"] and remote["blocks"] == local["blocks"]
     with fmrh.open(url) as t, fmrh.open(reference) as r:
+        assert same(t.read(), r.read())
+    # A rebuild in place on S3: the manifest's next state, put last; the old objects removed.
+    first = tmp_path / "first"
+    fmrh_cli("dataset", "build", "-q", "--seam", "first", *TILES, "-o", first)
+    again = fmrh.dask.build_dataset(TILES, url, client, seam="first")
+    assert again["txn_id"] == 2
+    assert sorted(again["superseded"]) == sorted(n for n in files(reference) if n != "MANIFEST")
+    keys = sorted(o["Key"] for o in s3.list_objects_v2(Bucket="dem")["Contents"])
+    assert keys == sorted(["n43/MANIFEST"] + ["n43/" + t["name"] for t in again["tiles"]])
+    with fmrh.open(url) as t, fmrh.open(first) as r:
+        assert t.info()["txn_id"] == 2
         assert same(t.read(), r.read())
