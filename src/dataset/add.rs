@@ -10,7 +10,8 @@
 use std::path::Path;
 use std::sync::Arc;
 
-use super::build::{record_of, sync_dir, tile_name, DatasetOptions};
+use super::build::sync_dir;
+use super::plan::{record_of, tile_name, DatasetOptions};
 use super::commit::{commit_tiles, publish, read_manifest, records, DatasetCommit, Dir, Files};
 use super::manifest::MANIFEST_NAME;
 use super::placement::{check_tiling, rect};

@@ -23,18 +23,15 @@ use std::path::{Path, PathBuf};
 use serde::Serialize;
 
 use super::manifest::MANIFEST_NAME;
-use super::plan::{assemble, build_tile, plan, same_datum, settled_edge, PlanTile, TileScan};
-use super::seams::SeamPolicy;
-use crate::error::{Error, Result};
-use crate::format::manifest::{
-    tile_name_is_valid, TileRecord, TILE_NAME_LEN,
+use super::plan::{
+    assemble, build_tile, plan, same_datum, settled_edge, DatasetOptions, PlanTile, TileScan,
 };
+use crate::error::{Error, Result};
 use crate::heightfield::{check_dimensions, Heightfield};
 use crate::ingest::limits::BUILD_BYTES_PER_SAMPLE;
 use crate::ingest::{self, IngestOptions, WindowedRaster};
-use crate::model::{BuildOptions, SampleRect};
+use crate::model::SampleRect;
 use crate::progress::Progress;
-use crate::store::{Store, WriteOptions};
 
 /// One input tile: its DEM, and where it goes (`None`: by its georeference).
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -43,25 +40,6 @@ pub struct TileInput {
     pub path: PathBuf,
     /// Its first column and row in dataset samples, from a layout.
     pub at: Option<(u64, u64)>,
-}
-
-/// How to build a dataset.
-#[derive(Clone, Debug)]
-pub struct DatasetOptions {
-    /// How to read each tile.
-    pub ingest: IngestOptions,
-    /// How to build each tile's model.
-    pub build: BuildOptions,
-    /// How to write each tile (a page size of 0 picks one per tile, as `fmrh build` does).
-    pub write: WriteOptions,
-    /// How shared edges are settled.
-    pub seam: SeamPolicy,
-    /// Metres between samples, overriding what the tiles say.
-    pub spacing_m: Option<[f64; 2]>,
-    /// Cut every input wider or taller than this many samples into windows of at most this
-    /// many a side, each a tile (neighbours share an edge row or column). `None`: only an
-    /// input too large for the memory budget is cut, into tiles of [`tile_side_for`] samples.
-    pub tile_size: Option<u32>,
 }
 
 /// One tile built.
@@ -94,56 +72,6 @@ pub struct DatasetSummary {
     pub manifest_bytes: u64,
     /// Bytes of every file of the dataset.
     pub total_bytes: u64,
-}
-
-/// The record of a tile file `name` at `rect`, whose container is `store`: pinned at its
-/// state, with its root's height range.
-pub(super) fn record_of<S: crate::store::Source>(
-    store: &Store<S>,
-    name: &str,
-    rect: SampleRect,
-) -> Result<TileRecord> {
-    let root = store.node(0)?;
-    Ok(TileRecord::new(
-        name,
-        rect,
-        store.pin(),
-        (root.min_height, root.max_height),
-    ))
-}
-
-/// A tile file name from an input's name: its stem's letters, digits, `.`, `_` and `-`
-/// (others become `_`), at most 43 bytes, then `.fmrh`; `-2`, `-3`, ... when taken (`taken`
-/// holds the names in use, in lower case).
-pub fn tile_name(input: &Path, taken: &std::collections::HashSet<String>) -> String {
-    let file = input.file_name().and_then(|n| n.to_str()).unwrap_or("tile");
-    let stem = file
-        .trim_end_matches(".gz")
-        .rsplit_once('.')
-        .map_or(file, |(s, _)| s);
-    let mut clean: String = stem
-        .chars()
-        .map(|c| {
-            if c.is_ascii_alphanumeric() || "_-".contains(c) {
-                c
-            } else {
-                '_'
-            }
-        })
-        .collect();
-    if clean.is_empty() || clean.starts_with('.') {
-        clean.insert_str(0, "tile");
-    }
-    clean.truncate(TILE_NAME_LEN - ".fmrh".len() - 8);
-    let mut name = format!("{clean}.fmrh");
-    let mut n = 2;
-    // Unique without case, so the dataset means the same on a case-insensitive file system.
-    while taken.contains(&name.to_ascii_lowercase()) {
-        name = format!("{clean}-{n}.fmrh");
-        n += 1;
-    }
-    debug_assert!(tile_name_is_valid(&name));
-    name
 }
 
 /// The side of the square tiles an input too large for a memory budget of `budget` bytes is

@@ -26,7 +26,8 @@ use std::sync::Arc;
 use serde::Serialize;
 
 use super::adjacency::TileEdges;
-use super::build::{record_of, sync_dir, tile_name};
+use super::build::sync_dir;
+use super::plan::{record_of, tile_name};
 use super::commit::{publish, read_manifest, records, Dir, Files};
 use super::manifest::MANIFEST_NAME;
 use super::reader::{Dataset, Tile};

@@ -28,7 +28,8 @@ pub mod seams;
 pub mod verify;
 
 pub use add::{add, replace_tile};
-pub use build::{build, BuiltTile, DatasetOptions, DatasetSummary, TileInput};
+pub use build::{build, BuiltTile, DatasetSummary, TileInput};
+pub use plan::DatasetOptions;
 pub use commit::{recover, replace, DatasetCommit, Dir};
 pub use compact::compact;
 pub use commit::TileCommit;

@@ -17,19 +17,90 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use super::adjacency::{tables_of, TileEdges};
-use super::build::{record_of, tile_name, DatasetOptions};
 use super::manifest::{write_state, Contents};
 use super::placement::{check_tiling, place_by_georeference, rect, PlacementError};
 use super::seams::{settle, Placed, SeamPolicy};
 use crate::error::{Error, Result};
-use crate::format::manifest::{TileRecord, SEAM_FIRST, SEAM_MEAN, SEAM_STRICT};
+use crate::format::manifest::{
+    tile_name_is_valid, TileRecord, SEAM_FIRST, SEAM_MEAN, SEAM_STRICT, TILE_NAME_LEN,
+};
 use crate::format::page_size_for;
 use crate::geoid::VerticalDatum;
 use crate::heightfield::{Georeference, Heightfield};
-use crate::model::{Model, SampleRect};
+use crate::ingest::IngestOptions;
+use crate::model::{BuildOptions, Model, SampleRect};
 use crate::progress::Progress;
 use crate::store::io::FileIo;
-use crate::store::{write_file, AnySource, Store};
+use crate::store::{write_file, AnySource, Store, WriteOptions};
+
+/// How to build a dataset.
+#[derive(Clone, Debug)]
+pub struct DatasetOptions {
+    /// How to read each tile.
+    pub ingest: IngestOptions,
+    /// How to build each tile's model.
+    pub build: BuildOptions,
+    /// How to write each tile (a page size of 0 picks one per tile, as `fmrh build` does).
+    pub write: WriteOptions,
+    /// How shared edges are settled.
+    pub seam: SeamPolicy,
+    /// Metres between samples, overriding what the tiles say.
+    pub spacing_m: Option<[f64; 2]>,
+    /// Cut every input wider or taller than this many samples into windows of at most this
+    /// many a side, each a tile (neighbours share an edge row or column). `None`: only an
+    /// input too large for the memory budget is cut, into tiles of `tile_side_for` (`build.rs`) samples.
+    pub tile_size: Option<u32>,
+}
+
+/// The record of a tile file `name` at `rect`, whose container is `store`: pinned at its
+/// state, with its root's height range.
+pub(super) fn record_of<S: crate::store::Source>(
+    store: &Store<S>,
+    name: &str,
+    rect: SampleRect,
+) -> Result<TileRecord> {
+    let root = store.node(0)?;
+    Ok(TileRecord::new(
+        name,
+        rect,
+        store.pin(),
+        (root.min_height, root.max_height),
+    ))
+}
+
+/// A tile file name from an input's name: its stem's letters, digits, `.`, `_` and `-`
+/// (others become `_`), at most 43 bytes, then `.fmrh`; `-2`, `-3`, ... when taken (`taken`
+/// holds the names in use, in lower case).
+pub fn tile_name(input: &Path, taken: &std::collections::HashSet<String>) -> String {
+    let file = input.file_name().and_then(|n| n.to_str()).unwrap_or("tile");
+    let stem = file
+        .trim_end_matches(".gz")
+        .rsplit_once('.')
+        .map_or(file, |(s, _)| s);
+    let mut clean: String = stem
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || "_-".contains(c) {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    if clean.is_empty() || clean.starts_with('.') {
+        clean.insert_str(0, "tile");
+    }
+    clean.truncate(TILE_NAME_LEN - ".fmrh".len() - 8);
+    let mut name = format!("{clean}.fmrh");
+    let mut n = 2;
+    // Unique without case, so the dataset means the same on a case-insensitive file system.
+    while taken.contains(&name.to_ascii_lowercase()) {
+        name = format!("{clean}-{n}.fmrh");
+        n += 1;
+    }
+    debug_assert!(tile_name_is_valid(&name));
+    name
+}
 
 /// What a build keeps of a tile after reading it once: its size, where it lies, what its
 /// heights are above, and its four border lines.
