@@ -213,8 +213,8 @@ def build_dataset(tiles, out, client=None, *, seam="strict", progress=None, **bu
     # 2. Plan, here.
     plan = _fmrh.distributed_plan([(str(p), at, d) for (p, at), d in zip(inputs, descriptions)],
                                   options, seam, taken)
-    shared = _json.loads(plan)["shared"]
-    files = _json.loads(plan)["files"]
+    planned = _json.loads(plan)
+    shared, files = planned["shared"], planned["files"]
     dest.prepare(replace)
     # 3. Build, on the workers, each tile with its neighbours' scans.
     builds = []

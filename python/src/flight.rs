@@ -55,11 +55,12 @@ impl Flight {
             let mut flight = terrain.fly(options, globe);
             for camera in cameras {
                 let sent = flight.frame(&camera).map(|f| {
+                    let entered: std::collections::HashSet<_> = f.loaded.iter().collect();
                     let loaded = f
                         .keys
                         .iter()
                         .zip(&f.blocks)
-                        .filter(|(k, _)| f.loaded.contains(k))
+                        .filter(|(k, _)| entered.contains(k))
                         .map(|(k, b)| (key(k), b.clone()))
                         .collect();
                     Sent {

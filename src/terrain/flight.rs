@@ -101,10 +101,7 @@ impl Flight<'_> {
             .iter()
             .map(|k| !self.resident.contains_key(k))
             .collect();
-        let stats = match &selected {
-            super::scene::Selected::Container(s, _) => s.stats,
-            super::scene::Selected::Dataset(s, _) => s.stats,
-        };
+        let stats = selected.stats();
         let decoded = selected.decode(self.terrain, |i| new[i])?;
         let loaded: Vec<BlockKey> = keys
             .iter()

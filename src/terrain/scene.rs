@@ -280,6 +280,14 @@ pub struct BlockKey {
 }
 
 impl Selected {
+    /// What the selection cost and guarantees.
+    pub(super) fn stats(&self) -> crate::scene::SceneStats {
+        match self {
+            Selected::Container(s, _) => s.stats,
+            Selected::Dataset(s, _) => s.stats,
+        }
+    }
+
     /// The keys of its blocks, in scene order.
     pub(super) fn keys(&self) -> Vec<BlockKey> {
         match self {
