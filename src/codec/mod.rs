@@ -467,6 +467,51 @@ fn float_predicted(samples: &[f32], width: usize) -> Option<Vec<u8>> {
     Some(out)
 }
 
+/// Numbers a decoder keeps a scratch buffer of, one per thread, reused from payload to
+/// payload so that decoding allocates and zeroes nothing per block once warm.
+pub(crate) trait Scratch: pco::data_types::Number + Default {
+    /// Runs `f` with this thread's buffer of `Self`.
+    fn with_buffer<R>(f: impl FnOnce(&mut Vec<Self>) -> R) -> R;
+}
+
+macro_rules! scratch {
+    ($t:ty) => {
+        impl Scratch for $t {
+            fn with_buffer<R>(f: impl FnOnce(&mut Vec<Self>) -> R) -> R {
+                thread_local! {
+                    static BUFFER: std::cell::RefCell<Vec<$t>> = const { std::cell::RefCell::new(Vec::new()) };
+                }
+                BUFFER.with(|b| match b.try_borrow_mut() {
+                    Ok(mut v) => f(&mut v),
+                    // Re-entered (no decoder does): a buffer of its own.
+                    Err(_) => f(&mut Vec::new()),
+                })
+            }
+        }
+    };
+}
+scratch!(i64);
+scratch!(u32);
+
+/// The largest scratch buffer a thread keeps between payloads, in numbers: a block of the
+/// largest size (a larger one is decoded in a buffer of its own, then dropped).
+const SCRATCH_KEPT: usize = 1 << 17;
+
+/// Runs `f` on `n` numbers of this thread's scratch buffer (their values left over from
+/// the last use: `f` overwrites them).
+pub(crate) fn with_scratch<T: Scratch, R>(n: usize, f: impl FnOnce(&mut [T]) -> R) -> R {
+    T::with_buffer(|v| {
+        if v.len() < n {
+            v.resize(n, T::default());
+        }
+        let result = f(&mut v[..n]);
+        if v.len() > SCRATCH_KEPT {
+            *v = Vec::new();
+        }
+        result
+    })
+}
+
 /// Decodes a pco stream of exactly `out.len()` numbers into `out`: no allocation sized by
 /// the stream, no bytes after its end.
 fn pco_decode<T: pco::data_types::Number>(src: &[u8], out: &mut [T]) -> Result<(), DecodeError> {

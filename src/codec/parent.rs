@@ -22,13 +22,17 @@
 //! when every held sample that is not a void equals the parent's height bit for bit (a
 //! coarse grid is a decimation of the same mended heights, so it does in a valid tree).
 
+mod rows;
+
 use pco::standalone::simple_compress;
 use pco::{ChunkConfig, DeltaSpec};
 
 use super::{
     from_ordered, is_lattice_value, lattice_value, pco_decode, predict, to_ordered, unzigzag,
-    voids, zigzag, DecodeError, Encoding, Wrapping, LATTICE_STEPS, MAX_LATTICE_INDEX, VOID_BITS,
+    voids, with_scratch, zigzag, DecodeError, Encoding, Wrapping, LATTICE_STEPS,
+    MAX_LATTICE_INDEX, VOID_BITS,
 };
+use rows::Rows;
 
 /// Where a grid's samples lie: sample columns and rows, each non-decreasing.
 #[derive(Clone, Copy, Debug)]
@@ -477,6 +481,18 @@ pub fn decode_against(
     parent: Parent<'_>,
     out: &mut [f32],
 ) -> Result<(), DecodeError> {
+    decode_with(bytes, at, parent, out, true)
+}
+
+/// [`decode_against`], through the row kernels ([`rows`]) where a payload has no voids when
+/// `fast`, else through the general per-sample loops (which the tests hold the kernels to).
+fn decode_with(
+    bytes: &[u8],
+    at: Axes<'_>,
+    parent: Parent<'_>,
+    out: &mut [f32],
+    fast: bool,
+) -> Result<(), DecodeError> {
     let encoding =
         Encoding::of(bytes).ok_or(DecodeError::UnknownEncoding(bytes.first().copied()))?;
     let length = |detail: String| DecodeError::Length {
@@ -545,6 +561,45 @@ pub fn decode_against(
     };
     let coded = n - voids_total - (held_cols * held_rows - held_voids);
     let pw = parent.at.cols.len();
+    if voids_total == 0 && fast {
+        // No voids: the row kernels, which need no per-sample test of a bitmap.
+        let held_cols: Vec<Option<u32>> = cols
+            .iter()
+            .map(|c| match c {
+                Along::Held(pi) => Some(*pi as u32),
+                Along::Mixed(..) => None,
+            })
+            .collect();
+        let grid = Rows {
+            w,
+            held_cols: &held_cols,
+            rows: &rows,
+            parent,
+        };
+        return match (planar, q) {
+            (true, Some(q)) => with_scratch(coded, |r: &mut [i64]| {
+                pco_decode(rest, r)?;
+                rows::planar_lattice(&grid, q, r, out)
+            }),
+            (true, None) => with_scratch(coded, |r: &mut [u32]| {
+                pco_decode(rest, r)?;
+                rows::planar_float(&grid, r, out)
+            }),
+            (false, q) => {
+                let predictor = Predictor::new(&cols, &rows, &parent);
+                match q {
+                    Some(q) => with_scratch(coded, |r: &mut [i64]| {
+                        pco_decode(rest, r)?;
+                        rows::interpolated_lattice(&grid, &predictor, q, r, out)
+                    }),
+                    None => with_scratch(coded, |r: &mut [u32]| {
+                        pco_decode(rest, r)?;
+                        rows::interpolated_float(&grid, &predictor, r, out)
+                    }),
+                }
+            }
+        };
+    }
     if planar {
         return decode_planar(rest, (&cols, &rows), parent, q, voids, coded, out);
     }
@@ -795,6 +850,55 @@ mod tests {
                     prop_assert_eq!(a.to_bits(), b.to_bits());
                 }
                 prop_assert!(super::super::decode(bytes, cc.len(), &mut out).is_err());
+            }
+        }
+
+        /// The row kernels (no voids) decode exactly as the general per-sample loops do:
+        /// the same bits, or both an error, for valid payloads of every encoding 5 to 8 and
+        /// for the same payloads with a byte changed (residuals out of range included).
+        #[test]
+        fn the_row_kernels_decode_as_the_general_loops(
+            b in prop::sample::select(vec![5u64, 9, 17]),
+            s in prop::sample::select(vec![1u64, 2, 4]),
+            q in 0u64..4,
+            width in 3u64..80,
+            height in 3u64..80,
+            seed in 0u64..1000,
+            lattice in any::<bool>(),
+            damage in prop::option::of((any::<prop::sample::Index>(), any::<u8>())),
+        ) {
+            let (dx, dy) = (q & 1, q >> 1);
+            let cells = (b - 1) * s;
+            let (w1, h1) = (width - 1, height - 1);
+            let (pc, pr) = (axis(0, 2 * s, b, w1), axis(0, 2 * s, b, h1));
+            let (c0, r0) = (dx * cells, dy * cells);
+            prop_assume!(c0 <= w1 && r0 <= h1);
+            let (cc, cr) = (axis(c0, s, b, w1), axis(r0, s, b, h1));
+            let heights: Vec<f32> = pr.iter().flat_map(|&r| pc.iter().map(move |&c| field(c, r, seed, lattice))).collect();
+            let samples: Vec<f32> = cr.iter().flat_map(|&r| cc.iter().map(move |&c| field(c, r, seed, lattice))).collect();
+            let parent = Parent { at: Axes { cols: &pc, rows: &pr }, heights: &heights };
+            let at = Axes { cols: &cc, rows: &cr };
+            let (interpolated, planar) = encode_both(&samples, at, parent, None).expect("encodes");
+            for mut bytes in [interpolated, planar] {
+                if let Some((i, v)) = damage {
+                    let i = i.index(bytes.len());
+                    bytes[i] = v;
+                }
+                let mut fast = vec![0.0f32; samples.len()];
+                let mut general = vec![0.0f32; samples.len()];
+                let a = decode_with(&bytes, at, parent, &mut fast, true);
+                let g = decode_with(&bytes, at, parent, &mut general, false);
+                prop_assert_eq!(a.is_ok(), g.is_ok(), "{:?} against {:?}", a, g);
+                if a.is_ok() {
+                    for (x, y) in fast.iter().zip(&general) {
+                        prop_assert_eq!(x.to_bits(), y.to_bits());
+                    }
+                    if damage.is_none() {
+                        for (x, y) in fast.iter().zip(&samples) {
+                            prop_assert_eq!(x.to_bits(), y.to_bits());
+                        }
+                    }
+                }
             }
         }
 

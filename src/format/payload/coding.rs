@@ -182,7 +182,20 @@ fn load_block_with(
             b.len()
         ));
     }
-    Ok(floats.iter().flat_map(|v| v.to_le_bytes()).collect())
+    Ok(layout_bytes(&floats, &[]))
+}
+
+/// The little-endian bytes of `heights` then `tail`: a layout (a copy, not a loop a byte at
+/// a time).
+fn layout_bytes(heights: &[f32], tail: &[u8]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(4 * heights.len() + tail.len());
+    if cfg!(target_endian = "little") {
+        out.extend_from_slice(zerocopy::IntoBytes::as_bytes(heights));
+    } else {
+        out.extend(heights.iter().flat_map(|v| v.to_le_bytes()));
+    }
+    out.extend_from_slice(tail);
+    out
 }
 
 /// A grid's stored form: the code from `code_heights` (`None`: it does not apply) of its
@@ -264,9 +277,7 @@ fn load_grid_with(
     } else {
         kept
     };
-    let mut out: Vec<u8> = heights.iter().flat_map(|v| v.to_le_bytes()).collect();
-    out.extend_from_slice(&bitmap);
-    Ok(out)
+    Ok(layout_bytes(&heights, &bitmap))
 }
 
 /// Refuses a block or grid shape no domain has, before anything is sized from it: the

@@ -179,6 +179,10 @@ impl<'a> BlockView<'a> {
 
     /// The heights a renderer draws: samples with each void replaced by its stand-in.
     pub fn mended(&self) -> Vec<f32> {
+        if self.stand_ins.is_empty() {
+            // No voids (most blocks): the samples as they are, a copy.
+            return self.samples.iter().map(|s| s.get()).collect();
+        }
         let mut stand_ins = self.stand_ins.iter();
         self.samples
             .iter()
@@ -256,10 +260,58 @@ impl<'a> GridView<'a> {
 
     /// The full `b × b` grid of heights, row-major.
     pub fn expanded(&self) -> Vec<f32> {
-        let b = self.size;
-        (0..b)
-            .flat_map(|j| (0..b).map(move |i| (i, j)))
-            .map(|(i, j)| self.height(i, j))
-            .collect()
+        let b = self.size as usize;
+        let (gw, gh) = (self.stored_width as usize, self.stored_height as usize);
+        let mut out = Vec::with_capacity(b * b);
+        // Row by row: the stored row, then its last height repeated (the clamp columns);
+        // past the stored rows, the last stored row again.
+        for j in 0..b {
+            let r = j.min(gh.saturating_sub(1));
+            let row = &self.heights[r * gw..(r + 1) * gw];
+            out.extend(row.iter().take(b).map(|h| h.get()));
+            let last = row.last().map_or(0.0, |h| h.get());
+            out.resize((j + 1) * b, last);
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        /// A grid's expansion (row by row) is its height at every sample of the full grid,
+        /// clamp columns and rows included; a block's mended heights are its samples with
+        /// each void's stand-in, in order.
+        #[test]
+        fn expanded_and_mended_agree_with_the_samples(
+            b in 1u32..20,
+            gw in 1u32..20,
+            gh in 1u32..20,
+            voids in proptest::collection::vec(any::<bool>(), 1..400),
+        ) {
+            let (gw, gh) = (gw.min(b), gh.min(b));
+            let n = (gw * gh) as usize;
+            let bytes: Vec<u8> = (0..n).flat_map(|k| (k as f32 * 1.5).to_le_bytes()).collect();
+            let g = GridView::new(&bytes, b, (gw, gh), false).expect("a grid");
+            let e = g.expanded();
+            prop_assert_eq!(e.len(), (b * b) as usize);
+            for j in 0..b {
+                for i in 0..b {
+                    prop_assert_eq!(e[(j * b + i) as usize].to_bits(), g.height(i, j).to_bits());
+                }
+            }
+            let void_at = |k: usize| voids[k % voids.len()];
+            let stand_ins: Vec<f32> = (0..n).filter(|&k| void_at(k)).map(|k| -(k as f32)).collect();
+            let mut bytes: Vec<u8> = (0..n)
+                .flat_map(|k| if void_at(k) { f32::from_bits(VOID_BITS) } else { k as f32 }.to_le_bytes())
+                .collect();
+            bytes.extend(stand_ins.iter().flat_map(|v| v.to_le_bytes()));
+            let v = BlockView::new(&bytes, gw, gh, u32::try_from(stand_ins.len()).expect("few")).expect("a block");
+            let want: Vec<f32> = (0..n).map(|k| if void_at(k) { -(k as f32) } else { k as f32 }).collect();
+            prop_assert_eq!(v.mended(), want);
+        }
     }
 }

@@ -185,7 +185,7 @@ impl ParentGrid {
     }
 
     /// As the codec takes it.
-    pub(crate) fn parent(&self) -> Parent<'_> {
+    pub fn parent(&self) -> Parent<'_> {
         Parent {
             at: Axes {
                 cols: &self.cols,

@@ -1,0 +1,301 @@
+//! Decode throughput per block encoding, on the payloads real containers store: how many
+//! nanoseconds one core spends per decoded sample, for each encoding id of
+//! `format-spec/container.md` §7, beside what the same samples cost pco alone and zlib
+//! inflate (issue 44: ≤ 4 ns per sample for every encoding).
+//!
+//! For each DEM of `benches/common/dems.rs` (Puget Sound 1k bundled; Puget Sound 4k and
+//! SRTM1 S46W066 from `../shared/data` when present) it builds the default container, then
+//! takes every stored payload (each physical block and each node's grid) with the grid it
+//! is coded against, decoded once beforehand, as a reader holding its ancestors has it. Per
+//! encoding it times, on one thread, the median of 5 passes over those payloads:
+//!
+//! - **payload**: `format::payload::decode`, the stored bytes to the layout a reader draws
+//!   (length field, samples' code, stand-ins or void bitmap), what a scene pays per block
+//!   once its ancestors are decoded;
+//! - **codec**: the samples' code alone (`codec::decode` or `codec::parent::decode_against`
+//!   into a reused buffer), the part the encoding decides;
+//! - **pco alone**: only the pco stream inside that code, decoded by pco into a new vector
+//!   (the floor under encodings 2 to 8 as long as pco codes their residuals);
+//! - **inflate**: the same samples as raw little-endian `f32`, DEFLATE-coded (flate2,
+//!   default level), inflated: a COG tile's decoder without its predictor.
+//!
+//! Every payload is checked bit for bit against its first decoding before it is timed.
+//! Times are ns per decoded sample; on a noisy machine read the ratios within a row.
+//!
+//!     cargo bench --bench decode
+
+#[path = "common/dems.rs"]
+mod dems;
+
+use std::collections::BTreeMap;
+use std::io::{Read, Write};
+use std::sync::Arc;
+use std::time::Instant;
+
+use fmrh::codec::{self, voids, Encoding};
+use fmrh::format::payload::{self, ParentGrid, Placement};
+use fmrh::store::Store;
+
+/// One stored payload and all it decodes with.
+struct Sample {
+    stored: Vec<u8>,
+    placement: Placement,
+    parent: Option<Arc<ParentGrid>>,
+    /// Values its samples' code holds (a grid thinned by area: its kept columns).
+    coded: usize,
+    /// Samples along a row of the code.
+    width: usize,
+    /// Its decoded layout, for the check.
+    layout: Vec<u8>,
+}
+
+impl Sample {
+    fn code(&self) -> &[u8] {
+        let len = u32::from_le_bytes([
+            self.stored[0],
+            self.stored[1],
+            self.stored[2],
+            self.stored[3],
+        ]) as usize;
+        &self.stored[4..4 + len]
+    }
+
+    fn encoding(&self) -> Encoding {
+        Encoding::of(self.code()).expect("an encoding id")
+    }
+
+    fn decode_codec(&self, out: &mut [f32]) {
+        let code = self.code();
+        match &self.parent {
+            None => codec::decode(code, self.width, out).expect("decodes"),
+            Some(p) => {
+                let (cols, rows) = self.placement.axes();
+                codec::parent::decode_against(
+                    code,
+                    codec::parent::Axes {
+                        cols: &cols,
+                        rows: &rows,
+                    },
+                    p.parent(),
+                    out,
+                )
+                .expect("decodes")
+            }
+        }
+    }
+
+    /// The pco stream inside the samples' code, and its number type: `None` for the
+    /// encodings without one (raw, constant).
+    fn pco_stream(&self) -> Option<(&[u8], char)> {
+        let code = self.code();
+        let body = &code[1..];
+        let (n, w) = (self.coded, self.width);
+        fn after_voids(b: &[u8], n: usize, w: usize) -> &[u8] {
+            voids::read(b[0], &b[1..], n, w).expect("voids").1
+        }
+        match self.encoding() {
+            Encoding::Raw | Encoding::Constant => None,
+            Encoding::FloatPco => Some((body, 'f')),
+            Encoding::FloatPredicted => Some((body, 'u')),
+            Encoding::Lattice | Encoding::LatticeFromParent | Encoding::LatticePlanarFromParent => {
+                Some((after_voids(&body[8..], n, w), 'i'))
+            }
+            Encoding::FloatFromParent | Encoding::FloatPlanarFromParent => {
+                Some((after_voids(body, n, w), 'u'))
+            }
+        }
+    }
+}
+
+fn pco_alone(stream: &[u8], kind: char) -> usize {
+    use pco::standalone::simple_decompress;
+    match kind {
+        'i' => simple_decompress::<i64>(stream).expect("pco").len(),
+        'u' => simple_decompress::<u32>(stream).expect("pco").len(),
+        _ => simple_decompress::<f32>(stream).expect("pco").len(),
+    }
+}
+
+/// Every payload of the container at `path`, with its parent grid.
+fn payloads(store: &Store) -> Vec<Sample> {
+    let domain = *store.domain();
+    let finest = domain.finest_level();
+    let mut out = Vec::new();
+    let mut push = |stored: Vec<u8>, placement: Placement, parent: Option<Arc<ParentGrid>>| {
+        let layout =
+            payload::decode(&stored, &placement, parent.as_deref()).expect("a payload decodes");
+        let (cols, rows) = placement.axes();
+        out.push(Sample {
+            stored,
+            placement,
+            parent,
+            coded: cols.len() * rows.len(),
+            width: cols.len(),
+            layout,
+        });
+    };
+    for (index, node) in store.nodes().expect("nodes").into_iter().enumerate() {
+        if node.level >= finest {
+            continue;
+        }
+        let stored = store.payload(node.payload).expect("reads").into_owned();
+        let parent = store
+            .grid_against_node(&node)
+            .expect("its parent")
+            .map(|(i, p)| store.parent_grid(i, &p).expect("parent grid"));
+        let _ = index;
+        push(stored, Placement::grid(&domain, &node), parent);
+    }
+    let (bx, by) = domain.nodes_across(finest);
+    for y in 0..by {
+        for x in 0..bx {
+            if !domain.exists(finest, x, y) {
+                continue;
+            }
+            let Ok(info) = store.stored_block(x, y) else {
+                continue;
+            };
+            let rect = domain
+                .footprint(finest, x, y)
+                .intersect(&domain.data_rect())
+                .expect("inside the data");
+            let stored = store.payload(info.payload).expect("reads").into_owned();
+            let parent = store
+                .against_node(x, y, &info)
+                .expect("its parent")
+                .map(|(i, p)| store.parent_grid(i, &p).expect("parent grid"));
+            push(stored, Placement::block(rect, info.void_count), parent);
+        }
+    }
+    out
+}
+
+fn median(mut t: Vec<f64>) -> f64 {
+    t.sort_by(f64::total_cmp);
+    t[t.len() / 2]
+}
+
+/// The median over 5 passes of `pass`, in seconds.
+fn timed(mut pass: impl FnMut()) -> f64 {
+    pass(); // warm
+    median(
+        (0..5)
+            .map(|_| {
+                let t = Instant::now();
+                pass();
+                t.elapsed().as_secs_f64()
+            })
+            .collect(),
+    )
+}
+
+fn main() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    println!(
+        "| DEM | encoding | payloads | samples | bytes/sample | payload ns | codec ns | pco alone ns | inflate ns | payload / inflate |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|");
+    for dem in dems::dems() {
+        let path = dem.build(dir.path());
+        let store = Store::open(&path).expect("opens");
+        let all = payloads(&store);
+        let mut by: BTreeMap<u8, Vec<&Sample>> = BTreeMap::new();
+        for s in &all {
+            by.entry(s.encoding() as u8).or_default().push(s);
+        }
+        let mut totals = [0.0f64; 4];
+        let mut total_samples = 0usize;
+        for (id, group) in &by {
+            let samples: usize = group.iter().map(|s| s.coded).sum();
+            let bytes: usize = group.iter().map(|s| s.stored.len()).sum();
+            // Checked once, bit for bit, against the first decoding.
+            for s in group {
+                let again =
+                    payload::decode(&s.stored, &s.placement, s.parent.as_deref()).expect("decodes");
+                assert_eq!(
+                    again, s.layout,
+                    "{}: a payload decoded differently",
+                    dem.name
+                );
+            }
+            let payload_t = timed(|| {
+                for s in group {
+                    std::hint::black_box(
+                        payload::decode(&s.stored, &s.placement, s.parent.as_deref())
+                            .expect("decodes"),
+                    );
+                }
+            });
+            let mut buf = vec![0f32; 1 << 16];
+            let codec_t = timed(|| {
+                for s in group {
+                    s.decode_codec(&mut buf[..s.coded]);
+                    std::hint::black_box(&buf);
+                }
+            });
+            let streams: Vec<(&[u8], char)> = group.iter().filter_map(|s| s.pco_stream()).collect();
+            let pco_t = timed(|| {
+                for (stream, kind) in &streams {
+                    std::hint::black_box(pco_alone(stream, *kind));
+                }
+            });
+            let deflated: Vec<(Vec<u8>, usize)> = group
+                .iter()
+                .map(|s| {
+                    let raw = &s.layout[..4 * s.coded.min(s.layout.len() / 4)];
+                    let mut e =
+                        flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
+                    e.write_all(raw).expect("deflate");
+                    (e.finish().expect("deflate"), raw.len())
+                })
+                .collect();
+            let mut raw = vec![0u8; 1 << 18];
+            let inflate_t = timed(|| {
+                for (z, n) in &deflated {
+                    let mut d = flate2::read::ZlibDecoder::new(&z[..]);
+                    d.read_exact(&mut raw[..*n]).expect("inflates");
+                    std::hint::black_box(&raw);
+                }
+            });
+            let ns = |t: f64| 1e9 * t / samples as f64;
+            for (slot, t) in totals
+                .iter_mut()
+                .zip([payload_t, codec_t, pco_t, inflate_t])
+            {
+                *slot += t;
+            }
+            total_samples += samples;
+            println!(
+                "| {} | {} {:?} | {} | {} | {:.2} | {:.2} | {:.2} | {} | {:.2} | {:.2} |",
+                dem.name,
+                id,
+                Encoding::from_id(*id).expect("an id"),
+                group.len(),
+                samples,
+                bytes as f64 / samples as f64,
+                ns(payload_t),
+                ns(codec_t),
+                if streams.is_empty() {
+                    "-".to_string()
+                } else {
+                    format!("{:.2}", ns(pco_t))
+                },
+                ns(inflate_t),
+                payload_t / inflate_t,
+            );
+        }
+        let ns = |t: f64| 1e9 * t / total_samples as f64;
+        println!(
+            "| {} | all | {} | {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |",
+            dem.name,
+            all.len(),
+            total_samples,
+            all.iter().map(|s| s.stored.len()).sum::<usize>() as f64 / total_samples as f64,
+            ns(totals[0]),
+            ns(totals[1]),
+            ns(totals[2]),
+            ns(totals[3]),
+            totals[0] / totals[3],
+        );
+    }
+}

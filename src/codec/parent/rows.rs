@@ -1,0 +1,284 @@
+//! The decoders' inner loops for payloads coded against a parent (encodings 5 to 8) with no
+//! voids, row by row: what a scene spends most of its decoding time in.
+//!
+//! The general decoder ([`super::decode_against`]'s other paths) asks, for every sample,
+//! whether the bitmap marks it void, whether its column and row are both held, and calls
+//! back for its value. Without voids a row is one of two kinds, known before it starts: a
+//! row the parent does not hold, where every sample is coded, and a held row, where the held
+//! columns take the parent's heights and the others are coded. So each row runs as a
+//! straight loop over slices: the residuals of the row taken as one slice, the planar
+//! prediction carried in registers (`left + up - up_left`, the row above kept apart), the
+//! interpolated predictions of a row computed for all its columns first (the same terms in
+//! the same order as [`super::RowPredictor::at`], so the same bits), and the conversion of
+//! codes to heights a loop of its own that the compiler vectorises.
+//!
+//! Every kernel produces exactly the general decoder's output for the same bytes, valid or
+//! not (a property test in `parent.rs` holds them to it), and reads the residuals only
+//! through checked slices: a count that does not match is an error, never a panic.
+
+use super::super::{
+    from_ordered, lattice_value, to_ordered, unzigzag, DecodeError, Wrapping, MAX_LATTICE_INDEX,
+};
+use super::{round_to_i64, Along, Parent, Predictor};
+
+/// What the kernels need to know of a payload's placement against its parent.
+pub(super) struct Rows<'a> {
+    /// Samples along a row.
+    pub w: usize,
+    /// Per column, the parent's column when the parent holds it.
+    pub held_cols: &'a [Option<u32>],
+    /// Per row, how the parent predicts it (held: the parent's row).
+    pub rows: &'a [Along],
+    /// The parent's grid.
+    pub parent: Parent<'a>,
+}
+
+impl Rows<'_> {
+    /// How many columns the parent holds.
+    fn held_count(&self) -> usize {
+        self.held_cols.iter().filter(|c| c.is_some()).count()
+    }
+
+    /// The parent's heights along its row `pj`.
+    fn parent_row(&self, pj: usize) -> &[f32] {
+        let pw = self.parent.at.cols.len();
+        &self.parent.heights[pj * pw..(pj + 1) * pw]
+    }
+}
+
+fn short() -> DecodeError {
+    DecodeError::Pco("fewer residuals than the payload codes".into())
+}
+
+/// The next `m` residuals of `r` from `*next`, or an error when there are fewer.
+fn take<'r, T>(r: &'r [T], next: &mut usize, m: usize) -> Result<&'r [T], DecodeError> {
+    let s = r.get(*next..*next + m).ok_or_else(short)?;
+    *next += m;
+    Ok(s)
+}
+
+/// Encodings 7 and 8 without voids: codes in the space of `T`, the planar predictor over
+/// them, a held sample's code `code_of` its height; `emit` turns a row of codes into
+/// heights (given the held columns in a held row, whose heights are then the parent's and
+/// whose codes it must not judge) and says whether any coded one was out of range.
+fn planar<T: Wrapping>(
+    g: &Rows<'_>,
+    r: &[T],
+    out: &mut [f32],
+    code_of: impl Fn(f32) -> T,
+    emit: impl Fn(&[T], &mut [f32], Option<&[Option<u32>]>) -> bool,
+) -> Result<bool, DecodeError> {
+    let w = g.w;
+    let held = g.held_count();
+    // The row above (zeros above the first: `left + 0 - 0` is the first row's predictor,
+    // `0 + up - 0` the first column's), the row being decoded, and a held row's codes.
+    let mut up = vec![T::default(); w];
+    let mut cur = vec![T::default(); w];
+    let mut held_codes = vec![T::default(); w];
+    let mut next = 0usize;
+    let mut bad = false;
+    // The chain from sample to sample is one addition: `left + ((up - up_left) + r)`, the
+    // same wrapping sum as `left + up - up_left + r` in another order.
+    for (ry, orow) in g.rows.iter().zip(out.chunks_exact_mut(w.max(1))) {
+        let (mut left, mut up_left) = (T::default(), T::default());
+        match *ry {
+            Along::Mixed(..) => {
+                let rr = take(r, &mut next, w)?;
+                for ((c, &u), &d) in cur.iter_mut().zip(&up).zip(rr) {
+                    left = left.plus(u.minus(up_left).plus(d));
+                    up_left = u;
+                    *c = left;
+                }
+                bad |= emit(&cur, orow, None);
+            }
+            Along::Held(pj) => {
+                let heights = g.parent_row(pj);
+                // The held samples' codes first, off the chain (a division each).
+                for (c, hc) in held_codes.iter_mut().zip(g.held_cols) {
+                    if let Some(pi) = hc {
+                        *c = code_of(heights[*pi as usize]);
+                    }
+                }
+                let mut rr = take(r, &mut next, w - held)?.iter();
+                for (((c, &u), &hcode), hc) in cur
+                    .iter_mut()
+                    .zip(&up)
+                    .zip(&held_codes)
+                    .zip(g.held_cols)
+                {
+                    left = match hc {
+                        Some(_) => hcode,
+                        None => left.plus(u.minus(up_left).plus(*rr.next().ok_or_else(short)?)),
+                    };
+                    up_left = u;
+                    *c = left;
+                }
+                bad |= emit(&cur, orow, Some(g.held_cols));
+                for (o, hc) in orow.iter_mut().zip(g.held_cols) {
+                    if let Some(pi) = hc {
+                        *o = heights[*pi as usize];
+                    }
+                }
+            }
+        }
+        std::mem::swap(&mut up, &mut cur);
+    }
+    Ok(bad)
+}
+
+/// The heights of lattice indexes `codes` on step `q` into `out`, and whether an index not
+/// in a held column (`held`) is out of range. A row whose indexes all fit in an `i32` (almost
+/// every row: that is ±2^31 steps) converts through `i32`, which the compiler vectorises;
+/// `k as f64` is the same number either way.
+fn lattice_row(codes: &[i64], out: &mut [f32], q: f64, held: Option<&[Option<u32>]>) -> bool {
+    // `k ^ (k >> 63)` is `k` or `-k - 1`: below 2^31 for all exactly when all fit.
+    let spread = codes.iter().fold(0u64, |a, &k| a | (k ^ (k >> 63)) as u64);
+    if spread < 1 << 31 {
+        for (o, &k) in out.iter_mut().zip(codes) {
+            *o = lattice_value(f64::from(k as i32), q);
+        }
+        return false;
+    }
+    let mut bad = false;
+    for (i, (o, &k)) in out.iter_mut().zip(codes).enumerate() {
+        *o = lattice_value(k as f64, q);
+        let coded = held.is_none_or(|h| h[i].is_none());
+        bad |= coded && k.unsigned_abs() > MAX_LATTICE_INDEX as u64;
+    }
+    bad
+}
+
+/// Encoding 7 without voids: lattice indexes on step `q`.
+pub(super) fn planar_lattice(
+    g: &Rows<'_>,
+    q: f64,
+    r: &[i64],
+    out: &mut [f32],
+) -> Result<(), DecodeError> {
+    let bad = planar(
+        g,
+        r,
+        out,
+        |h| round_to_i64(f64::from(h) / q),
+        |codes, out, held| lattice_row(codes, out, q, held),
+    )?;
+    if bad {
+        return Err(DecodeError::Pco("a lattice index is out of range".into()));
+    }
+    Ok(())
+}
+
+/// Encoding 8 without voids: order-preserving bits, zigzag residuals.
+pub(super) fn planar_float(g: &Rows<'_>, r: &[u32], out: &mut [f32]) -> Result<(), DecodeError> {
+    // The residuals are zigzag codes: undone first, a loop of its own.
+    let r: Vec<u32> = r.iter().map(|&z| unzigzag(z)).collect();
+    planar(g, &r, out, to_ordered, |codes, out, _| {
+        for (o, &u) in out.iter_mut().zip(codes) {
+            *o = from_ordered(u);
+        }
+        false
+    })
+    .map(|_| ())
+}
+
+/// The interpolated predictions of row `j` at every column, into `p`: `Σ_j wy_j · inner(j,
+/// c)` from `0.0`, term by term, as [`super::RowPredictor::at`] sums them.
+fn predictions(predictor: &Predictor<'_>, j: usize, p: &mut [f64]) {
+    let along = predictor.row(j);
+    let w = p.len();
+    let terms = &along.terms[..along.n];
+    let Some(&(start, b)) = terms.first() else {
+        p.fill(0.0);
+        return;
+    };
+    for (x, &i) in p.iter_mut().zip(&along.inner[start..start + w]) {
+        *x = 0.0 + b * i;
+    }
+    for &(start, b) in &terms[1..] {
+        for (x, &i) in p.iter_mut().zip(&along.inner[start..start + w]) {
+            *x += b * i;
+        }
+    }
+}
+
+/// Encodings 5 and 6 without voids: a coded sample's height `value_of` its interpolated
+/// prediction and residual, a held one the parent's. Returns whether `value_of` said any
+/// was out of range.
+fn interpolated<T: Copy>(
+    g: &Rows<'_>,
+    predictor: &Predictor<'_>,
+    r: &[T],
+    out: &mut [f32],
+    value_of: impl Fn(f64, T) -> (f32, bool),
+) -> Result<bool, DecodeError> {
+    let w = g.w;
+    let held = g.held_count();
+    let mut p = vec![0.0f64; w];
+    let mut next = 0usize;
+    let mut bad = false;
+    for (j, (ry, orow)) in g.rows.iter().zip(out.chunks_exact_mut(w.max(1))).enumerate() {
+        predictions(predictor, j, &mut p);
+        match *ry {
+            Along::Mixed(..) => {
+                let rr = take(r, &mut next, w)?;
+                for ((o, &x), &d) in orow.iter_mut().zip(&p).zip(rr) {
+                    let (v, b) = value_of(x, d);
+                    *o = v;
+                    bad |= b;
+                }
+            }
+            Along::Held(pj) => {
+                let heights = g.parent_row(pj);
+                let mut rr = take(r, &mut next, w - held)?.iter();
+                for ((o, &x), hc) in orow.iter_mut().zip(&p).zip(g.held_cols) {
+                    *o = match hc {
+                        Some(pi) => heights[*pi as usize],
+                        None => {
+                            let (v, b) = value_of(x, *rr.next().ok_or_else(short)?);
+                            bad |= b;
+                            v
+                        }
+                    };
+                }
+            }
+        }
+    }
+    Ok(bad)
+}
+
+/// Encoding 5 without voids.
+pub(super) fn interpolated_lattice(
+    g: &Rows<'_>,
+    predictor: &Predictor<'_>,
+    q: f64,
+    r: &[i64],
+    out: &mut [f32],
+) -> Result<(), DecodeError> {
+    // The prediction's index: `p · (1/q)`, one division a block (container.md §7).
+    let inv_q = 1.0 / q;
+    let bad = interpolated(g, predictor, r, out, |p, d| {
+        let k = round_to_i64(p * inv_q).wrapping_add(d);
+        (
+            lattice_value(k as f64, q),
+            k.unsigned_abs() > MAX_LATTICE_INDEX as u64,
+        )
+    })?;
+    if bad {
+        return Err(DecodeError::Pco("a lattice index is out of range".into()));
+    }
+    Ok(())
+}
+
+/// Encoding 6 without voids.
+pub(super) fn interpolated_float(
+    g: &Rows<'_>,
+    predictor: &Predictor<'_>,
+    r: &[u32],
+    out: &mut [f32],
+) -> Result<(), DecodeError> {
+    interpolated(g, predictor, r, out, |p, z| {
+        let d = unzigzag(z);
+        (from_ordered(to_ordered(p as f32).wrapping_add(d)), false)
+    })
+    .map(|_| ())
+}
