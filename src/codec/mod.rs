@@ -234,31 +234,31 @@ pub fn decode(bytes: &[u8], width: usize, out: &mut [f32]) -> Result<(), DecodeE
             }
             let (voids, rest) = voids::read(body[8], &body[9..], n, width).map_err(length)?;
             let voids = voids.as_deref();
-            let mut k = vec![0i64; n];
-            pco_decode(rest, &mut k)?;
-            // In place: each residual becomes its index once the cells it is predicted
-            // from (left, up, up-left: all earlier) are indexes. A void's residual is
-            // ignored (written 0).
-            if let Some(m) = voids {
-                for (i, r) in k.iter_mut().enumerate() {
-                    if m[i / 8] >> (i % 8) & 1 == 1 {
-                        *r = 0;
+            with_scratch(n, |k: &mut [i64]| {
+                pco_decode(rest, k)?;
+                // In place: each residual becomes its index once the cells it is predicted
+                // from (left, up, up-left: all earlier) are indexes. A void's residual is
+                // ignored (written 0).
+                if let Some(m) = voids {
+                    for (i, r) in k.iter_mut().enumerate() {
+                        if m[i / 8] >> (i % 8) & 1 == 1 {
+                            *r = 0;
+                        }
                     }
                 }
-            }
-            unpredict(&mut k, width);
-            let mut bad = None;
-            for (i, (o, &ki)) in out.iter_mut().zip(&k).enumerate() {
-                if ki.unsigned_abs() > MAX_LATTICE_INDEX as u64 {
-                    bad.get_or_insert((i, ki));
+                unpredict(k, width);
+                if lattice_heights(k, out, q, None) {
+                    let (i, ki) = k
+                        .iter()
+                        .enumerate()
+                        .find(|(_, ki)| ki.unsigned_abs() > MAX_LATTICE_INDEX as u64)
+                        .map_or((0, 0), |(i, &ki)| (i, ki));
+                    return Err(DecodeError::Pco(format!(
+                        "lattice index {ki} at sample {i} is out of range"
+                    )));
                 }
-                *o = lattice_value(ki as f64, q);
-            }
-            if let Some((i, ki)) = bad {
-                return Err(DecodeError::Pco(format!(
-                    "lattice index {ki} at sample {i} is out of range"
-                )));
-            }
+                Ok(())
+            })?;
             if let Some(m) = voids {
                 for (i, o) in out.iter_mut().enumerate() {
                     if m[i / 8] >> (i % 8) & 1 == 1 {
@@ -276,17 +276,17 @@ pub fn decode(bytes: &[u8], width: usize, out: &mut [f32]) -> Result<(), DecodeE
                 "coded against a parent grid: decode with codec::parent".into(),
             ));
         }
-        Encoding::FloatPredicted => {
-            let mut u = vec![0u32; out.len()];
-            pco_decode(body, &mut u)?;
-            for r in &mut u {
+        Encoding::FloatPredicted => with_scratch(out.len(), |u: &mut [u32]| {
+            pco_decode(body, u)?;
+            for r in u.iter_mut() {
                 *r = unzigzag(*r);
             }
-            unpredict(&mut u, width);
-            for (o, &ui) in out.iter_mut().zip(&u) {
+            unpredict(u, width);
+            for (o, &ui) in out.iter_mut().zip(u.iter()) {
                 *o = from_ordered(ui);
             }
-        }
+            Ok::<(), DecodeError>(())
+        })?,
     }
     Ok(())
 }
@@ -296,6 +296,34 @@ pub fn decode(bytes: &[u8], width: usize, out: &mut [f32]) -> Result<(), DecodeE
 /// lattice (for `|k| <= 2^40`). `k = -0` gives `+0.0`.
 pub fn lattice_value(k: f64, q: f64) -> f32 {
     ((k + 0.0) * q) as f32
+}
+
+/// The heights of lattice indexes `codes` on step `q` into `out` ([`lattice_value`]), and
+/// whether an index not in a held column (`held`: those the parent holds, whose heights the
+/// caller then takes from the parent) is out of range. A row whose indexes all fit in an
+/// `i32` (almost every row: ±2^31 steps) converts through `i32`, which the compiler
+/// vectorises; `k as f64` is the same number either way.
+pub(crate) fn lattice_heights(
+    codes: &[i64],
+    out: &mut [f32],
+    q: f64,
+    held: Option<&[Option<u32>]>,
+) -> bool {
+    // `k ^ (k >> 63)` is `k` or `-k - 1`: below 2^31 for all exactly when all fit.
+    let spread = codes.iter().fold(0u64, |a, &k| a | (k ^ (k >> 63)) as u64);
+    if spread < 1 << 31 {
+        for (o, &k) in out.iter_mut().zip(codes) {
+            *o = lattice_value(f64::from(k as i32), q);
+        }
+        return false;
+    }
+    let mut bad = false;
+    for (i, (o, &k)) in out.iter_mut().zip(codes).enumerate() {
+        *o = lattice_value(k as f64, q);
+        let coded = held.is_none_or(|h| h.get(i).is_none_or(Option::is_none));
+        bad |= coded && k.unsigned_abs() > MAX_LATTICE_INDEX as u64;
+    }
+    bad
 }
 
 /// The lattice index nearest to `v` on step `q`, when it is within the lattice's range.
@@ -367,20 +395,30 @@ fn predict<T: Wrapping>(k: &[T], i: usize, width: usize) -> T {
 }
 
 /// Turns residuals into values in place, row by row: cell `i` gets [`predict`]'s value from
-/// the cells before it plus its residual. The same arithmetic as `predict`, without a
-/// division per cell (decoding spends its time here and in pco).
+/// the cells before it plus its residual. The same arithmetic as `predict` in another
+/// order, `left + ((up - up_left) + r)`, so the chain from cell to cell is one addition held
+/// in a register (decoding spends its time here and in pco).
 fn unpredict<T: Wrapping>(k: &mut [T], width: usize) {
-    for i in 1..width.min(k.len()) {
-        k[i] = k[i - 1].plus(k[i]);
-    }
-    for row in (width..k.len()).step_by(width.max(1)) {
-        let end = (row + width).min(k.len());
-        k[row] = k[row - width].plus(k[row]);
-        for i in row + 1..end {
-            k[i] = k[i - 1]
-                .plus(k[i - width])
-                .minus(k[i - width - 1])
-                .plus(k[i]);
+    let width = width.max(1);
+    for row in (0..k.len()).step_by(width) {
+        let (above, rest) = k.split_at_mut(row);
+        let len = width.min(rest.len());
+        let cur = &mut rest[..len];
+        let (mut left, mut up_left) = (T::default(), T::default());
+        match above.len().checked_sub(width) {
+            None => {
+                for c in cur.iter_mut() {
+                    left = left.plus(*c);
+                    *c = left;
+                }
+            }
+            Some(start) => {
+                for (c, &u) in cur.iter_mut().zip(&above[start..]) {
+                    left = left.plus(u.minus(up_left).plus(*c));
+                    up_left = u;
+                    *c = left;
+                }
+            }
         }
     }
 }

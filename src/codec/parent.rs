@@ -225,6 +225,72 @@ fn round_to_i64(x: f64) -> i64 {
         .saturating_sub(i64::from(frac <= -0.5))
 }
 
+/// [`round_to_i64`] of every `x` into `out`. A row whose values all lie within ±2^30 (every
+/// row of real terrain) rounds through `i32`, which the compiler vectorises: there
+/// `x - trunc(x)` is as exact and the result the same.
+pub(super) fn round_row(x: &[f64], out: &mut [i64]) {
+    const SMALL: f64 = (1u64 << 30) as f64;
+    let small = x.iter().fold(true, |ok, v| ok & (v.abs() < SMALL));
+    if small {
+        for (o, &v) in out.iter_mut().zip(x) {
+            // SAFETY: `|v| < 2^30` (checked for the whole row above, which a NaN fails), so
+            // `v` is finite and its truncation fits an `i32`: the cast needs no saturation,
+            // and without it the loop vectorises.
+            let t: i32 = unsafe { v.to_int_unchecked() };
+            let frac = v - f64::from(t);
+            *o = i64::from(t + i32::from(frac >= 0.5) - i32::from(frac <= -0.5));
+        }
+    } else {
+        for (o, &v) in out.iter_mut().zip(x) {
+            *o = round_to_i64(v);
+        }
+    }
+}
+
+/// `round(h / q)` for the heights `heights[pi]` of the held columns (`held`), into `codes`
+/// (the other columns' left as they are), without a division where that gives the same
+/// index: `h · (1/q)` is within `|h/q| · 2^-51` of the quotient `h / q`, so below 2^30 it
+/// rounds the same way unless it lies within 2^-20 of a half, and a row where any does
+/// (none of real terrain's: a held height is on the lattice, its quotient next to an
+/// integer) is divided after all. `x` is a row of scratch.
+pub(super) fn held_indexes(
+    heights: &[f32],
+    held: &[Option<u32>],
+    q: f64,
+    x: &mut [f64],
+    codes: &mut [i64],
+) {
+    const SMALL: f64 = (1u64 << 30) as f64;
+    const MARGIN: f64 = 1.0 / (1u64 << 20) as f64;
+    let inv_q = 1.0 / q;
+    for (x, hc) in x.iter_mut().zip(held) {
+        *x = hc.map_or(0.0, |pi| f64::from(heights[pi as usize]) * inv_q);
+    }
+    let small = x.iter().fold(true, |ok, v| ok & (v.abs() < SMALL));
+    if small {
+        let mut near_half = false;
+        for ((c, &v), hc) in codes.iter_mut().zip(x.iter()).zip(held) {
+            // SAFETY: `|v| < 2^30` (checked above for the whole row, which a NaN fails):
+            // finite, and its truncation fits an `i32`.
+            let t: i32 = unsafe { v.to_int_unchecked() };
+            let frac = v - f64::from(t);
+            near_half |= ((frac.abs() - 0.5).abs() <= MARGIN) & hc.is_some();
+            let k = i64::from(t + i32::from(frac >= 0.5) - i32::from(frac <= -0.5));
+            if hc.is_some() {
+                *c = k;
+            }
+        }
+        if !near_half {
+            return;
+        }
+    }
+    for (c, hc) in codes.iter_mut().zip(held) {
+        if let Some(pi) = hc {
+            *c = round_to_i64(f64::from(heights[*pi as usize]) / q);
+        }
+    }
+}
+
 fn void_bitmap(samples: &[f32]) -> Option<Vec<u8>> {
     let mut bitmap = vec![0u8; samples.len().div_ceil(8)];
     let mut any = false;
@@ -778,6 +844,55 @@ mod tests {
         fn round_to_i64_agrees_everywhere(bits in any::<u64>()) {
             let x = f64::from_bits(bits);
             prop_assert_eq!(round_to_i64(x), x.round() as i64);
+        }
+
+        /// The held columns' indexes are `round(h / q)` whether or not they were divided
+        /// for: any heights (lattice ones, halves of a step, hostile bits), any step.
+        #[test]
+        fn held_indexes_are_rounded_quotients(
+            ks in proptest::collection::vec(-(1i64 << 31)..(1i64 << 31), 1..40),
+            bits in proptest::collection::vec(any::<u32>(), 1..40),
+            step in 0usize..12,
+            kind in 0usize..3,
+            every in 1usize..4,
+        ) {
+            let q = [1.0, 0.5, 0.25, 0.1, 0.05, 0.01, 0.001, 0.0001, 3.0, 1e-7, 1e7, 0.3][step];
+            let heights: Vec<f32> = match kind {
+                0 => ks.iter().map(|&k| lattice_value(k as f64, q)).collect(),
+                1 => ks.iter().map(|&k| ((k as f64 + 0.5) * q) as f32).collect(),
+                _ => bits.iter().map(|&b| f32::from_bits(b)).collect(),
+            };
+            let held: Vec<Option<u32>> = (0..heights.len())
+                .map(|i| (i % every == 0).then_some(u32::try_from(i).expect("small")))
+                .collect();
+            let mut x = vec![0.0; held.len()];
+            let mut codes = vec![7i64; held.len()];
+            held_indexes(&heights, &held, q, &mut x, &mut codes);
+            for (i, (&c, hc)) in codes.iter().zip(&held).enumerate() {
+                match hc {
+                    Some(_) => prop_assert_eq!(c, round_to_i64(f64::from(heights[i]) / q), "{} / {}", heights[i], q),
+                    None => prop_assert_eq!(c, 7),
+                }
+            }
+        }
+
+        /// A row rounds as its values one by one do, through `i32` or not.
+        #[test]
+        fn round_row_is_round_to_i64_of_each(
+            bits in proptest::collection::vec(any::<u64>(), 0..40),
+            halves in proptest::collection::vec(-(1i64 << 32)..(1i64 << 32), 0..40),
+            small in any::<bool>(),
+        ) {
+            let x: Vec<f64> = if small {
+                halves.iter().map(|&k| k as f64 / 4.0).collect()
+            } else {
+                bits.iter().map(|&b| f64::from_bits(b)).collect()
+            };
+            let mut out = vec![0i64; x.len()];
+            round_row(&x, &mut out);
+            for (&v, &o) in x.iter().zip(&out) {
+                prop_assert_eq!(o, round_to_i64(v), "{:e}", v);
+            }
         }
 
         #[test]

@@ -16,10 +16,8 @@
 //! not (a property test in `parent.rs` holds them to it), and reads the residuals only
 //! through checked slices: a count that does not match is an error, never a panic.
 
-use super::super::{
-    from_ordered, lattice_value, to_ordered, unzigzag, DecodeError, Wrapping, MAX_LATTICE_INDEX,
-};
-use super::{round_to_i64, Along, Parent, Predictor};
+use super::super::{from_ordered, lattice_heights, to_ordered, unzigzag, DecodeError, Wrapping};
+use super::{held_indexes, round_row, Along, Parent, Predictor};
 
 /// What the kernels need to know of a payload's placement against its parent.
 pub(super) struct Rows<'a> {
@@ -58,14 +56,15 @@ fn take<'r, T>(r: &'r [T], next: &mut usize, m: usize) -> Result<&'r [T], Decode
 }
 
 /// Encodings 7 and 8 without voids: codes in the space of `T`, the planar predictor over
-/// them, a held sample's code `code_of` its height; `emit` turns a row of codes into
+/// them, the held samples' codes what `codes_of` makes of a parent row's heights (at the
+/// held columns; the others are ignored); `emit` turns a row of codes into
 /// heights (given the held columns in a held row, whose heights are then the parent's and
 /// whose codes it must not judge) and says whether any coded one was out of range.
 fn planar<T: Wrapping>(
     g: &Rows<'_>,
     r: &[T],
     out: &mut [f32],
-    code_of: impl Fn(f32) -> T,
+    mut codes_of: impl FnMut(&[f32], &[Option<u32>], &mut [T]),
     emit: impl Fn(&[T], &mut [f32], Option<&[Option<u32>]>) -> bool,
 ) -> Result<bool, DecodeError> {
     let w = g.w;
@@ -94,11 +93,7 @@ fn planar<T: Wrapping>(
             Along::Held(pj) => {
                 let heights = g.parent_row(pj);
                 // The held samples' codes first, off the chain (a division each).
-                for (c, hc) in held_codes.iter_mut().zip(g.held_cols) {
-                    if let Some(pi) = hc {
-                        *c = code_of(heights[*pi as usize]);
-                    }
-                }
+                codes_of(heights, g.held_cols, &mut held_codes);
                 let mut rr = take(r, &mut next, w - held)?.iter();
                 for (((c, &u), &hcode), hc) in cur
                     .iter_mut()
@@ -126,28 +121,6 @@ fn planar<T: Wrapping>(
     Ok(bad)
 }
 
-/// The heights of lattice indexes `codes` on step `q` into `out`, and whether an index not
-/// in a held column (`held`) is out of range. A row whose indexes all fit in an `i32` (almost
-/// every row: that is ±2^31 steps) converts through `i32`, which the compiler vectorises;
-/// `k as f64` is the same number either way.
-fn lattice_row(codes: &[i64], out: &mut [f32], q: f64, held: Option<&[Option<u32>]>) -> bool {
-    // `k ^ (k >> 63)` is `k` or `-k - 1`: below 2^31 for all exactly when all fit.
-    let spread = codes.iter().fold(0u64, |a, &k| a | (k ^ (k >> 63)) as u64);
-    if spread < 1 << 31 {
-        for (o, &k) in out.iter_mut().zip(codes) {
-            *o = lattice_value(f64::from(k as i32), q);
-        }
-        return false;
-    }
-    let mut bad = false;
-    for (i, (o, &k)) in out.iter_mut().zip(codes).enumerate() {
-        *o = lattice_value(k as f64, q);
-        let coded = held.is_none_or(|h| h[i].is_none());
-        bad |= coded && k.unsigned_abs() > MAX_LATTICE_INDEX as u64;
-    }
-    bad
-}
-
 /// Encoding 7 without voids: lattice indexes on step `q`.
 pub(super) fn planar_lattice(
     g: &Rows<'_>,
@@ -155,12 +128,13 @@ pub(super) fn planar_lattice(
     r: &[i64],
     out: &mut [f32],
 ) -> Result<(), DecodeError> {
+    let mut x = vec![0.0f64; g.w];
     let bad = planar(
         g,
         r,
         out,
-        |h| round_to_i64(f64::from(h) / q),
-        |codes, out, held| lattice_row(codes, out, q, held),
+        |heights, held, codes| held_indexes(heights, held, q, &mut x, codes),
+        |codes, out, held| lattice_heights(codes, out, q, held),
     )?;
     if bad {
         return Err(DecodeError::Pco("a lattice index is out of range".into()));
@@ -172,7 +146,14 @@ pub(super) fn planar_lattice(
 pub(super) fn planar_float(g: &Rows<'_>, r: &[u32], out: &mut [f32]) -> Result<(), DecodeError> {
     // The residuals are zigzag codes: undone first, a loop of its own.
     let r: Vec<u32> = r.iter().map(|&z| unzigzag(z)).collect();
-    planar(g, &r, out, to_ordered, |codes, out, _| {
+    let codes_of = |heights: &[f32], held: &[Option<u32>], codes: &mut [u32]| {
+        for (c, hc) in codes.iter_mut().zip(held) {
+            if let Some(pi) = hc {
+                *c = to_ordered(heights[*pi as usize]);
+            }
+        }
+    };
+    planar(g, &r, out, codes_of, |codes, out, _| {
         for (o, &u) in out.iter_mut().zip(codes) {
             *o = from_ordered(u);
         }
@@ -246,7 +227,8 @@ fn interpolated<T: Copy>(
     Ok(bad)
 }
 
-/// Encoding 5 without voids.
+/// Encoding 5 without voids: per row, the predictions' indexes `round(p · (1/q))` a row at
+/// a time, the residuals added, the indexes converted a row at a time.
 pub(super) fn interpolated_lattice(
     g: &Rows<'_>,
     predictor: &Predictor<'_>,
@@ -256,13 +238,42 @@ pub(super) fn interpolated_lattice(
 ) -> Result<(), DecodeError> {
     // The prediction's index: `p · (1/q)`, one division a block (container.md §7).
     let inv_q = 1.0 / q;
-    let bad = interpolated(g, predictor, r, out, |p, d| {
-        let k = round_to_i64(p * inv_q).wrapping_add(d);
-        (
-            lattice_value(k as f64, q),
-            k.unsigned_abs() > MAX_LATTICE_INDEX as u64,
-        )
-    })?;
+    let w = g.w;
+    let held = g.held_count();
+    let mut p = vec![0.0f64; w];
+    let mut k = vec![0i64; w];
+    let mut next = 0usize;
+    let mut bad = false;
+    for (j, (ry, orow)) in g.rows.iter().zip(out.chunks_exact_mut(w.max(1))).enumerate() {
+        predictions(predictor, j, &mut p);
+        for x in &mut p {
+            *x *= inv_q;
+        }
+        round_row(&p, &mut k);
+        match *ry {
+            Along::Mixed(..) => {
+                for (k, &d) in k.iter_mut().zip(take(r, &mut next, w)?) {
+                    *k = k.wrapping_add(d);
+                }
+                bad |= lattice_heights(&k, orow, q, None);
+            }
+            Along::Held(pj) => {
+                let mut rr = take(r, &mut next, w - held)?.iter();
+                for (k, hc) in k.iter_mut().zip(g.held_cols) {
+                    if hc.is_none() {
+                        *k = k.wrapping_add(*rr.next().ok_or_else(short)?);
+                    }
+                }
+                bad |= lattice_heights(&k, orow, q, Some(g.held_cols));
+                let heights = g.parent_row(pj);
+                for (o, hc) in orow.iter_mut().zip(g.held_cols) {
+                    if let Some(pi) = hc {
+                        *o = heights[*pi as usize];
+                    }
+                }
+            }
+        }
+    }
     if bad {
         return Err(DecodeError::Pco("a lattice index is out of range".into()));
     }
