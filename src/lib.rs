@@ -212,6 +212,7 @@ pub mod raw {
         compact, AnySource, Block, Bytes, Children, CodeScan, CommitSummary, CompactOptions,
         Compacted, Container, FileSource, Grid, HeldGrid, HilbertScan, Layout, LoadedBlock,
         MmapSource, ReadStats, Snapshot, Source, StateInfo, Store, Wanted, WriteTxn,
+        ANCESTOR_CACHE_BYTES,
     };
 }
 

@@ -111,6 +111,47 @@ fn a_flight_over_a_container_gives_each_scene_and_decodes_only_what_entered() {
     assert!(loaded * 2 < visible, "{loaded} loaded of {visible} visible");
 }
 
+/// Within the store's budget for decoded ancestors, a flight decodes no ancestor twice: the
+/// grids its blocks are coded against, decoded for one frame, serve every later frame that
+/// needs them. With a budget of one grid the same path decodes some again (what the
+/// budget saves, and proof that the count can tell).
+#[test]
+fn a_flight_decodes_no_ancestor_twice_within_the_cache_budget() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("n43e007.fmrh");
+    common::fmrh_ok(&[
+        "build",
+        "-q",
+        common::bundled_dir()
+            .join("srtm3-pyhgtmap/N43E007.hgt.gz")
+            .to_str()
+            .unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    let path = cameras();
+    let fly = |budget: Option<u64>| {
+        let terrain = Terrain::open(&out).unwrap();
+        let store = terrain.store().unwrap();
+        if let Some(b) = budget {
+            store.set_ancestor_budget(b);
+        }
+        let mut flight = terrain.fly(SceneOptions::new(0.5), false);
+        for camera in &path {
+            flight.frame(camera).unwrap();
+        }
+        (store.ancestors_decoded(), store.ancestors_decoded_again())
+    };
+    let (decoded, again) = fly(None);
+    assert!(decoded > 0, "the path needs ancestors");
+    assert_eq!(again, 0, "{again} of {decoded} ancestors decoded again");
+    let (tiny, tiny_again) = fly(Some(20_000));
+    assert!(
+        tiny_again > 0 && tiny > decoded,
+        "a one-grid budget decoded {tiny} ({tiny_again} again) against {decoded}"
+    );
+}
+
 #[test]
 fn a_flight_over_a_dataset_gives_each_scene() {
     let dir = tempfile::tempdir().unwrap();

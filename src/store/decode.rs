@@ -4,8 +4,8 @@
 //! A physical block may be coded against its parent node's grid (format 4), and a grid
 //! against its parent's (format 5), so decoding one may need a chain of ancestors, up to a
 //! grid coded alone (at most the root). This room finds which node a payload is coded against
-//! (checked to be its parent: I-10, I-11), decodes each ancestor once and keeps the last
-//! [`ANCESTOR_CACHE`] of them, and decodes a scene's worth of payloads at once
+//! (checked to be its parent: I-10, I-11), decodes each ancestor once and keeps what it
+//! decoded up to [`super::ANCESTOR_CACHE_BYTES`] (`ancestors`), and decodes a scene's worth of payloads at once
 //! ([`Store::decode_payloads`]: every payload and the ancestors it needs in one coalesced
 //! batch read, a round per tree level on a remote source, then decoded from the root down on
 //! every core). The bytes themselves are decoded by [`crate::format::payload`]; the pages and
@@ -23,11 +23,6 @@ use crate::error::{Error, Result};
 use crate::format::payload::{self, BlockView, GridView, ParentGrid, Placement};
 use crate::format::{Invariant, PayloadRef, StoredBlock, StoredNode, Violation};
 use crate::model::SampleRect;
-
-/// How many decoded grids a store keeps for the payloads coded against them
-/// ([`Store::parent_grid`]): a path from the root to the finest level, with room for its
-/// siblings. At most about 17 KB each (65² heights).
-pub const ANCESTOR_CACHE: usize = 32;
 
 /// A payload to read and decode: a node's coarse grid (`level` above the finest), or physical
 /// block `(x, y)` at the finest level (`node`: its node, when the tree reaches it).
@@ -139,8 +134,8 @@ impl<S: Source> Store<S> {
     /// The decoded grid of node `index` (`node`, above the finest level), as the payloads
     /// coded against it decode with. Decoding a grid coded against its parent's (format 5)
     /// needs that grid first, and so on up to one coded alone; readers that walk the tree
-    /// (windows, `extract`, the validator) ask for the same ancestors again and again, so the
-    /// last 32 decoded are kept.
+    /// (windows, `extract`, the validator) ask for the same ancestors again and again, so
+    /// those decoded are kept, up to a budget (`ancestors`).
     pub fn parent_grid(&self, index: u32, node: &StoredNode) -> Result<Arc<ParentGrid>> {
         if let Some(g) = self.cached_parent_grid(index, node) {
             return Ok(g);
@@ -156,33 +151,39 @@ impl<S: Source> Store<S> {
         index: u32,
         node: &StoredNode,
     ) -> Option<Arc<ParentGrid>> {
-        self.lock_ancestors()
-            .iter()
-            .find(|g| g.node == index && g.payload == node.payload)
-            .cloned()
+        self.lock_ancestors().get(index, node.payload)
     }
 
-    /// Puts `grid` in the store's cache of ancestors, dropping the oldest beyond
-    /// [`ANCESTOR_CACHE`].
+    /// Puts `grid`, just decoded, in the store's cache of ancestors (which drops the least
+    /// recently used beyond its budget).
     pub(crate) fn keep_parent_grid(&self, grid: &Arc<ParentGrid>) {
-        let mut cache = self.lock_ancestors();
-        if cache
-            .iter()
-            .any(|g| g.node == grid.node && g.payload == grid.payload)
-        {
-            return;
-        }
-        if cache.len() >= ANCESTOR_CACHE {
-            cache.remove(0);
-        }
-        cache.push(Arc::clone(grid));
+        self.lock_ancestors().put(grid);
     }
 
-    fn lock_ancestors(&self) -> std::sync::MutexGuard<'_, Vec<Arc<ParentGrid>>> {
-        // A panic elsewhere cannot leave the list half changed: take it as it is.
+    fn lock_ancestors(&self) -> std::sync::MutexGuard<'_, super::ancestors::AncestorCache> {
+        // A panic elsewhere cannot leave the cache half changed: take it as it is.
         self.ancestors
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    /// How many grids that payloads are coded against this store has decoded since it
+    /// opened (each ancestor a scene or read needed and the cache did not hold).
+    pub fn ancestors_decoded(&self) -> u64 {
+        self.lock_ancestors().decoded()
+    }
+
+    /// How many of [`Store::ancestors_decoded`] were decoded a second time or more (the
+    /// cache had dropped them): what a camera path within the budget keeps at zero.
+    #[cfg(any(test, feature = "testing"))]
+    pub fn ancestors_decoded_again(&self) -> u64 {
+        self.lock_ancestors().decoded_again()
+    }
+
+    /// Sets the budget of the cache of ancestors, in bytes (for tests of what it saves).
+    #[cfg(any(test, feature = "testing"))]
+    pub fn set_ancestor_budget(&self, bytes: u64) {
+        self.lock_ancestors().set_budget(bytes);
     }
 
     /// The node whose grid `node`'s grid is coded against, if it is (format 5): checked to be

@@ -62,6 +62,7 @@ mod any;
 pub(crate) mod btree;
 mod bundled;
 mod decode;
+mod ancestors;
 pub mod io;
 pub mod lock;
 pub(crate) mod open;
@@ -90,8 +91,7 @@ pub use crate::format::{FreePage, PayloadRef, ScanEntry, StoredBlock, StoredNode
 pub use ahead::Ahead;
 pub use any::{is_url, AnySource};
 pub use decode::{Block, Grid, HeldGrid, LoadedBlock, Wanted};
-#[cfg(any(test, feature = "testing"))]
-pub use decode::ANCESTOR_CACHE;
+pub use ancestors::ANCESTOR_CACHE_BYTES;
 pub use pagecache::ReadStats;
 pub use read::{Children, CodeScan, HilbertScan, Layout};
 pub use source::{Bytes, Counted, FileSource, MmapSource, RequestStats, Source};
@@ -131,9 +131,9 @@ pub struct Store<S: Source = FileSource> {
     wrap_guard: Option<u64>,
     /// What opening read.
     open_reads: ReadStats,
-    /// Decoded grids that payloads are coded against (format 4, 5), most recent last
-    /// ([`Store::parent_grid`]).
-    ancestors: std::sync::Mutex<Vec<std::sync::Arc<ParentGrid>>>,
+    /// Decoded grids that payloads are coded against (format 4, 5), up to a budget in bytes
+    /// ([`Store::parent_grid`], `ancestors`).
+    ancestors: std::sync::Mutex<ancestors::AncestorCache>,
 }
 
 /// The state a store reads, as its commit record describes it.
