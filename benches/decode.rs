@@ -4,7 +4,8 @@
 //! inflate (issue 44: ≤ 4 ns per sample for every encoding).
 //!
 //! For each DEM of `benches/common/dems.rs` (Puget Sound 1k bundled; Puget Sound 4k and
-//! SRTM1 S46W066 from `../shared/data` when present) it builds the default container, then
+//! SRTM1 S46W066 from `../shared/data` when present), and dem_hills (float heights, from
+//! `../shared/data`), it builds the default container, then
 //! takes every stored payload (each physical block and each node's grid) with the grid it
 //! is coded against, decoded once beforehand, as a reader holding its ancestors has it. Per
 //! encoding it times, on one thread, the median of 5 passes over those payloads:
@@ -195,7 +196,17 @@ fn main() {
         "| DEM | encoding | payloads | samples | bytes/sample | payload ns | codec ns | pco alone ns | inflate ns | payload / inflate |"
     );
     println!("|---|---|---|---|---|---|---|---|---|---|");
-    for dem in dems::dems() {
+    let mut all_dems = dems::dems();
+    // Float heights off any lattice (encodings 3, 4, 6 and 8), when ../shared/data has them.
+    let root = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    match fmrh::ingest::load(
+        &root.join("../shared/data/gdal-rs-dem-hills/dem_hills.json"),
+        &fmrh::ingest::IngestOptions::default(),
+    ) {
+        Ok(hf) => all_dems.push(dems::Dem::new("dem_hills", hf, 10.0)),
+        Err(e) => eprintln!("skipping dem_hills: {e} (../shared/data)"),
+    }
+    for dem in all_dems {
         let path = dem.build(dir.path());
         let store = Store::open(&path).expect("opens");
         let all = payloads(&store);

@@ -23,26 +23,112 @@
 //! Times are wall-clock, warm (best of 5), for open + select + read + decode; the COG's
 //! decode is the `tiff` crate's DEFLATE and predictor.
 //!
-//! `cargo bench --bench scenes_vs_cog` (needs gdal-bin; the large DEMs need `../shared/data`).
+//! **Time, warm and cold** (issue 44): each scene is also timed whole (open + select +
+//! read + decode, best of 5) with the file in the page cache (*warm*) and with its pages
+//! dropped by `posix_fadvise(DONTNEED)` before each run (*cold*), for fmrh beside GDAL
+//! reading the same COG tiles (`benches/common/cog_times.py`: open, `ReadBlock` per tile;
+//! python3-gdal, one process per DEM, its start-up not counted). The `tiff`-crate reader's
+//! warm time is kept as its own column. Two tables follow the per-scene one: the ratios of
+//! fmrh's time to GDAL's, median and worst, warm and cold.
+//!
+//! `cargo bench --bench scenes_vs_cog` (needs gdal-bin and python3-gdal; the large DEMs need
+//! `../shared/data`).
 
 #[path = "common/cog.rs"]
 mod cog;
 #[path = "common/dems.rs"]
 mod dems;
 
+use std::path::Path;
+use std::process::Command;
 use std::time::Instant;
 
-use cog::{cog_decode, cog_reads, cog_scene, make_cog};
+use cog::{cog_decode, cog_reads, cog_scene, make_cog, Cog};
 use fmrh::scene::{load_blocks, SceneOptions, Terrain, TerrainFrame, WorldFrame};
 use fmrh::store::Store;
+
+const TAUS: [f64; 5] = [0.5, 1.0, 2.0, 4.0, 8.0];
+
+/// Drops the file's pages from the page cache (a cold read), as far as the kernel obliges.
+fn evict(path: &Path) {
+    if let Ok(f) = std::fs::File::open(path) {
+        use std::os::fd::AsRawFd;
+        // SAFETY: a plain advisory call on a descriptor we own; it reads no memory of ours.
+        unsafe {
+            libc::posix_fadvise(f.as_raw_fd(), 0, 0, libc::POSIX_FADV_DONTNEED);
+        }
+    }
+}
+
+/// The best of 5 runs of `run`, in microseconds, each after `before`.
+fn best_us(mut before: impl FnMut(), mut run: impl FnMut()) -> f64 {
+    (0..5)
+        .map(|_| {
+            before();
+            let t = Instant::now();
+            run();
+            t.elapsed().as_secs_f64() * 1e6
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// GDAL's (warm, cold) microseconds for each scene's tiles of `cog`.
+fn gdal_times(dir: &Path, cog: &Cog, scenes: &[Vec<(usize, usize)>]) -> Vec<(f64, f64)> {
+    let lists: Vec<Vec<[usize; 3]>> = scenes
+        .iter()
+        .map(|tiles| {
+            tiles
+                .iter()
+                .map(|&(l, t)| {
+                    let (tx, _) = cog.levels[l].tiles_across();
+                    [l, t % tx, t / tx]
+                })
+                .collect()
+        })
+        .collect();
+    let file = dir.join("scenes.json");
+    std::fs::write(&file, serde_json::to_vec(&lists).expect("json")).expect("writes");
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("benches/common/cog_times.py");
+    let out = Command::new("/usr/bin/python3")
+        .arg(&script)
+        .arg(&cog.path)
+        .arg(&file)
+        .arg("5")
+        .output()
+        .expect("python3 runs (python3-gdal)");
+    assert!(
+        out.status.success(),
+        "cog_times.py: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: Vec<serde_json::Value> = serde_json::from_slice(&out.stdout).expect("json");
+    v.iter()
+        .map(|s| {
+            let t = |k: &str| s[k].as_f64().expect("seconds") * 1e6;
+            (t("warm"), t("cold"))
+        })
+        .collect()
+}
+
+fn quantiles(mut r: Vec<f64>) -> (f64, f64, f64) {
+    r.sort_by(f64::total_cmp);
+    (r[r.len() / 2], r[r.len() - 1], r[0])
+}
+
+struct Row {
+    line: String,
+    fmrh_warm: f64,
+    fmrh_cold: f64,
+}
 
 fn main() {
     let dir = tempfile::tempdir().expect("temp dir");
     println!(
-        "| dataset | camera | tau | fmrh blocks | fmrh reads | fmrh bytes | fmrh max px | COG tiles | COG reads | COG bytes | COG max px | fmrh/COG bytes | fmrh us | COG us |"
+        "| dataset | camera | tau | fmrh blocks | fmrh reads | fmrh bytes | fmrh max px | COG tiles | COG reads | COG bytes | COG max px | fmrh/COG bytes | fmrh us warm | fmrh us cold | GDAL us warm | GDAL us cold | tiff-crate COG us warm | fmrh/GDAL warm | fmrh/GDAL cold |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     let mut ratios = Vec::new();
+    let (mut warm_ratios, mut cold_ratios) = (Vec::new(), Vec::new());
     for dem in dems::dems() {
         let name = dem.name;
         let Some(cog) = make_cog(dir.path(), name, &dem.source) else {
@@ -50,9 +136,11 @@ fn main() {
         };
         let path = dem.build(dir.path());
         let frame = WorldFrame::new(Some(dem.spacing));
+        let mut rows: Vec<Row> = Vec::new();
+        let mut scenes: Vec<Vec<(usize, usize)>> = Vec::new();
         for (cam_name, cam) in dem.cameras() {
             let view = cam.view().expect("camera");
-            for tau in [0.5, 1.0, 2.0, 4.0] {
+            for tau in TAUS {
                 let fmrh_run = || {
                     let store = Store::open(&path).expect("opens");
                     let terrain = Terrain::new(&store).expect("terrain");
@@ -68,30 +156,69 @@ fn main() {
                     )
                 };
                 let (blocks, reads, bytes, px) = fmrh_run();
-                let fmrh_us = (0..5)
-                    .map(|_| {
-                        let t = Instant::now();
+                let fmrh_warm = best_us(
+                    || {},
+                    || {
                         fmrh_run();
-                        t.elapsed().as_secs_f64() * 1e6
-                    })
-                    .fold(f64::INFINITY, f64::min);
+                    },
+                );
+                let fmrh_cold = best_us(
+                    || evict(&path),
+                    || {
+                        fmrh_run();
+                    },
+                );
                 let (tiles, cog_px) = cog_scene(&cog, TerrainFrame::Flat(frame), &view, tau);
                 let (cog_bytes, cog_calls) = cog_reads(&cog, &tiles);
-                let cog_us = (0..5)
-                    .map(|_| {
-                        let t = Instant::now();
+                let cog_us = best_us(
+                    || {},
+                    || {
                         let chosen = cog_scene(&cog, TerrainFrame::Flat(frame), &view, tau).0;
                         cog_decode(&cog, &chosen);
-                        t.elapsed().as_secs_f64() * 1e6
-                    })
-                    .fold(f64::INFINITY, f64::min);
+                    },
+                );
                 let ratio = bytes as f64 / cog_bytes as f64;
                 ratios.push(ratio);
-                println!(
-                    "| {name} | {cam_name} | {tau} | {blocks} | {reads} | {bytes} | {px:.2} | {} | {cog_calls} | {cog_bytes} | {cog_px:.2} | {ratio:.2} | {fmrh_us:.0} | {cog_us:.0} |",
-                    tiles.len()
-                );
+                rows.push(Row {
+                    line: format!(
+                        "| {name} | {cam_name} | {tau} | {blocks} | {reads} | {bytes} | {px:.2} | {} | {cog_calls} | {cog_bytes} | {cog_px:.2} | {ratio:.2} | {fmrh_warm:.0} | {fmrh_cold:.0} |",
+                        tiles.len()
+                    ),
+                    fmrh_warm,
+                    fmrh_cold,
+                });
+                scenes.push(tiles);
+                // The tiff-crate reader's time goes last on the line.
+                rows.last_mut().expect("a row").line += &format!(" {{gdal}} | {cog_us:.0} |");
             }
+        }
+        let gdal = gdal_times(dir.path(), &cog, &scenes);
+        for (row, (gw, gc)) in rows.iter().zip(gdal) {
+            let (w, c) = (row.fmrh_warm / gw, row.fmrh_cold / gc);
+            warm_ratios.push(w);
+            cold_ratios.push(c);
+            println!(
+                "{} {w:.3} | {c:.3} |",
+                row.line.replace("{gdal}", &format!("{gw:.0} | {gc:.0}"))
+            );
+        }
+    }
+    if !warm_ratios.is_empty() {
+        let (wm, ww, wb) = quantiles(warm_ratios.clone());
+        let (cm, cw, cb) = quantiles(cold_ratios.clone());
+        println!(
+            "\n| fmrh time / GDAL time | median | worst | best | scenes at or below 0.5 | scenes |"
+        );
+        println!("|---|---|---|---|---|---|");
+        for (what, (m, w, b), r) in [
+            ("warm", (wm, ww, wb), &warm_ratios),
+            ("cold", (cm, cw, cb), &cold_ratios),
+        ] {
+            println!(
+                "| {what} | {m:.3} | {w:.3} | {b:.3} | {} | {} |",
+                r.iter().filter(|&&x| x <= 0.5).count(),
+                r.len()
+            );
         }
     }
     ratios.sort_by(f64::total_cmp);

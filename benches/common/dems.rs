@@ -28,7 +28,7 @@ pub struct Dem {
 }
 
 impl Dem {
-    fn new(name: &'static str, mut source: Heightfield, spacing: f64) -> Dem {
+    pub fn new(name: &'static str, mut source: Heightfield, spacing: f64) -> Dem {
         if source.metadata.spacing_m.is_none() {
             source.metadata.spacing_m = Some([spacing, spacing]);
         }

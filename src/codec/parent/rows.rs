@@ -143,9 +143,16 @@ pub(super) fn planar_lattice(
 }
 
 /// Encoding 8 without voids: order-preserving bits, zigzag residuals.
-pub(super) fn planar_float(g: &Rows<'_>, r: &[u32], out: &mut [f32]) -> Result<(), DecodeError> {
-    // The residuals are zigzag codes: undone first, a loop of its own.
-    let r: Vec<u32> = r.iter().map(|&z| unzigzag(z)).collect();
+pub(super) fn planar_float(
+    g: &Rows<'_>,
+    r: &mut [u32],
+    out: &mut [f32],
+) -> Result<(), DecodeError> {
+    // The residuals are zigzag codes: undone first, in place, a loop of its own.
+    for z in r.iter_mut() {
+        *z = unzigzag(*z);
+    }
+    let r = &*r;
     let codes_of = |heights: &[f32], held: &[Option<u32>], codes: &mut [u32]| {
         for (c, hc) in codes.iter_mut().zip(held) {
             if let Some(pi) = hc {
@@ -153,7 +160,7 @@ pub(super) fn planar_float(g: &Rows<'_>, r: &[u32], out: &mut [f32]) -> Result<(
             }
         }
     };
-    planar(g, &r, out, codes_of, |codes, out, _| {
+    planar(g, r, out, codes_of, |codes, out, _| {
         for (o, &u) in out.iter_mut().zip(codes) {
             *o = from_ordered(u);
         }
