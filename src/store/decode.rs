@@ -624,7 +624,7 @@ impl<S: Source> Store<S> {
                     stored,
                     width: view.width,
                     height: view.height,
-                    heights: Arc::from(view.mended()),
+                    heights: view.mended_shared(),
                     parent_bytes,
                 })
             } else {
@@ -675,7 +675,7 @@ impl<S: Source> Store<S> {
             index,
             node.payload,
             &Placement::grid(self.domain(), node),
-            &layout,
+            layout,
         )
     }
 }

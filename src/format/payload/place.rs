@@ -127,8 +127,9 @@ pub struct ParentGrid {
 
 impl ParentGrid {
     /// The grid of node `node` (payload `payload`) placed by `placement` (a grid), from its
-    /// layout's stored heights `layout` (`gw × gh`, row-major).
-    pub fn new(node: u32, payload: PayloadRef, placement: &Placement, layout: &[f32]) -> Self {
+    /// layout's stored heights `layout` (`gw × gh`, row-major), kept as they are when the
+    /// grid is not thinned.
+    pub fn new(node: u32, payload: PayloadRef, placement: &Placement, layout: Vec<f32>) -> Self {
         let (gw, _) = placement.dims();
         let thin = match *placement {
             Placement::Grid { thin, .. } => thin,
@@ -140,7 +141,11 @@ impl ParentGrid {
             payload,
             cols,
             rows,
-            heights: kept_heights(layout, gw, thin),
+            heights: if thin == 0 {
+                layout
+            } else {
+                kept_heights(&layout, gw, thin)
+            },
         }
     }
 
@@ -167,7 +172,7 @@ impl ParentGrid {
             .take(gh as usize)
             .flat_map(|row| row[..gw as usize].iter().copied())
             .collect();
-        Some(ParentGrid::new(node, payload, placement, &layout))
+        Some(ParentGrid::new(node, payload, placement, layout))
     }
 
     /// A grid of `heights` (row-major) at sample columns `cols` and rows `rows` (each

@@ -441,7 +441,7 @@ fn parent_grid(model: &Model, node: u32) -> ParentGrid {
     let (g, _, _) = clipped_grid(model, node);
     // Whether it has voids does not change where its heights lie.
     let placement = Placement::node_grid(model.domain(), (n.level, n.x, n.y), false, n.thin);
-    ParentGrid::new(node, PayloadRef::default(), &placement, &g.heights)
+    ParentGrid::new(node, PayloadRef::default(), &placement, g.heights)
 }
 
 /// The grid of `node` clipped to its stored `gw × gh` (see [`crate::model::Domain::grid_dims`]).
