@@ -89,10 +89,9 @@ fn check(terrain: &Terrain, path: &[Camera], tau: f64) -> (usize, usize) {
     (loaded, visible)
 }
 
-#[test]
-fn a_flight_over_a_container_gives_each_scene_and_decodes_only_what_entered() {
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("n43e007.fmrh");
+/// The bundled SRTM tile N43E007 built (defaults) into `dir`.
+fn n43e007(dir: &std::path::Path) -> std::path::PathBuf {
+    let out = dir.join("n43e007.fmrh");
     common::fmrh_ok(&[
         "build",
         "-q",
@@ -103,6 +102,13 @@ fn a_flight_over_a_container_gives_each_scene_and_decodes_only_what_entered() {
         "-o",
         out.to_str().unwrap(),
     ]);
+    out
+}
+
+#[test]
+fn a_flight_over_a_container_gives_each_scene_and_decodes_only_what_entered() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = n43e007(dir.path());
     let terrain = Terrain::open(&out).unwrap();
     let path = cameras();
     assert!(path.len() >= 10);
@@ -118,17 +124,7 @@ fn a_flight_over_a_container_gives_each_scene_and_decodes_only_what_entered() {
 #[test]
 fn a_flight_decodes_no_ancestor_twice_within_the_cache_budget() {
     let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("n43e007.fmrh");
-    common::fmrh_ok(&[
-        "build",
-        "-q",
-        common::bundled_dir()
-            .join("srtm3-pyhgtmap/N43E007.hgt.gz")
-            .to_str()
-            .unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-    ]);
+    let out = n43e007(dir.path());
     let path = cameras();
     let fly = |budget: Option<u64>| {
         let terrain = Terrain::open(&out).unwrap();

@@ -921,6 +921,46 @@ mod tests {
         }
     }
 
+    /// A parent grid (columns, rows, heights) and its child in quadrant `q` (columns,
+    /// rows, samples, voids among them when `voids`), placed as format §7 places them in a
+    /// `width × height` raster with grids of side `b` at child stride `s`; `None` when that
+    /// quadrant lies outside the raster.
+    #[allow(clippy::type_complexity)]
+    fn child_of_parent(
+        (b, s, q): (u64, u64, u64),
+        (width, height): (u64, u64),
+        seed: u64,
+        lattice: bool,
+        voids: bool,
+    ) -> Option<(Vec<u64>, Vec<u64>, Vec<f32>, Vec<u64>, Vec<u64>, Vec<f32>)> {
+        let (dx, dy) = (q & 1, q >> 1);
+        let cells = (b - 1) * s; // a child's span; the parent's is twice it
+        let (w1, h1) = (width - 1, height - 1);
+        let (pc, pr) = (axis(0, 2 * s, b, w1), axis(0, 2 * s, b, h1));
+        let (c0, r0) = (dx * cells, dy * cells);
+        if c0 > w1 || r0 > h1 {
+            return None;
+        }
+        let (cc, cr) = (axis(c0, s, b, w1), axis(r0, s, b, h1));
+        let heights: Vec<f32> = pr
+            .iter()
+            .flat_map(|&r| pc.iter().map(move |&c| field(c, r, seed, lattice)))
+            .collect();
+        let samples: Vec<f32> = cr
+            .iter()
+            .flat_map(|&r| {
+                cc.iter().map(move |&c| {
+                    if voids && (c * 3 + r * 5 + seed).is_multiple_of(11) {
+                        f32::from_bits(VOID_BITS)
+                    } else {
+                        field(c, r, seed, lattice)
+                    }
+                })
+            })
+            .collect();
+        Some((pc, pr, heights, cc, cr, samples))
+    }
+
     proptest! {
         /// Any child of any parent (clipped at the data edge or not, lattice or float, with
         /// voids): encoding against the parent, then decoding, gives the child's bits.
@@ -935,17 +975,9 @@ mod tests {
             lattice in any::<bool>(),
             voids in any::<bool>(),
         ) {
-            let (dx, dy) = (q & 1, q >> 1);
-            let cells = (b - 1) * s; // a child's span; the parent's is twice it
-            let (w1, h1) = (width - 1, height - 1);
-            let (pc, pr) = (axis(0, 2 * s, b, w1), axis(0, 2 * s, b, h1));
-            let (c0, r0) = (dx * cells, dy * cells);
-            prop_assume!(c0 <= w1 && r0 <= h1);
-            let (cc, cr) = (axis(c0, s, b, w1), axis(r0, s, b, h1));
-            let heights: Vec<f32> = pr.iter().flat_map(|&r| pc.iter().map(move |&c| field(c, r, seed, lattice))).collect();
-            let samples: Vec<f32> = cr.iter().flat_map(|&r| cc.iter().map(move |&c| {
-                if voids && (c * 3 + r * 5 + seed) % 11 == 0 { f32::from_bits(VOID_BITS) } else { field(c, r, seed, lattice) }
-            })).collect();
+            let case = child_of_parent((b, s, q), (width, height), seed, lattice, voids);
+            prop_assume!(case.is_some());
+            let Some((pc, pr, heights, cc, cr, samples)) = case else { return Ok(()) };
             let parent = Parent { at: Axes { cols: &pc, rows: &pr }, heights: &heights };
             let at = Axes { cols: &cc, rows: &cr };
             let (interpolated, planar) = encode_both(&samples, at, parent, None).expect("a child of its parent encodes");
@@ -982,15 +1014,9 @@ mod tests {
             lattice in any::<bool>(),
             damage in prop::option::of((any::<prop::sample::Index>(), any::<u8>())),
         ) {
-            let (dx, dy) = (q & 1, q >> 1);
-            let cells = (b - 1) * s;
-            let (w1, h1) = (width - 1, height - 1);
-            let (pc, pr) = (axis(0, 2 * s, b, w1), axis(0, 2 * s, b, h1));
-            let (c0, r0) = (dx * cells, dy * cells);
-            prop_assume!(c0 <= w1 && r0 <= h1);
-            let (cc, cr) = (axis(c0, s, b, w1), axis(r0, s, b, h1));
-            let heights: Vec<f32> = pr.iter().flat_map(|&r| pc.iter().map(move |&c| field(c, r, seed, lattice))).collect();
-            let samples: Vec<f32> = cr.iter().flat_map(|&r| cc.iter().map(move |&c| field(c, r, seed, lattice))).collect();
+            let case = child_of_parent((b, s, q), (width, height), seed, lattice, false);
+            prop_assume!(case.is_some());
+            let Some((pc, pr, heights, cc, cr, samples)) = case else { return Ok(()) };
             let parent = Parent { at: Axes { cols: &pc, rows: &pr }, heights: &heights };
             let at = Axes { cols: &cc, rows: &cr };
             let (interpolated, planar) = encode_both(&samples, at, parent, None).expect("encodes");
