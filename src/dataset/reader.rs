@@ -17,6 +17,11 @@ use crate::store::{is_url, AnySource, Counted, ReadStats, Source, Store};
 /// Tile containers a dataset keeps open at once; the least recently used is closed first.
 pub const OPEN_TILES: usize = 64;
 
+/// The bytes of decoded ancestors each open tile keeps (a container alone keeps
+/// [`crate::store::ANCESTOR_CACHE_BYTES`]): 4 MiB, so [`OPEN_TILES`] tiles hold at most
+/// 256 MiB of them, about 240 grids of 65² a tile.
+pub const TILE_ANCESTOR_BYTES: u64 = 4 << 20;
+
 /// Tiles a remote dataset works on at once (opening, scheduling, loading), each over its
 /// own connections, so that their network rounds overlap. Local tiles go one at a time.
 pub const TILE_WORKERS: usize = 64;
@@ -344,7 +349,11 @@ impl Dataset {
             return Ok(store);
         }
         drop(open);
-        let store = Arc::new(self.open_tile_uncached(tile)?);
+        let store = self.open_tile_uncached(tile)?;
+        // Its share of the decoded ancestors a dataset keeps: the budget of one container
+        // over the tiles it may keep open, so that they hold at most that many bytes.
+        store.set_ancestor_budget(TILE_ANCESTOR_BYTES);
+        let store = Arc::new(store);
         self.tiles_opened
             .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let mut open = self

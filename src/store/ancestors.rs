@@ -99,14 +99,7 @@ impl AncestorCache {
         if size > self.budget {
             return;
         }
-        while self.bytes + size > self.budget {
-            let Some((_, node)) = self.order.pop_first() else {
-                break;
-            };
-            if let Some((old, _)) = self.grids.remove(&node) {
-                self.bytes -= old.memory();
-            }
-        }
+        self.shrink_to(self.budget - size);
         self.tick += 1;
         self.order.insert(self.tick, grid.node);
         self.grids.insert(grid.node, (Arc::clone(grid), self.tick));
@@ -124,14 +117,21 @@ impl AncestorCache {
         self.again
     }
 
-    /// Changes the budget (dropping what no longer fits at the next put).
-    #[cfg(any(test, feature = "testing"))]
+    /// Changes the budget, dropping the least recently used grids until the rest fit.
     pub(crate) fn set_budget(&mut self, budget: u64) {
         self.budget = budget;
-        if self.bytes > budget {
-            self.grids.clear();
-            self.order.clear();
-            self.bytes = 0;
+        self.shrink_to(budget);
+    }
+
+    /// Drops the least recently used grids until at most `limit` bytes are held.
+    fn shrink_to(&mut self, limit: u64) {
+        while self.bytes > limit {
+            let Some((_, node)) = self.order.pop_first() else {
+                break;
+            };
+            if let Some((old, _)) = self.grids.remove(&node) {
+                self.bytes -= old.memory();
+            }
         }
     }
 
@@ -202,5 +202,16 @@ mod tests {
         // Larger than the budget: not kept.
         cache.put(&grid(3, 9, 0));
         assert!(cache.get(3, grid(3, 9, 0).payload).is_none());
+        // A smaller budget drops the least recent until the rest fit.
+        let mut cache = AncestorCache::new(3 * one);
+        for node in 1..=3 {
+            cache.put(&grid(node, 5, 0));
+        }
+        assert!(cache.get(1, grid(1, 5, 0).payload).is_some()); // 1 is now the most recent
+        cache.set_budget(one);
+        assert_eq!(cache.bytes(), one);
+        assert!(cache.get(1, grid(1, 5, 0).payload).is_some());
+        cache.set_budget(0);
+        assert_eq!(cache.bytes(), 0);
     }
 }

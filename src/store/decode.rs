@@ -180,8 +180,9 @@ impl<S: Source> Store<S> {
         self.lock_ancestors().decoded_again()
     }
 
-    /// Sets the budget of the cache of ancestors, in bytes (for tests of what it saves).
-    #[cfg(any(test, feature = "testing"))]
+    /// Sets the budget of the cache of decoded ancestors, in bytes (default
+    /// [`super::ANCESTOR_CACHE_BYTES`]): a reader that keeps many stores open (a dataset's
+    /// tiles) gives each a share; 0 keeps none. What no longer fits is dropped.
     pub fn set_ancestor_budget(&self, bytes: u64) {
         self.lock_ancestors().set_budget(bytes);
     }
