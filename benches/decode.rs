@@ -117,7 +117,7 @@ fn pco_alone(stream: &[u8], kind: char) -> usize {
     }
 }
 
-/// Every payload of the container at `path`, with its parent grid.
+/// Every payload of `store`, with the grid it is coded against.
 fn payloads(store: &Store) -> Vec<Sample> {
     let domain = *store.domain();
     let finest = domain.finest_level();
@@ -135,7 +135,7 @@ fn payloads(store: &Store) -> Vec<Sample> {
             layout,
         });
     };
-    for (index, node) in store.nodes().expect("nodes").into_iter().enumerate() {
+    for node in store.nodes().expect("nodes") {
         if node.level >= finest {
             continue;
         }
@@ -144,7 +144,6 @@ fn payloads(store: &Store) -> Vec<Sample> {
             .grid_against_node(&node)
             .expect("its parent")
             .map(|(i, p)| store.parent_grid(i, &p).expect("parent grid"));
-        let _ = index;
         push(stored, Placement::grid(&domain, &node), parent);
     }
     let (bx, by) = domain.nodes_across(finest);

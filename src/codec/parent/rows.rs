@@ -42,10 +42,25 @@ impl Rows<'_> {
         let pw = self.parent.at.cols.len();
         &self.parent.heights[pj * pw..(pj + 1) * pw]
     }
+
+    /// Gives the held samples of `orow`, a row the parent holds as its row `pj`, the
+    /// parent's heights.
+    fn held_heights(&self, pj: usize, orow: &mut [f32]) {
+        let heights = self.parent_row(pj);
+        for (o, hc) in orow.iter_mut().zip(self.held_cols) {
+            if let Some(pi) = hc {
+                *o = heights[*pi as usize];
+            }
+        }
+    }
 }
 
 fn short() -> DecodeError {
     DecodeError::Pco("fewer residuals than the payload codes".into())
+}
+
+fn out_of_range() -> DecodeError {
+    DecodeError::Pco("a lattice index is out of range".into())
 }
 
 /// The next `m` residuals of `r` from `*next`, or an error when there are fewer.
@@ -91,9 +106,8 @@ fn planar<T: Wrapping>(
                 bad |= emit(&cur, orow, None);
             }
             Along::Held(pj) => {
-                let heights = g.parent_row(pj);
-                // The held samples' codes first, off the chain (a division each).
-                codes_of(heights, g.held_cols, &mut held_codes);
+                // The held samples' codes first, off the chain.
+                codes_of(g.parent_row(pj), g.held_cols, &mut held_codes);
                 let mut rr = take(r, &mut next, w - held)?.iter();
                 for (((c, &u), &hcode), hc) in cur
                     .iter_mut()
@@ -109,11 +123,7 @@ fn planar<T: Wrapping>(
                     *c = left;
                 }
                 bad |= emit(&cur, orow, Some(g.held_cols));
-                for (o, hc) in orow.iter_mut().zip(g.held_cols) {
-                    if let Some(pi) = hc {
-                        *o = heights[*pi as usize];
-                    }
-                }
+                g.held_heights(pj, orow);
             }
         }
         std::mem::swap(&mut up, &mut cur);
@@ -137,7 +147,7 @@ pub(super) fn planar_lattice(
         |codes, out, held| lattice_heights(codes, out, q, held),
     )?;
     if bad {
-        return Err(DecodeError::Pco("a lattice index is out of range".into()));
+        return Err(out_of_range());
     }
     Ok(())
 }
@@ -189,51 +199,6 @@ fn predictions(predictor: &Predictor<'_>, j: usize, p: &mut [f64]) {
     }
 }
 
-/// Encodings 5 and 6 without voids: a coded sample's height `value_of` its interpolated
-/// prediction and residual, a held one the parent's. Returns whether `value_of` said any
-/// was out of range.
-fn interpolated<T: Copy>(
-    g: &Rows<'_>,
-    predictor: &Predictor<'_>,
-    r: &[T],
-    out: &mut [f32],
-    value_of: impl Fn(f64, T) -> (f32, bool),
-) -> Result<bool, DecodeError> {
-    let w = g.w;
-    let held = g.held_count();
-    let mut p = vec![0.0f64; w];
-    let mut next = 0usize;
-    let mut bad = false;
-    for (j, (ry, orow)) in g.rows.iter().zip(out.chunks_exact_mut(w.max(1))).enumerate() {
-        predictions(predictor, j, &mut p);
-        match *ry {
-            Along::Mixed(..) => {
-                let rr = take(r, &mut next, w)?;
-                for ((o, &x), &d) in orow.iter_mut().zip(&p).zip(rr) {
-                    let (v, b) = value_of(x, d);
-                    *o = v;
-                    bad |= b;
-                }
-            }
-            Along::Held(pj) => {
-                let heights = g.parent_row(pj);
-                let mut rr = take(r, &mut next, w - held)?.iter();
-                for ((o, &x), hc) in orow.iter_mut().zip(&p).zip(g.held_cols) {
-                    *o = match hc {
-                        Some(pi) => heights[*pi as usize],
-                        None => {
-                            let (v, b) = value_of(x, *rr.next().ok_or_else(short)?);
-                            bad |= b;
-                            v
-                        }
-                    };
-                }
-            }
-        }
-    }
-    Ok(bad)
-}
-
 /// Encoding 5 without voids: per row, the predictions' indexes `round(p · (1/q))` a row at
 /// a time, the residuals added, the indexes converted a row at a time.
 pub(super) fn interpolated_lattice(
@@ -272,31 +237,47 @@ pub(super) fn interpolated_lattice(
                     }
                 }
                 bad |= lattice_heights(&k, orow, q, Some(g.held_cols));
-                let heights = g.parent_row(pj);
-                for (o, hc) in orow.iter_mut().zip(g.held_cols) {
-                    if let Some(pi) = hc {
-                        *o = heights[*pi as usize];
-                    }
-                }
+                g.held_heights(pj, orow);
             }
         }
     }
     if bad {
-        return Err(DecodeError::Pco("a lattice index is out of range".into()));
+        return Err(out_of_range());
     }
     Ok(())
 }
 
-/// Encoding 6 without voids.
+/// Encoding 6 without voids: a coded sample's height is its interpolated prediction's
+/// order-preserving bits plus its residual, a held one the parent's.
 pub(super) fn interpolated_float(
     g: &Rows<'_>,
     predictor: &Predictor<'_>,
     r: &[u32],
     out: &mut [f32],
 ) -> Result<(), DecodeError> {
-    interpolated(g, predictor, r, out, |p, z| {
-        let d = unzigzag(z);
-        (from_ordered(to_ordered(p as f32).wrapping_add(d)), false)
-    })
-    .map(|_| ())
+    let w = g.w;
+    let held = g.held_count();
+    let mut p = vec![0.0f64; w];
+    let mut next = 0usize;
+    let value = |p: f64, z: u32| from_ordered(to_ordered(p as f32).wrapping_add(unzigzag(z)));
+    for (j, (ry, orow)) in g.rows.iter().zip(out.chunks_exact_mut(w.max(1))).enumerate() {
+        predictions(predictor, j, &mut p);
+        match *ry {
+            Along::Mixed(..) => {
+                for ((o, &x), &z) in orow.iter_mut().zip(&p).zip(take(r, &mut next, w)?) {
+                    *o = value(x, z);
+                }
+            }
+            Along::Held(pj) => {
+                let mut rr = take(r, &mut next, w - held)?.iter();
+                for ((o, &x), hc) in orow.iter_mut().zip(&p).zip(g.held_cols) {
+                    if hc.is_none() {
+                        *o = value(x, *rr.next().ok_or_else(short)?);
+                    }
+                }
+                g.held_heights(pj, orow);
+            }
+        }
+    }
+    Ok(())
 }
