@@ -137,6 +137,17 @@ fn frames_load_only_what_is_missing() {
             let load: HashSet<BlockId> = frame.load.iter().copied().collect();
             let keep: HashSet<BlockId> = frame.keep.iter().copied().collect();
             assert_eq!(&load | &keep, visible, "{} frame {i}", s.name);
+            // The scheduler's selection (a coarser region) is the scene, block for block.
+            let exact = Terrain::new(sched.store())
+                .unwrap()
+                .scene(cam, &ScheduleOptions::new(1.0).scene)
+                .unwrap();
+            assert_eq!(
+                sched.last_scene().unwrap().blocks,
+                exact.blocks,
+                "{} frame {i}",
+                s.name
+            );
             assert!(load.is_disjoint(&resident), "{} frame {i} reloads", s.name);
             assert!(keep.is_subset(&resident));
             for e in &frame.evict {
@@ -164,6 +175,25 @@ fn frames_load_only_what_is_missing() {
         );
     }
     eprintln!("{table}");
+}
+
+/// A frame is a selection, then its application. A selection applied late (after another
+/// frame made its blocks resident) loads none of them again: they are kept, and the resident
+/// bytes are counted once.
+#[test]
+fn a_selection_applied_late_loads_nothing_twice() {
+    let store = arc_store(views::fixture(views::puget_1k(), &BuildOptions::default()));
+    let cams = cameras_of(&shipped()[0]);
+    let mut sched = Scheduler::new(store, ScheduleOptions::new(1.0)).unwrap();
+    let stale = sched.select(&cams[0]).unwrap();
+    let first = sched.frame(&cams[0]).unwrap();
+    assert!(first.stats.loaded > 0);
+    let late = sched.apply(&cams[0], stale).unwrap();
+    assert_eq!(late.stats.loaded, 0);
+    assert!(late.load.is_empty());
+    assert_eq!(late.keep, first.load, "every block of the view is kept");
+    assert_eq!(late.stats.resident_bytes, first.stats.resident_bytes);
+    assert_eq!(late.stats.resident, first.stats.resident);
 }
 
 #[test]

@@ -275,6 +275,11 @@ fn check_scene(
     let view = camera.view().unwrap();
     let scene = terrain.scene(camera, &SceneOptions::new(tau)).unwrap();
     let data = store.domain().data_rect();
+    // A scheduler's selection (a coarser region, horizon culling as always) is the same.
+    let selected = terrain
+        .scene_blocks(camera, &SceneOptions::new(tau))
+        .unwrap();
+    prop_assert_eq!(&selected.blocks, &scene.blocks, "{}", what);
 
     // One cover of what is seen.
     let (w, hgt) = (field.width(), field.height());

@@ -6,7 +6,8 @@
 //! threshold at every valid sample; a view scene's reconstruction is within each owning
 //! block's error. Cameras at the edges of the domain (on the ground, inside the terrain, very
 //! far, fields of view near 0° and 180°, straight down and up, non-finite input) are fixed
-//! cases.
+//! cases. A scheduler's selection (`Terrain::scene_blocks`, a coarser region) is the scene's
+//! blocks to the bit, and the store's memo of decoded nodes answers as the node table does.
 
 mod common;
 
@@ -96,6 +97,46 @@ proptest! {
             prop_assert!(b.screen_error <= tau, "{:?} misses tau {}", b, tau);
         }
         assert_visible_points_covered(f, &terrain, &cam, &scene);
+    }
+
+    /// The store's memo of decoded nodes answers as the node table does, whatever the order
+    /// of reads: every node read twice is the node read once, and a node past the table is
+    /// an error every time.
+    #[test]
+    fn nodes_read_again_are_the_nodes_of_the_table(
+        reads in proptest::collection::vec(any::<u32>(), 1..400),
+    ) {
+        let f = puget();
+        let all = f.store.nodes().unwrap();
+        let count = u32::try_from(all.len()).unwrap();
+        for r in reads {
+            let i = r % (count + 8);
+            match all.get(i as usize) {
+                Some(n) => prop_assert_eq!(&f.store.node(i).unwrap(), n),
+                None => prop_assert!(f.store.node(i).is_err()),
+            }
+        }
+    }
+
+    /// What a scheduler selects ([`Terrain::scene_blocks`]: a coarser frustum region, nodes
+    /// outside the frustum dropped as they are met) is the scene's blocks to the bit, in
+    /// both modes, from tolerances where pruned leaves give way to physical blocks to coarse
+    /// ones.
+    #[test]
+    fn a_schedulers_selection_is_the_scene(
+        seed in any::<u64>(),
+        tau in prop_oneof![0.02f64..0.5, 0.5f64..16.0],
+        uniform in any::<bool>(),
+    ) {
+        let f = puget();
+        let terrain = Terrain::new(&f.store).unwrap();
+        let cam = views::random_camera(&f.model, terrain.frame(), &mut Rng::new(seed));
+        let mode = if uniform { Mode::Uniform } else { Mode::View };
+        let scene = terrain.scene(&cam, &opts(tau, mode, None)).unwrap();
+        let selected = terrain.scene_blocks(&cam, &opts(tau, mode, None)).unwrap();
+        prop_assert_eq!(&selected.blocks, &scene.blocks);
+        prop_assert_eq!(selected.stats.max_screen_error, scene.stats.max_screen_error);
+        prop_assert_eq!(selected.stats.samples, scene.stats.samples);
     }
 
     #[test]

@@ -17,12 +17,15 @@ use std::collections::BTreeMap;
 use std::time::Instant;
 
 use glam::DVec3;
+use rayon::prelude::*;
 use serde::Serialize;
 
 use super::reader::{Dataset, Tile};
 use crate::error::Result;
 use crate::model::SampleRect;
-use crate::scene::{Camera, FrameStats, GlobeFrame, ScheduleOptions, Scheduler, WorldFrame};
+use crate::scene::{
+    Camera, FrameStats, GlobeFrame, ScheduleOptions, Scheduler, Selection, WorldFrame,
+};
 use crate::store::{AnySource, ReadStats};
 
 /// One frame over a dataset.
@@ -30,8 +33,9 @@ use crate::store::{AnySource, ReadStats};
 pub struct DatasetFrame {
     /// 0 for the first.
     pub index: u64,
-    /// The tiles' frame figures summed (times included: the frame's wall time is
-    /// `schedule_ns`, tile choice included, plus `load_ns`).
+    /// The tiles' frame figures summed, but for `schedule_ns`: the frame's wall time to
+    /// choose the tiles, select their scenes (side by side) and evict. The frame's wall time
+    /// is that plus `load_ns`.
     #[serde(flatten)]
     pub stats: FrameStats,
     /// Tiles scheduled this frame.
@@ -219,17 +223,31 @@ impl<'d> DatasetScheduler<'d> {
                 self.tiles.insert(*k, (r, Scheduler::new(store, options)?));
             }
         }
+        // Every tile selects its scene, side by side on the pool's threads (a selection
+        // changes nothing); then each loads and evicts in turn, its decoding on the pool.
+        let selecting = Instant::now();
+        let (globe, frame) = (self.globe, self.frame);
+        let local = |r: &SampleRect| match globe {
+            Some(_) => *camera,
+            None => super::scene::in_tile(camera, r, &frame),
+        };
+        let selections: Vec<Selection> = self
+            .tiles
+            .par_iter()
+            .map(|(_, (r, s))| s.select(&local(r)))
+            .collect::<Result<_>>()?;
+        let select_ns = selecting.elapsed().as_nanos() as u64;
         let mut tiles = 0;
-        for (r, s) in self.tiles.values_mut() {
-            let local = match self.globe {
-                Some(_) => *camera,
-                None => super::scene::in_tile(camera, r, &self.frame),
-            };
-            let f = s.frame(&local)?;
+        let mut evict_ns = 0;
+        for ((r, s), selection) in self.tiles.values_mut().zip(selections) {
+            let selected_ns = selection.schedule_ns();
+            let f = s.apply(&local(r), selection)?;
             stats.merge(&f.stats);
+            evict_ns += f.stats.schedule_ns.saturating_sub(selected_ns);
             tiles += 1;
         }
-        stats.schedule_ns += choose_ns;
+        // Wall time: the tiles' selections overlap, so their sum would overstate it.
+        stats.schedule_ns = choose_ns + select_ns + evict_ns;
         let index = self.frames;
         self.frames += 1;
         Ok(DatasetFrame {

@@ -41,6 +41,6 @@ pub use fly::DatasetFrame;
 pub use reader::{is_dataset, Dataset};
 #[cfg(any(test, feature = "testing"))]
 pub use reader::{Tile, OPEN_TILES};
-pub use scene::{DatasetBlock, DatasetScene, TilePart};
+pub use scene::{in_tile, DatasetBlock, DatasetScene, TilePart};
 pub use seams::SeamPolicy;
 pub use verify::{verify, DatasetReport, TileReport};

@@ -23,10 +23,10 @@ pub fn all_finest<S: Source>(
     window: Option<SampleRect>,
 ) -> Result<Vec<SceneBlock>> {
     let view = camera.view()?;
-    let (quadrants, _) = terrain.region(&view, window)?;
+    let region = terrain.region(&view, window)?;
     let (zmin, zmax) = terrain.height_range();
     let mut out = Vec::new();
-    for q in &quadrants {
+    for q in &region.quadrants {
         let (xs, ys) = q.blocks(terrain.domain());
         for y in ys {
             for x in xs.clone() {
@@ -48,9 +48,7 @@ pub fn traversal<S: Source>(
 ) -> Result<Vec<SceneBlock>> {
     let view = camera.view()?;
     let d = *terrain.domain();
-    let (quadrants, _) = terrain.region(&view, window)?;
-    let keys: Vec<KeyRange> = quadrants.iter().map(|q| q.keys(&d)).collect();
-    let region = ranges::merge(&keys, u64::MAX);
+    let region = ranges::merge(&terrain.region(&view, window)?.keys, u64::MAX);
     let Some(region) = region.first() else {
         return Ok(Vec::new());
     };

@@ -47,7 +47,7 @@ pub use load::{load_blocks, LoadedBlock, PAYLOAD_GAP};
 pub use load::{load_blocks_reusing, HeldGrid};
 pub use reconstruct::{reconstruct, Reconstruction};
 pub use result::{Mode, NeighbourLevels, Scene, SceneBlock, SceneOptions, SceneStats, DEFAULT_GAP};
-pub use schedule::{FrameStats, ScheduleOptions, Scheduler};
+pub use schedule::{FrameStats, ScheduleOptions, Scheduler, Selection};
 #[cfg(any(test, feature = "testing"))]
 pub use schedule::{BlockId, Frame};
 pub use terrain::Terrain;

@@ -160,14 +160,17 @@ pub fn block_key(domain: &Domain, x: u32, y: u32) -> u64 {
     hilbert_encode(u32::from(domain.finest_level()), x, y)
 }
 
-/// Splits the region `classify` describes into maximal aligned quadrants, sorted by key.
-/// `classify` sees each candidate quadrant at most once, coarse to fine; a `Partial`
-/// quadrant at the finest level is kept whole.
+/// Splits the region `classify` describes into maximal aligned quadrants, sorted by key,
+/// each with its key range (computed once, here). `classify` sees each candidate quadrant at
+/// most once, coarse to fine; a `Partial` quadrant at level `deepest` (or the finest level)
+/// is kept whole.
 pub fn decompose(
     domain: &Domain,
+    deepest: u8,
     mut classify: impl FnMut(&Quadrant) -> Coverage,
-) -> Vec<Quadrant> {
-    let mut out = Vec::new();
+) -> (Vec<Quadrant>, Vec<KeyRange>) {
+    let deepest = deepest.min(domain.finest_level());
+    let mut out: Vec<(KeyRange, Quadrant)> = Vec::new();
     let mut stack = vec![Quadrant {
         level: 0,
         x: 0,
@@ -176,13 +179,14 @@ pub fn decompose(
     while let Some(q) = stack.pop() {
         match classify(&q) {
             Coverage::Outside => {}
-            Coverage::Inside => out.push(q),
-            Coverage::Partial if q.level == domain.finest_level() => out.push(q),
+            Coverage::Inside => out.push((q.keys(domain), q)),
+            Coverage::Partial if q.level >= deepest => out.push((q.keys(domain), q)),
             Coverage::Partial => stack.extend(q.children(domain)),
         }
     }
-    out.sort_by_cached_key(|q| q.keys(domain).lo);
-    out
+    // The quadrants are disjoint, so no two share a first key: the order is total.
+    out.sort_unstable_by_key(|(k, _)| k.lo);
+    out.into_iter().map(|(k, q)| (q, k)).unzip()
 }
 
 /// The classifier of a window given in finest blocks `[x0, y0, x1, y1]` (inclusive).
@@ -236,7 +240,8 @@ mod tests {
     fn a_window_becomes_maximal_quadrants() {
         // 8 x 8 blocks (L = 3); the window of blocks 0..=3 x 0..=3 is one level-1 quadrant.
         let d = Domain::new(8 * 8 + 1, 8 * 8 + 1, 9).unwrap();
-        let qs = decompose(&d, window_classifier(&d, [0, 0, 3, 3]));
+        let (qs, keys) = decompose(&d, d.finest_level(), window_classifier(&d, [0, 0, 3, 3]));
+        assert_eq!(keys, vec![qs[0].keys(&d)]);
         assert_eq!(
             qs,
             vec![Quadrant {
@@ -246,9 +251,11 @@ mod tests {
             }]
         );
         // Blocks 1..=4 x 1..=2 need finer pieces; their key ranges cover exactly 8 blocks.
-        let qs = decompose(&d, window_classifier(&d, [1, 1, 4, 2]));
-        let keys: u64 = qs.iter().map(|q| q.keys(&d).hi - q.keys(&d).lo + 1).sum();
-        assert_eq!(keys, 8);
+        let (qs, keys) = decompose(&d, d.finest_level(), window_classifier(&d, [1, 1, 4, 2]));
+        assert!(qs.iter().zip(&keys).all(|(q, k)| q.keys(&d) == *k));
+        assert!(keys.windows(2).all(|w| w[0].hi < w[1].lo), "sorted and disjoint");
+        let count: u64 = keys.iter().map(|k| k.hi - k.lo + 1).sum();
+        assert_eq!(count, 8);
     }
 
     #[test]

@@ -133,6 +133,26 @@ pub struct Frame {
     pub stats: FrameStats,
 }
 
+/// A frame's scene and what of it is missing: [`Scheduler::select`]'s answer, which
+/// [`Scheduler::apply`] acts on.
+#[derive(Clone, Debug)]
+pub struct Selection {
+    scene: Scene,
+    /// Scene blocks not resident, in scene order.
+    load: Vec<SceneBlock>,
+    /// Scene blocks already resident.
+    keep: Vec<BlockId>,
+    /// Time the selection took, in nanoseconds.
+    schedule_ns: u64,
+}
+
+impl Selection {
+    /// Time the selection took, in nanoseconds.
+    pub fn schedule_ns(&self) -> u64 {
+        self.schedule_ns
+    }
+}
+
 /// A frame's figures (seed 000 Table 2 and more).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct FrameStats {
@@ -271,12 +291,17 @@ impl<S: Source + 'static> Scheduler<S> {
     /// Moves to `camera`: selects its scene, loads what is missing, evicts what the areas
     /// and the budget say.
     pub fn frame(&mut self, camera: &Camera) -> Result<Frame> {
+        let selection = self.select(camera)?;
+        self.apply(camera, selection)
+    }
+
+    /// The first half of [`Scheduler::frame`]: `camera`'s scene and what of it is missing.
+    /// It changes nothing, so the tiles of a dataset select their scenes side by side
+    /// (the dataset's scheduler does); [`Scheduler::apply`] then loads and evicts.
+    pub fn select(&self, camera: &Camera) -> Result<Selection> {
         let started = Instant::now();
-        let store = Arc::clone(&self.store);
-        let terrain = self.options.terrain(&store)?;
-        let scene = terrain.scene(camera, &self.options.scene)?;
-        let index = self.frames;
-        let visible: HashSet<BlockId> = scene.blocks.iter().map(BlockId::of).collect();
+        let terrain = self.options.terrain(&self.store)?;
+        let scene = terrain.scene_blocks(camera, &self.options.scene)?;
         let (mut load, mut keep) = (Vec::new(), Vec::new());
         for b in &scene.blocks {
             let id = BlockId::of(b);
@@ -286,7 +311,30 @@ impl<S: Source + 'static> Scheduler<S> {
                 load.push(*b);
             }
         }
-        let schedule_ns = started.elapsed().as_nanos() as u64;
+        Ok(Selection {
+            scene,
+            load,
+            keep,
+            schedule_ns: started.elapsed().as_nanos() as u64,
+        })
+    }
+
+    /// The second half of [`Scheduler::frame`]: loads what `selection` (made by
+    /// [`Scheduler::select`] for `camera`) lacks, then evicts. A block the selection found
+    /// missing that is resident by now (a selection applied late) is kept, not loaded
+    /// again. The frame's `schedule_ns` is the selection's plus the eviction's.
+    pub fn apply(&mut self, camera: &Camera, selection: Selection) -> Result<Frame> {
+        let Selection {
+            scene,
+            load,
+            mut keep,
+            schedule_ns,
+        } = selection;
+        let (load, late): (Vec<SceneBlock>, Vec<SceneBlock>) = load
+            .into_iter()
+            .partition(|b| !self.resident.contains_key(&BlockId::of(b)));
+        keep.extend(late.iter().map(BlockId::of));
+        let index = self.frames;
 
         let loading = Instant::now();
         let mut stats = FrameStats {
@@ -348,6 +396,9 @@ impl<S: Source + 'static> Scheduler<S> {
         stats.load_ns = loading.elapsed().as_nanos() as u64;
 
         let evict_started = Instant::now();
+        let store = Arc::clone(&self.store);
+        let terrain = self.options.terrain(&store)?;
+        let visible: HashSet<BlockId> = scene.blocks.iter().map(BlockId::of).collect();
         for id in &keep {
             if let Some(r) = self.resident.get_mut(id) {
                 r.last_visible = index;
@@ -525,7 +576,7 @@ fn warm<S: Source>(
     let Ok(terrain) = options.terrain(store) else {
         return;
     };
-    let Ok(scene) = terrain.scene(&camera, &options.scene) else {
+    let Ok(scene) = terrain.scene_blocks(&camera, &options.scene) else {
         return;
     };
     lock(cache)

@@ -15,6 +15,10 @@ pub(super) struct Search<'t, 's, S: Source> {
     pub terrain: &'t Terrain<'s, S>,
     pub view: &'t View,
     pub tau: f64,
+    /// The frustum decides a coarse region: a node whose box lies wholly outside it is dropped
+    /// with its subtree (each descendant's box lies inside its own), since `finish` would
+    /// cull every block of it.
+    pub cull: bool,
     pub out: Vec<SceneBlock>,
     pub stats: SceneStats,
 }

@@ -12,13 +12,36 @@
 //! The selection asks the store for key ranges and node records; it never parses a page.
 
 use super::camera::{Aabb, Coverage, GlobeFrame, TerrainFrame, View, WorldFrame};
-use super::ranges::{self, Quadrant};
+use super::ranges::{self, KeyRange, Quadrant};
 use super::result::SceneBlock;
 use super::stitch;
 use crate::error::{Error, Result};
 use crate::format::StoredNode;
 use crate::model::{Domain, SampleRect};
 use crate::store::{Ahead, Source, Store};
+
+/// The region of a scene: maximal aligned quadrants, and what the search needs of them.
+#[derive(Clone, Debug)]
+pub struct Region {
+    /// The quadrants, sorted by key.
+    pub quadrants: Vec<Quadrant>,
+    /// Each quadrant's Hilbert keys, in the same order.
+    pub keys: Vec<KeyRange>,
+    /// The window that decided the region; `None`: the frustum did.
+    pub window: Option<SampleRect>,
+    /// The frustum's quadrants were split short of the finest level
+    /// ([`Terrain::scene_blocks`]).
+    pub coarse: bool,
+    /// The samples the region spans: the window, or the quadrants' bounding rectangle
+    /// (`None`: no quadrant).
+    pub span: Option<SampleRect>,
+    /// The least distance from the eye to a quadrant's box (from the data's lowest to
+    /// highest height); infinite when there is none.
+    pub near: f64,
+    /// The greatest distance from the eye to a point of a quadrant's box; 0 when there is
+    /// none.
+    pub far: f64,
+}
 
 /// A store seen as terrain in the world frame: what every scene over it shares.
 pub struct Terrain<'s, S: Source> {
@@ -161,27 +184,53 @@ impl<'s, S: Source> Terrain<'s, S> {
         )
     }
 
-    /// The region a scene covers, as maximal aligned quadrants sorted by key, and the
-    /// samples it spans: `window` itself, or the quadrants the frustum may see.
-    pub fn region(
+    /// The region a scene covers ([`Region`]): `window` itself, or the quadrants the
+    /// frustum may see.
+    pub fn region(&self, view: &View, window: Option<SampleRect>) -> Result<Region> {
+        self.region_to(view, window, self.domain.finest_level())
+    }
+
+    /// As [`Terrain::region`], with the frustum's quadrants split no deeper than level
+    /// `deepest`: fewer, coarser quadrants that hold the same visible terrain and more
+    /// besides. A window's quadrants are always exact.
+    pub(super) fn region_to(
         &self,
         view: &View,
         window: Option<SampleRect>,
-    ) -> Result<(Vec<Quadrant>, Option<SampleRect>)> {
+        deepest: u8,
+    ) -> Result<Region> {
         let d = self.domain;
+        let deepest = deepest.min(d.finest_level());
         let data = d.data_rect();
-        let quadrants = match window {
+        let (mut near, mut far) = (f64::INFINITY, 0.0f64);
+        let (quadrants, keys) = match window {
             Some(w) => {
                 w.check_inside(&data, "data")?;
                 let blocks = ranges::window_blocks(&d, &w);
-                ranges::decompose(&d, ranges::window_classifier(&d, blocks))
-            }
-            None => ranges::decompose(&d, |q| {
-                if self.hidden(view, &q.samples(&d), self.root.max_height) {
-                    Coverage::Outside
-                } else {
-                    view.classify(&self.quadrant_box(q))
+                let (quadrants, keys) =
+                    ranges::decompose(&d, d.finest_level(), ranges::window_classifier(&d, blocks));
+                for q in &quadrants {
+                    let b = self.quadrant_box(q);
+                    near = near.min(b.distance(view.eye));
+                    far = far.max(b.max_distance(view.eye));
                 }
+                (quadrants, keys)
+            }
+            // Each candidate's box is made once: to classify it, and if it is kept, to
+            // measure it.
+            None => ranges::decompose(&d, deepest, |q| {
+                let rect = q.samples(&d);
+                if self.hidden(view, &rect, self.root.max_height) {
+                    return Coverage::Outside;
+                }
+                // The quadrant's box: `quadrant_box`, its rectangle made once.
+                let b = self.rect_box(&rect, self.root.min_height, self.root.max_height);
+                let c = view.classify(&b);
+                if c == Coverage::Inside || (c == Coverage::Partial && q.level >= deepest) {
+                    near = near.min(b.distance(view.eye));
+                    far = far.max(b.max_distance(view.eye));
+                }
+                c
             }),
         };
         let span = window.or_else(|| {
@@ -195,7 +244,15 @@ impl<'s, S: Source> Terrain<'s, S> {
                     row1: a.row1.max(b.row1),
                 })
         });
-        Ok((quadrants, span))
+        Ok(Region {
+            quadrants,
+            keys,
+            window,
+            coarse: window.is_none() && deepest < d.finest_level(),
+            span,
+            near,
+            far,
+        })
     }
 
     /// The scene block of node `index`, seen from `view`.

@@ -7,24 +7,24 @@
 //! (`9Q/16`) of a file with a precision. When that finest cluster's threshold is already it,
 //! it is returned instead: nothing is more exact, and its blocks are fewer.
 
-use super::ranges::{self, KeyRange, Quadrant};
+use super::ranges;
+use super::terrain::Region;
 use super::search::Search;
 use crate::error::Result;
 use crate::store::Source;
 
 impl<S: Source> Search<'_, '_, S> {
-    /// Fills the scene of `quadrants` in uniform mode; `p_min` is the nearest distance.
-    pub fn uniform(&mut self, quadrants: &[Quadrant], p_min: f64, gap: u64) -> Result<()> {
+    /// Fills the scene of `region` in uniform mode; `p_min` is the nearest distance.
+    pub fn uniform(&mut self, region: &Region, p_min: f64, gap: u64) -> Result<()> {
         let allowed = self.view.allowed_error(self.tau, p_min);
         self.stats.p_min = Some(p_min);
-        self.uniform_within(quadrants, allowed, gap)
+        self.uniform_within(region, allowed, gap)
     }
 
-    /// The uniform cut within the static bound `allowed` (metres) over `quadrants`: the
+    /// The uniform cut within the static bound `allowed` (metres) over `region`: the
     /// cluster with the largest threshold at most `allowed`, or physical blocks below the
     /// finest threshold.
-    pub fn uniform_within(&mut self, quadrants: &[Quadrant], allowed: f64, gap: u64) -> Result<()> {
-        let d = *self.terrain.domain();
+    pub fn uniform_within(&mut self, region: &Region, allowed: f64, gap: u64) -> Result<()> {
         self.stats.allowed_error = Some(allowed);
         // The largest threshold within the bound: the thresholds ascend.
         let thresholds = self.terrain.thresholds();
@@ -37,9 +37,8 @@ impl<S: Source> Search<'_, '_, S> {
             .or_else(|| (storage > 0.0 && thresholds.first() <= Some(&storage)).then_some(0));
         self.stats.cluster = cluster;
         self.stats.threshold = Some(cluster.map_or(storage, |c| thresholds[c]));
-        let keys: Vec<KeyRange> = quadrants.iter().map(|q| q.keys(&d)).collect();
         let (zmin, zmax) = self.terrain.height_range();
-        let runs = ranges::merge(&keys, gap);
+        let runs = ranges::merge(&region.keys, gap);
         match cluster {
             Some(c) => {
                 for (i, n, _) in self.scan(c, &runs)? {
@@ -48,7 +47,12 @@ impl<S: Source> Search<'_, '_, S> {
             }
             None => {
                 for run in &runs {
-                    for q in quadrants.iter().filter(|q| run.meets(&q.keys(&d))) {
+                    for (q, _) in region
+                        .quadrants
+                        .iter()
+                        .zip(&region.keys)
+                        .filter(|(_, k)| run.meets(k))
+                    {
                         self.emit_physical(q, run, zmin, zmax)?;
                     }
                 }

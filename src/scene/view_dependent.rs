@@ -19,30 +19,26 @@
 //! since no block is more exact, and its screen error is reported as it is, above `τ`.
 //!
 
+use super::camera::Coverage;
 use super::ranges::{self, KeyRange, KeyRun, Quadrant};
 use super::search::Search;
+use super::terrain::Region;
 use crate::error::Result;
 use crate::format::StoredNode;
 use crate::store::Source;
 
 impl<S: Source> Search<'_, '_, S> {
-    /// Fills the scene of `quadrants` in view-dependent mode.
-    pub fn view_dependent(&mut self, quadrants: &[Quadrant], gap: u64) -> Result<()> {
+    /// Fills the scene of `region` in view-dependent mode.
+    pub fn view_dependent(&mut self, region: &Region, gap: u64) -> Result<()> {
         let terrain = self.terrain;
-        let d = *terrain.domain();
         let thresholds = terrain.thresholds();
         let (tau, view) = (self.tau, self.view);
         // One seed for the whole region, from its farthest point: the finest cluster at or
         // above every V node of the region; None: the root.
-        let far = quadrants
-            .iter()
-            .map(|q| terrain.quadrant_box(q).max_distance(view.eye))
-            .fold(0.0, f64::max);
-        let need = view.allowed_error(tau, far);
+        let need = view.allowed_error(tau, region.far);
         let first = thresholds.partition_point(|&t| t < need);
         let seed = (first < thresholds.len()).then_some(first);
-        let keys: Vec<KeyRange> = quadrants.iter().map(|q| q.keys(&d)).collect();
-        let runs = ranges::merge(&keys, gap);
+        let runs = ranges::merge(&region.keys, gap);
         let start = match seed {
             Some(c) => self.scan(c, &runs)?,
             None => {
@@ -63,7 +59,11 @@ impl<S: Source> Search<'_, '_, S> {
         while !wave.is_empty() {
             let mut split = Vec::new();
             for (i, n, r) in wave {
-                let distance = self.terrain.node_box(&n).distance(self.view.eye);
+                let node_box = self.terrain.node_box(&n);
+                if self.cull && self.view.classify(&node_box) == Coverage::Outside {
+                    continue;
+                }
+                let distance = node_box.distance(self.view.eye);
                 // A node as exact as storage allows is kept even when it misses `tau`:
                 // nothing below it is better (a file with a precision, model §4).
                 if self.view.screen_error(n.monotone_error, distance) <= self.tau

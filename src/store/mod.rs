@@ -63,6 +63,7 @@ pub(crate) mod btree;
 mod bundled;
 mod decode;
 mod ancestors;
+mod nodememo;
 pub mod io;
 pub mod lock;
 pub(crate) mod open;
@@ -134,6 +135,8 @@ pub struct Store<S: Source = FileSource> {
     /// Decoded grids that payloads are coded against (format 4, 5), up to a budget in bytes
     /// ([`Store::parent_grid`], `ancestors`).
     ancestors: std::sync::Mutex<ancestors::AncestorCache>,
+    /// Nodes read, by index ([`Store::node`], `nodememo`).
+    nodes: nodememo::NodeMemo,
 }
 
 /// The state a store reads, as its commit record describes it.

@@ -226,6 +226,7 @@ impl Opened {
             registered: self.registered,
             open_reads: self.open_reads,
             ancestors: std::sync::Mutex::default(),
+            nodes: super::nodememo::NodeMemo::default(),
             src,
         }
     }

@@ -205,11 +205,16 @@ impl<S: Source> Store<S> {
 
     /// Node `index` of the node table (Hilbert pre-order; 0 is the root), checked to be a
     /// node of the domain (I-10's level and position), so that no caller computes with a
-    /// level or a position the geometry does not have.
+    /// level or a position the geometry does not have. A node read before is answered from
+    /// the store's memo of decoded nodes (`nodememo`) without reading the table again.
     #[inline]
     pub fn node(&self, index: u32) -> Result<StoredNode> {
-        self.node_record(index)
-            .and_then(|r| self.checked_node(index, r.decode()))
+        if let Some(n) = self.nodes.get(index) {
+            return Ok(n);
+        }
+        let n = self.checked_node(index, self.node_record(index)?.decode())?;
+        self.nodes.put(index, n);
+        Ok(n)
     }
 
     #[inline]
