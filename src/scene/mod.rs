@@ -31,6 +31,7 @@ mod select;
 mod stitch;
 pub mod surface;
 mod terrain;
+pub(crate) mod worker;
 mod uniform;
 mod view_dependent;
 

@@ -25,9 +25,7 @@
 //! together, with adjacent payloads coalesced into one read ([`super::load`]).
 
 use std::collections::{HashMap, HashSet};
-use std::sync::mpsc::{self, Receiver, Sender};
-use std::sync::{Arc, Condvar, Mutex, MutexGuard};
-use std::thread::JoinHandle;
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use serde::Serialize;
@@ -38,6 +36,7 @@ use crate::store::{Source, Store};
 
 use super::camera::{Camera, GlobeFrame, TerrainFrame, WorldFrame};
 use super::load::{load_blocks, load_blocks_reusing, LoadedBlock, PAYLOAD_GAP};
+use super::worker::{lock, NewestWorker};
 use super::{Scene, SceneBlock, SceneOptions, Terrain};
 
 /// A block's identity: level and position (a node, or a physical block below a leaf).
@@ -102,6 +101,21 @@ impl ScheduleOptions {
             globe: false,
             globe_frame: None,
         }
+    }
+
+    /// Checks the radii: finite and at least 0.
+    pub fn check(&self) -> Result<()> {
+        for (what, v) in [
+            ("memory radius", self.memory_radius),
+            ("cache radius", self.cache_radius),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(crate::error::Error::InvalidArgument(format!(
+                    "{what} {v}: must be finite and >= 0"
+                )));
+            }
+        }
+        Ok(())
     }
 
     /// The terrain these options select scenes on: flat, or on the globe.
@@ -205,8 +219,8 @@ struct Resident {
     last_visible: u64,
 }
 
-/// A prefetch request: its number, the predicted camera, the blocks already resident.
-type Request = (u64, Camera, HashSet<BlockId>);
+/// Where [`Scheduler::apply_warmed`] takes warmed blocks from: the block, decoded, if warm.
+pub type WarmSource<'a> = dyn FnMut(&SceneBlock) -> Option<LoadedBlock> + 'a;
 
 type WarmCache = Arc<Mutex<HashMap<BlockId, (SceneBlock, LoadedBlock)>>>;
 
@@ -225,16 +239,7 @@ pub struct Scheduler<S: Source + 'static> {
 impl<S: Source + 'static> Scheduler<S> {
     /// A scheduler over `store`; starts the prefetch thread when asked.
     pub fn new(store: Arc<Store<S>>, options: ScheduleOptions) -> Result<Self> {
-        for (what, v) in [
-            ("memory radius", options.memory_radius),
-            ("cache radius", options.cache_radius),
-        ] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(crate::error::Error::InvalidArgument(format!(
-                    "{what} {v}: must be finite and >= 0"
-                )));
-            }
-        }
+        options.check()?;
         options.terrain(&store)?; // the root must be readable (and on the globe, placed)
         let prefetcher = options
             .prefetch
@@ -296,8 +301,8 @@ impl<S: Source + 'static> Scheduler<S> {
     }
 
     /// The first half of [`Scheduler::frame`]: `camera`'s scene and what of it is missing.
-    /// It changes nothing, so the tiles of a dataset select their scenes side by side
-    /// (the dataset's scheduler does); [`Scheduler::apply`] then loads and evicts.
+    /// It changes nothing; [`Scheduler::apply`] then loads and evicts (a dataset's
+    /// scheduler selects every tile's scene first, then applies each).
     pub fn select(&self, camera: &Camera) -> Result<Selection> {
         let started = Instant::now();
         let terrain = self.options.terrain(&self.store)?;
@@ -324,6 +329,28 @@ impl<S: Source + 'static> Scheduler<S> {
     /// missing that is resident by now (a selection applied late) is kept, not loaded
     /// again. The frame's `schedule_ns` is the selection's plus the eviction's.
     pub fn apply(&mut self, camera: &Camera, selection: Selection) -> Result<Frame> {
+        self.apply_from(camera, selection, None)
+    }
+
+    /// As [`Scheduler::apply`], taking the blocks it lacks from `warm` first (a prefetcher
+    /// outside this scheduler: a dataset's, which warms every tile from one thread) when it
+    /// has them, then from this scheduler's own prefetcher, then from the store. A warmed
+    /// block counts only if its payload is the scene block's.
+    pub fn apply_warmed(
+        &mut self,
+        camera: &Camera,
+        selection: Selection,
+        warm: &mut WarmSource<'_>,
+    ) -> Result<Frame> {
+        self.apply_from(camera, selection, Some(warm))
+    }
+
+    fn apply_from(
+        &mut self,
+        camera: &Camera,
+        selection: Selection,
+        mut outside: Option<&mut WarmSource<'_>>,
+    ) -> Result<Frame> {
         let Selection {
             scene,
             load,
@@ -348,23 +375,24 @@ impl<S: Source + 'static> Scheduler<S> {
         // Blocks the prefetcher warmed, then the rest read together (coalesced) and decoded.
         let mut ready: Vec<(SceneBlock, LoadedBlock)> = Vec::with_capacity(load.len());
         let mut missing: Vec<SceneBlock> = Vec::new();
-        if let Some(p) = &self.prefetcher {
-            let mut warm = lock(&p.cache);
-            for block in &load {
-                match warm
-                    .remove(&BlockId::of(block))
+        let mut own = self.prefetcher.as_ref().map(|p| lock(&p.cache));
+        for block in &load {
+            let from_outside = outside.as_mut().and_then(|take| take(block));
+            let warmed = from_outside.or_else(|| {
+                own.as_mut()
+                    .and_then(|warm| warm.remove(&BlockId::of(block)))
                     .filter(|(cb, _)| cb.payload == block.payload)
-                {
-                    Some((_, loaded)) => {
-                        stats.prefetch_hits += 1;
-                        ready.push((*block, loaded));
-                    }
-                    None => missing.push(*block),
+                    .map(|(_, loaded)| loaded)
+            });
+            match warmed {
+                Some(loaded) => {
+                    stats.prefetch_hits += 1;
+                    ready.push((*block, loaded));
                 }
+                None => missing.push(*block),
             }
-        } else {
-            missing.clone_from(&load);
         }
+        drop(own);
         // A block coded against its parent's grid takes the grid from the parent block when
         // that is still resident (it was drawn in an earlier frame), instead of reading it.
         let resident = &self.resident;
@@ -480,127 +508,79 @@ impl<S: Source + 'static> Scheduler<S> {
     }
 }
 
-fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
-    // A panic in the prefetch thread leaves a usable cache: every entry is whole.
-    m.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
-}
-
 /// The prefetch thread and its warm cache.
 struct Prefetcher {
     cache: WarmCache,
-    /// Requests sent, and requests finished (with a condition variable to wait on).
-    sent: u64,
-    done: Arc<(Mutex<u64>, Condvar)>,
-    requests: Option<Sender<Request>>,
-    thread: Option<JoinHandle<()>>,
+    worker: NewestWorker<(Camera, HashSet<BlockId>)>,
 }
 
 impl Prefetcher {
     fn start<S: Source + 'static>(store: Arc<Store<S>>, options: ScheduleOptions) -> Prefetcher {
         let cache: WarmCache = Arc::default();
-        let (tx, rx) = mpsc::channel();
         let thread_cache = Arc::clone(&cache);
-        let done: Arc<(Mutex<u64>, Condvar)> = Arc::default();
-        let thread_done = Arc::clone(&done);
-        let thread = std::thread::Builder::new()
-            .name("fmrh-prefetch".into())
-            .spawn(move || prefetch_loop(&store, options, &thread_cache, &thread_done, rx))
-            .ok();
-        Prefetcher {
-            cache,
-            sent: 0,
-            done,
-            requests: thread.is_some().then_some(tx),
-            thread,
-        }
+        let worker = NewestWorker::start("fmrh-prefetch", move |(camera, have)| {
+            warm(&store, &options, &thread_cache, &camera, &have);
+        });
+        Prefetcher { cache, worker }
     }
 
     fn ask(&mut self, camera: Camera, have: HashSet<BlockId>) {
-        if let Some(tx) = &self.requests {
-            self.sent += 1;
-            // A closed channel means the thread ended; prefetch is only ever a hint.
-            if tx.send((self.sent, camera, have)).is_err() {
-                self.requests = None;
-            }
-        }
+        self.worker.ask((camera, have));
     }
 
     fn wait(&self) {
-        if self.requests.is_none() {
-            return;
-        }
-        let (lock_done, cv) = &*self.done;
-        let mut done = lock(lock_done);
-        while *done < self.sent {
-            done = cv.wait(done).unwrap_or_else(|p| p.into_inner());
-        }
+        self.worker.wait();
     }
 }
 
-impl Drop for Prefetcher {
-    fn drop(&mut self) {
-        self.requests = None; // ends the loop
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
-    }
-}
-
-fn prefetch_loop<S: Source>(
+/// What a prefetcher warms for one store: the blocks of `camera`'s scene within
+/// `options.cache_radius` of the eye that `skip` does not rule out (resident, or already
+/// warm), read together and decoded. Returns the scene's blocks (all of them, to tell which
+/// warm entries are still wanted) and the warmed ones. An error is only ever a miss: the
+/// frame that needs the block reads (and reports) it.
+pub fn warm_blocks<S: Source>(
     store: &Store<S>,
-    options: ScheduleOptions,
-    cache: &WarmCache,
-    done: &(Mutex<u64>, Condvar),
-    rx: Receiver<Request>,
-) {
-    while let Ok(mut request) = rx.recv() {
-        // Only the newest prediction matters.
-        while let Ok(newer) = rx.try_recv() {
-            request = newer;
-        }
-        let number = request.0;
-        warm(store, options, cache, request.1, &request.2);
-        *lock(&done.0) = number;
-        done.1.notify_all();
+    options: &ScheduleOptions,
+    camera: &Camera,
+    skip: impl Fn(&BlockId) -> bool,
+) -> (Vec<BlockId>, Vec<(SceneBlock, LoadedBlock)>) {
+    let Ok(terrain) = options.terrain(store) else {
+        return (Vec::new(), Vec::new());
+    };
+    let Ok(scene) = terrain.scene_blocks(camera, &options.scene) else {
+        return (Vec::new(), Vec::new());
+    };
+    let wanted: Vec<SceneBlock> = scene
+        .blocks
+        .iter()
+        .filter(|b| b.distance <= options.cache_radius && !skip(&BlockId::of(b)))
+        .copied()
+        .collect();
+    let ids = scene.blocks.iter().map(BlockId::of).collect();
+    match load_blocks(store, &wanted, PAYLOAD_GAP) {
+        Ok(loaded) => (ids, wanted.into_iter().zip(loaded).collect()),
+        Err(_) => (ids, Vec::new()),
     }
 }
 
-/// Reads the blocks of `camera`'s scene that are neither in `have` nor cached.
+/// Drops the warm entries beyond the cache radius of `camera`, then warms the blocks of its
+/// scene that are neither in `have` nor warm.
 fn warm<S: Source>(
     store: &Store<S>,
-    options: ScheduleOptions,
+    options: &ScheduleOptions,
     cache: &WarmCache,
-    camera: Camera,
+    camera: &Camera,
     have: &HashSet<BlockId>,
 ) {
-    let Ok(terrain) = options.terrain(store) else {
-        return;
-    };
-    let Ok(scene) = terrain.scene_blocks(&camera, &options.scene) else {
-        return;
-    };
-    lock(cache)
-        .retain(|_, (b, _)| terrain.block_box(b).distance(camera.eye) <= options.cache_radius);
-    let wanted: Vec<SceneBlock> = {
-        let cached = lock(cache);
-        scene
-            .blocks
-            .iter()
-            .filter(|b| {
-                let id = BlockId::of(b);
-                !have.contains(&id)
-                    && b.distance <= options.cache_radius
-                    && !cached.contains_key(&id)
-            })
-            .copied()
-            .collect()
-    };
-    // Read together and decoded here, off the frame's path; a failure leaves the frame to
-    // read (and report) it.
-    if let Ok(loaded) = load_blocks(store, &wanted, PAYLOAD_GAP) {
-        let mut cached = lock(cache);
-        for (b, l) in wanted.into_iter().zip(loaded) {
-            cached.insert(BlockId::of(&b), (b, l));
-        }
+    if let Ok(terrain) = options.terrain(store) {
+        lock(cache)
+            .retain(|_, (b, _)| terrain.block_box(b).distance(camera.eye) <= options.cache_radius);
+    }
+    let (_, warmed) = warm_blocks(store, options, camera, |id| {
+        have.contains(id) || lock(cache).contains_key(id)
+    });
+    let mut cached = lock(cache);
+    for (b, l) in warmed {
+        cached.insert(BlockId::of(&b), (b, l));
     }
 }
