@@ -278,7 +278,7 @@ impl<'d> DatasetScheduler<'d> {
                     target: b.target + (b.target - a.target),
                     ..b
                 };
-                self.ask_prefetch(&predicted)?;
+                self.ask_prefetch(&predicted);
             }
         }
         let index = self.frames;
@@ -299,15 +299,16 @@ impl<'d> DatasetScheduler<'d> {
     }
 
     /// Asks the prefetcher to warm what `predicted` will see: each tile its frustum meets,
-    /// with the tile's resident blocks left out.
-    fn ask_prefetch(&mut self, predicted: &Camera) -> Result<()> {
+    /// with the tile's resident blocks left out. Prefetch is a hint: a prediction that fails
+    /// (a camera the next frame will refuse too) or a tile that does not open warms nothing,
+    /// and the frame that needs it reads (and reports) it.
+    fn ask_prefetch(&mut self, predicted: &Camera) {
         let seen = match self.globe {
             Some(_) => self.dataset.scene_tiles_on_globe(predicted, None),
             None => self.dataset.scene_tiles(predicted, None, &self.frame),
         };
-        // A prediction that fails (a camera the next frame will refuse too) warms nothing.
         let Ok(seen) = seen else {
-            return Ok(());
+            return;
         };
         let mut batch = Vec::with_capacity(seen.len());
         for t in seen {
@@ -317,7 +318,10 @@ impl<'d> DatasetScheduler<'d> {
                     Arc::clone(s.store()),
                     s.resident().map(BlockId::of).collect(),
                 ),
-                None => (self.dataset.open_tile(&t)?, HashSet::new()),
+                None => match self.dataset.open_tile(&t) {
+                    Ok(store) => (store, HashSet::new()),
+                    Err(_) => continue,
+                },
             };
             let camera = match self.globe {
                 Some(_) => *predicted,
@@ -338,7 +342,6 @@ impl<'d> DatasetScheduler<'d> {
         if let Some(p) = &mut self.prefetcher {
             p.ask(batch);
         }
-        Ok(())
     }
 }
 
