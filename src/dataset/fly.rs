@@ -29,7 +29,7 @@ use serde::Serialize;
 use super::reader::{Dataset, Tile};
 use crate::error::Result;
 use crate::model::SampleRect;
-use crate::scene::schedule::{warm_blocks, BlockId};
+use crate::scene::schedule::{predict, warm_blocks, BlockId};
 use crate::scene::worker::{lock, NewestWorker};
 use crate::scene::{
     Camera, FrameStats, GlobeFrame, LoadedBlock, SceneBlock, ScheduleOptions, Scheduler,
@@ -192,11 +192,7 @@ impl<'d> DatasetScheduler<'d> {
     pub fn frame(&mut self, camera: &Camera) -> Result<DatasetFrame> {
         let started = Instant::now();
         let mut wanted: BTreeMap<u64, Tile> = BTreeMap::new();
-        let seen = match self.globe {
-            Some(_) => self.dataset.scene_tiles_on_globe(camera, None)?,
-            None => self.dataset.scene_tiles(camera, None, &self.frame)?,
-        };
-        for t in seen {
+        for t in self.seen(camera)? {
             wanted.insert(t.index, t);
         }
         for t in self.near(camera.eye, self.options.memory_radius)? {
@@ -212,7 +208,6 @@ impl<'d> DatasetScheduler<'d> {
             .collect();
         for k in gone {
             if let Some((_, s)) = self.tiles.remove(&k) {
-                s.wait_prefetch();
                 stats.evicted += s.resident().count() as u64;
                 self.dropped_reads = self.dropped_reads.plus(&s.store().read_stats());
                 dropped += 1;
@@ -223,13 +218,10 @@ impl<'d> DatasetScheduler<'d> {
             if !self.tiles.contains_key(k) {
                 let store = self.dataset.open_tile(t)?;
                 let r = t.rect();
-                // On the globe, the tile where the dataset's grid puts it.
-                let globe_frame = self.globe.map(|g| g.at_sample(r.col0, r.row0));
                 let options = ScheduleOptions {
-                    globe_frame,
                     // The dataset's one prefetcher warms every tile.
                     prefetch: false,
-                    ..self.options
+                    ..self.tile_options(&r)
                 };
                 self.tiles.insert(*k, (r, Scheduler::new(store, options)?));
             }
@@ -240,10 +232,7 @@ impl<'d> DatasetScheduler<'d> {
         // lost 100 us at 60 frames a second, waking the pool's idle threads.
         let selecting = Instant::now();
         let (globe, frame) = (self.globe, self.frame);
-        let local = |r: &SampleRect| match globe {
-            Some(_) => *camera,
-            None => super::in_tile(camera, r, &frame),
-        };
+        let local = |r: &SampleRect| tile_camera(globe.is_some(), camera, r, &frame);
         let selections: Vec<Selection> = self
             .tiles
             .values()
@@ -271,15 +260,8 @@ impl<'d> DatasetScheduler<'d> {
         }
         stats.schedule_ns = choose_ns + select_ns + evict_ns;
         self.last_cameras = [self.last_cameras[1], Some(*camera)];
-        if let [Some(a), Some(b)] = self.last_cameras {
-            if self.prefetcher.is_some() {
-                let predicted = Camera {
-                    eye: b.eye + (b.eye - a.eye),
-                    target: b.target + (b.target - a.target),
-                    ..b
-                };
-                self.ask_prefetch(&predicted);
-            }
+        if let Some(predicted) = predict(&self.last_cameras).filter(|_| self.prefetcher.is_some()) {
+            self.ask_prefetch(&predicted);
         }
         let index = self.frames;
         self.frames += 1;
@@ -289,6 +271,23 @@ impl<'d> DatasetScheduler<'d> {
             tiles,
             tiles_dropped: dropped,
         })
+    }
+
+    /// The tiles `camera`'s frustum meets.
+    fn seen(&self, camera: &Camera) -> Result<Vec<Tile>> {
+        match self.globe {
+            Some(_) => self.dataset.scene_tiles_on_globe(camera, None),
+            None => self.dataset.scene_tiles(camera, None, &self.frame),
+        }
+    }
+
+    /// The options of the tile whose samples are `r`: on the globe, placed where the
+    /// dataset's grid puts it.
+    fn tile_options(&self, r: &SampleRect) -> ScheduleOptions {
+        ScheduleOptions {
+            globe_frame: self.globe.map(|g| g.at_sample(r.col0, r.row0)),
+            ..self.options
+        }
     }
 
     /// Waits for the prefetch thread to finish every request made so far.
@@ -303,11 +302,7 @@ impl<'d> DatasetScheduler<'d> {
     /// (a camera the next frame will refuse too) or a tile that does not open warms nothing,
     /// and the frame that needs it reads (and reports) it.
     fn ask_prefetch(&mut self, predicted: &Camera) {
-        let seen = match self.globe {
-            Some(_) => self.dataset.scene_tiles_on_globe(predicted, None),
-            None => self.dataset.scene_tiles(predicted, None, &self.frame),
-        };
-        let Ok(seen) = seen else {
+        let Ok(seen) = self.seen(predicted) else {
             return;
         };
         let mut batch = Vec::with_capacity(seen.len());
@@ -323,19 +318,11 @@ impl<'d> DatasetScheduler<'d> {
                     Err(_) => continue,
                 },
             };
-            let camera = match self.globe {
-                Some(_) => *predicted,
-                None => super::in_tile(predicted, &r, &self.frame),
-            };
-            let options = ScheduleOptions {
-                globe_frame: self.globe.map(|g| g.at_sample(r.col0, r.row0)),
-                ..self.options
-            };
             batch.push(TileRequest {
                 tile: t.index,
                 store,
-                camera,
-                options,
+                camera: tile_camera(self.globe.is_some(), predicted, &r, &self.frame),
+                options: self.tile_options(&r),
                 have,
             });
         }
@@ -353,6 +340,16 @@ impl std::fmt::Debug for DatasetScheduler<'_> {
             .field("tiles", &self.tiles.keys().collect::<Vec<_>>())
             .field("frames", &self.frames)
             .finish_non_exhaustive()
+    }
+}
+
+/// `camera` as the tile whose samples are `r` takes it: in its own frame on flat ground
+/// ([`super::in_tile`]); on the globe every tile takes the ECEF camera as it is.
+fn tile_camera(on_globe: bool, camera: &Camera, r: &SampleRect, frame: &WorldFrame) -> Camera {
+    if on_globe {
+        *camera
+    } else {
+        super::in_tile(camera, r, frame)
     }
 }
 
@@ -399,7 +396,10 @@ impl Prefetcher {
 fn warm(cache: &WarmCache, batch: Vec<TileRequest>) {
     let mut wanted: HashSet<(u64, BlockId)> = HashSet::new();
     for t in batch {
-        let (ids, warmed) = warm_blocks(&t.store, &t.options, &t.camera, |id| {
+        let Ok(terrain) = t.options.terrain(&t.store) else {
+            continue;
+        };
+        let (ids, warmed) = warm_blocks(&terrain, &t.options, &t.camera, |id| {
             t.have.contains(id) || lock(cache).contains_key(&(t.tile, *id))
         });
         wanted.extend(ids.into_iter().map(|id| (t.tile, id)));

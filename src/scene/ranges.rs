@@ -179,14 +179,20 @@ pub fn decompose(
     while let Some(q) = stack.pop() {
         match classify(&q) {
             Coverage::Outside => {}
-            Coverage::Inside => out.push((q.keys(domain), q)),
-            Coverage::Partial if q.level >= deepest => out.push((q.keys(domain), q)),
-            Coverage::Partial => stack.extend(q.children(domain)),
+            c if kept_whole(c, q.level, deepest) => out.push((q.keys(domain), q)),
+            _ => stack.extend(q.children(domain)),
         }
     }
     // The quadrants are disjoint, so no two share a first key: the order is total.
     out.sort_unstable_by_key(|(k, _)| k.lo);
     out.into_iter().map(|(k, q)| (q, k)).unzip()
+}
+
+/// Whether [`decompose`] keeps a quadrant at `level` that `classify` found `c` whole, rather
+/// than splitting it (`Outside` is dropped either way): inside, or partly inside at level
+/// `deepest` or below.
+pub fn kept_whole(c: Coverage, level: u8, deepest: u8) -> bool {
+    c == Coverage::Inside || (c == Coverage::Partial && level >= deepest)
 }
 
 /// The classifier of a window given in finest blocks `[x0, y0, x1, y1]` (inclusive).

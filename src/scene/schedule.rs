@@ -37,6 +37,7 @@ use crate::store::{Source, Store};
 use super::camera::{Camera, GlobeFrame, TerrainFrame, WorldFrame};
 use super::load::{load_blocks, load_blocks_reusing, LoadedBlock, PAYLOAD_GAP};
 use super::worker::{lock, NewestWorker};
+use super::terrain::block_box;
 use super::{Scene, SceneBlock, SceneOptions, Terrain};
 
 /// A block's identity: level and position (a node, or a physical block below a leaf).
@@ -119,7 +120,7 @@ impl ScheduleOptions {
     }
 
     /// The terrain these options select scenes on: flat, or on the globe.
-    fn terrain<'s, S: Source>(&self, store: &'s Store<S>) -> Result<Terrain<'s, S>> {
+    pub(crate) fn terrain<'s, S: Source>(&self, store: &'s Store<S>) -> Result<Terrain<'s, S>> {
         match (self.globe, self.globe_frame) {
             (false, _) => Terrain::with_spacing(store, self.spacing_m),
             (true, None) => Terrain::on_globe(store),
@@ -156,6 +157,8 @@ pub struct Selection {
     load: Vec<SceneBlock>,
     /// Scene blocks already resident.
     keep: Vec<BlockId>,
+    /// Where the terrain's samples are (eviction measures blocks in it).
+    world: TerrainFrame,
     /// Time the selection took, in nanoseconds.
     schedule_ns: u64,
 }
@@ -320,6 +323,7 @@ impl<S: Source + 'static> Scheduler<S> {
             scene,
             load,
             keep,
+            world: terrain.world(),
             schedule_ns: started.elapsed().as_nanos() as u64,
         })
     }
@@ -355,6 +359,7 @@ impl<S: Source + 'static> Scheduler<S> {
             scene,
             load,
             mut keep,
+            world,
             schedule_ns,
         } = selection;
         let (load, late): (Vec<SceneBlock>, Vec<SceneBlock>) = load
@@ -424,27 +429,20 @@ impl<S: Source + 'static> Scheduler<S> {
         stats.load_ns = loading.elapsed().as_nanos() as u64;
 
         let evict_started = Instant::now();
-        let store = Arc::clone(&self.store);
-        let terrain = self.options.terrain(&store)?;
         let visible: HashSet<BlockId> = scene.blocks.iter().map(BlockId::of).collect();
         for id in &keep {
             if let Some(r) = self.resident.get_mut(id) {
                 r.last_visible = index;
             }
         }
-        let evict = self.evict(camera, &visible, &terrain)?;
+        let evict = self.evict(camera, &visible, &world);
         stats.evicted = evict.len() as u64;
         stats.resident = self.resident.len() as u64;
         stats.resident_bytes = self.resident_bytes;
         stats.schedule_ns += evict_started.elapsed().as_nanos() as u64;
 
         self.last_cameras = [self.last_cameras[1], Some(*camera)];
-        if let (Some(p), [Some(a), Some(b)]) = (&mut self.prefetcher, self.last_cameras) {
-            let predicted = Camera {
-                eye: b.eye + (b.eye - a.eye),
-                target: b.target + (b.target - a.target),
-                ..b
-            };
+        if let (Some(p), Some(predicted)) = (&mut self.prefetcher, predict(&self.last_cameras)) {
             let have: HashSet<BlockId> = self.resident.keys().copied().collect();
             p.ask(predicted, have);
         }
@@ -468,15 +466,15 @@ impl<S: Source + 'static> Scheduler<S> {
         &mut self,
         camera: &Camera,
         visible: &HashSet<BlockId>,
-        terrain: &Terrain<'_, S>,
-    ) -> Result<Vec<BlockId>> {
+        world: &TerrainFrame,
+    ) -> Vec<BlockId> {
         let eye = camera.eye;
         let radius = self.options.memory_radius;
         let mut out: Vec<BlockId> = self
             .resident
             .iter()
             .filter(|(id, r)| {
-                !visible.contains(id) && terrain.block_box(&r.block).distance(eye) > radius
+                !visible.contains(id) && block_box(world, &r.block).distance(eye) > radius
             })
             .map(|(id, _)| *id)
             .collect();
@@ -504,8 +502,21 @@ impl<S: Source + 'static> Scheduler<S> {
             }
         }
         out.sort_unstable();
-        Ok(out)
+        out
     }
+}
+
+/// The camera of the next frame, extrapolated from the last two (eye and target move on as
+/// they moved); `None` before there are two.
+pub(crate) fn predict(last: &[Option<Camera>; 2]) -> Option<Camera> {
+    let [Some(a), Some(b)] = *last else {
+        return None;
+    };
+    Some(Camera {
+        eye: b.eye + (b.eye - a.eye),
+        target: b.target + (b.target - a.target),
+        ..b
+    })
 }
 
 /// The prefetch thread and its warm cache.
@@ -533,20 +544,17 @@ impl Prefetcher {
     }
 }
 
-/// What a prefetcher warms for one store: the blocks of `camera`'s scene within
-/// `options.cache_radius` of the eye that `skip` does not rule out (resident, or already
-/// warm), read together and decoded. Returns the scene's blocks (all of them, to tell which
-/// warm entries are still wanted) and the warmed ones. An error is only ever a miss: the
-/// frame that needs the block reads (and reports) it.
+/// What a prefetcher warms for one store: the blocks of `camera`'s scene over `terrain`
+/// within `options.cache_radius` of the eye that `skip` does not rule out (resident, or
+/// already warm), read together and decoded. Returns the scene's blocks (all of them, to
+/// tell which warm entries are still wanted) and the warmed ones. An error is only ever a
+/// miss: the frame that needs the block reads (and reports) it.
 pub fn warm_blocks<S: Source>(
-    store: &Store<S>,
+    terrain: &Terrain<'_, S>,
     options: &ScheduleOptions,
     camera: &Camera,
     skip: impl Fn(&BlockId) -> bool,
 ) -> (Vec<BlockId>, Vec<(SceneBlock, LoadedBlock)>) {
-    let Ok(terrain) = options.terrain(store) else {
-        return (Vec::new(), Vec::new());
-    };
     let Ok(scene) = terrain.scene_blocks(camera, &options.scene) else {
         return (Vec::new(), Vec::new());
     };
@@ -557,7 +565,7 @@ pub fn warm_blocks<S: Source>(
         .copied()
         .collect();
     let ids = scene.blocks.iter().map(BlockId::of).collect();
-    match load_blocks(store, &wanted, PAYLOAD_GAP) {
+    match load_blocks(terrain.store(), &wanted, PAYLOAD_GAP) {
         Ok(loaded) => (ids, wanted.into_iter().zip(loaded).collect()),
         Err(_) => (ids, Vec::new()),
     }
@@ -572,11 +580,12 @@ fn warm<S: Source>(
     camera: &Camera,
     have: &HashSet<BlockId>,
 ) {
-    if let Ok(terrain) = options.terrain(store) {
-        lock(cache)
-            .retain(|_, (b, _)| terrain.block_box(b).distance(camera.eye) <= options.cache_radius);
-    }
-    let (_, warmed) = warm_blocks(store, options, camera, |id| {
+    let Ok(terrain) = options.terrain(store) else {
+        return;
+    };
+    lock(cache)
+        .retain(|_, (b, _)| terrain.block_box(b).distance(camera.eye) <= options.cache_radius);
+    let (_, warmed) = warm_blocks(&terrain, options, camera, |id| {
         have.contains(id) || lock(cache).contains_key(id)
     });
     let mut cached = lock(cache);

@@ -43,6 +43,12 @@ pub struct Region {
     pub far: f64,
 }
 
+/// The box of scene block `b` in `world`: its samples by its height range
+/// ([`Terrain::block_box`], for a caller that holds the frame and not the terrain).
+pub fn block_box(world: &TerrainFrame, b: &SceneBlock) -> Aabb {
+    world.rect_box(&b.rect(), f64::from(b.min_height), f64::from(b.max_height))
+}
+
 /// A store seen as terrain in the world frame: what every scene over it shares.
 pub struct Terrain<'s, S: Source> {
     pub(super) store: &'s Store<S>,
@@ -226,7 +232,7 @@ impl<'s, S: Source> Terrain<'s, S> {
                 // The quadrant's box: `quadrant_box`, its rectangle made once.
                 let b = self.rect_box(&rect, self.root.min_height, self.root.max_height);
                 let c = view.classify(&b);
-                if c == Coverage::Inside || (c == Coverage::Partial && q.level >= deepest) {
+                if ranges::kept_whole(c, q.level, deepest) {
                     near = near.min(b.distance(view.eye));
                     far = far.max(b.max_distance(view.eye));
                 }
@@ -339,7 +345,7 @@ impl<'s, S: Source> Terrain<'s, S> {
 
     /// The box of a scene block: its samples by its height range.
     pub fn block_box(&self, b: &SceneBlock) -> Aabb {
-        self.rect_box(&b.rect(), b.min_height, b.max_height)
+        block_box(&self.world, b)
     }
 
     /// The root's height range: bounds every height of the terrain.
