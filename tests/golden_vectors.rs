@@ -6,9 +6,9 @@
 //! regenerate with `FMRH_BLESS=1 cargo test --release --test golden_vectors`.
 //!
 //! Files of older versions stay readable: `format-spec/vectors/v1.1/`, `v1.2/`, `v2.0/`,
-//! `v2.1/`, `v3.0/`, `v4.0/`, `v5.0/` and `v6.0/` keep the same vectors as those versions
-//! wrote them. They must read and verify exactly as the current ones do; 2.x to 6.0 files
-//! accept a transaction (which makes them 6.1), 1.x files refuse one. The polar vector (format 6.0: a
+//! `v2.1/`, `v3.0/`, `v4.0/`, `v5.0/`, `v6.0/` and `v6.1/` keep the same vectors as those
+//! versions wrote them. They must read and verify exactly as the current ones do; 2.x to
+//! 6.1 files accept a transaction (which makes them 6.2), 1.x files refuse one. The polar vector (format 6.0: a
 //! longitude-latitude grid at 80° N whose coarse grids are thinned by area) has no older copy.
 //!
 //! Three more pins: a crafted vector (`slot-1-beside-invalid-slot-0.fmrh`: where slot 1 lies
@@ -357,7 +357,7 @@ fn vector_commit_record_fields_sit_where_the_spec_says() {
     let bytes = build(&vectors()[1]);
     assert_eq!(&bytes[0..8], b"FMRH\r\n\x1a\n");
     assert_eq!(u16::from_le_bytes([bytes[8], bytes[9]]), 6); // major
-    assert_eq!(u16::from_le_bytes([bytes[10], bytes[11]]), 1); // minor
+    assert_eq!(u16::from_le_bytes([bytes[10], bytes[11]]), 2); // minor
     assert_eq!(u32::from_le_bytes(bytes[12..16].try_into().unwrap()), 1024); // page size
     assert_eq!(u64::from_le_bytes(bytes[16..24].try_into().unwrap()), 1); // txn id
     assert_eq!(
@@ -366,9 +366,11 @@ fn vector_commit_record_fields_sit_where_the_spec_says() {
     );
     // pages_txn (1.2 and later): the fresh file's one transaction wrote every structured page.
     assert_eq!(u64::from_le_bytes(bytes[168..176].try_into().unwrap()), 1);
-    // The bundle's head length (5.0) is set; the record's reserved tail is zero.
+    // The bundle's head length (5.0) is set; a bundled state has no top of the tree (6.2,
+    // bytes 200..216); the record's reserved tail is zero.
     assert!(u32::from_le_bytes(bytes[196..200].try_into().unwrap()) > 0);
-    assert!(bytes[200..252].iter().all(|&b| b == 0));
+    assert!(bytes[200..216].iter().all(|&b| b == 0));
+    assert!(bytes[216..252].iter().all(|&b| b == 0));
     let crc = crc32fast::hash(&bytes[..252]);
     assert_eq!(u32::from_le_bytes(bytes[252..256].try_into().unwrap()), crc);
     assert!(
@@ -458,7 +460,7 @@ fn format_1_vectors_read_verify_and_refuse_writes() {
 /// them, no grid thinned) read sample for sample, pass `verify --full`, and accept a
 /// transaction, whose commit makes them 6.0 (format §8) with their metadata in a bundle.
 #[test]
-fn format_2_to_6_0_vectors_read_verify_and_take_a_transaction() {
+fn format_2_to_6_1_vectors_read_verify_and_take_a_transaction() {
     let old_vectors = lossless_vectors()
         .into_iter()
         .map(|v| ((2u16, 0u16), v))
@@ -471,7 +473,8 @@ fn format_2_to_6_0_vectors_read_verify_and_take_a_transaction() {
         .chain(old_vectors().into_iter().map(|v| ((3, 0), v)))
         .chain(old_vectors().into_iter().map(|v| ((4, 0), v)))
         .chain(old_vectors().into_iter().map(|v| ((5, 0), v)))
-        .chain(vectors().into_iter().map(|v| ((6, 0), v)));
+        .chain(vectors().into_iter().map(|v| ((6, 0), v)))
+        .chain(vectors().into_iter().map(|v| ((6, 1), v)));
     for ((major, minor), v) in old_vectors {
         let old = dir()
             .join(format!("v{major}.{minor}"))
@@ -480,10 +483,12 @@ fn format_2_to_6_0_vectors_read_verify_and_take_a_transaction() {
         assert_eq!(store.state().format_version, (major, minor), "{}", v.name);
         // Before 6.1 the datum is not recorded: the reader's convention says (a test
         // source: unknown), whatever the field was built with.
-        assert_eq!(
-            store.header().metadata.vertical_datum,
-            VerticalDatum::Unknown
-        );
+        if (major, minor) < (6, 1) {
+            assert_eq!(
+                store.header().metadata.vertical_datum,
+                VerticalDatum::Unknown
+            );
+        }
         assert_eq!(
             store.header().precision.map(|p| p.step()),
             v.precision.filter(|_| (major, minor) > (2, 0))
@@ -623,11 +628,11 @@ fn vertical_datum_codes_follow_the_version_rules() {
     assert_eq!(datum(&with(156, 0), (6, 0)), Ok(VerticalDatum::Unknown));
     assert_eq!(datum(&with(156, 4), (6, 1)), Ok(VerticalDatum::Egm2008));
     assert!(datum(&with(156, 9), (6, 1)).is_err());
-    assert_eq!(datum(&with(156, 9), (6, 2)), Ok(VerticalDatum::Unknown));
+    assert_eq!(datum(&with(156, 9), (6, 3)), Ok(VerticalDatum::Unknown));
     assert!(datum(&blob, (6, 0)).is_err());
     assert!(datum(&blob, (5, 0)).is_err());
     assert!(datum(&with(158, 1), (6, 1)).is_err());
-    assert_eq!(datum(&with(158, 1), (6, 2)), Ok(VerticalDatum::Egm96));
+    assert_eq!(datum(&with(158, 1), (6, 3)), Ok(VerticalDatum::Egm96));
 }
 
 /// Format 6's thinned grids, read by the spec alone (container §7 "Thinned grids", model
@@ -731,6 +736,115 @@ fn slot_vector() -> Vec<u8> {
     bytes[12..16].copy_from_slice(&2048u32.to_le_bytes());
     reseal(&mut bytes[..256]);
     bytes
+}
+
+/// The top of the tree (format 6.2, §6.8), read from the paged vector by the spec alone:
+/// the commit record names it at bytes 200..216; its `FMTP` pages hold `count`, `levels`
+/// and the entries; each entry's record is byte for byte the node table's at its ordinal
+/// (found by walking the table's B+-tree from the record's TreeRef at 72), and the top
+/// holds exactly the nodes of level below `levels`. The fresh paged layout (§2) puts the
+/// node table's root, the top, the directory and the header in the file's last pages.
+#[test]
+fn the_paged_vector_pins_the_top_of_the_tree() {
+    let v = vectors().into_iter().find(|v| v.paged).unwrap();
+    let bytes = std::fs::read(dir().join(format!("{}.fmrh", v.name))).unwrap();
+    let p = 1024usize;
+    let u64_at = |at: usize| u64::from_le_bytes(bytes[at..at + 8].try_into().unwrap());
+    let u32_at = |at: usize| u32::from_le_bytes(bytes[at..at + 4].try_into().unwrap());
+    let u16_at = |at: usize| u16::from_le_bytes(bytes[at..at + 2].try_into().unwrap());
+    // The blob: pages of P - 24 content bytes, each with its header.
+    let (first, len) = (u64_at(200) as usize, u64_at(208) as usize);
+    assert!(len > 0, "a paged state has a top");
+    let mut top = Vec::new();
+    for i in 0..len.div_ceil(p - 24) {
+        let page = (first + i) * p;
+        assert_eq!(&bytes[page..page + 4], b"FMTP");
+        assert_eq!(u64_at(page + 8) as usize, first + i);
+        assert_eq!(
+            u32_at(page + 4),
+            crc32fast::hash(&bytes[page + 8..page + p])
+        );
+        let count = u32_at(page + 20) as usize;
+        top.extend_from_slice(&bytes[page + 24..page + 24 + count]);
+    }
+    assert_eq!(top.len(), len);
+    let count = u32::from_le_bytes(top[0..4].try_into().unwrap()) as usize;
+    let levels = top[4];
+    assert_eq!(&top[5..8], &[0, 0, 0]);
+    assert_eq!(len, 8 + 84 * count);
+    // The node table's leaves, in order, by a walk from its root.
+    let (root, records, record_size) = (u64_at(72) as usize, u64_at(80) as usize, u16_at(90));
+    assert_eq!(record_size, 80);
+    let mut table = Vec::new();
+    let mut stack = vec![root];
+    while let Some(page_no) = stack.pop() {
+        let page = page_no * p;
+        assert_eq!(&bytes[page..page + 4], b"FMNT");
+        let (level, n) = (u16_at(page + 16), u32_at(page + 20) as usize);
+        if level == 0 {
+            table.extend_from_slice(&bytes[page + 24..page + 24 + 80 * n]);
+        } else {
+            // Children pushed last-first, so the first is walked first.
+            for e in (0..n).rev() {
+                stack.push(u64_at(page + 24 + 24 * e + 16) as usize);
+            }
+        }
+    }
+    assert_eq!(table.len(), 80 * records);
+    // The finest level is the header's; the writer's top holds levels 0..=min(3, L).
+    let finest = table.chunks(80).map(|r| r[8]).max().unwrap();
+    assert_eq!(levels, (finest + 1).min(4));
+    let expected: Vec<usize> = (0..records)
+        .filter(|&i| table[80 * i + 8] < levels)
+        .collect();
+    let held: Vec<usize> = (0..count)
+        .map(|e| u32::from_le_bytes(top[8 + 84 * e..12 + 84 * e].try_into().unwrap()) as usize)
+        .collect();
+    assert_eq!(held, expected);
+    for (e, &o) in held.iter().enumerate() {
+        assert_eq!(
+            &top[12 + 84 * e..8 + 84 * (e + 1)],
+            &table[80 * o..80 * (o + 1)],
+            "entry {e}: node {o}"
+        );
+    }
+    // The layout: node table root, top, directory, header, then the end of the file.
+    let pages = bytes.len() / p;
+    let header = u64_at(40) as usize;
+    let directory = u64_at(56) as usize;
+    assert_eq!(header, pages - 1);
+    assert!(root < first && first < directory && directory < header);
+    // A 6.1 reader's view: bytes 200..216 were reserved, and the file's minor is newer.
+    assert_eq!(u16_at(10), 2);
+}
+
+/// A top of the tree whose record differs from the node table's (its page's CRC made
+/// right, so only the comparison can tell) is I-10 damage: `verify` says so, where a
+/// remote reader would have trusted the copy.
+#[test]
+fn a_top_that_differs_from_the_table_fails_verify() {
+    let v = vectors().into_iter().find(|v| v.paged).unwrap();
+    let mut bytes = std::fs::read(dir().join(format!("{}.fmrh", v.name))).unwrap();
+    let p = 1024usize;
+    let first = u64::from_le_bytes(bytes[200..208].try_into().unwrap()) as usize;
+    let page = &mut bytes[first * p..(first + 1) * p];
+    assert_eq!(&page[..4], b"FMTP");
+    // Entry 1's record (after the page header, the top's 8-byte prefix, entry 0 and the
+    // entry's 4-byte ordinal): its static error, at +32 in the record.
+    let at = 24 + 8 + 84 + 4 + 32;
+    page[at] ^= 1;
+    let crc = crc32fast::hash(&page[8..]);
+    page[4..8].copy_from_slice(&crc.to_le_bytes());
+    let report =
+        fmrh::store::verify(fmrh::store::Bytes(bytes), fmrh::store::VerifyMode::Fast).unwrap();
+    assert!(!report.valid);
+    let failed: Vec<String> = report
+        .checks
+        .iter()
+        .filter(|c| c.status == fmrh::store::CheckStatus::Failed)
+        .map(|c| format!("{:?}", c.id))
+        .collect();
+    assert_eq!(failed, ["NodeTable"], "{report:?}");
 }
 
 #[test]

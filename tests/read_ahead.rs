@@ -282,3 +282,75 @@ fn a_complete_tree_is_read_entirely_from_pages_fetched_ahead() {
         );
     }
 }
+
+/// The tags of the pages at `reads` (offsets into `bytes`).
+fn tags_of(bytes: &[u8], reads: &[u64]) -> Vec<[u8; 4]> {
+    reads
+        .iter()
+        .map(|&r| {
+            let r = r as usize;
+            bytes[r..r + 4].try_into().unwrap()
+        })
+        .collect()
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(24))]
+
+    /// The top of the tree (format 6.2, §6.8): a fresh paged file holds its coarsest
+    /// levels' nodes, which the store answers from memory. A cold view-dependent scene on a
+    /// source that fetches ahead starts from the root (no cluster index page is read),
+    /// reads every table page it and its
+    /// load need from batches fetched ahead (none costs a round of its own), and a scene
+    /// whose blocks all lie in the top, above the finest level, reads no page of the node
+    /// table or the block table.
+    #[test]
+    fn a_top_starts_a_remote_scene_in_memory(
+        field in fields::any_field(200),
+        seed in 0u64..1000,
+        tau in 0.5f64..16.0,
+    ) {
+        let bytes = paged(&field, 9);
+        let plain = Store::from_bytes(bytes.clone()).unwrap();
+        prop_assert!(plain.top().is_none(), "a local reader reads nodes from the table");
+        let store = Store::from_source(Recorder::new(bytes.clone())).unwrap();
+        let finest = plain.domain().finest_level();
+        let top = store.top().expect("a fresh paged file has a top").clone();
+        prop_assert_eq!(top.levels, (finest + 1).min(4));
+        let nodes = plain.nodes().unwrap();
+        let held: Vec<u32> = top.nodes.iter().map(|&(o, _)| o).collect();
+        let expected: Vec<u32> = (0u32..)
+            .zip(&nodes)
+            .filter(|(_, n)| n.level < top.levels)
+            .map(|(i, _)| i)
+            .collect();
+        prop_assert_eq!(held, expected);
+        store.source().take();
+        let model = fmrh::model::Model::build(
+            field.clone(),
+            &fmrh::model::BuildOptions { block_size: 9, ..Default::default() },
+        )
+        .unwrap();
+        let mut rng = fields::Rng::new(seed);
+        let camera = common::views::random_camera(&model, WorldFrame::new(None), &mut rng);
+        let Ok(scene) = Terrain::new(&store).and_then(|t| t.scene(&camera, &SceneOptions::new(tau)))
+        else {
+            return Ok(());
+        };
+        load_blocks(&store, &scene.blocks, 0).unwrap();
+        let (batches, reads) = store.source().take();
+        let missed = unfetched(&batches, &reads);
+        prop_assert!(missed.is_empty(), "pages read unfetched: {:?}", missed);
+        // Started from the root, not from a cluster's index.
+        let tags = tags_of(&bytes, &reads);
+        prop_assert!(!tags.iter().any(|t| t == b"FMCI"), "an index page was read");
+        // A finest-level block's record is in the block table, whatever its level.
+        if scene.blocks.iter().all(|b| b.level < top.levels && b.level < finest) {
+            let tables = tags
+                .iter()
+                .filter(|&t| t == b"FMNT" || t == b"FMBT")
+                .count();
+            prop_assert_eq!(tables, 0, "{} blocks in the top", scene.blocks.len());
+        }
+    }
+}

@@ -164,6 +164,8 @@ struct Sections {
     commit_slots: u64,
     dataset_header: u64,
     cluster_directory: u64,
+    /// The top of the tree (format 6.2): a copy of the coarsest levels' node records.
+    top: u64,
     node_table: u64,
     block_table: u64,
     free_list: u64,
@@ -188,6 +190,7 @@ impl Sections {
         let metadata_pages = l.commit_pages
             + l.dataset_header_pages
             + l.cluster_directory_pages
+            + l.top_pages
             + l.node_table_pages
             + l.block_table_pages
             + l.free_list_pages
@@ -198,6 +201,7 @@ impl Sections {
             commit_slots: l.commit_pages * p,
             dataset_header: l.dataset_header_pages * p,
             cluster_directory: l.cluster_directory_pages * p,
+            top: l.top_pages * p,
             node_table: l.node_table_pages * p,
             block_table: l.block_table_pages * p,
             free_list: l.free_list_pages * p,
@@ -550,6 +554,7 @@ fn print_info(path: &std::path::Path, i: &Info) {
         ("cluster indexes", s.cluster_indexes),
         ("adjacency lists", s.adjacency_lists),
         ("cluster directory", s.cluster_directory),
+        ("top of the tree", s.top),
         ("dataset header", s.dataset_header),
         ("commit slots", s.commit_slots),
         ("free list", s.free_list),

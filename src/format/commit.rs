@@ -6,15 +6,16 @@
 //! of the two valid records.
 //!
 //! ```text
-//!  0        8     10    12     16       24           32     36     40 ...  168       176     200 ... 252  256
-//!  | magic  | maj | min | page | txn_id | file_length| flags| rsvd | roots | pages_txn| bundle | rsvd | crc |
-//!  └──────── the envelope: the same in every major version ───────┘                         └─ CRC of 0..252
+//!  0        8     10    12     16       24           32     36     40 ...  168       176     200   216 ... 252  256
+//!  | magic  | maj | min | page | txn_id | file_length| flags| rsvd | roots | pages_txn| bundle | top | rsvd | crc |
+//!  └──────── the envelope: the same in every major version ───────┘                               └─ CRC of 0..252
 //! ```
 //!
 //! `pages_txn` (1.2; zero before) is the transaction that wrote every structured page the
 //! state reaches: each of those pages carries its low 16 bits (`page::txn_tag`). `bundle`
 //! (3.0; zero before) names the compressed metadata bundle, if the state has one
-//! ([`super::bundle`]).
+//! ([`super::bundle`]). `top` (6.2; zero before) names the top of the tree, a copy of the
+//! coarsest levels' node records ([`super::top`]), if the state has one.
 //!
 //! **The envelope.** Magic, major, minor, page size, txn id and the CRC at 252 keep their
 //! places in every major version, so a reader can tell that a newer writer has superseded the
@@ -92,8 +93,11 @@ on_disk! {
         pub pages_txn: U64,
         /// The metadata bundle (3.0; zero before, and when the state has none).
         pub bundle: BundleRef,
+        /// The top of the tree (6.2; zero before, and when the state has none): a copy of
+        /// the coarsest levels' node records ([`super::top`]).
+        pub top: BlobRef,
         /// Zero.
-        pub reserved: [u8; 52],
+        pub reserved: [u8; 36],
         /// CRC-32 of bytes `0..COMMIT_CRC_SPAN` of the record.
         pub crc: U32,
     }
@@ -145,7 +149,8 @@ impl CommitRecord {
             roots,
             pages_txn: U64::new(txn_id),
             bundle: BundleRef::default(),
-            reserved: [0; 52],
+            top: BlobRef::default(),
+            reserved: [0; 36],
             crc: U32::new(0),
         };
         r.seal();
@@ -157,6 +162,24 @@ impl CommitRecord {
         self.bundle = bundle;
         self.seal();
         self
+    }
+
+    /// The same record with `top` as the top of its tree (6.2), sealed.
+    pub fn with_top(mut self, top: BlobRef) -> CommitRecord {
+        self.top = top;
+        self.seal();
+        self
+    }
+
+    /// The top of the tree (6.2), when the state has one: a record of an older version
+    /// has none (the field was reserved).
+    pub fn top(&self) -> Option<BlobRef> {
+        (self.has_top_field() && self.top.length.get() != 0).then_some(self.top)
+    }
+
+    /// Whether the record's version has the `top` field (6.2 and later minors of 6).
+    fn has_top_field(&self) -> bool {
+        self.major.get() == FORMAT_MAJOR && self.minor.get() >= 2
     }
 
     /// The same state under another txn id and flags, sealed: what a writer publishes to mark
@@ -351,6 +374,7 @@ pub fn classify(bytes: &[u8], slot: u8, offset: u64) -> Slot {
             || (!r.binds_pages() && r.pages_txn.get() != 0)
             || (!has_bundle && !is_zero(r.bundle.as_bytes()))
             || (r.major.get() < 5 && r.bundle.head_len.get() != 0)
+            || (!r.has_top_field() && !is_zero(r.top.as_bytes()))
             || !is_zero(&r.reserved))
     {
         return invalid("reserved fields are not zero".into());

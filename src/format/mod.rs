@@ -87,6 +87,7 @@ pub mod page;
 pub mod payload;
 pub mod records;
 pub mod tables;
+pub mod top;
 pub mod tree;
 
 pub use crate::error::{Invariant, Violation};
@@ -140,8 +141,11 @@ pub const MAGIC: [u8; 8] = *b"FMRH\r\n\x1a\n";
 pub const FORMAT_MAJOR: u16 = 6;
 
 /// Compatible additions within [`FORMAT_MAJOR`]: 1 records the heights' vertical datum in
-/// the dataset header (byte 156, formerly reserved); a 6.0 reader ignores it.
-pub const FORMAT_MINOR: u16 = 1;
+/// the dataset header (byte 156, formerly reserved); a 6.0 reader ignores it. 2 adds the
+/// top of the tree (commit record bytes 200..216, formerly reserved: `format::top`), a copy of
+/// the coarsest levels' node records that lets a remote reader start a scene without
+/// reading the node table; a 6.1 reader ignores it.
+pub const FORMAT_MINOR: u16 = 2;
 
 /// The last minor version of major 5.
 pub const LAST_MINOR_OF_5: u16 = 0;

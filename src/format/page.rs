@@ -41,6 +41,8 @@ pub mod tag {
     pub const ADJACENCY: [u8; 4] = *b"FMAJ";
     /// A page of the free list.
     pub const FREE_LIST: [u8; 4] = *b"FMFL";
+    /// A page of the top of the tree (6.2).
+    pub const TOP: [u8; 4] = *b"FMTP";
 }
 
 on_disk! {

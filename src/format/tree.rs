@@ -131,15 +131,47 @@ pub fn build<E>(
     txn: u64,
     emit: &mut dyn FnMut(Vec<u8>) -> Result<(), E>,
 ) -> Result<TreeRef, E> {
+    build_split(records, spec, page_size, [first_page, 0], txn, emit)
+}
+
+/// Leaf pages a tree of `records` records of `record_size` bytes takes.
+pub fn leaf_pages(records: u64, page_size: u32, record_size: usize) -> u64 {
+    records.div_ceil(leaf_capacity(page_size, record_size) as u64)
+}
+
+/// As [`build`], numbering the leaves from `first[0]` on and the branches from `first[1]`
+/// on, each consecutively; `first[1] == 0` numbers the branches right after the leaves
+/// (what [`build`] does). A writer that wants a tree's branches elsewhere than beside its
+/// leaves (the fresh layout puts the node and block tables' branches in the file's last
+/// pages, which a remote reader fetches at open) writes the pages `emit` is given at the
+/// numbers their headers carry.
+pub fn build_split<E>(
+    records: &[u8],
+    spec: TreeSpec,
+    page_size: u32,
+    first: [u64; 2],
+    txn: u64,
+    emit: &mut dyn FnMut(Vec<u8>) -> Result<(), E>,
+) -> Result<TreeRef, E> {
     let size = spec.record_size;
     let count = (records.len() / size) as u64;
     if count == 0 {
         return Ok(empty(size));
     }
-    let mut next = first_page;
+    let mut next_leaf = first[0];
+    let mut next_branch = if first[1] == 0 {
+        first[0] + leaf_pages(count, page_size, size)
+    } else {
+        first[1]
+    };
     let mut page = |level: u16, count: usize, body: &[u8]| -> Result<u64, E> {
-        let no = next;
-        next += 1;
+        let next = if level == 0 {
+            &mut next_leaf
+        } else {
+            &mut next_branch
+        };
+        let no = *next;
+        *next += 1;
         // A page holds fewer than 2^16 entries.
         let count = u32::try_from(count).unwrap_or(u32::MAX);
         let stamp = PageStamp { page_no: no, txn };

@@ -109,16 +109,24 @@ impl<S: Source> Search<'_, '_, S> {
         if parents.is_empty() || !store.prefetches() {
             return Ok(());
         }
+        let top = store.top();
         let mut a = Ahead::new();
         for &(i, ref n) in parents {
             let below = n.subtree_len.saturating_sub(1);
-            if below == 0 {
+            // Children the top holds (format 6.2) are read from memory.
+            if below == 0 || top.is_some_and(|t| t.holds_level(n.level.saturating_add(1))) {
                 continue;
             }
             // Saturating: the lengths come from the file, and a lookup checks what they name.
             let first = i.saturating_add(1);
             if below <= SMALL_SUBTREE {
                 a.nodes(first, i.saturating_add(below));
+                // Below the top (format 6.2), a small subtree is one the view refines
+                // into: its blocks' records come in the same round, since a load reads
+                // them for the finest nodes the refinement ends at.
+                if top.is_some() {
+                    self.name_blocks_under(&mut a, n);
+                }
             } else {
                 let child = below / 4;
                 for k in 0..4 {
@@ -128,6 +136,26 @@ impl<S: Source> Search<'_, '_, S> {
             }
         }
         store.fetch_ahead(&a)
+    }
+}
+
+impl<S: Source> Search<'_, '_, S> {
+    /// Names the block records of the physical blocks under `n`, when they are few (at most
+    /// [`SMALL_SUBTREE`] / 2 blocks).
+    fn name_blocks_under(&self, a: &mut Ahead, n: &StoredNode) {
+        let d = self.terrain.domain();
+        let finest = d.finest_level();
+        let Some(depth) = finest.checked_sub(n.level).filter(|&k| k <= 3) else {
+            return;
+        };
+        let (cols, rows) = d.nodes_across(finest);
+        let side = 1u32 << depth;
+        let (x0, y0) = (n.x.saturating_mul(side), n.y.saturating_mul(side));
+        for y in y0..y0.saturating_add(side).min(rows) {
+            for x in x0..x0.saturating_add(side).min(cols) {
+                a.block(x, y);
+            }
+        }
     }
 }
 

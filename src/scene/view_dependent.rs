@@ -37,7 +37,13 @@ impl<S: Source> Search<'_, '_, S> {
         // above every V node of the region; None: the root.
         let need = view.allowed_error(tau, region.far);
         let first = thresholds.partition_point(|&t| t < need);
-        let seed = (first < thresholds.len()).then_some(first);
+        // A remote reader holding the top of the tree (format 6.2) starts from the root: the
+        // coarse levels are in memory, where the seed's range scan would cost a round for
+        // the index and one for its nodes. The cut is the same (the argument above holds
+        // for any start at or above it).
+        let store = terrain.store();
+        let from_top = store.top().is_some() && store.prefetches();
+        let seed = (first < thresholds.len() && !from_top).then_some(first);
         let runs = ranges::merge(&region.keys, gap);
         let start = match seed {
             Some(c) => self.scan(c, &runs)?,

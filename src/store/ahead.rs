@@ -111,6 +111,13 @@ impl<S: Source> Store<S> {
         self.src.prefetches()
     }
 
+    /// The top of the tree (format 6.2), when the state has one and the store holds it:
+    /// the nodes of its coarsest levels, read at open by a store whose source fetches ahead
+    /// (a remote object) and by the validator. A local reader reads them from the table.
+    pub fn top(&self) -> Option<&crate::format::top::Top> {
+        self.top.as_deref()
+    }
+
     /// Fetches the pages the lookups `ahead` names will read, one round per tree level on a
     /// remote source, so that the lookups then find them at hand. Nothing on a source that
     /// does not fetch ahead. A cluster that does not exist is left out (its scan reports
@@ -127,11 +134,23 @@ impl<S: Source> Store<S> {
                 Some((*info.index(), tables::INDEX, spans.clone()))
             })
             .collect();
-        if !ahead.nodes.is_empty() {
+        // A node the top holds (format 6.2) is never looked up in the table.
+        let nodes: Vec<Span> = ahead
+            .nodes
+            .iter()
+            .filter(|s| match (**s, self.top.as_deref()) {
+                (Span::Ordinals(a, b), Some(top)) if a == b => {
+                    u32::try_from(a).map_or(true, |a| top.get(a).is_none())
+                }
+                _ => true,
+            })
+            .copied()
+            .collect();
+        if !nodes.is_empty() {
             wants.push((
                 self.commit.roots.node_table,
                 tables::NODES,
-                merged(&ahead.nodes),
+                merged(&nodes),
             ));
         }
         // A block outside the domain is left out: its lookup reports it.

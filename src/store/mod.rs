@@ -137,6 +137,9 @@ pub struct Store<S: Source = FileSource> {
     ancestors: std::sync::Mutex<ancestors::AncestorCache>,
     /// Nodes read, by index ([`Store::node`], `nodememo`).
     nodes: nodememo::NodeMemo,
+    /// The top of the tree (format 6.2), read at open when the state has one: the
+    /// coarsest levels' nodes, which [`Store::node`] then never looks up in the table.
+    top: Option<std::sync::Arc<crate::format::top::Top>>,
 }
 
 /// The state a store reads, as its commit record describes it.
@@ -410,7 +413,8 @@ impl<S: Source> Store<S> {
         };
         let mut seen = pages::PageSet::with_bundle(self.page_count, self.bundle_pages());
         let roots = &self.commit.roots;
-        for blob in [&roots.dataset_header, &roots.cluster_directory] {
+        let top = self.commit.top().unwrap_or_default();
+        for blob in [&roots.dataset_header, &roots.cluster_directory, &top] {
             let count = crate::format::blob::blob_pages(blob.length.get(), self.page_size);
             for i in 0..count {
                 let page = blob.first_page.get() + i;

@@ -37,6 +37,7 @@ use crate::format::dataset::MAX_DATASET_HEADER_LEN;
 use crate::format::directory::{self, MAX_DIRECTORY_LEN};
 use crate::format::manifest::StatePin;
 use crate::format::tables::state_trees;
+use crate::format::top::{Top, MAX_TOP_LEN};
 use crate::format::{tag, BlobRef, DatasetHeader, Invariant, TreeRef, Violation};
 
 /// Reads and checks a blob of at most `max_len` bytes, adding its pages to `seen`.
@@ -200,6 +201,7 @@ struct Opened {
     metadata_pages: Option<PageSet>,
     registered: bool,
     open_reads: ReadStats,
+    top: Option<Top>,
     /// Where the state's table pages lie, as the fresh layout puts them (format §2): from
     /// the dataset header's first page to the end of the file, or the bundle's stored run
     /// when the header is in the metadata bundle (the tables are too).
@@ -227,6 +229,7 @@ impl Opened {
             open_reads: self.open_reads,
             ancestors: std::sync::Mutex::default(),
             nodes: super::nodememo::NodeMemo::default(),
+            top: self.top.map(Arc::new),
             src,
         }
     }
@@ -266,11 +269,13 @@ fn open_once<S: Source>(src: &S, walk: Walk, pin: Option<StatePin>) -> Result<Op
     let mut seen = PageSet::with_bundle(page_count, bundle_pages);
     if src.prefetches() {
         // One round for what opening reads next and scenes and loads read first: the
-        // header's and the directory's pages, and the roots of the node and block tables
-        // (a remote source).
+        // header's, the directory's and the top's pages, and the roots of the node and
+        // block tables (a remote source). A fresh paged file holds them all in its last
+        // pages, which the source fetched with the commit slots.
         let roots = &commit.roots;
+        let top = commit.top().unwrap_or_default();
         let mut ahead = Vec::new();
-        for blob in [&roots.dataset_header, &roots.cluster_directory] {
+        for blob in [&roots.dataset_header, &roots.cluster_directory, &top] {
             let count = blob::blob_pages(blob.length.get(), page_size).min(MAX_AHEAD_PAGES);
             ahead.extend((0..count).map(|i| blob.first_page.get().saturating_add(i)));
         }
@@ -298,6 +303,15 @@ fn open_once<S: Source>(src: &S, walk: Walk, pin: Option<StatePin>) -> Result<Op
     )?;
     let clusters = directory::decode(&dir, &header, commit.roots.adjacency.records.get())
         .map_err(|v| pages.corrupt(v))?;
+    // The top of the tree serves a reader that pays a round trip per page (a remote
+    // source) and the validator; a local reader finds the same nodes in the table, and
+    // opening stays within its few pages (`tests/lean_reads.rs`).
+    let top = match commit.top() {
+        Some(blob) if src.prefetches() || walk == Walk::Full => {
+            Some(read_top(&pages, &blob, &header, &mut seen)?)
+        }
+        _ => None,
+    };
     let expect = |tree: &TreeRef, n: u64, what: &str| -> Result<()> {
         if tree.records.get() != n {
             return Err(pages.corrupt(Violation::new(
@@ -345,7 +359,11 @@ fn open_once<S: Source>(src: &S, walk: Walk, pin: Option<StatePin>) -> Result<Op
         metadata_pages: (walk == Walk::Full).then_some(seen),
         registered,
         open_reads: counted.stats(),
-        metadata_area: {
+        // With a top, a scene reads the node table's subtrees it refines into, a run each:
+        // fetching the whole area would cost more bytes than the rounds it saves.
+        metadata_area: if commit.top().is_some() {
+            None
+        } else {
             let first = commit.roots.dataset_header.first_page.get();
             let bundle = &commit.bundle;
             if first >= crate::format::bundle::BUNDLE_FIRST_PAGE {
@@ -357,5 +375,28 @@ fn open_once<S: Source>(src: &S, walk: Walk, pin: Option<StatePin>) -> Result<Op
             }
             .filter(|area| !area.is_empty())
         },
+        top,
     })
+}
+
+/// Reads and checks the top of the tree (format 6.2) that `blob` names: in file pages,
+/// well formed, and naming nodes the header's table and levels hold (the validator checks
+/// each record against the table's, I-10).
+fn read_top<S: Source + ?Sized>(
+    pages: &Pages<'_, S>,
+    blob: &BlobRef,
+    header: &DatasetHeader,
+    seen: &mut PageSet,
+) -> Result<Top> {
+    let bad = |detail: String| pages.corrupt(Violation::new(Invariant::NodeTable, "top", detail));
+    if crate::format::bundle::is_bundle_page(blob.first_page.get()) {
+        return Err(bad("in the metadata bundle, where a top never lies".into()));
+    }
+    let bytes = read_blob(pages, blob, tag::TOP, MAX_TOP_LEN, "top", seen)?;
+    let top = crate::format::top::decode(&bytes).map_err(|v| pages.corrupt(v))?;
+    let nodes = header.node_count;
+    if let Some(&(o, _)) = top.nodes.iter().find(|&&(o, _)| u64::from(o) >= nodes) {
+        return Err(bad(format!("node {o} is past the table's {nodes} nodes")));
+    }
+    Ok(top)
 }

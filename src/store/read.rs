@@ -38,6 +38,8 @@ pub struct Layout {
     pub dataset_header_pages: u64,
     /// Cluster directory pages.
     pub cluster_directory_pages: u64,
+    /// Pages of the top of the tree (format 6.2), 0 when the state has none.
+    pub top_pages: u64,
     /// Node table pages.
     pub node_table_pages: u64,
     /// Block table pages.
@@ -143,6 +145,7 @@ impl<S: Source> Store<S> {
             commit_pages: 2,
             dataset_header_pages: blob(&self.commit.roots.dataset_header),
             cluster_directory_pages: blob(&self.commit.roots.cluster_directory),
+            top_pages: self.commit.top().map_or(0, |t| blob(&t)),
             node_table_pages: sum(tables::NODES),
             block_table_pages: sum(tables::BLOCKS),
             free_list_pages: sum(tables::FREE),
@@ -209,6 +212,9 @@ impl<S: Source> Store<S> {
     /// the store's memo of decoded nodes (`nodememo`) without reading the table again.
     #[inline]
     pub fn node(&self, index: u32) -> Result<StoredNode> {
+        if let Some(n) = self.top.as_deref().and_then(|t| t.get(index)) {
+            return self.checked_node(index, *n);
+        }
         if let Some(n) = self.nodes.get(index) {
             return Ok(n);
         }

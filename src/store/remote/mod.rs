@@ -12,7 +12,9 @@
 //!   fresh build puts its metadata bundle, format §2), as one multi-range request where the
 //!   server answers those (nginx does), else as two requests in parallel (S3). Reads inside
 //!   them cost nothing more. The answers also tell the object's length and its ETag.
-//! * **Metadata, a round per tree level at most:** after opening, the store advises where
+//! * **Metadata, a round per tree level at most:** a state with a top of the tree (format
+//!   6.2) advises nothing: its scenes name the subtrees they refine into, one round. Otherwise,
+//!   after opening, the store advises where
 //!   its table pages lie ([`Source::advise_metadata`]); the first read inside that area
 //!   fetches it whole when it is at most [`RemoteOptions::metadata_limit`] bytes, and every
 //!   index, node and block page is then served from memory. In a larger area (a dataset's

@@ -366,6 +366,7 @@ fn verify_state<S: Source>(
     };
     structure::check_free_list(store, &loaded, checks);
     structure::check_nodes(store, &loaded, checks);
+    structure::check_top(store, &loaded, checks);
     structure::check_blocks(store, &loaded, checks);
     let payload_pages = payloads::check_payloads(store, &loaded, checks, progress)?;
     structure::check_ownership(store, &loaded, &payload_pages, checks);

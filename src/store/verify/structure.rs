@@ -1,7 +1,10 @@
 //! The records' own consistency (fast mode): the free list (I-16), the node table (I-10), the
 //! block table (I-11), page ownership (I-8), and index entries naming their nodes (I-13).
 
+use zerocopy::IntoBytes;
+
 use super::{Checks, Loaded};
+
 use crate::curve::HilbertKey;
 use crate::format::payload;
 use crate::format::{
@@ -34,6 +37,40 @@ pub(super) fn check_free_list<S: Source>(store: &Store<S>, l: &Loaded, checks: &
         prev = Some(page);
     }
     checks.pass(Invariant::FreeList);
+}
+
+/// I-10's part about the top of the tree (format 6.2): it holds exactly the table's nodes
+/// of level below its `levels`, each record equal to the table's at its ordinal. (Its shape
+/// was checked when the store opened.)
+pub(super) fn check_top<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Checks) {
+    let Some(top) = store.top() else {
+        return;
+    };
+    let id = Invariant::NodeTable;
+    let expected: Vec<u32> = (0u32..)
+        .zip(&l.nodes)
+        .filter(|(_, n)| n.level < top.levels)
+        .map(|(i, _)| i)
+        .collect();
+    let held: Vec<u32> = top.nodes.iter().map(|&(o, _)| o).collect();
+    if held != expected {
+        checks.fail(
+            id,
+            format!(
+                "the top holds {} nodes; the table has {} of level below {}",
+                held.len(),
+                expected.len(),
+                top.levels
+            ),
+        );
+        return;
+    }
+    for (&(o, _), record) in top.nodes.iter().zip(&top.records) {
+        if l.nodes.get(o as usize).map(|r| r.as_bytes()) != Some(record.as_bytes()) {
+            checks.fail(id, format!("top: node {o} differs from the table's record"));
+            return;
+        }
+    }
 }
 
 pub(super) fn check_nodes<S: Source>(store: &Store<S>, l: &Loaded, checks: &mut Checks) {

@@ -22,6 +22,7 @@ use crate::format::blob::encode_blob;
 use crate::format::bundle::BundleRef;
 use crate::format::payload::{self, PayloadRef};
 use crate::format::tables::FREE;
+use crate::format::top::TOP_LEVELS;
 use crate::format::tree::{self, TreeSpec};
 use crate::format::{self, tag, BlobRef, CommitRecord, DatasetHeader, StateRoots, TreeRef};
 use crate::heightfield::Metadata;
@@ -130,15 +131,11 @@ pub(crate) fn write_named<W: Write + Seek>(
     let before = sink.out.written;
     sink.out.pad_to_page()?;
     sections.payload_padding += sink.out.written - before;
-    let (dataset_header, roots) = match bundled {
-        Some(b) => (b.dataset_header, b.roots),
+    let (dataset_header, roots, top) = match bundled {
+        Some(b) => (b.dataset_header, b.roots, BlobRef::default()),
         None => {
             sink.next_page = sink.out.written / u64::from(p);
-            let dataset_header = sink.blob(&header, tag::DATASET_HEADER)?;
-            (
-                dataset_header,
-                tables::write_tables(model, &refs, &mut sink)?,
-            )
+            write_paged(model, &refs, &header, &mut sink)?
         }
     };
     let of = |t: [u8; 4]| sink.bytes.get(&t).copied().unwrap_or(0);
@@ -148,6 +145,7 @@ pub(crate) fn write_named<W: Write + Seek>(
     sections.cluster_index = of(tag::CLUSTER_INDEX);
     sections.adjacency = of(tag::ADJACENCY);
     sections.cluster_directory = of(tag::CLUSTER_DIRECTORY);
+    sections.top = of(tag::TOP);
     let TableRoots {
         node_table,
         block_table,
@@ -165,7 +163,9 @@ pub(crate) fn write_named<W: Write + Seek>(
         free_list: tree::empty(FREE.record_size),
         adjacency,
     };
-    let record = CommitRecord::new(p, FIRST_TXN, file_length, 0, roots).with_bundle(bundle);
+    let record = CommitRecord::new(p, FIRST_TXN, file_length, 0, roots)
+        .with_bundle(bundle)
+        .with_top(top);
     out.w.seek(SeekFrom::Start(0)).map_err(io_err)?;
     out.w.write_all(record.as_bytes()).map_err(io_err)?;
     out.w.seek(SeekFrom::Start(file_length)).map_err(io_err)?;
@@ -291,6 +291,65 @@ fn write_payloads<W: Write>(
 }
 
 /// A [`PageSink`] that appends pages in order (a fresh file), counting bytes per tag.
+/// A paged state's metadata, laid out so that what a remote reader needs first lies in the
+/// file's last pages, which it fetches at open with the commit slots (format §2): the
+/// cluster indexes and the adjacency table, the leaves of the node and block tables, then
+/// their branches, the top of the tree (6.2), the cluster directory and the dataset
+/// header. Returns the header's blob, the tables' roots and the top's blob.
+fn write_paged<W: Write>(
+    model: &Model,
+    refs: &PayloadRefs,
+    header: &[u8],
+    sink: &mut SeqSink<'_, '_, W>,
+) -> Result<(BlobRef, TableRoots, BlobRef)> {
+    let records = tables::TableRecords::of(model, refs);
+    let (clusters, adjacency) = records.write_indexes(sink)?;
+    let p = sink.page_size;
+    let leaves = |bytes: &[u8], spec: TreeSpec| {
+        tree::leaf_pages(
+            (bytes.len() / spec.record_size) as u64,
+            p,
+            spec.record_size,
+        )
+    };
+    let (nodes, blocks) = (crate::format::tables::NODES, crate::format::tables::BLOCKS);
+    let branches_at = sink.next_page + leaves(&records.nodes, nodes) + leaves(&records.blocks, blocks);
+    let mut branches = Vec::new();
+    let node_table = sink.split_tree(&records.nodes, nodes, branches_at, &mut branches)?;
+    let block_table = sink.split_tree(
+        &records.blocks,
+        blocks,
+        branches_at + branches.len() as u64,
+        &mut branches,
+    )?;
+    if sink.next_page != branches_at {
+        return Err(Error::Internal(format!(
+            "the tables' leaves end at page {}, not {branches_at}",
+            sink.next_page
+        )));
+    }
+    for (tag, page) in branches {
+        sink.pages(tag, &[page])?;
+    }
+    let levels = TOP_LEVELS.min(model.domain().finest_level().saturating_add(1));
+    let top = sink.blob(&records.top(levels), tag::TOP)?;
+    let cluster_directory = sink.blob(
+        &crate::format::directory::encode(&clusters),
+        tag::CLUSTER_DIRECTORY,
+    )?;
+    let dataset_header = sink.blob(header, tag::DATASET_HEADER)?;
+    Ok((
+        dataset_header,
+        TableRoots {
+            node_table,
+            block_table,
+            adjacency,
+            cluster_directory,
+        },
+        top,
+    ))
+}
+
 struct SeqSink<'a, 'w, W: Write> {
     out: &'a mut PageWriter<'w, W>,
     next_page: u64,
@@ -306,6 +365,30 @@ impl<W: Write> SeqSink<'_, '_, W> {
         self.next_page += pages.len() as u64;
         *self.bytes.entry(tag).or_default() += pages.len() as u64 * u64::from(self.page_size);
         Ok(())
+    }
+
+    /// Writes the leaves of a tree of `records` here and numbers its branches from
+    /// `branches_at` on, leaving them in `branches` for the caller to write there.
+    fn split_tree(
+        &mut self,
+        records: &[u8],
+        spec: TreeSpec,
+        branches_at: u64,
+        branches: &mut Vec<([u8; 4], Vec<u8>)>,
+    ) -> Result<TreeRef> {
+        let mut leaves = Vec::new();
+        let first = [self.next_page, branches_at];
+        let root = tree::build_split::<Error>(records, spec, self.page_size, first, FIRST_TXN, &mut |page| {
+            // The level sits at bytes 16..18 of the page header (format §4).
+            if page.get(16..18) == Some(&[0, 0][..]) {
+                leaves.push(page);
+            } else {
+                branches.push((spec.tag, page));
+            }
+            Ok(())
+        })?;
+        self.pages(spec.tag, &leaves)?;
+        Ok(root)
     }
 }
 

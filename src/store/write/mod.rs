@@ -99,6 +99,9 @@ pub struct SectionBytes {
     pub adjacency: u64,
     /// Cluster directory pages.
     pub cluster_directory: u64,
+    /// Pages of the top of the tree (format 6.2): a copy of the coarsest levels' node
+    /// records, written with paged tables.
+    pub top: u64,
     /// Stored bytes of the metadata bundle (format §6.7): the header, tables and directory,
     /// compressed, when they are small; the page counts above are then 0.
     pub bundle: u64,

@@ -7,7 +7,7 @@
 
 use rayon::prelude::*;
 
-use zerocopy::IntoBytes;
+use zerocopy::{FromBytes, IntoBytes};
 
 use crate::error::{Error, Result};
 use crate::format::bundle;
@@ -232,92 +232,10 @@ pub(crate) fn write_tables(
     refs: &PayloadRefs,
     sink: &mut dyn PageSink,
 ) -> Result<TableRoots> {
-    let domain = *model.domain();
-    let tree = model.tree();
-    let finest = domain.finest_level();
-    let (cols, _) = domain.nodes_across(finest);
-
-    let mut node_records = Vec::with_capacity(tree.nodes().len() * tables::NODES.record_size);
-    for (i, n) in tree.nodes().iter().enumerate() {
-        let at_finest = n.level == finest;
-        let stored = StoredNode {
-            key: n.key,
-            level: n.level,
-            x: n.x,
-            y: n.y,
-            child_mask: n.child_mask,
-            parent: Some(n.parent).filter(|&p| p != NO_PARENT),
-            subtree_len: n.subtree_len,
-            static_error: n.static_error,
-            monotone_error: n.monotone_error,
-            min_height: n.min_height,
-            max_height: n.max_height,
-            valid_samples: n.valid_samples,
-            payload: if at_finest {
-                refs.block[block_index(n.x, n.y, cols)]
-            } else {
-                refs.grid[i]
-            },
-            grid_has_voids: !at_finest && refs.grid_voids[i],
-            grid_against_parent: !at_finest && refs.grid_against[i],
-            grid_bitmap_flagged: !at_finest && refs.grid_voids[i] && !refs.grid_raw_bitmap[i],
-            grid_thin: if at_finest { 0 } else { n.thin },
-        };
-        node_records.extend_from_slice(NodeRecord::encode(&stored).as_bytes());
-    }
-    let node_table = sink.tree(&node_records, tables::NODES)?;
-
-    let mut block_records = Vec::with_capacity(refs.shapes.len() * tables::BLOCKS.record_size);
-    for ((s, &payload), &against) in refs.shapes.iter().zip(&refs.block).zip(&refs.against) {
-        let (width, height) = s.size();
-        let block = StoredBlock {
-            payload,
-            width,
-            height,
-            void_count: s.void_count,
-            against,
-        };
-        block_records.extend_from_slice(BlockRecord::encode(&block).as_bytes());
-    }
-    let block_table = sink.tree(&block_records, tables::BLOCKS)?;
-
-    // Clusters: one index each; their edge lists go into the one adjacency table.
-    let mut clusters = Vec::with_capacity(model.clusters().len());
-    let mut adjacency_entries: Vec<u8> = Vec::new();
-    let adjacency_len = |bytes: &Vec<u8>| (bytes.len() / tables::ADJACENCY.record_size) as u64;
-    for c in model.clusters() {
-        let mut entries = Vec::with_capacity(c.nodes.len() * tables::INDEX.record_size);
-        for &i in &c.nodes {
-            let n = tree.node(i);
-            let e = ScanEntry {
-                key: n.key,
-                level: n.level,
-                node: i,
-            };
-            entries.extend_from_slice(IndexEntry::encode(&e).as_bytes());
-        }
-        let index = sink.tree(&entries, tables::INDEX)?;
-        let mut adjacency = [EdgeRange::default(); 4];
-        for (range, list) in adjacency
-            .iter_mut()
-            .zip(cluster::edge_nodes(tree, &c.nodes))
-        {
-            let first = adjacency_len(&adjacency_entries);
-            for i in list {
-                let e = AdjacencyEntry {
-                    node: zerocopy::byteorder::little_endian::U32::new(i),
-                };
-                adjacency_entries.extend_from_slice(e.as_bytes());
-            }
-            let end = adjacency_len(&adjacency_entries);
-            *range = EdgeRange {
-                first: first.into(),
-                count: (end - first).into(),
-            };
-        }
-        clusters.push(ClusterInfo::new(c.threshold, c.max_error, index, adjacency));
-    }
-    let adjacency = sink.tree(&adjacency_entries, tables::ADJACENCY)?;
+    let records = TableRecords::of(model, refs);
+    let node_table = sink.tree(&records.nodes, tables::NODES)?;
+    let block_table = sink.tree(&records.blocks, tables::BLOCKS)?;
+    let (clusters, adjacency) = records.write_indexes(sink)?;
     let cluster_directory = sink.blob(&directory::encode(&clusters), tag::CLUSTER_DIRECTORY)?;
     Ok(TableRoots {
         node_table,
@@ -325,6 +243,151 @@ pub(crate) fn write_tables(
         adjacency,
         cluster_directory,
     })
+}
+
+/// One cluster's records: its threshold and largest error, its index's entries, and its
+/// four edge lists' runs in the adjacency table.
+pub(crate) struct ClusterRecords {
+    threshold: f64,
+    max_error: f64,
+    index: Vec<u8>,
+    edges: [EdgeRange; 4],
+}
+
+/// The records of a state's tables, before they are written as pages.
+pub(crate) struct TableRecords {
+    /// The node table's records, in the tree's pre-order.
+    pub nodes: Vec<u8>,
+    /// The block table's records, row-major.
+    pub blocks: Vec<u8>,
+    pub clusters: Vec<ClusterRecords>,
+    /// Every cluster's edge lists, back to back.
+    pub adjacency: Vec<u8>,
+}
+
+impl TableRecords {
+    /// The records of `model`'s tables, with payloads where `refs` says.
+    pub fn of(model: &Model, refs: &PayloadRefs) -> TableRecords {
+        let domain = *model.domain();
+        let tree = model.tree();
+        let finest = domain.finest_level();
+        let (cols, _) = domain.nodes_across(finest);
+
+        let mut nodes = Vec::with_capacity(tree.nodes().len() * tables::NODES.record_size);
+        for (i, n) in tree.nodes().iter().enumerate() {
+            let at_finest = n.level == finest;
+            let stored = StoredNode {
+                key: n.key,
+                level: n.level,
+                x: n.x,
+                y: n.y,
+                child_mask: n.child_mask,
+                parent: Some(n.parent).filter(|&p| p != NO_PARENT),
+                subtree_len: n.subtree_len,
+                static_error: n.static_error,
+                monotone_error: n.monotone_error,
+                min_height: n.min_height,
+                max_height: n.max_height,
+                valid_samples: n.valid_samples,
+                payload: if at_finest {
+                    refs.block[block_index(n.x, n.y, cols)]
+                } else {
+                    refs.grid[i]
+                },
+                grid_has_voids: !at_finest && refs.grid_voids[i],
+                grid_against_parent: !at_finest && refs.grid_against[i],
+                grid_bitmap_flagged: !at_finest
+                    && refs.grid_voids[i]
+                    && !refs.grid_raw_bitmap[i],
+                grid_thin: if at_finest { 0 } else { n.thin },
+            };
+            nodes.extend_from_slice(NodeRecord::encode(&stored).as_bytes());
+        }
+
+        let mut blocks = Vec::with_capacity(refs.shapes.len() * tables::BLOCKS.record_size);
+        for ((s, &payload), &against) in refs.shapes.iter().zip(&refs.block).zip(&refs.against) {
+            let (width, height) = s.size();
+            let block = StoredBlock {
+                payload,
+                width,
+                height,
+                void_count: s.void_count,
+                against,
+            };
+            blocks.extend_from_slice(BlockRecord::encode(&block).as_bytes());
+        }
+
+        // Clusters: one index each; their edge lists go into the one adjacency table.
+        let mut clusters = Vec::with_capacity(model.clusters().len());
+        let mut adjacency: Vec<u8> = Vec::new();
+        let adjacency_len = |bytes: &Vec<u8>| (bytes.len() / tables::ADJACENCY.record_size) as u64;
+        for c in model.clusters() {
+            let mut index = Vec::with_capacity(c.nodes.len() * tables::INDEX.record_size);
+            for &i in &c.nodes {
+                let n = tree.node(i);
+                let e = ScanEntry {
+                    key: n.key,
+                    level: n.level,
+                    node: i,
+                };
+                index.extend_from_slice(IndexEntry::encode(&e).as_bytes());
+            }
+            let mut edges = [EdgeRange::default(); 4];
+            for (range, list) in edges.iter_mut().zip(cluster::edge_nodes(tree, &c.nodes)) {
+                let first = adjacency_len(&adjacency);
+                for i in list {
+                    let e = AdjacencyEntry {
+                        node: zerocopy::byteorder::little_endian::U32::new(i),
+                    };
+                    adjacency.extend_from_slice(e.as_bytes());
+                }
+                let end = adjacency_len(&adjacency);
+                *range = EdgeRange {
+                    first: first.into(),
+                    count: (end - first).into(),
+                };
+            }
+            clusters.push(ClusterRecords {
+                threshold: c.threshold,
+                max_error: c.max_error,
+                index,
+                edges,
+            });
+        }
+        TableRecords {
+            nodes,
+            blocks,
+            clusters,
+            adjacency,
+        }
+    }
+
+    /// Writes every cluster's index, then the adjacency table; returns the clusters as the
+    /// directory describes them, and the adjacency table's root.
+    pub fn write_indexes(&self, sink: &mut dyn PageSink) -> Result<(Vec<ClusterInfo>, TreeRef)> {
+        let mut clusters = Vec::with_capacity(self.clusters.len());
+        for c in &self.clusters {
+            let index = sink.tree(&c.index, tables::INDEX)?;
+            clusters.push(ClusterInfo::new(c.threshold, c.max_error, index, c.edges));
+        }
+        let adjacency = sink.tree(&self.adjacency, tables::ADJACENCY)?;
+        Ok((clusters, adjacency))
+    }
+
+    /// The top of the tree (format 6.2): the records of every node of level below
+    /// `levels`, with their ordinals.
+    pub fn top(&self, levels: u8) -> Vec<u8> {
+        let size = tables::NODES.record_size;
+        let entries = self
+            .nodes
+            .chunks_exact(size)
+            .zip(0u32..)
+            .filter_map(|(bytes, i)| {
+                let r = NodeRecord::ref_from_bytes(bytes).ok()?;
+                (r.level < levels).then_some((i, r))
+            });
+        crate::format::top::encode(levels, entries)
+    }
 }
 
 /// The row-major index of block `(x, y)` among `cols` columns.
