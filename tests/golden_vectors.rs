@@ -743,7 +743,8 @@ fn slot_vector() -> Vec<u8> {
 /// and the entries; each entry's record is byte for byte the node table's at its ordinal
 /// (found by walking the table's B+-tree from the record's TreeRef at 72), and the top
 /// holds exactly the nodes of level below `levels`. The fresh paged layout (§2) puts the
-/// node table's root, the top, the directory and the header in the file's last pages.
+/// coarse grids after every block, the root's last, and the node table's root, the top, the
+/// directory and the header in the file's last pages.
 #[test]
 fn the_paged_vector_pins_the_top_of_the_tree() {
     let v = vectors().into_iter().find(|v| v.paged).unwrap();
@@ -808,6 +809,21 @@ fn the_paged_vector_pins_the_top_of_the_tree() {
             "entry {e}: node {o}"
         );
     }
+    // The payloads (§2): the coarse grids (levels below 4) after every block, level 3 first
+    // and the root's last.
+    let offset = |o: usize| u64::from_le_bytes(table[80 * o + 64..80 * o + 72].try_into().unwrap());
+    let level = |o: usize| table[80 * o + 8];
+    let blocks_end = (0..records)
+        .filter(|&o| level(o) == finest)
+        .map(offset)
+        .max()
+        .unwrap();
+    let coarse: Vec<usize> = (0..records).filter(|&o| level(o) < finest).collect();
+    assert!(coarse.iter().all(|&o| offset(o) > blocks_end));
+    assert!(
+        coarse.iter().all(|&o| o == 0 || offset(o) < offset(0)),
+        "the root's grid is last"
+    );
     // The layout: node table root, top, directory, header, then the end of the file.
     let pages = bytes.len() / p;
     let header = u64_at(40) as usize;

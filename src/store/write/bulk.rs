@@ -290,7 +290,6 @@ fn write_payloads<W: Write>(
     })
 }
 
-/// A [`PageSink`] that appends pages in order (a fresh file), counting bytes per tag.
 /// A paged state's metadata, laid out so that what a remote reader needs first lies in the
 /// file's last pages, which it fetches at open with the commit slots (format §2): the
 /// cluster indexes and the adjacency table, the leaves of the node and block tables, then
@@ -350,6 +349,7 @@ fn write_paged<W: Write>(
     ))
 }
 
+/// A [`PageSink`] that appends pages in order (a fresh file), counting bytes per tag.
 struct SeqSink<'a, 'w, W: Write> {
     out: &'a mut PageWriter<'w, W>,
     next_page: u64,
@@ -438,13 +438,18 @@ impl<W: Write> PageWriter<'_, W> {
     }
 }
 
-/// The payloads in file order: the tree in Hilbert pre-order, each node's grid (or, at the
-/// finest level, its block), and after each leaf above the finest level the blocks under it
-/// in Hilbert order.
+/// The payloads in file order (format §2): the tree in Hilbert pre-order, each node's grid
+/// (or, at the finest level, its block), and after each leaf above the finest level the
+/// blocks under it in Hilbert order; except the grids of the top of the tree's levels
+/// (0 to 3, [`TOP_LEVELS`]), which come last, level by level from the finest to the root.
+/// So the coarse grids lie just before the metadata, in the file's last bytes that a remote
+/// reader fetches at open: a coarse scene then needs no payload round of its own, and
+/// others find there the ancestors their payloads are coded against.
 fn payload_order(model: &Model) -> Vec<Item> {
     let d = model.domain();
     let finest = d.finest_level();
     let mut items = Vec::new();
+    let mut coarse: Vec<(u8, Item)> = Vec::new();
     for (i, n) in model.tree().nodes().iter().enumerate() {
         if n.level == finest {
             items.push(Item::Block {
@@ -454,13 +459,21 @@ fn payload_order(model: &Model) -> Vec<Item> {
             });
             continue;
         }
-        items.push(Item::Grid {
+        let grid = Item::Grid {
             node: tables::node_id(i),
-        });
+        };
+        if n.level < TOP_LEVELS {
+            coarse.push((n.level, grid));
+        } else {
+            items.push(grid);
+        }
         if n.subtree_len == 1 {
             blocks_under(d, n.level, n.x, n.y, &mut items);
         }
     }
+    // Stable: each level keeps its Hilbert order.
+    coarse.sort_by_key(|&(level, _)| std::cmp::Reverse(level));
+    items.extend(coarse.into_iter().map(|(_, item)| item));
     items
 }
 
