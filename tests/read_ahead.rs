@@ -23,7 +23,7 @@ use std::path::Path;
 use std::sync::Mutex;
 
 use common::fields::{self, Character};
-use fmrh::scene::{load_blocks, SceneOptions, Terrain, WorldFrame};
+use fmrh::scene::{load_blocks, Mode, SceneOptions, Terrain, WorldFrame};
 use fmrh::store::{Ahead, Bytes, Source, Store, WriteOptions};
 use proptest::prelude::*;
 
@@ -298,8 +298,9 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(24))]
 
     /// The top of the tree (format 6.2, §6.8): a fresh paged file holds its coarsest
-    /// levels' nodes, which the store answers from memory. A cold view-dependent scene on a
-    /// source that fetches ahead starts from the root (no cluster index page is read),
+    /// levels' nodes, which the store answers from memory. A cold scene on a source that
+    /// fetches ahead, view-dependent or uniform, gives the local reader's blocks, starts from
+    /// the root (no cluster index page is read),
     /// reads every table page it and its
     /// load need from batches fetched ahead (none costs a round of its own), and a scene
     /// whose blocks all lie in the top, above the finest level, reads no page of the node
@@ -309,6 +310,7 @@ proptest! {
         field in fields::any_field(200),
         seed in 0u64..1000,
         tau in 0.5f64..16.0,
+        uniform in any::<bool>(),
     ) {
         let bytes = paged(&field, 9);
         let plain = Store::from_bytes(bytes.clone()).unwrap();
@@ -333,12 +335,19 @@ proptest! {
         .unwrap();
         let mut rng = fields::Rng::new(seed);
         let camera = common::views::random_camera(&model, WorldFrame::new(None), &mut rng);
-        let Ok(scene) = Terrain::new(&store).and_then(|t| t.scene(&camera, &SceneOptions::new(tau)))
-        else {
+        let options = SceneOptions {
+            mode: if uniform { Mode::Uniform } else { Mode::View },
+            ..SceneOptions::new(tau)
+        };
+        let Ok(scene) = Terrain::new(&store).and_then(|t| t.scene(&camera, &options)) else {
             return Ok(());
         };
         load_blocks(&store, &scene.blocks, 0).unwrap();
         let (batches, reads) = store.source().take();
+        // The same blocks as a local reader's, which scans the cluster index (uniform) or
+        // starts from the seed cluster (view).
+        let local = Terrain::new(&plain).unwrap().scene(&camera, &options).unwrap();
+        prop_assert_eq!(&local.blocks, &scene.blocks);
         let missed = unfetched(&batches, &reads);
         prop_assert!(missed.is_empty(), "pages read unfetched: {:?}", missed);
         // Started from the root, not from a cluster's index.

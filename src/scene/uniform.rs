@@ -7,10 +7,11 @@
 //! (`9Q/16`) of a file with a precision. When that finest cluster's threshold is already it,
 //! it is returned instead: nothing is more exact, and its blocks are fewer.
 
-use super::ranges;
+use super::ranges::{self, KeyRange, KeyRun};
 use super::terrain::Region;
 use super::search::Search;
 use crate::error::Result;
+use crate::format::StoredNode;
 use crate::store::Source;
 
 impl<S: Source> Search<'_, '_, S> {
@@ -39,7 +40,14 @@ impl<S: Source> Search<'_, '_, S> {
         self.stats.threshold = Some(cluster.map_or(storage, |c| thresholds[c]));
         let (zmin, zmax) = self.terrain.height_range();
         let runs = ranges::merge(&region.keys, gap);
+        let store = self.terrain.store();
         match cluster {
+            // A remote reader holding the top of the tree (format 6.2) descends from the root
+            // in memory instead of scanning the index (a round for its pages, one for its
+            // nodes): the cluster is the cut C(δ) (container I-13).
+            Some(c) if store.top().is_some() && store.prefetches() => {
+                self.cut_from_root(thresholds[c], &runs)?;
+            }
             Some(c) => {
                 for (i, n, _) in self.scan(c, &runs)? {
                     self.emit(i, &n);
@@ -57,6 +65,40 @@ impl<S: Source> Search<'_, '_, S> {
                     }
                 }
             }
+        }
+        Ok(())
+    }
+
+    /// Emits the cut `C(δ)` that meet each of `runs`: the nodes with `e* <= δ` whose parent
+    /// has `e* > δ`, found from the root level by level (the children of a level's nodes
+    /// fetched together, on a source that reads ahead).
+    fn cut_from_root(&mut self, delta: f64, runs: &[KeyRun]) -> Result<()> {
+        let finest = self.terrain.domain().finest_level();
+        let root = self.terrain.root();
+        let mut wave: Vec<(u32, StoredNode, usize)> = (0..runs.len()).map(|r| (0, root, r)).collect();
+        while !wave.is_empty() {
+            let mut split = Vec::new();
+            for (i, n, r) in wave {
+                // A leaf has `e* <= delta_min <= δ` in a valid file (I-10); kept either way.
+                if n.monotone_error <= delta || n.subtree_len <= 1 {
+                    self.emit(i, &n);
+                } else {
+                    split.push((i, n, r));
+                }
+            }
+            let parents: Vec<(u32, StoredNode)> = split.iter().map(|&(i, n, _)| (i, n)).collect();
+            self.fetch_children(&parents)?;
+            let mut next = Vec::new();
+            for (i, n, r) in split {
+                for child in self.terrain.store().children(i, &n) {
+                    let (c, child) = child?;
+                    self.stats.node_reads += 1;
+                    if runs[r].meets(&KeyRange::of_node(child.key, child.level, finest)) {
+                        next.push((c, child, r));
+                    }
+                }
+            }
+            wave = next;
         }
         Ok(())
     }
