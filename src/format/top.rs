@@ -201,4 +201,26 @@ mod tests {
         assert!(decode(&reserved).is_err());
         assert!(decode(&encode(0, [])).is_err());
     }
+
+    proptest::proptest! {
+        /// Any bytes decode to a top or to an I-10 violation, never a panic; a top that
+        /// decodes holds the root first and ordinals ascending.
+        #[test]
+        fn any_bytes_decode_or_are_refused(
+            mut bytes in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..600),
+            count in 0u32..8,
+        ) {
+            if bytes.len() >= 4 {
+                // A count that matches the length half of the time, so entries get read.
+                let fit = ((bytes.len().saturating_sub(TOP_PREFIX_LEN)) / TOP_ENTRY_LEN) as u32;
+                let c = if count % 2 == 0 { fit } else { count };
+                bytes[..4].copy_from_slice(&c.to_le_bytes());
+            }
+            if let Ok(top) = decode(&bytes) {
+                proptest::prop_assert_eq!(top.nodes[0].0, 0);
+                proptest::prop_assert!(top.nodes.windows(2).all(|w| w[0].0 < w[1].0));
+                proptest::prop_assert_eq!(top.nodes.len(), top.records.len());
+            }
+        }
+    }
 }
