@@ -212,7 +212,7 @@ mod tests {
         ) {
             if bytes.len() >= 4 {
                 // A count that matches the length half of the time, so entries get read.
-                let fit = ((bytes.len().saturating_sub(TOP_PREFIX_LEN)) / TOP_ENTRY_LEN) as u32;
+                let fit = u32::try_from(bytes.len().saturating_sub(TOP_PREFIX_LEN) / TOP_ENTRY_LEN).unwrap_or(0);
                 let c = if count % 2 == 0 { fit } else { count };
                 bytes[..4].copy_from_slice(&c.to_le_bytes());
             }
