@@ -63,6 +63,24 @@ struct DelayProxy {
 /// When the shared link is next free to send.
 type Link = Arc<Mutex<Instant>>;
 
+/// Copies `from` to `to` in chunks of at most `chunk` bytes, calling `before` with each
+/// chunk's length before writing it, until either side closes; then closes `to`'s writing.
+fn pump(mut from: TcpStream, mut to: TcpStream, chunk: usize, mut before: impl FnMut(usize)) {
+    let mut buf = vec![0u8; chunk];
+    loop {
+        match from.read(&mut buf) {
+            Ok(0) | Err(_) => break,
+            Ok(n) => {
+                before(n);
+                if to.write_all(&buf[..n]).is_err() {
+                    break;
+                }
+            }
+        }
+    }
+    let _ = to.shutdown(std::net::Shutdown::Write);
+}
+
 impl DelayProxy {
     fn start(upstream: u16) -> DelayProxy {
         let listener = TcpListener::bind("127.0.0.1:0").expect("bind");
@@ -80,55 +98,32 @@ impl DelayProxy {
                 let _ = client.set_nodelay(true);
                 let _ = server.set_nodelay(true);
                 let latency = Arc::clone(&latency);
-                let (mut c_read, mut s_write) =
-                    (client.try_clone().unwrap(), server.try_clone().unwrap());
+                let (c_read, s_write) = (client.try_clone().unwrap(), server.try_clone().unwrap());
+                // Requests: each chunk a client sends waits the latency.
                 std::thread::spawn(move || {
-                    let mut buf = vec![0u8; 64 << 10];
-                    loop {
-                        match c_read.read(&mut buf) {
-                            Ok(0) | Err(_) => break,
-                            Ok(n) => {
-                                let ms = latency.load(Ordering::Relaxed);
-                                if ms > 0 {
-                                    std::thread::sleep(Duration::from_millis(ms));
-                                }
-                                if s_write.write_all(&buf[..n]).is_err() {
-                                    break;
-                                }
-                            }
+                    pump(c_read, s_write, 64 << 10, |_| {
+                        let ms = latency.load(Ordering::Relaxed);
+                        if ms > 0 {
+                            std::thread::sleep(Duration::from_millis(ms));
                         }
-                    }
-                    let _ = s_write.shutdown(std::net::Shutdown::Write);
+                    })
                 });
-                let (mut s_read, mut c_write) = (server, client);
+                // Answers: each chunk waits for its share of the shared link.
                 let (cap, link) = (Arc::clone(&cap), Arc::clone(&link));
                 std::thread::spawn(move || {
-                    let mut buf = vec![0u8; 16 << 10];
-                    loop {
-                        match s_read.read(&mut buf) {
-                            Ok(0) | Err(_) => break,
-                            Ok(n) => {
-                                let rate = cap.load(Ordering::Relaxed);
-                                if rate > 0 {
-                                    // Reserve the link for n bytes after whatever is queued.
-                                    let done = {
-                                        let mut free = link.lock().unwrap();
-                                        let start = (*free).max(Instant::now());
-                                        *free =
-                                            start + Duration::from_secs_f64(n as f64 / rate as f64);
-                                        *free
-                                    };
-                                    std::thread::sleep(
-                                        done.saturating_duration_since(Instant::now()),
-                                    );
-                                }
-                                if c_write.write_all(&buf[..n]).is_err() {
-                                    break;
-                                }
-                            }
+                    pump(server, client, 16 << 10, |n| {
+                        let rate = cap.load(Ordering::Relaxed);
+                        if rate > 0 {
+                            // Reserve the link for n bytes after whatever is queued.
+                            let done = {
+                                let mut free = link.lock().unwrap();
+                                let start = (*free).max(Instant::now());
+                                *free = start + Duration::from_secs_f64(n as f64 / rate as f64);
+                                *free
+                            };
+                            std::thread::sleep(done.saturating_duration_since(Instant::now()));
                         }
-                    }
-                    let _ = c_write.shutdown(std::net::Shutdown::Write);
+                    })
                 });
             }
         });

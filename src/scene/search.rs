@@ -140,6 +140,30 @@ impl<S: Source> Search<'_, '_, S> {
 }
 
 impl<S: Source> Search<'_, '_, S> {
+    /// The next level of a descent: the children of each of `split` (node index, node,
+    /// and the run of `runs` it meets) that meet its run, fetched together first on a
+    /// source that reads ahead.
+    pub fn children_of(
+        &mut self,
+        split: Vec<(u32, StoredNode, usize)>,
+        runs: &[KeyRun],
+    ) -> Result<Vec<(u32, StoredNode, usize)>> {
+        let finest = self.terrain.domain().finest_level();
+        let parents: Vec<(u32, StoredNode)> = split.iter().map(|&(i, n, _)| (i, n)).collect();
+        self.fetch_children(&parents)?;
+        let mut next = Vec::new();
+        for (i, n, r) in split {
+            for child in self.terrain.store().children(i, &n) {
+                let (c, child) = child?;
+                self.stats.node_reads += 1;
+                if runs[r].meets(&KeyRange::of_node(child.key, child.level, finest)) {
+                    next.push((c, child, r));
+                }
+            }
+        }
+        Ok(next)
+    }
+
     /// Names the block records of the physical blocks under `n`, when they are few (at most
     /// [`SMALL_SUBTREE`] / 2 blocks).
     fn name_blocks_under(&self, a: &mut Ahead, n: &StoredNode) {

@@ -7,7 +7,7 @@
 //! (`9Q/16`) of a file with a precision. When that finest cluster's threshold is already it,
 //! it is returned instead: nothing is more exact, and its blocks are fewer.
 
-use super::ranges::{self, KeyRange, KeyRun};
+use super::ranges::{self, KeyRun};
 use super::terrain::Region;
 use super::search::Search;
 use crate::error::Result;
@@ -73,7 +73,6 @@ impl<S: Source> Search<'_, '_, S> {
     /// has `e* > δ`, found from the root level by level (the children of a level's nodes
     /// fetched together, on a source that reads ahead).
     fn cut_from_root(&mut self, delta: f64, runs: &[KeyRun]) -> Result<()> {
-        let finest = self.terrain.domain().finest_level();
         let root = self.terrain.root();
         let mut wave: Vec<(u32, StoredNode, usize)> = (0..runs.len()).map(|r| (0, root, r)).collect();
         while !wave.is_empty() {
@@ -86,19 +85,7 @@ impl<S: Source> Search<'_, '_, S> {
                     split.push((i, n, r));
                 }
             }
-            let parents: Vec<(u32, StoredNode)> = split.iter().map(|&(i, n, _)| (i, n)).collect();
-            self.fetch_children(&parents)?;
-            let mut next = Vec::new();
-            for (i, n, r) in split {
-                for child in self.terrain.store().children(i, &n) {
-                    let (c, child) = child?;
-                    self.stats.node_reads += 1;
-                    if runs[r].meets(&KeyRange::of_node(child.key, child.level, finest)) {
-                        next.push((c, child, r));
-                    }
-                }
-            }
-            wave = next;
+            wave = self.children_of(split, runs)?;
         }
         Ok(())
     }

@@ -20,7 +20,7 @@
 //!
 
 use super::camera::Coverage;
-use super::ranges::{self, KeyRange, KeyRun, Quadrant};
+use super::ranges::{self, KeyRun, Quadrant};
 use super::search::Search;
 use super::terrain::Region;
 use crate::error::Result;
@@ -60,7 +60,6 @@ impl<S: Source> Search<'_, '_, S> {
     /// the children of every node refined at one level are fetched together.
     fn refine(&mut self, start: Vec<(u32, StoredNode, usize)>, runs: &[KeyRun]) -> Result<()> {
         let finest = self.terrain.domain().finest_level();
-        let ahead = self.terrain.store().prefetches();
         let mut wave = start;
         while !wave.is_empty() {
             let mut split = Vec::new();
@@ -92,22 +91,7 @@ impl<S: Source> Search<'_, '_, S> {
                 }
                 split.push((i, n, r));
             }
-            if ahead {
-                let parents: Vec<(u32, StoredNode)> =
-                    split.iter().map(|&(i, n, _)| (i, n)).collect();
-                self.fetch_children(&parents)?;
-            }
-            let mut next = Vec::new();
-            for (i, n, r) in split {
-                for child in self.terrain.store().children(i, &n) {
-                    let (c, child) = child?;
-                    self.stats.node_reads += 1;
-                    if runs[r].meets(&KeyRange::of_node(child.key, child.level, finest)) {
-                        next.push((c, child, r));
-                    }
-                }
-            }
-            wave = next;
+            wave = self.children_of(split, runs)?;
         }
         Ok(())
     }
