@@ -189,6 +189,25 @@ fn timed(mut pass: impl FnMut()) -> f64 {
     )
 }
 
+/// The code of `group` decoded round after round: the best round's ns a sample.
+fn codec_loop(group: &[&Sample]) -> f64 {
+    let mut buf = vec![0f32; 1 << 16];
+    let mut best = f64::MAX;
+    for _ in 0..12 {
+        let t = Instant::now();
+        let mut n = 0usize;
+        while t.elapsed().as_secs_f64() < 0.5 {
+            for s in group {
+                s.decode_codec(&mut buf[..s.coded]);
+                std::hint::black_box(&buf);
+                n += s.coded;
+            }
+        }
+        best = best.min(1e9 * t.elapsed().as_secs_f64() / n as f64);
+    }
+    best
+}
+
 fn main() {
     let dir = tempfile::tempdir().expect("temp dir");
     println!(
@@ -205,7 +224,17 @@ fn main() {
         Ok(hf) => all_dems.push(dems::Dem::new("dem_hills", hf, 10.0)),
         Err(e) => eprintln!("skipping dem_hills: {e} (../shared/data)"),
     }
+    // `FMRH_DECODE_LOOP=DEM:ID` (e.g. `puget-4k:7`): only that DEM's payloads of encoding ID,
+    // their code decoded over and over for 6 s (to profile, e.g. under `perf record`), and
+    // the best of twelve half-second rounds printed.
+    let only = std::env::var("FMRH_DECODE_LOOP").ok();
     for dem in all_dems {
+        if only
+            .as_ref()
+            .is_some_and(|o| !o.starts_with(&format!("{}:", dem.name)))
+        {
+            continue;
+        }
         let path = dem.build(dir.path());
         let store = Store::open(&path).expect("opens");
         let all = payloads(&store);
@@ -216,6 +245,15 @@ fn main() {
         let mut totals = [0.0f64; 4];
         let mut total_samples = 0usize;
         for (id, group) in &by {
+            if let Some(o) = &only {
+                if o.ends_with(&format!(":{id}")) {
+                    println!(
+                        "{o}: codec {:.3} ns a sample (best of 12 rounds)",
+                        codec_loop(group)
+                    );
+                }
+                continue;
+            }
             let samples: usize = group.iter().map(|s| s.coded).sum();
             let bytes: usize = group.iter().map(|s| s.stored.len()).sum();
             // Checked once, bit for bit, against the first decoding.

@@ -25,6 +25,11 @@ pub(super) struct Rows<'a> {
     pub w: usize,
     /// Per column, the parent's column when the parent holds it.
     pub held_cols: &'a [Option<u32>],
+    /// The columns the parent holds, in order, each with the parent's column: a held row's
+    /// loops run over these and [`Rows::coded`] instead of asking every column.
+    pub held: &'a [(usize, usize)],
+    /// The columns the parent does not hold, in order.
+    pub coded: &'a [usize],
     /// Per row, how the parent predicts it (held: the parent's row).
     pub rows: &'a [Along],
     /// The parent's grid.
@@ -34,7 +39,7 @@ pub(super) struct Rows<'a> {
 impl Rows<'_> {
     /// How many columns the parent holds.
     fn held_count(&self) -> usize {
-        self.held_cols.iter().filter(|c| c.is_some()).count()
+        self.held.len()
     }
 
     /// The parent's heights along its row `pj`.
@@ -47,10 +52,8 @@ impl Rows<'_> {
     /// parent's heights.
     fn held_heights(&self, pj: usize, orow: &mut [f32]) {
         let heights = self.parent_row(pj);
-        for (o, hc) in orow.iter_mut().zip(self.held_cols) {
-            if let Some(pi) = hc {
-                *o = heights[*pi as usize];
-            }
+        for &(c, pi) in self.held {
+            orow[c] = heights[pi];
         }
     }
 }
@@ -71,24 +74,23 @@ fn take<'r, T>(r: &'r [T], next: &mut usize, m: usize) -> Result<&'r [T], Decode
 }
 
 /// Encodings 7 and 8 without voids: codes in the space of `T`, the planar predictor over
-/// them, the held samples' codes what `codes_of` makes of a parent row's heights (at the
-/// held columns; the others are ignored); `emit` turns a row of codes into
+/// them, the held samples' codes what `codes_of` makes of a parent row's heights (written at
+/// the held columns, [`Rows::held`], and nowhere else); `emit` turns a row of codes into
 /// heights (given the held columns in a held row, whose heights are then the parent's and
 /// whose codes it must not judge) and says whether any coded one was out of range.
 fn planar<T: Wrapping>(
     g: &Rows<'_>,
     r: &[T],
     out: &mut [f32],
-    mut codes_of: impl FnMut(&[f32], &[Option<u32>], &mut [T]),
+    mut codes_of: impl FnMut(&[f32], &[(usize, usize)], &mut [T]),
     emit: impl Fn(&[T], &mut [f32], Option<&[Option<u32>]>) -> bool,
 ) -> Result<bool, DecodeError> {
     let w = g.w;
     let held = g.held_count();
     // The row above (zeros above the first: `left + 0 - 0` is the first row's predictor,
-    // `0 + up - 0` the first column's), the row being decoded, and a held row's codes.
+    // `0 + up - 0` the first column's) and the row being decoded.
     let mut up = vec![T::default(); w];
     let mut cur = vec![T::default(); w];
-    let mut held_codes = vec![T::default(); w];
     let mut next = 0usize;
     let mut bad = false;
     // The chain from sample to sample is one addition: `left + ((up - up_left) + r)`, the
@@ -106,21 +108,14 @@ fn planar<T: Wrapping>(
                 bad |= emit(&cur, orow, None);
             }
             Along::Held(pj) => {
-                // The held samples' codes first, off the chain.
-                codes_of(g.parent_row(pj), g.held_cols, &mut held_codes);
-                let mut rr = take(r, &mut next, w - held)?.iter();
-                for (((c, &u), &hcode), hc) in cur
-                    .iter_mut()
-                    .zip(&up)
-                    .zip(&held_codes)
-                    .zip(g.held_cols)
-                {
-                    left = match hc {
-                        Some(_) => hcode,
-                        None => left.plus(u.minus(up_left).plus(*rr.next().ok_or_else(short)?)),
-                    };
-                    up_left = u;
-                    *c = left;
+                // The held samples' codes first, off the chain; then each coded sample from
+                // the sample to its left (held or coded) and the two above.
+                codes_of(g.parent_row(pj), g.held, &mut cur);
+                for (&c, &d) in g.coded.iter().zip(take(r, &mut next, w - held)?) {
+                    if let Some(b) = c.checked_sub(1) {
+                        (left, up_left) = (cur[b], up[b]);
+                    }
+                    cur[c] = left.plus(up[c].minus(up_left).plus(d));
                 }
                 bad |= emit(&cur, orow, Some(g.held_cols));
                 g.held_heights(pj, orow);
@@ -163,11 +158,9 @@ pub(super) fn planar_float(
         *z = unzigzag(*z);
     }
     let r = &*r;
-    let codes_of = |heights: &[f32], held: &[Option<u32>], codes: &mut [u32]| {
-        for (c, hc) in codes.iter_mut().zip(held) {
-            if let Some(pi) = hc {
-                *c = to_ordered(heights[*pi as usize]);
-            }
+    let codes_of = |heights: &[f32], held: &[(usize, usize)], codes: &mut [u32]| {
+        for &(c, pi) in held {
+            codes[c] = to_ordered(heights[pi]);
         }
     };
     planar(g, r, out, codes_of, |codes, out, _| {
@@ -230,11 +223,8 @@ pub(super) fn interpolated_lattice(
                 bad |= lattice_heights(&k, orow, q, None);
             }
             Along::Held(pj) => {
-                let mut rr = take(r, &mut next, w - held)?.iter();
-                for (k, hc) in k.iter_mut().zip(g.held_cols) {
-                    if hc.is_none() {
-                        *k = k.wrapping_add(*rr.next().ok_or_else(short)?);
-                    }
+                for (&c, &d) in g.coded.iter().zip(take(r, &mut next, w - held)?) {
+                    k[c] = k[c].wrapping_add(d);
                 }
                 bad |= lattice_heights(&k, orow, q, Some(g.held_cols));
                 g.held_heights(pj, orow);
@@ -269,11 +259,8 @@ pub(super) fn interpolated_float(
                 }
             }
             Along::Held(pj) => {
-                let mut rr = take(r, &mut next, w - held)?.iter();
-                for ((o, &x), hc) in orow.iter_mut().zip(&p).zip(g.held_cols) {
-                    if hc.is_none() {
-                        *o = value(x, *rr.next().ok_or_else(short)?);
-                    }
+                for (&c, &z) in g.coded.iter().zip(take(r, &mut next, w - held)?) {
+                    orow[c] = value(p[c], z);
                 }
                 g.held_heights(pj, orow);
             }
