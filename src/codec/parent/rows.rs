@@ -172,22 +172,46 @@ pub(super) fn planar_float(
     .map(|_| ())
 }
 
-/// The interpolated predictions of row `j` at every column, into `p`: `Σ_j wy_j · inner(j,
-/// c)` from `0.0`, term by term, as [`super::RowPredictor::at`] sums them.
-fn predictions(predictor: &Predictor<'_>, j: usize, p: &mut [f64]) {
+/// The interpolated predictions of row `j` at every column, into `p`, each passed through
+/// `finish`: `Σ_j wy_j · inner(j, c)` from `0.0`, term by term, as
+/// [`super::RowPredictor::at`] sums them. The usual counts of terms (one, two, four) are
+/// summed in one pass over the row, the others a pass a term.
+pub(super) fn predictions(
+    predictor: &Predictor<'_>,
+    j: usize,
+    p: &mut [f64],
+    finish: impl Fn(f64) -> f64,
+) {
     let along = predictor.row(j);
     let w = p.len();
-    let terms = &along.terms[..along.n];
-    let Some(&(start, b)) = terms.first() else {
-        p.fill(0.0);
-        return;
-    };
-    for (x, &i) in p.iter_mut().zip(&along.inner[start..start + w]) {
-        *x = 0.0 + b * i;
-    }
-    for &(start, b) in &terms[1..] {
-        for (x, &i) in p.iter_mut().zip(&along.inner[start..start + w]) {
-            *x += b * i;
+    let row = |start: usize| &along.inner[start..start + w];
+    match along.terms[..along.n] {
+        [(s0, b0)] => {
+            for (x, &i0) in p.iter_mut().zip(row(s0)) {
+                *x = finish(0.0 + b0 * i0);
+            }
+        }
+        [(s0, b0), (s1, b1)] => {
+            for ((x, &i0), &i1) in p.iter_mut().zip(row(s0)).zip(row(s1)) {
+                *x = finish(0.0 + b0 * i0 + b1 * i1);
+            }
+        }
+        [(s0, b0), (s1, b1), (s2, b2), (s3, b3)] => {
+            let rows = row(s0).iter().zip(row(s1)).zip(row(s2)).zip(row(s3));
+            for (x, (((&i0, &i1), &i2), &i3)) in p.iter_mut().zip(rows) {
+                *x = finish(0.0 + b0 * i0 + b1 * i1 + b2 * i2 + b3 * i3);
+            }
+        }
+        ref terms => {
+            p.fill(0.0);
+            for &(start, b) in terms {
+                for (x, &i) in p.iter_mut().zip(row(start)) {
+                    *x += b * i;
+                }
+            }
+            for x in p.iter_mut() {
+                *x = finish(*x);
+            }
         }
     }
 }
@@ -210,10 +234,7 @@ pub(super) fn interpolated_lattice(
     let mut next = 0usize;
     let mut bad = false;
     for (j, (ry, orow)) in g.rows.iter().zip(out.chunks_exact_mut(w.max(1))).enumerate() {
-        predictions(predictor, j, &mut p);
-        for x in &mut p {
-            *x *= inv_q;
-        }
+        predictions(predictor, j, &mut p, |x| x * inv_q);
         round_row(&p, &mut k);
         match *ry {
             Along::Mixed(..) => {
@@ -251,7 +272,7 @@ pub(super) fn interpolated_float(
     let mut next = 0usize;
     let value = |p: f64, z: u32| from_ordered(to_ordered(p as f32).wrapping_add(unzigzag(z)));
     for (j, (ry, orow)) in g.rows.iter().zip(out.chunks_exact_mut(w.max(1))).enumerate() {
-        predictions(predictor, j, &mut p);
+        predictions(predictor, j, &mut p, |x| x);
         match *ry {
             Along::Mixed(..) => {
                 for ((o, &x), &z) in orow.iter_mut().zip(&p).zip(take(r, &mut next, w)?) {
