@@ -170,10 +170,9 @@ impl<'a> Predictor<'a> {
         let n = if first <= last { last - first + 1 } else { 0 };
         // The columns grouped by their number of terms (held: one, interpolated: two or
         // four), so that each group's loop is straight; each sum runs from `0.0` term by
-        // term as before, so the bits are the same.
-        // The cubic midpoints (almost every interpolated column) are computed for a run of
-        // the parent's row at once, a loop over contiguous heights the compiler vectorises,
-        // then placed.
+        // term as before, so the bits are the same. The cubic midpoints (almost every
+        // interpolated column) are computed along a run of the parent's row at once, a loop
+        // over contiguous heights the compiler vectorises, and then placed.
         let mut ones = Vec::new();
         let mut twos = Vec::new();
         let mut cubics = Vec::new();
