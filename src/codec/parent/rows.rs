@@ -37,11 +37,6 @@ pub(super) struct Rows<'a> {
 }
 
 impl Rows<'_> {
-    /// How many columns the parent holds.
-    fn held_count(&self) -> usize {
-        self.held.len()
-    }
-
     /// The parent's heights along its row `pj`.
     fn parent_row(&self, pj: usize) -> &[f32] {
         let pw = self.parent.at.cols.len();
@@ -86,7 +81,6 @@ fn planar<T: Wrapping>(
     emit: impl Fn(&[T], &mut [f32], Option<&[Option<u32>]>) -> bool,
 ) -> Result<bool, DecodeError> {
     let w = g.w;
-    let held = g.held_count();
     // The row above (zeros above the first: `left + 0 - 0` is the first row's predictor,
     // `0 + up - 0` the first column's) and the row being decoded.
     let mut up = vec![T::default(); w];
@@ -111,7 +105,7 @@ fn planar<T: Wrapping>(
                 // The held samples' codes first, off the chain; then each coded sample from
                 // the sample to its left (held or coded) and the two above.
                 codes_of(g.parent_row(pj), g.held, &mut cur);
-                for (&c, &d) in g.coded.iter().zip(take(r, &mut next, w - held)?) {
+                for (&c, &d) in g.coded.iter().zip(take(r, &mut next, g.coded.len())?) {
                     if let Some(b) = c.checked_sub(1) {
                         (left, up_left) = (cur[b], up[b]);
                     }
@@ -228,7 +222,6 @@ pub(super) fn interpolated_lattice(
     // The prediction's index: `p · (1/q)`, one division a block (container.md §7).
     let inv_q = 1.0 / q;
     let w = g.w;
-    let held = g.held_count();
     let mut p = vec![0.0f64; w];
     let mut k = vec![0i64; w];
     let mut next = 0usize;
@@ -244,7 +237,7 @@ pub(super) fn interpolated_lattice(
                 bad |= lattice_heights(&k, orow, q, None);
             }
             Along::Held(pj) => {
-                for (&c, &d) in g.coded.iter().zip(take(r, &mut next, w - held)?) {
+                for (&c, &d) in g.coded.iter().zip(take(r, &mut next, g.coded.len())?) {
                     k[c] = k[c].wrapping_add(d);
                 }
                 bad |= lattice_heights(&k, orow, q, Some(g.held_cols));
@@ -267,7 +260,6 @@ pub(super) fn interpolated_float(
     out: &mut [f32],
 ) -> Result<(), DecodeError> {
     let w = g.w;
-    let held = g.held_count();
     let mut p = vec![0.0f64; w];
     let mut next = 0usize;
     let value = |p: f64, z: u32| from_ordered(to_ordered(p as f32).wrapping_add(unzigzag(z)));
@@ -280,7 +272,7 @@ pub(super) fn interpolated_float(
                 }
             }
             Along::Held(pj) => {
-                for (&c, &z) in g.coded.iter().zip(take(r, &mut next, w - held)?) {
+                for (&c, &z) in g.coded.iter().zip(take(r, &mut next, g.coded.len())?) {
                     orow[c] = value(p[c], z);
                 }
                 g.held_heights(pj, orow);
