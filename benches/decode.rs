@@ -15,6 +15,9 @@
 //!   once its ancestors are decoded;
 //! - **codec**: the samples' code alone (`codec::decode` or `codec::parent::decode_against`
 //!   into a reused buffer), the part the encoding decides;
+//! - **codec, baseline kernels**: the same with the decoders' row kernels forced to their
+//!   baseline x86-64 build (`codec::with_baseline_kernels`) where the CPU would run their AVX2
+//!   build, the passes alternated with the previous column's;
 //! - **pco alone**: only the pco stream inside that code, decoded by pco into a new vector
 //!   (the floor under encodings 2 to 8 as long as pco codes their residuals);
 //! - **inflate**: the same samples as raw little-endian `f32`, DEFLATE-coded (flate2,
@@ -189,11 +192,27 @@ fn timed(mut pass: impl FnMut()) -> f64 {
     )
 }
 
-/// The code of `group` decoded round after round: the best round's ns a sample.
-fn codec_loop(group: &[&Sample]) -> f64 {
+/// [`timed`] of two passes, alternated (on a noisy machine, side by side): their medians.
+fn timed_pair(mut a: impl FnMut(), mut b: impl FnMut()) -> (f64, f64) {
+    a(); // warm
+    b();
+    let (mut ta, mut tb) = (Vec::new(), Vec::new());
+    for _ in 0..5 {
+        for (pass, times) in [(&mut a as &mut dyn FnMut(), &mut ta), (&mut b, &mut tb)] {
+            let t = Instant::now();
+            pass();
+            times.push(t.elapsed().as_secs_f64());
+        }
+    }
+    (median(ta), median(tb))
+}
+
+/// The code of `group` decoded round after round, rounds of the kernels' AVX2 build (where
+/// the CPU has it) alternating with rounds of their baseline build: each one's best round's
+/// ns a sample.
+fn codec_loop(group: &[&Sample]) -> (f64, f64) {
     let mut buf = vec![0f32; 1 << 16];
-    let mut best = f64::MAX;
-    for _ in 0..12 {
+    let mut round = || {
         let t = Instant::now();
         let mut n = 0usize;
         while t.elapsed().as_secs_f64() < 0.5 {
@@ -203,17 +222,22 @@ fn codec_loop(group: &[&Sample]) -> f64 {
                 n += s.coded;
             }
         }
-        best = best.min(1e9 * t.elapsed().as_secs_f64() / n as f64);
+        1e9 * t.elapsed().as_secs_f64() / n as f64
+    };
+    let (mut wide, mut baseline) = (f64::MAX, f64::MAX);
+    for _ in 0..12 {
+        wide = wide.min(round());
+        baseline = baseline.min(codec::with_baseline_kernels(&mut round));
     }
-    best
+    (wide, baseline)
 }
 
 fn main() {
     let dir = tempfile::tempdir().expect("temp dir");
     println!(
-        "| DEM | encoding | payloads | samples | bytes/sample | payload ns | codec ns | pco alone ns | inflate ns | payload / inflate |"
+        "| DEM | encoding | payloads | samples | bytes/sample | payload ns | codec ns | codec ns, baseline kernels | pco alone ns | inflate ns | payload / inflate |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
     let mut all_dems = dems::dems();
     // Float heights off any lattice (encodings 3, 4, 6 and 8), when ../shared/data has them.
     let root = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"));
@@ -225,8 +249,9 @@ fn main() {
         Err(e) => eprintln!("skipping dem_hills: {e} (../shared/data)"),
     }
     // `FMRH_DECODE_LOOP=DEM:ID` (e.g. `puget-4k:7`): only that DEM's payloads of encoding ID,
-    // their code decoded over and over for 6 s (to profile, e.g. under `perf record`), and
-    // the best of twelve half-second rounds printed.
+    // their code decoded over and over for 12 s (to profile, e.g. under `perf record`), and
+    // the best of twelve half-second rounds printed, for the kernels' AVX2 and baseline
+    // builds in alternate rounds.
     let only = std::env::var("FMRH_DECODE_LOOP").ok();
     for dem in all_dems {
         if only
@@ -242,14 +267,15 @@ fn main() {
         for s in &all {
             by.entry(s.encoding() as u8).or_default().push(s);
         }
-        let mut totals = [0.0f64; 4];
+        let mut totals = [0.0f64; 5];
         let mut total_samples = 0usize;
         for (id, group) in &by {
             if let Some(o) = &only {
                 if o.ends_with(&format!(":{id}")) {
+                    let (wide, baseline) = codec_loop(group);
                     println!(
-                        "{o}: codec {:.3} ns a sample (best of 12 rounds)",
-                        codec_loop(group)
+                        "{o}: codec {wide:.3} ns a sample, {baseline:.3} with the kernels' \
+                         baseline build (best of 12 rounds each, alternated)"
                     );
                 }
                 continue;
@@ -274,13 +300,17 @@ fn main() {
                     );
                 }
             });
-            let mut buf = vec![0f32; 1 << 16];
-            let codec_t = timed(|| {
+            let decode_all = |buf: &mut [f32]| {
                 for s in group {
                     s.decode_codec(&mut buf[..s.coded]);
                     std::hint::black_box(&buf);
                 }
-            });
+            };
+            let (mut buf, mut buf2) = (vec![0f32; 1 << 16], vec![0f32; 1 << 16]);
+            let (codec_t, codec_baseline_t) = timed_pair(
+                || decode_all(&mut buf),
+                || codec::with_baseline_kernels(|| decode_all(&mut buf2)),
+            );
             let streams: Vec<(&[u8], char)> = group.iter().filter_map(|s| s.pco_stream()).collect();
             let pco_t = timed(|| {
                 for (stream, kind) in &streams {
@@ -306,15 +336,16 @@ fn main() {
                 }
             });
             let ns = |t: f64| 1e9 * t / samples as f64;
-            for (slot, t) in totals
-                .iter_mut()
-                .zip([payload_t, codec_t, pco_t, inflate_t])
+            for (slot, t) in
+                totals
+                    .iter_mut()
+                    .zip([payload_t, codec_t, codec_baseline_t, pco_t, inflate_t])
             {
                 *slot += t;
             }
             total_samples += samples;
             println!(
-                "| {} | {} {:?} | {} | {} | {:.2} | {:.2} | {:.2} | {} | {:.2} | {:.2} |",
+                "| {} | {} {:?} | {} | {} | {:.2} | {:.2} | {:.2} | {:.2} | {} | {:.2} | {:.2} |",
                 dem.name,
                 id,
                 Encoding::from_id(*id).expect("an id"),
@@ -323,6 +354,7 @@ fn main() {
                 bytes as f64 / samples as f64,
                 ns(payload_t),
                 ns(codec_t),
+                ns(codec_baseline_t),
                 if streams.is_empty() {
                     "-".to_string()
                 } else {
@@ -334,7 +366,7 @@ fn main() {
         }
         let ns = |t: f64| 1e9 * t / total_samples as f64;
         println!(
-            "| {} | all | {} | {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |",
+            "| {} | all | {} | {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |",
             dem.name,
             all.len(),
             total_samples,
@@ -343,7 +375,8 @@ fn main() {
             ns(totals[1]),
             ns(totals[2]),
             ns(totals[3]),
-            totals[0] / totals[3],
+            ns(totals[4]),
+            totals[0] / totals[4],
         );
     }
 }

@@ -38,10 +38,20 @@
 //! never a panic. (The payload CRC catches corruption before decoding; this is the second
 //! line.)
 //!
+//! **Speed.** Decoding is pco, then the kernels that turn residuals into heights: the
+//! planar chain, the parent's interpolation, roundings and conversions a row at a time
+//! ([`parent`]'s `rows`). Those kernels are built twice, for the baseline x86-64 and for
+//! AVX2, and run as the build the CPU can (`wide`): the same bits either way.
+//!
 //! The module knows nothing of files: the format stores its output as payload bytes.
 
+#[macro_use]
+mod wide;
 pub mod parent;
 pub mod voids;
+
+#[cfg(any(test, feature = "testing"))]
+pub use wide::baseline as with_baseline_kernels;
 
 use pco::standalone::{simple_compress, DecompressorItem, FileDecompressor};
 use pco::{ChunkConfig, DeltaSpec};
@@ -236,18 +246,7 @@ pub fn decode(bytes: &[u8], width: usize, out: &mut [f32]) -> Result<(), DecodeE
             let voids = voids.as_deref();
             with_scratch(n, |k: &mut [i64]| {
                 pco_decode(rest, k)?;
-                // In place: each residual becomes its index once the cells it is predicted
-                // from (left, up, up-left: all earlier) are indexes. A void's residual is
-                // ignored (written 0).
-                if let Some(m) = voids {
-                    for (i, r) in k.iter_mut().enumerate() {
-                        if m[i / 8] >> (i % 8) & 1 == 1 {
-                            *r = 0;
-                        }
-                    }
-                }
-                unpredict(k, width);
-                if lattice_heights(k, out, q, None) {
+                if lattice_from_residuals(k, voids, width, q, out) {
                     let (i, ki) = k
                         .iter()
                         .enumerate()
@@ -278,17 +277,49 @@ pub fn decode(bytes: &[u8], width: usize, out: &mut [f32]) -> Result<(), DecodeE
         }
         Encoding::FloatPredicted => with_scratch(out.len(), |u: &mut [u32]| {
             pco_decode(body, u)?;
-            for r in u.iter_mut() {
-                *r = unzigzag(*r);
-            }
-            unpredict(u, width);
-            for (o, &ui) in out.iter_mut().zip(u.iter()) {
-                *o = from_ordered(ui);
-            }
+            float_from_residuals(u, width, out);
             Ok::<(), DecodeError>(())
         })?,
     }
     Ok(())
+}
+
+wide! {
+    /// Encoding 2's residuals `k` (decoded from pco) to heights in `out`, the voids of the
+    /// bitmap `voids` left for the caller; says whether an index was out of range.
+    fn lattice_from_residuals(
+        k: &mut [i64],
+        voids: Option<&[u8]>,
+        width: usize,
+        q: f64,
+        out: &mut [f32],
+    ) -> bool {
+        // In place: each residual becomes its index once the cells it is predicted from
+        // (left, up, up-left: all earlier) are indexes. A void's residual is ignored
+        // (written 0).
+        if let Some(m) = voids {
+            for (i, r) in k.iter_mut().enumerate() {
+                if m[i / 8] >> (i % 8) & 1 == 1 {
+                    *r = 0;
+                }
+            }
+        }
+        unpredict(k, width);
+        lattice_heights(k, out, q, None)
+    }
+}
+
+wide! {
+    /// Encoding 4's zigzag residuals `u` (decoded from pco) to heights in `out`.
+    fn float_from_residuals(u: &mut [u32], width: usize, out: &mut [f32]) {
+        for r in u.iter_mut() {
+            *r = unzigzag(*r);
+        }
+        unpredict(u, width);
+        for (o, &ui) in out.iter_mut().zip(u.iter()) {
+            *o = from_ordered(ui);
+        }
+    }
 }
 
 /// The height of lattice index `k` (an integer-valued `f64`) on step `q`: `(k · q) as f32`,
@@ -303,6 +334,7 @@ pub fn lattice_value(k: f64, q: f64) -> f32 {
 /// caller then takes from the parent) is out of range. A row whose indexes all fit in an
 /// `i32` (almost every row: ±2^31 steps) converts through `i32`, which the compiler
 /// vectorises; `k as f64` is the same number either way.
+#[inline(always)]
 pub(crate) fn lattice_heights(
     codes: &[i64],
     out: &mut [f32],
@@ -398,6 +430,7 @@ fn predict<T: Wrapping>(k: &[T], i: usize, width: usize) -> T {
 /// the cells before it plus its residual. The same arithmetic as `predict` in another
 /// order, `left + ((up - up_left) + r)`, so the chain from cell to cell is one addition held
 /// in a register (decoding spends its time here and in pco).
+#[inline(always)]
 fn unpredict<T: Wrapping>(k: &mut [T], width: usize) {
     let width = width.max(1);
     for row in (0..k.len()).step_by(width) {
@@ -740,6 +773,41 @@ mod tests {
             let mut ru: Vec<u32> = (0..n).map(|i| u[i].wrapping_sub(predict(&u, i, width))).collect();
             unpredict(&mut ru, width);
             proptest::prop_assert_eq!(ru, u);
+        }
+
+        /// The kernels' two builds (`wide`: AVX2 where the CPU has it, and the baseline)
+        /// decode any block, voids and damage included, to the same bits or the same error.
+        #[test]
+        fn both_builds_of_the_kernels_decode_alike(
+            bits in proptest::collection::vec(proptest::prelude::any::<u32>(), 1..400),
+            width in 1usize..40,
+            kind in 0usize..3,
+            damage in proptest::option::of((proptest::prelude::any::<proptest::sample::Index>(), proptest::prelude::any::<u8>())),
+        ) {
+            let n = bits.len() / width * width;
+            proptest::prop_assume!(n > 0);
+            let samples: Vec<f32> = bits[..n]
+                .iter()
+                .map(|&b| match kind {
+                    0 => ((b % 2000) as f32 - 1000.0) * 0.25,
+                    1 if b % 7 == 0 => f32::from_bits(VOID_BITS),
+                    1 => (b % 5000) as f32 * 0.1,
+                    _ => f32::from_bits(b),
+                })
+                .collect();
+            let mut bytes = encode(&samples, width);
+            if let Some((i, v)) = damage {
+                let i = i.index(bytes.len());
+                bytes[i] = v;
+            }
+            let (mut a, mut b) = (vec![0.0f32; n], vec![0.0f32; n]);
+            let wide = decode(&bytes, width, &mut a);
+            let narrow = wide::baseline(|| decode(&bytes, width, &mut b));
+            proptest::prop_assert_eq!(&wide, &narrow);
+            if wide.is_ok() {
+                let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                proptest::prop_assert_eq!(bits(&a), bits(&b));
+            }
         }
 
         /// Any bytes decode or fail; nothing panics.

@@ -155,8 +155,9 @@ struct Predictor<'a> {
     w: usize,
 }
 
-impl<'a> Predictor<'a> {
-    fn new(cols: &[Along], rows: &'a [Along], parent: &Parent<'_>) -> Self {
+wide! {
+    /// [`Predictor::new`]'s work: the parent's rows interpolated at every child column.
+    fn predictor<'a>(cols: &[Along], rows: &'a [Along], parent: &Parent<'_>) -> Predictor<'a> {
         let pw = parent.at.cols.len();
         let mut one = [(0, 0.0)];
         let (mut first, mut last) = (usize::MAX, 0);
@@ -234,9 +235,15 @@ impl<'a> Predictor<'a> {
             w,
         }
     }
+}
+
+impl<'a> Predictor<'a> {
+    fn new(cols: &[Along], rows: &'a [Along], parent: &Parent<'_>) -> Self {
+        predictor(cols, rows, parent)
+    }
 
     /// Child row `r`'s terms, resolved to rows of `inner`: the decoder's inner loop.
-    #[inline]
+    #[inline(always)]
     fn row(&self, r: usize) -> RowPredictor<'_> {
         let mut one = [(0, 0.0)];
         let mut terms = [(0usize, 0.0f64); 4];
@@ -289,6 +296,7 @@ fn round_to_i64(x: f64) -> i64 {
 /// [`round_to_i64`] of every `x` into `out`. A row whose values all lie within ±2^30 (every
 /// row of real terrain) rounds through `i32`, which the compiler vectorises: there
 /// `x - trunc(x)` is as exact and the result the same.
+#[inline(always)]
 pub(super) fn round_row(x: &[f64], out: &mut [i64]) {
     const SMALL: f64 = (1u64 << 30) as f64;
     let small = x.iter().fold(true, |ok, v| ok & (v.abs() < SMALL));
@@ -315,6 +323,7 @@ pub(super) fn round_row(x: &[f64], out: &mut [i64]) {
 /// rounds the same way unless it lies within 2^-20 of a half, and a row where any does
 /// (none of real terrain's: a held height is on the lattice, its quotient next to an
 /// integer) is divided after all. `x` is scratch of at least `held.len()`.
+#[inline(always)]
 pub(super) fn held_indexes(
     heights: &[f32],
     held: &[(usize, usize)],
@@ -878,6 +887,7 @@ fn planar_fill<T: super::Wrapping>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::codec::wide;
     use proptest::prelude::*;
 
     #[test]
@@ -1182,12 +1192,18 @@ mod tests {
                 }
                 let mut fast = vec![0.0f32; samples.len()];
                 let mut general = vec![0.0f32; samples.len()];
+                let mut narrow = vec![0.0f32; samples.len()];
                 let a = decode_with(&bytes, at, parent, &mut fast, true);
                 let g = decode_with(&bytes, at, parent, &mut general, false);
+                // The kernels' baseline build too (`fast` ran their AVX2 build where the CPU
+                // has it: `codec::wide`).
+                let b = wide::baseline(|| decode_with(&bytes, at, parent, &mut narrow, true));
                 prop_assert_eq!(a.is_ok(), g.is_ok(), "{:?} against {:?}", a, g);
+                prop_assert_eq!(&a, &b);
                 if a.is_ok() {
-                    for (x, y) in fast.iter().zip(&general) {
+                    for ((x, y), z) in fast.iter().zip(&general).zip(&narrow) {
                         prop_assert_eq!(x.to_bits(), y.to_bits());
+                        prop_assert_eq!(x.to_bits(), z.to_bits());
                     }
                     if damage.is_none() {
                         for (x, y) in fast.iter().zip(&samples) {

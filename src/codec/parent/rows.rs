@@ -38,6 +38,7 @@ pub(super) struct Rows<'a> {
 
 impl Rows<'_> {
     /// The parent's heights along its row `pj`.
+    #[inline(always)]
     fn parent_row(&self, pj: usize) -> &[f32] {
         let pw = self.parent.at.cols.len();
         &self.parent.heights[pj * pw..(pj + 1) * pw]
@@ -45,6 +46,7 @@ impl Rows<'_> {
 
     /// Gives the held samples of `orow`, a row the parent holds as its row `pj`, the
     /// parent's heights.
+    #[inline(always)]
     fn held_heights(&self, pj: usize, orow: &mut [f32]) {
         let heights = self.parent_row(pj);
         for &(c, pi) in self.held {
@@ -62,6 +64,7 @@ fn out_of_range() -> DecodeError {
 }
 
 /// The next `m` residuals of `r` from `*next`, or an error when there are fewer.
+#[inline(always)]
 fn take<'r, T>(r: &'r [T], next: &mut usize, m: usize) -> Result<&'r [T], DecodeError> {
     let s = r.get(*next..*next + m).ok_or_else(short)?;
     *next += m;
@@ -73,6 +76,7 @@ fn take<'r, T>(r: &'r [T], next: &mut usize, m: usize) -> Result<&'r [T], Decode
 /// the held columns, [`Rows::held`], and nowhere else); `emit` turns a row of codes into
 /// heights (given the held columns in a held row, whose heights are then the parent's and
 /// whose codes it must not judge) and says whether any coded one was out of range.
+#[inline(always)]
 fn planar<T: Wrapping>(
     g: &Rows<'_>,
     r: &[T],
@@ -120,56 +124,61 @@ fn planar<T: Wrapping>(
     Ok(bad)
 }
 
-/// Encoding 7 without voids: lattice indexes on step `q`.
-pub(super) fn planar_lattice(
-    g: &Rows<'_>,
-    q: f64,
-    r: &[i64],
-    out: &mut [f32],
-) -> Result<(), DecodeError> {
-    let mut x = vec![0.0f64; g.w];
-    let bad = planar(
-        g,
-        r,
-        out,
-        |heights, held, codes| held_indexes(heights, held, q, &mut x, codes),
-        |codes, out, held| lattice_heights(codes, out, q, held),
-    )?;
-    if bad {
-        return Err(out_of_range());
+wide! {
+    /// Encoding 7 without voids: lattice indexes on step `q`.
+    pub(super) fn planar_lattice(
+        g: &Rows<'_>,
+        q: f64,
+        r: &[i64],
+        out: &mut [f32],
+    ) -> Result<(), DecodeError> {
+        let mut x = vec![0.0f64; g.w];
+        let bad = planar(
+            g,
+            r,
+            out,
+            |heights, held, codes| held_indexes(heights, held, q, &mut x, codes),
+            |codes, out, held| lattice_heights(codes, out, q, held),
+        )?;
+        if bad {
+            return Err(out_of_range());
+        }
+        Ok(())
     }
-    Ok(())
 }
 
-/// Encoding 8 without voids: order-preserving bits, zigzag residuals.
-pub(super) fn planar_float(
-    g: &Rows<'_>,
-    r: &mut [u32],
-    out: &mut [f32],
-) -> Result<(), DecodeError> {
-    // The residuals are zigzag codes: undone first, in place, a loop of its own.
-    for z in r.iter_mut() {
-        *z = unzigzag(*z);
+wide! {
+    /// Encoding 8 without voids: order-preserving bits, zigzag residuals.
+    pub(super) fn planar_float(
+        g: &Rows<'_>,
+        r: &mut [u32],
+        out: &mut [f32],
+    ) -> Result<(), DecodeError> {
+        // The residuals are zigzag codes: undone first, in place, a loop of its own.
+        for z in r.iter_mut() {
+            *z = unzigzag(*z);
+        }
+        let r = &*r;
+        let codes_of = |heights: &[f32], held: &[(usize, usize)], codes: &mut [u32]| {
+            for &(c, pi) in held {
+                codes[c] = to_ordered(heights[pi]);
+            }
+        };
+        planar(g, r, out, codes_of, |codes, out, _| {
+            for (o, &u) in out.iter_mut().zip(codes) {
+                *o = from_ordered(u);
+            }
+            false
+        })
+        .map(|_| ())
     }
-    let r = &*r;
-    let codes_of = |heights: &[f32], held: &[(usize, usize)], codes: &mut [u32]| {
-        for &(c, pi) in held {
-            codes[c] = to_ordered(heights[pi]);
-        }
-    };
-    planar(g, r, out, codes_of, |codes, out, _| {
-        for (o, &u) in out.iter_mut().zip(codes) {
-            *o = from_ordered(u);
-        }
-        false
-    })
-    .map(|_| ())
 }
 
 /// The interpolated predictions of row `j` at every column, into `p`, each passed through
 /// `finish`: `Σ_j wy_j · inner(j, c)` from `0.0`, term by term, as
 /// [`super::RowPredictor::at`] sums them. The usual counts of terms (one, two, four) are
 /// summed in one pass over the row, the others a pass a term.
+#[inline(always)]
 pub(super) fn predictions(
     predictor: &Predictor<'_>,
     j: usize,
@@ -210,74 +219,78 @@ pub(super) fn predictions(
     }
 }
 
-/// Encoding 5 without voids: per row, the predictions' indexes `round(p · (1/q))` a row at
-/// a time, the residuals added, the indexes converted a row at a time.
-pub(super) fn interpolated_lattice(
-    g: &Rows<'_>,
-    predictor: &Predictor<'_>,
-    q: f64,
-    r: &[i64],
-    out: &mut [f32],
-) -> Result<(), DecodeError> {
-    // The prediction's index: `p · (1/q)`, one division a block (container.md §7).
-    let inv_q = 1.0 / q;
-    let w = g.w;
-    let mut p = vec![0.0f64; w];
-    let mut k = vec![0i64; w];
-    let mut next = 0usize;
-    let mut bad = false;
-    for (j, (ry, orow)) in g.rows.iter().zip(out.chunks_exact_mut(w.max(1))).enumerate() {
-        predictions(predictor, j, &mut p, |x| x * inv_q);
-        round_row(&p, &mut k);
-        match *ry {
-            Along::Mixed(..) => {
-                for (k, &d) in k.iter_mut().zip(take(r, &mut next, w)?) {
-                    *k = k.wrapping_add(d);
+wide! {
+    /// Encoding 5 without voids: per row, the predictions' indexes `round(p · (1/q))` a row at
+    /// a time, the residuals added, the indexes converted a row at a time.
+    pub(super) fn interpolated_lattice(
+        g: &Rows<'_>,
+        predictor: &Predictor<'_>,
+        q: f64,
+        r: &[i64],
+        out: &mut [f32],
+    ) -> Result<(), DecodeError> {
+        // The prediction's index: `p · (1/q)`, one division a block (container.md §7).
+        let inv_q = 1.0 / q;
+        let w = g.w;
+        let mut p = vec![0.0f64; w];
+        let mut k = vec![0i64; w];
+        let mut next = 0usize;
+        let mut bad = false;
+        for (j, (ry, orow)) in g.rows.iter().zip(out.chunks_exact_mut(w.max(1))).enumerate() {
+            predictions(predictor, j, &mut p, |x| x * inv_q);
+            round_row(&p, &mut k);
+            match *ry {
+                Along::Mixed(..) => {
+                    for (k, &d) in k.iter_mut().zip(take(r, &mut next, w)?) {
+                        *k = k.wrapping_add(d);
+                    }
+                    bad |= lattice_heights(&k, orow, q, None);
                 }
-                bad |= lattice_heights(&k, orow, q, None);
-            }
-            Along::Held(pj) => {
-                for (&c, &d) in g.coded.iter().zip(take(r, &mut next, g.coded.len())?) {
-                    k[c] = k[c].wrapping_add(d);
+                Along::Held(pj) => {
+                    for (&c, &d) in g.coded.iter().zip(take(r, &mut next, g.coded.len())?) {
+                        k[c] = k[c].wrapping_add(d);
+                    }
+                    bad |= lattice_heights(&k, orow, q, Some(g.held_cols));
+                    g.held_heights(pj, orow);
                 }
-                bad |= lattice_heights(&k, orow, q, Some(g.held_cols));
-                g.held_heights(pj, orow);
             }
         }
+        if bad {
+            return Err(out_of_range());
+        }
+        Ok(())
     }
-    if bad {
-        return Err(out_of_range());
-    }
-    Ok(())
 }
 
-/// Encoding 6 without voids: a coded sample's height is its interpolated prediction's
-/// order-preserving bits plus its residual, a held one the parent's.
-pub(super) fn interpolated_float(
-    g: &Rows<'_>,
-    predictor: &Predictor<'_>,
-    r: &[u32],
-    out: &mut [f32],
-) -> Result<(), DecodeError> {
-    let w = g.w;
-    let mut p = vec![0.0f64; w];
-    let mut next = 0usize;
-    let value = |p: f64, z: u32| from_ordered(to_ordered(p as f32).wrapping_add(unzigzag(z)));
-    for (j, (ry, orow)) in g.rows.iter().zip(out.chunks_exact_mut(w.max(1))).enumerate() {
-        predictions(predictor, j, &mut p, |x| x);
-        match *ry {
-            Along::Mixed(..) => {
-                for ((o, &x), &z) in orow.iter_mut().zip(&p).zip(take(r, &mut next, w)?) {
-                    *o = value(x, z);
+wide! {
+    /// Encoding 6 without voids: a coded sample's height is its interpolated prediction's
+    /// order-preserving bits plus its residual, a held one the parent's.
+    pub(super) fn interpolated_float(
+        g: &Rows<'_>,
+        predictor: &Predictor<'_>,
+        r: &[u32],
+        out: &mut [f32],
+    ) -> Result<(), DecodeError> {
+        let w = g.w;
+        let mut p = vec![0.0f64; w];
+        let mut next = 0usize;
+        let value = |p: f64, z: u32| from_ordered(to_ordered(p as f32).wrapping_add(unzigzag(z)));
+        for (j, (ry, orow)) in g.rows.iter().zip(out.chunks_exact_mut(w.max(1))).enumerate() {
+            predictions(predictor, j, &mut p, |x| x);
+            match *ry {
+                Along::Mixed(..) => {
+                    for ((o, &x), &z) in orow.iter_mut().zip(&p).zip(take(r, &mut next, w)?) {
+                        *o = value(x, z);
+                    }
                 }
-            }
-            Along::Held(pj) => {
-                for (&c, &z) in g.coded.iter().zip(take(r, &mut next, g.coded.len())?) {
-                    orow[c] = value(p[c], z);
+                Along::Held(pj) => {
+                    for (&c, &z) in g.coded.iter().zip(take(r, &mut next, g.coded.len())?) {
+                        orow[c] = value(p[c], z);
+                    }
+                    g.held_heights(pj, orow);
                 }
-                g.held_heights(pj, orow);
             }
         }
+        Ok(())
     }
-    Ok(())
 }
