@@ -71,31 +71,79 @@ fn take<'r, T>(r: &'r [T], next: &mut usize, m: usize) -> Result<&'r [T], Decode
     Ok(s)
 }
 
-/// Encodings 7 and 8 without voids: codes in the space of `T`, the planar predictor over
-/// them, the held samples' codes what `codes_of` makes of a parent row's heights (written at
-/// the held columns, [`Rows::held`], and nowhere else); `emit` turns a row of codes into
-/// heights (given the held columns in a held row, whose heights are then the parent's and
-/// whose codes it must not judge) and says whether any coded one was out of range.
+/// What encodings 7 and 8 differ in: the space their codes live in and how heights map to
+/// it. A trait with methods inlined, not closures, so that the kernels' AVX2 build holds
+/// their loops too (a closure is a function of its own, built as the baseline).
+trait CodeSpace {
+    type Code: Wrapping;
+    /// The held samples' codes, from the heights of a parent row: written at the held
+    /// columns ([`Rows::held`]) and nowhere else.
+    fn codes_of(&mut self, heights: &[f32], held: &[(usize, usize)], codes: &mut [Self::Code]);
+    /// A row of codes to heights (given the held columns in a held row, whose heights are
+    /// then the parent's and whose codes it must not judge); whether any coded one was out
+    /// of range.
+    fn emit(&self, codes: &[Self::Code], out: &mut [f32], held: Option<&[Option<u32>]>) -> bool;
+}
+
+/// Encoding 7's codes: lattice indexes on step `q` (`x`: scratch of a row).
+struct LatticeCodes {
+    q: f64,
+    x: Vec<f64>,
+}
+
+impl CodeSpace for LatticeCodes {
+    type Code = i64;
+    #[inline(always)]
+    fn codes_of(&mut self, heights: &[f32], held: &[(usize, usize)], codes: &mut [i64]) {
+        held_indexes(heights, held, self.q, &mut self.x, codes);
+    }
+    #[inline(always)]
+    fn emit(&self, codes: &[i64], out: &mut [f32], held: Option<&[Option<u32>]>) -> bool {
+        lattice_heights(codes, out, self.q, held)
+    }
+}
+
+/// Encoding 8's codes: order-preserving bits.
+struct FloatCodes;
+
+impl CodeSpace for FloatCodes {
+    type Code = u32;
+    #[inline(always)]
+    fn codes_of(&mut self, heights: &[f32], held: &[(usize, usize)], codes: &mut [u32]) {
+        for &(c, pi) in held {
+            codes[c] = to_ordered(heights[pi]);
+        }
+    }
+    #[inline(always)]
+    fn emit(&self, codes: &[u32], out: &mut [f32], _: Option<&[Option<u32>]>) -> bool {
+        for (o, &u) in out.iter_mut().zip(codes) {
+            *o = from_ordered(u);
+        }
+        false
+    }
+}
+
+/// Encodings 7 and 8 without voids: codes in `space`, the planar predictor over them;
+/// whether any coded sample's code was out of range.
 #[inline(always)]
-fn planar<T: Wrapping>(
+fn planar<S: CodeSpace>(
     g: &Rows<'_>,
-    r: &[T],
+    r: &[S::Code],
     out: &mut [f32],
-    mut codes_of: impl FnMut(&[f32], &[(usize, usize)], &mut [T]),
-    emit: impl Fn(&[T], &mut [f32], Option<&[Option<u32>]>) -> bool,
+    space: &mut S,
 ) -> Result<bool, DecodeError> {
     let w = g.w;
     // The row above (zeros above the first: `left + 0 - 0` is the first row's predictor,
     // `0 + up - 0` the first column's) and the row being decoded.
-    let mut up = vec![T::default(); w];
-    let mut cur = vec![T::default(); w];
+    let mut up = vec![S::Code::default(); w];
+    let mut cur = vec![S::Code::default(); w];
     let mut next = 0usize;
     let mut bad = false;
     // The chain from sample to sample is one addition: `left + ((up - up_left) + r)`, the
     // same wrapping sum as `left + up - up_left + r` in another order.
     for (ry, orow) in g.rows.iter().zip(out.chunks_exact_mut(w.max(1))) {
-        let (mut left, mut up_left) = (T::default(), T::default());
-        match *ry {
+        let (mut left, mut up_left) = (S::Code::default(), S::Code::default());
+        let held = match *ry {
             Along::Mixed(..) => {
                 let rr = take(r, &mut next, w)?;
                 for ((c, &u), &d) in cur.iter_mut().zip(&up).zip(rr) {
@@ -103,21 +151,25 @@ fn planar<T: Wrapping>(
                     up_left = u;
                     *c = left;
                 }
-                bad |= emit(&cur, orow, None);
+                None
             }
             Along::Held(pj) => {
                 // The held samples' codes first, off the chain; then each coded sample from
                 // the sample to its left (held or coded) and the two above.
-                codes_of(g.parent_row(pj), g.held, &mut cur);
+                space.codes_of(g.parent_row(pj), g.held, &mut cur);
                 for (&c, &d) in g.coded.iter().zip(take(r, &mut next, g.coded.len())?) {
                     if let Some(b) = c.checked_sub(1) {
                         (left, up_left) = (cur[b], up[b]);
                     }
                     cur[c] = left.plus(up[c].minus(up_left).plus(d));
                 }
-                bad |= emit(&cur, orow, Some(g.held_cols));
-                g.held_heights(pj, orow);
+                Some(pj)
             }
+        };
+        // One call of `emit` a row (inlined once).
+        bad |= space.emit(&cur, orow, held.map(|_| g.held_cols));
+        if let Some(pj) = held {
+            g.held_heights(pj, orow);
         }
         std::mem::swap(&mut up, &mut cur);
     }
@@ -132,15 +184,8 @@ wide! {
         r: &[i64],
         out: &mut [f32],
     ) -> Result<(), DecodeError> {
-        let mut x = vec![0.0f64; g.w];
-        let bad = planar(
-            g,
-            r,
-            out,
-            |heights, held, codes| held_indexes(heights, held, q, &mut x, codes),
-            |codes, out, held| lattice_heights(codes, out, q, held),
-        )?;
-        if bad {
+        let mut space = LatticeCodes { q, x: vec![0.0f64; g.w] };
+        if planar(g, r, out, &mut space)? {
             return Err(out_of_range());
         }
         Ok(())
@@ -158,19 +203,7 @@ wide! {
         for z in r.iter_mut() {
             *z = unzigzag(*z);
         }
-        let r = &*r;
-        let codes_of = |heights: &[f32], held: &[(usize, usize)], codes: &mut [u32]| {
-            for &(c, pi) in held {
-                codes[c] = to_ordered(heights[pi]);
-            }
-        };
-        planar(g, r, out, codes_of, |codes, out, _| {
-            for (o, &u) in out.iter_mut().zip(codes) {
-                *o = from_ordered(u);
-            }
-            false
-        })
-        .map(|_| ())
+        planar(g, r, out, &mut FloatCodes).map(|_| ())
     }
 }
 
@@ -274,7 +307,10 @@ wide! {
         let w = g.w;
         let mut p = vec![0.0f64; w];
         let mut next = 0usize;
-        let value = |p: f64, z: u32| from_ordered(to_ordered(p as f32).wrapping_add(unzigzag(z)));
+        #[inline(always)]
+        fn value(p: f64, z: u32) -> f32 {
+            from_ordered(to_ordered(p as f32).wrapping_add(unzigzag(z)))
+        }
         for (j, (ry, orow)) in g.rows.iter().zip(out.chunks_exact_mut(w.max(1))).enumerate() {
             predictions(predictor, j, &mut p, |x| x);
             match *ry {
