@@ -23,6 +23,11 @@
 //! - **inflate**: the same samples as raw little-endian `f32`, DEFLATE-coded (flate2,
 //!   default level), inflated: a COG tile's decoder without its predictor.
 //!
+//! `FMRH_CODER_STUDY=1` prints instead, per DEM and encoding, the residual streams coded by
+//! the candidate coder of `common/tans.rs` beside pco: bytes, and ns a number decoded, the
+//! two decoders' passes alternated (`FMRH_CODER_LOOP=DEM:ID` adds 10 s of the candidate
+//! alone on those streams, to profile).
+//!
 //! Every payload is checked bit for bit against its first decoding before it is timed.
 //! Times are ns per decoded sample; on a noisy machine read the ratios within a row.
 //!
@@ -30,6 +35,8 @@
 
 #[path = "common/dems.rs"]
 mod dems;
+#[path = "common/tans.rs"]
+mod tans;
 
 use std::collections::BTreeMap;
 use std::io::{Read, Write};
@@ -117,6 +124,177 @@ fn pco_alone(stream: &[u8], kind: char) -> usize {
         'i' => simple_decompress::<i64>(stream).expect("pco").len(),
         'u' => simple_decompress::<u32>(stream).expect("pco").len(),
         _ => simple_decompress::<f32>(stream).expect("pco").len(),
+    }
+}
+
+/// Decodes the pco stream `src` of exactly `out.len()` numbers into `out`, as the codec does
+/// (no allocation sized by the stream).
+fn pco_into<T: pco::data_types::Number>(src: &[u8], out: &mut [T]) {
+    use pco::standalone::{DecompressorItem, FileDecompressor};
+    let (file, mut rest) = FileDecompressor::new(src).expect("pco");
+    let mut done = 0;
+    loop {
+        match file.chunk_decompressor::<T, &[u8]>(rest).expect("pco") {
+            DecompressorItem::Chunk(mut chunk) => {
+                let n = chunk.n();
+                chunk.read(&mut out[done..done + n]).expect("pco");
+                done += n;
+                rest = chunk.into_src();
+            }
+            DecompressorItem::EndOfData(_) => return,
+        }
+    }
+}
+
+/// One residual stream of the coder study: pco's bytes, the candidate's, and the codes.
+struct Stream<'a> {
+    pco: &'a [u8],
+    kind: char,
+    codes: Vec<u32>,
+    candidate: Vec<u8>,
+    factor: i64,
+}
+
+fn gcd(a: u64, b: u64) -> u64 {
+    if b == 0 {
+        a
+    } else {
+        gcd(b, a % b)
+    }
+}
+
+/// `FMRH_CODER_STUDY=1`: the residual streams of each encoding coded by the candidate of
+/// `common/tans.rs` beside pco: bytes, and ns a number decoded (passes alternated).
+fn coder_study(dem: &str, by: &BTreeMap<u8, Vec<&Sample>>) {
+    use pco::standalone::simple_decompress;
+    // The edges first: one code, one symbol, the largest codes, every symbol, odd lengths.
+    let mut x = 0x9E37_79B9u32;
+    let mut random = || {
+        x ^= x << 13;
+        x ^= x >> 17;
+        x ^= x << 5;
+        x
+    };
+    let edges: Vec<Vec<u32>> = vec![
+        vec![0],
+        vec![u32::MAX],
+        vec![7; 4099],
+        (0..5000).map(|_| random()).collect(),
+        (0..4097).map(|_| random() >> (random() % 32)).collect(),
+        (0..33).map(|i| u32::MAX - i).collect(),
+    ];
+    for codes in edges {
+        let coded = tans::encode(&codes).expect("codes");
+        let mut back = vec![0u32; codes.len()];
+        tans::Decoder::default().decode(&coded, &mut back, |v| v);
+        assert_eq!(
+            back, codes,
+            "the candidate coder lost a code of an edge case"
+        );
+    }
+    for (id, group) in by {
+        let mut streams = Vec::new();
+        let mut skipped = 0usize;
+        for (pco, kind) in group.iter().filter_map(|s| s.pco_stream()) {
+            // The lattice residuals divided by their greatest common divisor first (pco finds
+            // such a multiplier too: Puget 4k's are all multiples of 256), which the
+            // candidate would store in its header (counted below as 4 bytes).
+            let (codes, factor): (Option<Vec<u32>>, i64) = match kind {
+                'i' => {
+                    let r = simple_decompress::<i64>(pco).expect("pco");
+                    let g = r.iter().fold(0u64, |g, &x| gcd(g, x.unsigned_abs())).max(1) as i64;
+                    let codes = r
+                        .iter()
+                        .map(|&x| {
+                            let x = x / g;
+                            u32::try_from(((x << 1) ^ (x >> 63)) as u64).ok()
+                        })
+                        .collect();
+                    (codes, g)
+                }
+                'u' => (Some(simple_decompress::<u32>(pco).expect("pco")), 1),
+                _ => (None, 1),
+            };
+            let Some(codes) = codes else {
+                skipped += 1;
+                continue;
+            };
+            let Some(mut candidate) = tans::encode(&codes) else {
+                continue; // no numbers: pco's empty stream is all either would store
+            };
+            let mut back = vec![0u32; codes.len()];
+            tans::Decoder::default().decode(&candidate, &mut back, |v| v);
+            assert_eq!(back, codes, "{dem}: the candidate coder lost a code");
+            if kind == 'i' {
+                candidate.extend_from_slice(&[0; 4]); // the factor's room
+            }
+            streams.push(Stream {
+                pco,
+                kind,
+                codes,
+                candidate,
+                factor,
+            });
+        }
+        if streams.is_empty() {
+            continue;
+        }
+        if std::env::var("FMRH_CODER_LOOP").is_ok_and(|l| l == format!("{dem}:{id}")) {
+            // To profile the candidate alone: its decoding of these streams for 10 s.
+            let mut decoder = tans::Decoder::default();
+            let mut out = vec![0u32; 1 << 17];
+            let t = Instant::now();
+            while t.elapsed().as_secs_f64() < 10.0 {
+                for s in &streams {
+                    decoder.decode(&s.candidate, &mut out[..s.codes.len()], |z| z);
+                    std::hint::black_box(&out);
+                }
+            }
+        }
+        let numbers: usize = streams.iter().map(|s| s.codes.len()).sum();
+        let pco_bytes: usize = streams.iter().map(|s| s.pco.len()).sum();
+        let cand_bytes: usize = streams.iter().map(|s| s.candidate.len()).sum();
+        let (mut wide, mut narrow) = (vec![0i64; 1 << 17], vec![0u32; 1 << 17]);
+        let (mut wide2, mut narrow2) = (wide.clone(), narrow.clone());
+        let mut decoder = tans::Decoder::default();
+        let (pco_t, cand_t) = timed_pair(
+            || {
+                for s in &streams {
+                    let n = s.codes.len();
+                    match s.kind {
+                        'i' => pco_into(s.pco, &mut wide[..n]),
+                        _ => pco_into(s.pco, &mut narrow[..n]),
+                    }
+                    std::hint::black_box((&wide, &narrow));
+                }
+            },
+            || {
+                for s in &streams {
+                    let n = s.codes.len();
+                    match s.kind {
+                        // As pco gives them: the residual, not its zigzag code.
+                        'i' => decoder.decode(&s.candidate, &mut wide2[..n], |z| {
+                            i64::from((z >> 1) as i32 ^ -((z & 1) as i32)) * s.factor
+                        }),
+                        _ => decoder.decode(&s.candidate, &mut narrow2[..n], |z| z),
+                    }
+                    std::hint::black_box((&wide2, &narrow2));
+                }
+            },
+        );
+        let ns = |t: f64| 1e9 * t / numbers as f64;
+        println!(
+            "| {dem} | {id} {:?} | {} | {} | {} | {} | {:.3} | {:.2} | {:.2} | {:.2} |",
+            Encoding::from_id(*id).expect("an id"),
+            streams.len(),
+            skipped,
+            numbers,
+            pco_bytes,
+            cand_bytes as f64 / pco_bytes as f64,
+            ns(pco_t),
+            ns(cand_t),
+            cand_t / pco_t,
+        );
     }
 }
 
@@ -234,10 +412,18 @@ fn codec_loop(group: &[&Sample]) -> (f64, f64) {
 
 fn main() {
     let dir = tempfile::tempdir().expect("temp dir");
-    println!(
+    let study = std::env::var_os("FMRH_CODER_STUDY").is_some();
+    if study {
+        println!(
+            "| DEM | encoding | streams | left to pco | numbers | pco bytes | candidate / pco bytes | pco ns a number | candidate ns a number | candidate / pco time |"
+        );
+        println!("|---|---|---|---|---|---|---|---|---|---|");
+    } else {
+        println!(
         "| DEM | encoding | payloads | samples | bytes/sample | payload ns | codec ns | codec ns, baseline kernels | pco alone ns | inflate ns | payload / inflate |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+        println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    }
     let mut all_dems = dems::dems();
     // Float heights off any lattice (encodings 3, 4, 6 and 8), when ../shared/data has them.
     let root = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"));
@@ -266,6 +452,10 @@ fn main() {
         let mut by: BTreeMap<u8, Vec<&Sample>> = BTreeMap::new();
         for s in &all {
             by.entry(s.encoding() as u8).or_default().push(s);
+        }
+        if study {
+            coder_study(dem.name, &by);
+            continue;
         }
         let mut totals = [0.0f64; 5];
         let mut total_samples = 0usize;
