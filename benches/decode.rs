@@ -26,7 +26,8 @@
 //! `FMRH_CODER_STUDY=1` prints instead, per DEM and encoding, the residual streams coded by
 //! the candidate coder of `common/tans.rs` beside pco: bytes, and ns a number decoded, the
 //! two decoders' passes alternated (`FMRH_CODER_LOOP=DEM:ID` adds 10 s of the candidate
-//! alone on those streams, to profile).
+//! alone on those streams, to profile); then a table of the lattice streams rebuilt into
+//! samples by the planar rule after pco, after the candidate, and fused with the candidate.
 //!
 //! Every payload is checked bit for bit against its first decoding before it is timed.
 //! Times are ns per decoded sample; on a noisy machine read the ratios within a row.
@@ -165,7 +166,7 @@ fn gcd(a: u64, b: u64) -> u64 {
 
 /// `FMRH_CODER_STUDY=1`: the residual streams of each encoding coded by the candidate of
 /// `common/tans.rs` beside pco: bytes, and ns a number decoded (passes alternated).
-fn coder_study(dem: &str, by: &BTreeMap<u8, Vec<&Sample>>) {
+fn coder_study(dem: &str, by: &BTreeMap<u8, Vec<&Sample>>, fusion: &mut Vec<String>) {
     use pco::standalone::simple_decompress;
     // The edges first: one code, one symbol, the largest codes, every symbol, odd lengths.
     let mut x = 0x9E37_79B9u32;
@@ -282,6 +283,54 @@ fn coder_study(dem: &str, by: &BTreeMap<u8, Vec<&Sample>>) {
                 }
             },
         );
+        // Where the lattice residuals share a factor: pco on them divided by it (what a writer
+        // whose `q` took the factor in would store), beside pco as stored.
+        let divided: Vec<(Vec<u8>, usize, &[u8])> = streams
+            .iter()
+            .filter(|s| s.kind == 'i' && s.factor > 1)
+            .map(|s| {
+                let r: Vec<i64> = s
+                    .codes
+                    .iter()
+                    .map(|&z| i64::from((z >> 1) as i32 ^ -((z & 1) as i32)))
+                    .collect();
+                let config = pco::ChunkConfig::default().with_delta_spec(pco::DeltaSpec::NoOp);
+                let coded = pco::standalone::simple_compress(&r, &config).expect("pco");
+                (coded, r.len(), s.pco)
+            })
+            .collect();
+        if !divided.is_empty() {
+            let (mut a, mut b) = (vec![0i64; 1 << 17], vec![0i64; 1 << 17]);
+            let (as_stored, after) = timed_pair(
+                || {
+                    for (_, n, stored) in &divided {
+                        pco_into(stored, &mut a[..*n]);
+                        std::hint::black_box(&a);
+                    }
+                },
+                || {
+                    for (coded, n, _) in &divided {
+                        pco_into(coded, &mut b[..*n]);
+                        std::hint::black_box(&b);
+                    }
+                },
+            );
+            let stored: usize = divided.iter().map(|d| d.2.len()).sum();
+            let recoded: usize = divided.iter().map(|d| d.0.len()).sum();
+            let numbers: usize = divided.iter().map(|d| d.1).sum();
+            println!(
+                "| {dem} | {id}, pco on residuals divided by their common factor | {} | | | {stored} | {:.3} | {:.2} | {:.2} (pco) | {:.2} |",
+                divided.len(),
+                recoded as f64 / stored as f64,
+                1e9 * as_stored / numbers as f64,
+                1e9 * after / numbers as f64,
+                after / as_stored,
+            );
+        }
+        let lattice: Vec<&Stream> = streams.iter().filter(|s| s.kind == 'i').collect();
+        if !lattice.is_empty() {
+            fusion.push(fused_rebuild(dem, *id, &lattice));
+        }
         let ns = |t: f64| 1e9 * t / numbers as f64;
         println!(
             "| {dem} | {id} {:?} | {} | {} | {} | {} | {:.3} | {:.2} | {:.2} | {:.2} |",
@@ -296,6 +345,95 @@ fn coder_study(dem: &str, by: &BTreeMap<u8, Vec<&Sample>>) {
             cand_t / pco_t,
         );
     }
+}
+
+/// The lattice streams of one encoding rebuilt into samples by encoding 2's planar rule (each
+/// stream taken as a square grid where its length is a square, else one row: the work of
+/// encodings 2 and 7, not their exact layout), three ways: pco then the rebuild, the
+/// candidate then the rebuild, and the candidate fused with it (`tans::Decoder::
+/// decode_planar`). The three are checked bit for bit against each other first; a row of ns
+/// a number, the three passes alternated.
+fn fused_rebuild(dem: &str, id: u8, streams: &[&Stream]) -> String {
+    let q = 0.1;
+    let width = |n: usize| {
+        let w = (n as f64).sqrt() as usize;
+        if w * w == n {
+            w
+        } else {
+            n
+        }
+    };
+    let mut decoder = tans::Decoder::default();
+    let mut r = vec![0i64; 1 << 17];
+    let mut above = vec![0i64; 1 << 17];
+    let (mut out, mut check) = (vec![0f32; 1 << 17], vec![0f32; 1 << 17]);
+    let unzigzag = |z: u32| i64::from((z >> 1) as i32 ^ -((z & 1) as i32));
+    for s in streams {
+        let (n, w) = (s.codes.len(), width(s.codes.len()));
+        pco_into(s.pco, &mut r[..n]);
+        above[..w].fill(0);
+        tans::planar(&r[..n], w, q, &mut above[..w], &mut check[..n]);
+        decoder.decode(&s.candidate, &mut r[..n], |z| unzigzag(z) * s.factor);
+        above[..w].fill(0);
+        tans::planar(&r[..n], w, q, &mut above[..w], &mut out[..n]);
+        assert!(out[..n]
+            .iter()
+            .zip(&check[..n])
+            .all(|(a, b)| a.to_bits() == b.to_bits()));
+        above[..w].fill(0);
+        decoder.decode_planar(&s.candidate, s.factor, w, q, &mut above[..w], &mut out[..n]);
+        assert!(
+            out[..n]
+                .iter()
+                .zip(&check[..n])
+                .all(|(a, b)| a.to_bits() == b.to_bits()),
+            "{dem}: the fused rebuild differs"
+        );
+    }
+    let mut pass = |way: usize| {
+        for s in streams {
+            let (n, w) = (s.codes.len(), width(s.codes.len()));
+            above[..w].fill(0);
+            match way {
+                0 => {
+                    pco_into(s.pco, &mut r[..n]);
+                    tans::planar(&r[..n], w, q, &mut above[..w], &mut out[..n]);
+                }
+                1 => {
+                    decoder.decode(&s.candidate, &mut r[..n], |z| unzigzag(z) * s.factor);
+                    tans::planar(&r[..n], w, q, &mut above[..w], &mut out[..n]);
+                }
+                _ => decoder.decode_planar(
+                    &s.candidate,
+                    s.factor,
+                    w,
+                    q,
+                    &mut above[..w],
+                    &mut out[..n],
+                ),
+            }
+            std::hint::black_box(&out);
+        }
+    };
+    let mut times = [Vec::new(), Vec::new(), Vec::new()];
+    for way in 0..3 {
+        pass(way); // warm
+    }
+    for _ in 0..5 {
+        for (way, t) in times.iter_mut().enumerate() {
+            let start = Instant::now();
+            pass(way);
+            t.push(start.elapsed().as_secs_f64());
+        }
+    }
+    let numbers: usize = streams.iter().map(|s| s.codes.len()).sum();
+    let [a, b, c] = times.map(|t| 1e9 * median(t) / numbers as f64);
+    format!(
+        "| {dem} | {id} | {} | {numbers} | {a:.2} | {b:.2} | {c:.2} | {:.2} | {:.2} |",
+        streams.len(),
+        b / a,
+        c / a
+    )
 }
 
 /// Every payload of `store`, with the grid it is coded against.
@@ -424,6 +562,7 @@ fn main() {
     );
         println!("|---|---|---|---|---|---|---|---|---|---|---|");
     }
+    let mut fusion = Vec::new();
     let mut all_dems = dems::dems();
     // Float heights off any lattice (encodings 3, 4, 6 and 8), when ../shared/data has them.
     let root = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"));
@@ -454,7 +593,7 @@ fn main() {
             by.entry(s.encoding() as u8).or_default().push(s);
         }
         if study {
-            coder_study(dem.name, &by);
+            coder_study(dem.name, &by, &mut fusion);
             continue;
         }
         let mut totals = [0.0f64; 5];
@@ -568,5 +707,15 @@ fn main() {
             ns(totals[4]),
             totals[0] / totals[4],
         );
+    }
+    if study {
+        println!(
+            "\nThe lattice streams rebuilt into samples by the planar rule, ns a number:\n\n\
+             | DEM | encoding | streams | numbers | pco, then rebuild | candidate, then rebuild | candidate fused with the rebuild | candidate then / pco then | fused / pco then |"
+        );
+        println!("|---|---|---|---|---|---|---|---|---|");
+        for row in fusion {
+            println!("{row}");
+        }
     }
 }

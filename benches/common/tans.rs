@@ -24,6 +24,10 @@
 //!
 //! A reader reads 8 bytes at any bit position, so the decoder works on a copy padded with 8
 //! zero bytes (a real format would let it read to the end of the payload instead).
+//!
+//! [`Decoder::decode_planar`] asks a second question: does decoding each residual where the
+//! planar rebuild consumes it (one loop, no buffer between) beat running the two one after
+//! the other ([`Decoder::decode`], then [`planar`])? Measured: no.
 
 #![allow(dead_code)]
 
@@ -235,9 +239,9 @@ fn peek(buf: &[u8], pos: usize) -> u64 {
 }
 
 impl Decoder {
-    /// Decodes `out.len()` codes from `stream` into `out`, mapped by `map`. (Built with
-    /// BMI2's one-instruction variable shifts it was no faster, as measured.)
-    pub fn decode<T>(&mut self, stream: &[u8], out: &mut [T], map: impl Fn(u32) -> T) {
+    /// Reads the header of `stream` into a copy padded for 8-byte reads and builds the
+    /// table: the bit position of the first code and the lanes' first states.
+    fn start(&mut self, stream: &[u8]) -> (usize, [usize; LANES]) {
         self.padded.clear();
         self.padded.extend_from_slice(stream);
         self.padded.extend_from_slice(&[0; 8]);
@@ -280,12 +284,19 @@ impl Decoder {
                 p = (p + step) & mask;
             }
         }
-        // FSE numbers a symbol's states in the order of the spread, as the encoder does.
         let mut st = [0usize; LANES];
         for s in &mut st {
             *s = (peek(buf, pos) & u64::from(size - 1)) as usize;
             pos += log as usize;
         }
+        (pos, st)
+    }
+
+    /// Decodes `out.len()` codes from `stream` into `out`, mapped by `map`. (Built with
+    /// BMI2's one-instruction variable shifts it was no faster, as measured.)
+    pub fn decode<T>(&mut self, stream: &[u8], out: &mut [T], map: impl Fn(u32) -> T) {
+        let (mut pos, mut st) = self.start(stream);
+        let buf = &self.padded[..];
         let table = &self.table[..];
         let step_one = |s: &mut usize, pos: &mut usize| -> T {
             let e = table[*s];
@@ -303,6 +314,70 @@ impl Decoder {
         }
         for (o, s) in chunks.into_remainder().iter_mut().zip(&mut st) {
             *o = step_one(s, &mut pos);
+        }
+    }
+
+    /// [`Decoder::decode`] of lattice residuals fused with [`planar`]'s rebuild: each code
+    /// becomes its residual (`zigzag⁻¹ · factor`), then its sample, in one loop, so that the
+    /// coder's chain (its bit position) and the planar sum's run side by side. `above` is a
+    /// row of `w` zeros on entry.
+    pub fn decode_planar(
+        &mut self,
+        stream: &[u8],
+        factor: i64,
+        w: usize,
+        q: f64,
+        above: &mut [i64],
+        out: &mut [f32],
+    ) {
+        let (mut pos, mut st) = self.start(stream);
+        let buf = &self.padded[..];
+        let table = &self.table[..];
+        let (mut left, mut up_left, mut c) = (0i64, 0i64, 0usize);
+        let mut step_one = |s: &mut usize, pos: &mut usize, o: &mut f32| {
+            let e = table[*s];
+            let word = peek(buf, *pos);
+            let z = e.base + (word as u32 & e.extra_mask);
+            *s = usize::from(e.next) + ((word >> e.extra) as u32 & e.bits_mask) as usize;
+            *pos += usize::from(e.extra) + usize::from(e.bits);
+            let r = i64::from((z >> 1) as i32 ^ -((z & 1) as i32)) * factor;
+            if c == 0 {
+                (left, up_left) = (0, 0);
+            }
+            let up = above[c];
+            let k = left + up - up_left + r;
+            (up_left, left) = (up, k);
+            above[c] = k;
+            *o = (k as f64 * q) as f32;
+            c += 1;
+            if c == w {
+                c = 0;
+            }
+        };
+        let mut chunks = out.chunks_exact_mut(LANES);
+        for o in &mut chunks {
+            for (o, s) in o.iter_mut().zip(&mut st) {
+                step_one(s, &mut pos, o);
+            }
+        }
+        for (o, s) in chunks.into_remainder().iter_mut().zip(&mut st) {
+            step_one(s, &mut pos, o);
+        }
+    }
+}
+
+/// Encoding 2's rebuild of `w`-wide rows from their residuals `r`, the samples `k · q`: the
+/// planar predictor (left + up − up-left, zeros outside), one pass a row after the residuals
+/// are decoded, as the codec runs it after pco. `above` is a row of `w` zeros on entry.
+pub fn planar(r: &[i64], w: usize, q: f64, above: &mut [i64], out: &mut [f32]) {
+    for (r, o) in r.chunks(w).zip(out.chunks_mut(w)) {
+        let (mut left, mut up_left) = (0i64, 0i64);
+        for ((&r, o), a) in r.iter().zip(o).zip(above.iter_mut()) {
+            let up = *a;
+            let k = left + up - up_left + r;
+            (up_left, left) = (up, k);
+            *a = k;
+            *o = (k as f64 * q) as f32;
         }
     }
 }
