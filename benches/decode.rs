@@ -168,31 +168,6 @@ fn gcd(a: u64, b: u64) -> u64 {
 /// `common/tans.rs` beside pco: bytes, and ns a number decoded (passes alternated).
 fn coder_study(dem: &str, by: &BTreeMap<u8, Vec<&Sample>>, fusion: &mut Vec<String>) {
     use pco::standalone::simple_decompress;
-    // The edges first: one code, one symbol, the largest codes, every symbol, odd lengths.
-    let mut x = 0x9E37_79B9u32;
-    let mut random = || {
-        x ^= x << 13;
-        x ^= x >> 17;
-        x ^= x << 5;
-        x
-    };
-    let edges: Vec<Vec<u32>> = vec![
-        vec![0],
-        vec![u32::MAX],
-        vec![7; 4099],
-        (0..5000).map(|_| random()).collect(),
-        (0..4097).map(|_| random() >> (random() % 32)).collect(),
-        (0..33).map(|i| u32::MAX - i).collect(),
-    ];
-    for codes in edges {
-        let coded = tans::encode(&codes).expect("codes");
-        let mut back = vec![0u32; codes.len()];
-        tans::Decoder::default().decode(&coded, &mut back, |v| v);
-        assert_eq!(
-            back, codes,
-            "the candidate coder lost a code of an edge case"
-        );
-    }
     for (id, group) in by {
         let mut streams = Vec::new();
         let mut skipped = 0usize;
@@ -206,10 +181,7 @@ fn coder_study(dem: &str, by: &BTreeMap<u8, Vec<&Sample>>, fusion: &mut Vec<Stri
                     let g = r.iter().fold(0u64, |g, &x| gcd(g, x.unsigned_abs())).max(1) as i64;
                     let codes = r
                         .iter()
-                        .map(|&x| {
-                            let x = x / g;
-                            u32::try_from(((x << 1) ^ (x >> 63)) as u64).ok()
-                        })
+                        .map(|&x| u32::try_from(tans::zigzag(x / g)).ok())
                         .collect();
                     (codes, g)
                 }
@@ -275,7 +247,7 @@ fn coder_study(dem: &str, by: &BTreeMap<u8, Vec<&Sample>>, fusion: &mut Vec<Stri
                     match s.kind {
                         // As pco gives them: the residual, not its zigzag code.
                         'i' => decoder.decode(&s.candidate, &mut wide2[..n], |z| {
-                            i64::from((z >> 1) as i32 ^ -((z & 1) as i32)) * s.factor
+                            tans::residual(z) * s.factor
                         }),
                         _ => decoder.decode(&s.candidate, &mut narrow2[..n], |z| z),
                     }
@@ -289,11 +261,7 @@ fn coder_study(dem: &str, by: &BTreeMap<u8, Vec<&Sample>>, fusion: &mut Vec<Stri
             .iter()
             .filter(|s| s.kind == 'i' && s.factor > 1)
             .map(|s| {
-                let r: Vec<i64> = s
-                    .codes
-                    .iter()
-                    .map(|&z| i64::from((z >> 1) as i32 ^ -((z & 1) as i32)))
-                    .collect();
+                let r: Vec<i64> = s.codes.iter().map(|&z| tans::residual(z)).collect();
                 let config = pco::ChunkConfig::default().with_delta_spec(pco::DeltaSpec::NoOp);
                 let coded = pco::standalone::simple_compress(&r, &config).expect("pco");
                 (coded, r.len(), s.pco)
@@ -367,26 +335,23 @@ fn fused_rebuild(dem: &str, id: u8, streams: &[&Stream]) -> String {
     let mut r = vec![0i64; 1 << 17];
     let mut above = vec![0i64; 1 << 17];
     let (mut out, mut check) = (vec![0f32; 1 << 17], vec![0f32; 1 << 17]);
-    let unzigzag = |z: u32| i64::from((z >> 1) as i32 ^ -((z & 1) as i32));
+    let same_bits = |a: &[f32], b: &[f32]| a.iter().zip(b).all(|(a, b)| a.to_bits() == b.to_bits());
     for s in streams {
         let (n, w) = (s.codes.len(), width(s.codes.len()));
         pco_into(s.pco, &mut r[..n]);
         above[..w].fill(0);
         tans::planar(&r[..n], w, q, &mut above[..w], &mut check[..n]);
-        decoder.decode(&s.candidate, &mut r[..n], |z| unzigzag(z) * s.factor);
+        decoder.decode(&s.candidate, &mut r[..n], |z| tans::residual(z) * s.factor);
         above[..w].fill(0);
         tans::planar(&r[..n], w, q, &mut above[..w], &mut out[..n]);
-        assert!(out[..n]
-            .iter()
-            .zip(&check[..n])
-            .all(|(a, b)| a.to_bits() == b.to_bits()));
+        assert!(
+            same_bits(&out[..n], &check[..n]),
+            "{dem}: the candidate's rebuild differs"
+        );
         above[..w].fill(0);
         decoder.decode_planar(&s.candidate, s.factor, w, q, &mut above[..w], &mut out[..n]);
         assert!(
-            out[..n]
-                .iter()
-                .zip(&check[..n])
-                .all(|(a, b)| a.to_bits() == b.to_bits()),
+            same_bits(&out[..n], &check[..n]),
             "{dem}: the fused rebuild differs"
         );
     }
@@ -400,7 +365,7 @@ fn fused_rebuild(dem: &str, id: u8, streams: &[&Stream]) -> String {
                     tans::planar(&r[..n], w, q, &mut above[..w], &mut out[..n]);
                 }
                 1 => {
-                    decoder.decode(&s.candidate, &mut r[..n], |z| unzigzag(z) * s.factor);
+                    decoder.decode(&s.candidate, &mut r[..n], |z| tans::residual(z) * s.factor);
                     tans::planar(&r[..n], w, q, &mut above[..w], &mut out[..n]);
                 }
                 _ => decoder.decode_planar(
@@ -563,6 +528,9 @@ fn main() {
         println!("|---|---|---|---|---|---|---|---|---|---|---|");
     }
     let mut fusion = Vec::new();
+    if study {
+        tans::check_edges();
+    }
     let mut all_dems = dems::dems();
     // Float heights off any lattice (encodings 3, 4, 6 and 8), when ../shared/data has them.
     let root = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"));
