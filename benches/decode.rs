@@ -24,7 +24,7 @@
 //!   default level), inflated: a COG tile's decoder without its predictor.
 //!
 //! `FMRH_CODER_STUDY=1` prints instead, per DEM and encoding, the residual streams coded by
-//! the candidate coder of `common/tans.rs` beside pco: bytes, and ns a number decoded, the
+//! the candidate coder (`fmrh::codec::tans`, planned for format 7) beside pco: bytes, and ns a number decoded, the
 //! two decoders' passes alternated (`FMRH_CODER_LOOP=DEM:ID` adds 10 s of the candidate
 //! alone on those streams, to profile); then a table of the lattice streams rebuilt into
 //! samples by the planar rule after pco, after the candidate, and fused with the candidate.
@@ -44,6 +44,7 @@ use std::io::{Read, Write};
 use std::sync::Arc;
 use std::time::Instant;
 
+use fmrh::codec::tans::{self as coder, Decoder};
 use fmrh::codec::{self, voids, Encoding};
 use fmrh::format::payload::{self, ParentGrid, Placement};
 use fmrh::store::Store;
@@ -152,7 +153,10 @@ struct Stream<'a> {
     pco: &'a [u8],
     kind: char,
     codes: Vec<u32>,
+    /// The candidate's stream.
     candidate: Vec<u8>,
+    /// The bytes its encoding stores before the stream: the factor's LEB128 (lattice).
+    prefix: usize,
     factor: i64,
 }
 
@@ -164,8 +168,8 @@ fn gcd(a: u64, b: u64) -> u64 {
     }
 }
 
-/// `FMRH_CODER_STUDY=1`: the residual streams of each encoding coded by the candidate of
-/// `common/tans.rs` beside pco: bytes, and ns a number decoded (passes alternated).
+/// `FMRH_CODER_STUDY=1`: the residual streams of each encoding coded by the candidate
+/// (`fmrh::codec::tans`) beside pco: bytes, and ns a number decoded (passes alternated).
 fn coder_study(dem: &str, by: &BTreeMap<u8, Vec<&Sample>>, fusion: &mut Vec<String>) {
     use pco::standalone::simple_decompress;
     for (id, group) in by {
@@ -174,7 +178,7 @@ fn coder_study(dem: &str, by: &BTreeMap<u8, Vec<&Sample>>, fusion: &mut Vec<Stri
         for (pco, kind) in group.iter().filter_map(|s| s.pco_stream()) {
             // The lattice residuals divided by their greatest common divisor first (pco finds
             // such a multiplier too: Puget 4k's are all multiples of 256), which the
-            // candidate would store in its header (counted below as 4 bytes).
+            // candidate's encodings store before the stream (counted below as its LEB128).
             let (codes, factor): (Option<Vec<u32>>, i64) = match kind {
                 'i' => {
                     let r = simple_decompress::<i64>(pco).expect("pco");
@@ -192,20 +196,26 @@ fn coder_study(dem: &str, by: &BTreeMap<u8, Vec<&Sample>>, fusion: &mut Vec<Stri
                 skipped += 1;
                 continue;
             };
-            let Some(mut candidate) = tans::encode(&codes) else {
+            if codes.is_empty() {
                 continue; // no numbers: pco's empty stream is all either would store
-            };
-            let mut back = vec![0u32; codes.len()];
-            tans::Decoder::default().decode(&candidate, &mut back, |v| v);
-            assert_eq!(back, codes, "{dem}: the candidate coder lost a code");
-            if kind == 'i' {
-                candidate.extend_from_slice(&[0; 4]); // the factor's room
             }
+            let mut candidate = Vec::new();
+            coder::encode(&codes, &mut candidate);
+            let mut back = vec![0u32; codes.len()];
+            Decoder::default()
+                .decode(&candidate, &mut back, |v| v)
+                .expect("the coder's own stream");
+            assert_eq!(back, codes, "{dem}: the candidate coder lost a code");
+            let prefix = match kind {
+                'i' => (64 - factor.leading_zeros() as usize).div_ceil(7).max(1),
+                _ => 0,
+            };
             streams.push(Stream {
                 pco,
                 kind,
                 codes,
                 candidate,
+                prefix,
                 factor,
             });
         }
@@ -214,22 +224,22 @@ fn coder_study(dem: &str, by: &BTreeMap<u8, Vec<&Sample>>, fusion: &mut Vec<Stri
         }
         if std::env::var("FMRH_CODER_LOOP").is_ok_and(|l| l == format!("{dem}:{id}")) {
             // To profile the candidate alone: its decoding of these streams for 10 s.
-            let mut decoder = tans::Decoder::default();
+            let mut decoder = Decoder::default();
             let mut out = vec![0u32; 1 << 17];
             let t = Instant::now();
             while t.elapsed().as_secs_f64() < 10.0 {
                 for s in &streams {
-                    decoder.decode(&s.candidate, &mut out[..s.codes.len()], |z| z);
-                    std::hint::black_box(&out);
+                    let decoded = decoder.decode(&s.candidate, &mut out[..s.codes.len()], |z| z);
+                    std::hint::black_box((&out, decoded.is_ok()));
                 }
             }
         }
         let numbers: usize = streams.iter().map(|s| s.codes.len()).sum();
         let pco_bytes: usize = streams.iter().map(|s| s.pco.len()).sum();
-        let cand_bytes: usize = streams.iter().map(|s| s.candidate.len()).sum();
+        let cand_bytes: usize = streams.iter().map(|s| s.prefix + s.candidate.len()).sum();
         let (mut wide, mut narrow) = (vec![0i64; 1 << 17], vec![0u32; 1 << 17]);
         let (mut wide2, mut narrow2) = (wide.clone(), narrow.clone());
-        let mut decoder = tans::Decoder::default();
+        let mut decoder = Decoder::default();
         let (pco_t, cand_t) = timed_pair(
             || {
                 for s in &streams {
@@ -244,14 +254,14 @@ fn coder_study(dem: &str, by: &BTreeMap<u8, Vec<&Sample>>, fusion: &mut Vec<Stri
             || {
                 for s in &streams {
                     let n = s.codes.len();
-                    match s.kind {
+                    let decoded = match s.kind {
                         // As pco gives them: the residual, not its zigzag code.
                         'i' => decoder.decode(&s.candidate, &mut wide2[..n], |z| {
                             tans::residual(z) * s.factor
                         }),
                         _ => decoder.decode(&s.candidate, &mut narrow2[..n], |z| z),
-                    }
-                    std::hint::black_box((&wide2, &narrow2));
+                    };
+                    std::hint::black_box((&wide2, &narrow2, decoded.is_ok()));
                 }
             },
         );
@@ -318,8 +328,7 @@ fn coder_study(dem: &str, by: &BTreeMap<u8, Vec<&Sample>>, fusion: &mut Vec<Stri
 /// The lattice streams of one encoding rebuilt into samples by encoding 2's planar rule (each
 /// stream taken as a square grid where its length is a square, else one row: the work of
 /// encodings 2 and 7, not their exact layout), three ways: pco then the rebuild, the
-/// candidate then the rebuild, and the candidate fused with it (`tans::Decoder::
-/// decode_planar`). The three are checked bit for bit against each other first; a row of ns
+/// candidate then the rebuild, and the candidate fused with it (`tans::decode_planar`). The three are checked bit for bit against each other first; a row of ns
 /// a number, the three passes alternated.
 fn fused_rebuild(dem: &str, id: u8, streams: &[&Stream]) -> String {
     let q = 0.1;
@@ -331,7 +340,7 @@ fn fused_rebuild(dem: &str, id: u8, streams: &[&Stream]) -> String {
             n
         }
     };
-    let mut decoder = tans::Decoder::default();
+    let mut decoder = Decoder::default();
     let mut r = vec![0i64; 1 << 17];
     let mut above = vec![0i64; 1 << 17];
     let (mut out, mut check) = (vec![0f32; 1 << 17], vec![0f32; 1 << 17]);
@@ -341,7 +350,9 @@ fn fused_rebuild(dem: &str, id: u8, streams: &[&Stream]) -> String {
         pco_into(s.pco, &mut r[..n]);
         above[..w].fill(0);
         tans::planar(&r[..n], w, q, &mut above[..w], &mut check[..n]);
-        decoder.decode(&s.candidate, &mut r[..n], |z| tans::residual(z) * s.factor);
+        decoder
+            .decode(&s.candidate, &mut r[..n], |z| tans::residual(z) * s.factor)
+            .expect("the coder's own stream");
         above[..w].fill(0);
         tans::planar(&r[..n], w, q, &mut above[..w], &mut out[..n]);
         assert!(
@@ -349,7 +360,15 @@ fn fused_rebuild(dem: &str, id: u8, streams: &[&Stream]) -> String {
             "{dem}: the candidate's rebuild differs"
         );
         above[..w].fill(0);
-        decoder.decode_planar(&s.candidate, s.factor, w, q, &mut above[..w], &mut out[..n]);
+        tans::decode_planar(
+            &mut decoder,
+            &s.candidate,
+            s.factor,
+            w,
+            q,
+            &mut above[..w],
+            &mut out[..n],
+        );
         assert!(
             same_bits(&out[..n], &check[..n]),
             "{dem}: the fused rebuild differs"
@@ -365,10 +384,13 @@ fn fused_rebuild(dem: &str, id: u8, streams: &[&Stream]) -> String {
                     tans::planar(&r[..n], w, q, &mut above[..w], &mut out[..n]);
                 }
                 1 => {
-                    decoder.decode(&s.candidate, &mut r[..n], |z| tans::residual(z) * s.factor);
+                    let decoded =
+                        decoder.decode(&s.candidate, &mut r[..n], |z| tans::residual(z) * s.factor);
+                    std::hint::black_box(decoded.is_ok());
                     tans::planar(&r[..n], w, q, &mut above[..w], &mut out[..n]);
                 }
-                _ => decoder.decode_planar(
+                _ => tans::decode_planar(
+                    &mut decoder,
                     &s.candidate,
                     s.factor,
                     w,
@@ -528,9 +550,6 @@ fn main() {
         println!("|---|---|---|---|---|---|---|---|---|---|---|");
     }
     let mut fusion = Vec::new();
-    if study {
-        tans::check_edges();
-    }
     let mut all_dems = dems::dems();
     // Float heights off any lattice (encodings 3, 4, 6 and 8), when ../shared/data has them.
     let root = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"));

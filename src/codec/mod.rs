@@ -48,6 +48,8 @@
 #[macro_use]
 mod wide;
 pub mod parent;
+#[cfg(any(test, feature = "testing"))]
+pub mod tans;
 pub mod voids;
 
 #[cfg(any(test, feature = "testing"))]
