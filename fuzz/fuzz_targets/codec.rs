@@ -3,13 +3,17 @@
 //! and grid payload, and a block coded against a parent grid), which must decode or fail with
 //! an error (never panic, never write past the block), or the rest is samples
 //! (`f32` bits, or lattice values), which must encode and decode back bit for bit, alone and
-//! against a parent grid holding every other sample (format 4).
+//! against a parent grid holding every other sample (format 4). Both ways, the same bytes also
+//! go through the binned tANS coder planned for format 7 (`codec::tans`): as a stream of
+//! `width × rows` codes, which must decode or fail, and whose codes, when it decodes, must
+//! code and decode back; and the samples' bits as codes, which must round-trip.
 //!
 //! cargo fuzz run --sanitizer none codec
 
 #![no_main]
 
 use fmrh::codec::parent::{decode_against, encode_against, Axes, Parent};
+use fmrh::codec::tans;
 use fmrh::format::payload::{self, ParentGrid, Placement};
 use libfuzzer_sys::fuzz_target;
 
@@ -36,6 +40,17 @@ fn parent_heights(samples: &[f32], width: usize, pc: &[u64], pr: &[u64]) -> Vec<
             })
         })
         .collect()
+}
+
+/// Codes `codes` with the tANS coder and decodes them back, panicking on any difference.
+fn codes_round_trip(codes: &[u32]) {
+    let mut stream = Vec::new();
+    tans::encode(codes, &mut stream);
+    let mut back = vec![0u32; codes.len()];
+    tans::Decoder::default()
+        .decode(&stream, &mut back, |v| v)
+        .expect("the coder's own stream decodes");
+    assert_eq!(back, codes);
 }
 
 fuzz_target!(|data: &[u8]| {
@@ -84,6 +99,10 @@ fuzz_target!(|data: &[u8]| {
         if let Some(p) = ParentGrid::from_parts(pc.clone(), pr.clone(), heights.clone()) {
             let _ = payload::decode(rest, &block, Some(&p));
         }
+        let mut codes = vec![0u32; width * rows];
+        if tans::Decoder::default().decode(rest, &mut codes, |v| v).is_ok() {
+            codes_round_trip(&codes);
+        }
         return;
     }
     let n = width * rows;
@@ -104,6 +123,7 @@ fuzz_target!(|data: &[u8]| {
             }
         })
         .collect();
+    codes_round_trip(&samples.iter().map(|v| v.to_bits()).collect::<Vec<u32>>());
     let bytes = fmrh::codec::encode(&samples, width);
     let mut out = vec![0.0f32; n];
     fmrh::codec::decode(&bytes, width, &mut out).expect("an encoding decodes");
