@@ -29,6 +29,11 @@
 //! alone on those streams, to profile); then a table of the lattice streams rebuilt into
 //! samples by the planar rule after pco, after the candidate, and fused with the candidate.
 //!
+//! `FMRH_PREDICT_STUDY=1` prints instead, per DEM, encoding 5's blocks rebuilt by two
+//! stand-alone kernels, the parent interpolated from its heights in `f64` (format 6) and from
+//! its lattice codes in `i32` (a candidate for format 7), ns a sample, passes alternated,
+//! beside the codec's own decoding of the same payloads (`common/predict.rs`).
+//!
 //! Every payload is checked bit for bit against its first decoding before it is timed.
 //! Times are ns per decoded sample; on a noisy machine read the ratios within a row.
 //!
@@ -36,6 +41,8 @@
 
 #[path = "common/dems.rs"]
 mod dems;
+#[path = "common/predict.rs"]
+mod predict;
 #[path = "common/tans.rs"]
 mod tans;
 
@@ -510,6 +517,72 @@ fn timed_pair(mut a: impl FnMut(), mut b: impl FnMut()) -> (f64, f64) {
     (median(ta), median(tb))
 }
 
+/// `FMRH_PREDICT_STUDY=1`: encoding 5's blocks of `dem` rebuilt by the `f64` and the `i32`
+/// kernel of `common/predict.rs`, checked bit for bit, then timed side by side (three
+/// alternated medians of five), beside the codec decoding the same payloads (a median of
+/// five after each).
+fn predict_study(dem: &str, by: &BTreeMap<u8, Vec<&Sample>>) {
+    let Some(group) = by.get(&(Encoding::LatticeFromParent as u8)) else {
+        return;
+    };
+    let mut blocks = Vec::new();
+    let mut used = Vec::new();
+    for s in group {
+        let mut out = vec![0f32; s.coded];
+        s.decode_codec(&mut out);
+        let code = s.code();
+        let q = f64::from_le_bytes(code[1..9].try_into().expect("a step"));
+        if let Some(b) = predict::Block::new(&out, s.width, q) {
+            assert!(
+                predict::check(&b),
+                "{dem}: a kernel of the study lost a sample"
+            );
+            blocks.push(b);
+            used.push(*s);
+        }
+    }
+    if blocks.is_empty() {
+        return;
+    }
+    let n: usize = blocks.iter().map(|b| b.len()).sum();
+    let blocks = &blocks;
+    let kernel = |integer: bool| {
+        let (mut scratch, mut out) = (predict::Scratch::default(), vec![0f32; 1 << 17]);
+        move || {
+            for b in blocks {
+                predict::run(integer, b, &mut scratch, &mut out[..b.len()]);
+                std::hint::black_box(&out);
+            }
+        }
+    };
+    let (mut float, mut integer) = (kernel(false), kernel(true));
+    let ns = |t: f64| 1e9 * t / n as f64;
+    let mut buf = vec![0f32; 1 << 17];
+    for _ in 0..3 {
+        let (f, i) = timed_pair(&mut float, &mut integer);
+        let codec = median(
+            (0..5)
+                .map(|_| {
+                    let t = Instant::now();
+                    for s in &used {
+                        s.decode_codec(&mut buf[..s.coded]);
+                        std::hint::black_box(&buf);
+                    }
+                    t.elapsed().as_secs_f64()
+                })
+                .collect(),
+        );
+        println!(
+            "| {dem} | {} | {n} | {:.2} | {:.2} | {:.2} | {:.2} |",
+            blocks.len(),
+            ns(codec),
+            ns(f),
+            ns(i),
+            i / f
+        );
+    }
+}
+
 /// The code of `group` decoded round after round, rounds of the kernels' AVX2 build (where
 /// the CPU has it) alternating with rounds of their baseline build: each one's best round's
 /// ns a sample.
@@ -581,6 +654,10 @@ fn main() {
         }
         if study {
             coder_study(dem.name, &by, &mut fusion);
+            continue;
+        }
+        if std::env::var_os("FMRH_PREDICT_STUDY").is_some() {
+            predict_study(dem.name, &by);
             continue;
         }
         let mut totals = [0.0f64; 5];
