@@ -318,34 +318,23 @@ fn kernel_i(b: &Block, s: &mut Scratch, out: &mut [f32]) {
     }
 }
 
-/// The two kernels built for AVX2, as the codec's are where the CPU has it.
+/// Kernel `integer` or not built for AVX2, as the codec's kernels are where the CPU has it.
 ///
 /// # Safety
 /// The CPU must have AVX2.
 #[target_feature(enable = "avx2")]
-unsafe fn kernel_f_avx2(b: &Block, s: &mut Scratch, out: &mut [f32]) {
-    kernel_f(b, s, out)
-}
-
-/// See [`kernel_f_avx2`].
-///
-/// # Safety
-/// The CPU must have AVX2.
-#[target_feature(enable = "avx2")]
-unsafe fn kernel_i_avx2(b: &Block, s: &mut Scratch, out: &mut [f32]) {
-    kernel_i(b, s, out)
+unsafe fn run_avx2(integer: bool, b: &Block, s: &mut Scratch, out: &mut [f32]) {
+    match integer {
+        true => kernel_i(b, s, out),
+        false => kernel_f(b, s, out),
+    }
 }
 
 /// Runs kernel `integer` or not on `b` into `out`, the AVX2 build where the CPU has it.
 pub fn run(integer: bool, b: &Block, s: &mut Scratch, out: &mut [f32]) {
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU has AVX2, checked just above.
-        unsafe {
-            match integer {
-                true => kernel_i_avx2(b, s, out),
-                false => kernel_f_avx2(b, s, out),
-            }
-        }
+        unsafe { run_avx2(integer, b, s, out) }
     } else if integer {
         kernel_i(b, s, out)
     } else {

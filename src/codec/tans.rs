@@ -58,6 +58,8 @@
 //! of the stack for the same loop to finish on. Nothing is allocated from a number in the stream: the
 //! table is at most `2^12` entries whatever the header says, in a buffer the caller keeps.
 
+use super::voids::varint;
+
 /// Codes below this are symbols of their own.
 const DIRECT: u32 = 16;
 /// The fewest and most table bits `L`.
@@ -182,15 +184,6 @@ fn normalize(counts: &[u64], n: u64, log: u32) -> Vec<u32> {
     w
 }
 
-/// Appends the LEB128 varint of `v` to `out`.
-fn write_count(mut v: u32, out: &mut Vec<u8>) {
-    while v >= 0x80 {
-        out.push(v as u8 | 0x80);
-        v >>= 7;
-    }
-    out.push(v as u8);
-}
-
 /// The count at the start of `stream` and the bytes it took.
 fn read_count(stream: &[u8]) -> Result<(u64, usize), StreamError> {
     let mut v = 0u64;
@@ -214,7 +207,7 @@ pub fn encode(codes: &[u32], out: &mut Vec<u8>) {
     let Ok(count) = u32::try_from(codes.len()) else {
         panic!("a stream of {} codes", codes.len());
     };
-    write_count(count, out);
+    varint(u64::from(count), out);
     if codes.is_empty() {
         return;
     }
@@ -663,7 +656,7 @@ mod tests {
     fn counts_round_trip() {
         for v in [0, 1, 127, 128, 16_383, 16_384, u32::MAX] {
             let mut out = Vec::new();
-            write_count(v, &mut out);
+            varint(u64::from(v), &mut out);
             assert_eq!(read_count(&out), Ok((u64::from(v), out.len())));
         }
     }
@@ -764,7 +757,7 @@ mod tests {
             // (At 256 cases this found the tail's overrun, kept as a fixed case above.)
             // The right count first, so that the bytes reach the table and the codes.
             let mut stream = Vec::new();
-            write_count(n, &mut stream);
+            varint(u64::from(n), &mut stream);
             stream.extend_from_slice(&bytes);
             let mut out = vec![0u32; n as usize];
             if Decoder::default().decode(&stream, &mut out, |v| v).is_ok() {

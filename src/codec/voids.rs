@@ -88,7 +88,8 @@ fn to_runs(bitmap: &[u8], n: usize, width: usize) -> Vec<u8> {
     out
 }
 
-fn varint(mut v: u64, out: &mut Vec<u8>) {
+/// Appends the LEB128 varint of `v` to `out` (7 bits a byte, low first).
+pub(super) fn varint(mut v: u64, out: &mut Vec<u8>) {
     loop {
         let byte = (v & 0x7f) as u8;
         v >>= 7;
