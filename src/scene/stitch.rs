@@ -51,7 +51,7 @@ impl CellMap {
         };
         let (width, height) = (x1 - x0, y1 - y0);
         let area = u64::from(width) * u64::from(height);
-        if area > (blocks.len() as u64 * cells_per_block).min(1 << 20) {
+        if area > (blocks.len() as u64).saturating_mul(cells_per_block).min(1 << 20) {
             return empty;
         }
         let mut cells = vec![0u32; area as usize];
