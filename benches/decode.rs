@@ -34,6 +34,12 @@
 //! its lattice codes in `i32` (a candidate for format 7), ns a sample, passes alternated,
 //! beside the codec's own decoding of the same payloads (`common/predict.rs`).
 //!
+//! `FMRH_RECODE_STUDY=1` prints instead, per DEM and stored encoding, the same payloads
+//! coded again as format 7's writer codes them (residuals in the tANS stream, encodings 9 to
+//! 14, pco where they do not fit; alone or against the same grid, the smaller, as the writer
+//! keeps), beside the stored ones: bytes a sample, the encodings they became, and ns a decoded
+//! sample for the codec and the whole payload, the two codings' passes alternated.
+//!
 //! Every payload is checked bit for bit against its first decoding before it is timed.
 //! Times are ns per decoded sample; on a noisy machine read the ratios within a row.
 //!
@@ -57,6 +63,7 @@ use fmrh::format::payload::{self, ParentGrid, Placement};
 use fmrh::store::Store;
 
 /// One stored payload and all it decodes with.
+#[derive(Clone)]
 struct Sample {
     stored: Vec<u8>,
     placement: Placement,
@@ -123,6 +130,8 @@ impl Sample {
             Encoding::FloatFromParent | Encoding::FloatPlanarFromParent => {
                 Some((after_voids(body, n, w), 'u'))
             }
+            // tANS (format 7): no pco stream.
+            _ => None,
         }
     }
 }
@@ -483,6 +492,117 @@ fn payloads(store: &Store) -> Vec<Sample> {
     out
 }
 
+/// `s` coded again with residuals by `coder`, as a writer does: alone, and against its
+/// grid when it has one, the smaller kept (a tie goes to alone).
+fn recoded(s: &Sample, coder: codec::Coder) -> Sample {
+    let coding = payload::Coding {
+        coder,
+        ..payload::Coding::default()
+    };
+    let alone = payload::encode(&s.layout, &s.placement, coding, None).expect("codes");
+    let against = s
+        .parent
+        .as_ref()
+        .and_then(|p| payload::encode(&s.layout, &s.placement, coding, Some(p)));
+    let (stored, parent) = match against {
+        Some(a) if a.len() < alone.len() => (a, s.parent.clone()),
+        _ => (alone, None),
+    };
+    let again = payload::decode(&stored, &s.placement, parent.as_deref()).expect("decodes");
+    assert_eq!(again, s.layout, "a recoded payload decoded differently");
+    Sample {
+        stored,
+        parent,
+        ..s.clone()
+    }
+}
+
+/// The samples' codes of `all` decoded into `buf`.
+fn codecs<'a>(all: impl Iterator<Item = &'a Sample>, buf: &mut [f32]) {
+    for s in all {
+        s.decode_codec(&mut buf[..s.coded]);
+        std::hint::black_box(&buf);
+    }
+}
+
+/// The payloads of `all` decoded to their layouts.
+fn payloads_decoded<'a>(all: impl Iterator<Item = &'a Sample>) {
+    for s in all {
+        std::hint::black_box(
+            payload::decode(&s.stored, &s.placement, s.parent.as_deref()).expect("decodes"),
+        );
+    }
+}
+
+/// `FMRH_RECODE_STUDY=1`: each stored encoding's payloads beside the same coded by format
+/// 7's writer (tANS residuals), passes alternated.
+fn recode_study(dem: &str, by: &BTreeMap<u8, Vec<&Sample>>) {
+    let (mut bytes, mut t, mut samples) = ([0usize; 2], [0.0f64; 4], 0usize);
+    for (id, group) in by {
+        let tans: Vec<Sample> = group
+            .iter()
+            .map(|s| recoded(s, codec::Coder::Tans))
+            .collect();
+        let mut became: BTreeMap<u8, usize> = BTreeMap::new();
+        for s in &tans {
+            *became.entry(s.encoding() as u8).or_default() += 1;
+        }
+        let n: usize = group.iter().map(|s| s.coded).sum();
+        let b = [
+            group.iter().map(|s| s.stored.len()).sum::<usize>(),
+            tans.iter().map(|s| s.stored.len()).sum(),
+        ];
+        let (mut buf, mut buf2) = (vec![0f32; 1 << 16], vec![0f32; 1 << 16]);
+        let (c6, c7) = timed_pair(
+            || codecs(group.iter().copied(), &mut buf),
+            || codecs(tans.iter(), &mut buf2),
+        );
+        let (p6, p7) = timed_pair(
+            || payloads_decoded(group.iter().copied()),
+            || payloads_decoded(tans.iter()),
+        );
+        let ns = |x: f64| 1e9 * x / n as f64;
+        println!(
+            "| {dem} | {id} {:?} | {} | {n} | {:.3} | {:.3} | {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |",
+            Encoding::from_id(*id).expect("an id"),
+            group.len(),
+            b[0] as f64 / n as f64,
+            b[1] as f64 / n as f64,
+            became
+                .iter()
+                .map(|(e, c)| format!("{e}: {c}"))
+                .collect::<Vec<_>>()
+                .join(", "),
+            ns(c6),
+            ns(c7),
+            c7 / c6,
+            ns(p6),
+            ns(p7),
+            p7 / p6,
+        );
+        bytes[0] += b[0];
+        bytes[1] += b[1];
+        for (slot, x) in t.iter_mut().zip([c6, c7, p6, p7]) {
+            *slot += x;
+        }
+        samples += n;
+    }
+    let ns = |x: f64| 1e9 * x / samples as f64;
+    println!(
+        "| {dem} | all | {} | {samples} | {:.3} | {:.3} | {:.3}× bytes | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |",
+        by.values().map(Vec::len).sum::<usize>(),
+        bytes[0] as f64 / samples as f64,
+        bytes[1] as f64 / samples as f64,
+        bytes[1] as f64 / bytes[0] as f64,
+        ns(t[0]),
+        ns(t[1]),
+        t[1] / t[0],
+        ns(t[2]),
+        ns(t[3]),
+        t[3] / t[2],
+    );
+}
+
 fn median(mut t: Vec<f64>) -> f64 {
     t.sort_by(f64::total_cmp);
     t[t.len() / 2]
@@ -611,7 +731,13 @@ fn codec_loop(group: &[&Sample]) -> (f64, f64) {
 fn main() {
     let dir = tempfile::tempdir().expect("temp dir");
     let study = std::env::var_os("FMRH_CODER_STUDY").is_some();
-    if study {
+    let recode = std::env::var_os("FMRH_RECODE_STUDY").is_some();
+    if recode {
+        println!(
+            "| DEM | stored encoding | payloads | samples | bytes/sample | recoded bytes/sample | recoded encodings (payloads) | codec ns | recoded codec ns | recoded / stored | payload ns | recoded payload ns | recoded / stored |"
+        );
+        println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    } else if study {
         println!(
             "| DEM | encoding | streams | left to pco | numbers | pco bytes | candidate / pco bytes | pco ns a number | candidate ns a number | candidate / pco time |"
         );
@@ -654,6 +780,10 @@ fn main() {
         }
         if study {
             coder_study(dem.name, &by, &mut fusion);
+            continue;
+        }
+        if recode {
+            recode_study(dem.name, &by);
             continue;
         }
         if std::env::var_os("FMRH_PREDICT_STUDY").is_some() {

@@ -357,7 +357,8 @@ fn against(s: &Samples, v: &[f32], ps: &Samples, pv: &[f32]) -> usize {
         },
         heights: pv,
     };
-    let bytes = encode_against(v, at, parent, None).expect("a child of its parent encodes");
+    let bytes = encode_against(v, at, parent, None, fmrh::codec::Coder::default())
+        .expect("a child of its parent encodes");
     let mut out = vec![0.0f32; v.len()];
     decode_against(&bytes, at, parent, &mut out).expect("decodes");
     assert!(

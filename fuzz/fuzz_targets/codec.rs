@@ -3,8 +3,9 @@
 //! and grid payload, and a block coded against a parent grid), which must decode or fail with
 //! an error (never panic, never write past the block), or the rest is samples
 //! (`f32` bits, or lattice values), which must encode and decode back bit for bit, alone and
-//! against a parent grid holding every other sample (format 4). Both ways, the same bytes also
-//! go through the binned tANS coder planned for format 7 (`codec::tans`): as a stream of
+//! against a parent grid holding every other sample (format 4), their residuals coded by pco
+//! or, by the third byte's bit 2, by format 7's tANS stream (encodings 9 to 14). Both ways,
+//! the same bytes also go through the binned tANS coder alone (`codec::tans`): as a stream of
 //! `width × rows` codes, which must decode or fail, and whose codes, when it decodes, must
 //! code and decode back; and the samples' bits as codes, which must round-trip.
 //!
@@ -13,7 +14,7 @@
 #![no_main]
 
 use fmrh::codec::parent::{decode_against, encode_against, Axes, Parent};
-use fmrh::codec::tans;
+use fmrh::codec::{tans, Coder};
 use fmrh::format::payload::{self, ParentGrid, Placement};
 use libfuzzer_sys::fuzz_target;
 
@@ -124,7 +125,8 @@ fuzz_target!(|data: &[u8]| {
         })
         .collect();
     codes_round_trip(&samples.iter().map(|v| v.to_bits()).collect::<Vec<u32>>());
-    let bytes = fmrh::codec::encode(&samples, width);
+    let coder = if mode & 4 != 0 { Coder::Tans } else { Coder::Pco };
+    let bytes = fmrh::codec::encode_on(&samples, width, None, coder);
     let mut out = vec![0.0f32; n];
     fmrh::codec::decode(&bytes, width, &mut out).expect("an encoding decodes");
     for (a, b) in samples.iter().zip(&out) {
@@ -140,7 +142,7 @@ fuzz_target!(|data: &[u8]| {
     let odd_nan = samples
         .iter()
         .any(|v| v.is_nan() && v.to_bits() != fmrh::codec::VOID_BITS);
-    match encode_against(&samples, at, parent, None) {
+    match encode_against(&samples, at, parent, None, coder) {
         Some(bytes) => {
             let mut back = vec![0.0f32; n];
             decode_against(&bytes, at, parent, &mut back).expect("an encoding decodes");

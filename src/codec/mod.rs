@@ -14,6 +14,7 @@
 //! | 4 | pco on 2D-predicted residuals of the `f32` bits | floats off any lattice |
 //! | 5, 6 | lattice or float, against a parent grid ([`parent`]): the held samples free, the others predicted from the grid | a block (format 4) or grid (format 5) whose parent's grid holds a quarter of its samples |
 //! | 7, 8 | lattice or float, the held samples free, the others 2D-predicted as in 2 and 4 | the same, where the block's own neighbours predict better |
+//! | 9–14 | 2, 4, 5, 6, 7 and 8 with their residuals in the binned tANS stream ([`tans`]) rather than pco | a writer of format 7 (lattice ones: where the residuals over their common factor fit an `i32`) |
 //!
 //! Encodings 5 to 8 code a block *against its parent's grid*: the samples the parent holds
 //! cost nothing, the others are residuals against an interpolation of the parent (5, 6) or
@@ -25,6 +26,8 @@
 //! (pcodec, a pure-Rust codec for numeric columns) then codes the residuals with binning and
 //! tANS. Measured on 65² blocks (`cargo bench --bench codecs`), this keeps 29 % of Puget
 //! Sound 1k's bytes where zstd keeps 57 % and plain pco 33 %, and decodes at about 1 GB/s.
+//! Format 7 codes them with a binned tANS stream of our own instead ([`tans`], [`Coder`]):
+//! the same idea without pco's generality, smaller and faster to decode (`docs/format-7-plan.md`).
 //!
 //! **Voids** are the canonical NaN (`0x7FC00000`). The lattice encoding lists them in a
 //! bitmap ([`voids`]: raw, or since format 5 as runs of the row-to-row changes) and predicts
@@ -48,15 +51,17 @@
 #[macro_use]
 mod wide;
 pub mod parent;
-#[cfg(any(test, feature = "testing"))]
+mod residuals;
 pub mod tans;
 pub mod voids;
+
+pub use residuals::Coder;
 
 #[cfg(any(test, feature = "testing"))]
 pub use wide::baseline as with_baseline_kernels;
 
 use pco::standalone::{simple_compress, DecompressorItem, FileDecompressor};
-use pco::{ChunkConfig, DeltaSpec};
+use pco::ChunkConfig;
 
 /// The bits of a void sample.
 pub const VOID_BITS: u32 = 0x7FC0_0000;
@@ -93,7 +98,29 @@ pub enum Encoding {
     /// The `f32` bits of the samples the parent's grid does not hold, 2D-predicted from
     /// the block's own samples.
     FloatPlanarFromParent = 8,
+    /// [`Encoding::Lattice`] with its residuals in a tANS stream (format 7).
+    LatticeTans = 9,
+    /// [`Encoding::FloatPredicted`] with its residuals in a tANS stream.
+    FloatPredictedTans = 10,
+    /// [`Encoding::LatticeFromParent`] with its residuals in a tANS stream.
+    LatticeFromParentTans = 11,
+    /// [`Encoding::FloatFromParent`] with its residuals in a tANS stream.
+    FloatFromParentTans = 12,
+    /// [`Encoding::LatticePlanarFromParent`] with its residuals in a tANS stream.
+    LatticePlanarFromParentTans = 13,
+    /// [`Encoding::FloatPlanarFromParent`] with its residuals in a tANS stream.
+    FloatPlanarFromParentTans = 14,
 }
+
+/// The pco encodings with a tANS twin, and their twins, in pairs.
+const TANS_OF: [(Encoding, Encoding); 6] = [
+    (Encoding::Lattice, Encoding::LatticeTans),
+    (Encoding::FloatPredicted, Encoding::FloatPredictedTans),
+    (Encoding::LatticeFromParent, Encoding::LatticeFromParentTans),
+    (Encoding::FloatFromParent, Encoding::FloatFromParentTans),
+    (Encoding::LatticePlanarFromParent, Encoding::LatticePlanarFromParentTans),
+    (Encoding::FloatPlanarFromParent, Encoding::FloatPlanarFromParentTans),
+];
 
 impl Encoding {
     /// The encoding of id `byte`.
@@ -108,8 +135,43 @@ impl Encoding {
             6 => Encoding::FloatFromParent,
             7 => Encoding::LatticePlanarFromParent,
             8 => Encoding::FloatPlanarFromParent,
+            9 => Encoding::LatticeTans,
+            10 => Encoding::FloatPredictedTans,
+            11 => Encoding::LatticeFromParentTans,
+            12 => Encoding::FloatFromParentTans,
+            13 => Encoding::LatticePlanarFromParentTans,
+            14 => Encoding::FloatPlanarFromParentTans,
             _ => return None,
         })
+    }
+
+    /// The pco encoding of the same shape (itself for one that is not a tANS one): its
+    /// header, prediction and layout, which the decoders dispatch on.
+    pub fn shape(self) -> Encoding {
+        TANS_OF
+            .iter()
+            .find(|&&(_, t)| t == self)
+            .map_or(self, |&(p, _)| p)
+    }
+
+    /// The coder of this encoding's residuals.
+    pub fn coder(self) -> Coder {
+        if self.shape() == self {
+            Coder::Pco
+        } else {
+            Coder::Tans
+        }
+    }
+
+    /// This shape (a pco encoding) with its residuals coded by `coder`.
+    fn coded_by(self, coder: Coder) -> Encoding {
+        match coder {
+            Coder::Pco => self.shape(),
+            Coder::Tans => TANS_OF
+                .iter()
+                .find(|&&(p, _)| p == self)
+                .map_or(self, |&(_, t)| t),
+        }
     }
 
     /// The encoding `bytes` (an encoded block) uses.
@@ -140,6 +202,12 @@ pub enum DecodeError {
     /// The pco stream is damaged or holds the wrong count.
     #[error("pco stream: {0}")]
     Pco(String),
+    /// The tANS stream is damaged or holds the wrong count.
+    #[error("{0}")]
+    Tans(tans::StreamError),
+    /// A lattice tANS stream's common factor is not a LEB128 varint in `1..2^32`.
+    #[error("the residuals' common factor is not a varint in 1..2^32")]
+    Factor,
 }
 
 /// Encodes a `width`-wide row-major block, picking the smallest encoding.
@@ -148,15 +216,16 @@ pub enum DecodeError {
 /// If `samples.len()` is not a multiple of a non-zero `width` (a caller's bug).
 #[cfg(any(test, feature = "testing"))]
 pub fn encode(samples: &[f32], width: usize) -> Vec<u8> {
-    encode_on(samples, width, None)
+    encode_on(samples, width, None, Coder::default())
 }
 
 /// As [`encode`], also trying the lattice step `step` (a file's storage precision, which
-/// need not be one of [`LATTICE_STEPS`]). The coarsest step every sample lies on wins.
+/// need not be one of [`LATTICE_STEPS`]), with residuals coded by `coder`. The coarsest step
+/// every sample lies on wins.
 ///
 /// # Panics
 /// As [`encode`].
-pub fn encode_on(samples: &[f32], width: usize, step: Option<f64>) -> Vec<u8> {
+pub fn encode_on(samples: &[f32], width: usize, step: Option<f64>, coder: Coder) -> Vec<u8> {
     assert!(
         width > 0 && samples.len().is_multiple_of(width),
         "encode: {} samples in rows of {width}",
@@ -185,10 +254,10 @@ pub fn encode_on(samples: &[f32], width: usize, step: Option<f64>) -> Vec<u8> {
     }
     match steps.iter().find(|&&q| on_lattice(samples, q)) {
         // On a lattice the float encodings cannot win by much; skip their cost.
-        Some(&q) => keep(lattice(samples, width, q)),
+        Some(&q) => keep(lattice(samples, width, q, coder)),
         None => {
             keep(float_pco(samples));
-            keep(float_predicted(samples, width));
+            keep(float_predicted(samples, width, coder));
         }
     }
     best
@@ -216,7 +285,8 @@ pub fn decode(bytes: &[u8], width: usize, out: &mut [f32]) -> Result<(), DecodeE
             out.len()
         )));
     }
-    match encoding {
+    let coder = encoding.coder();
+    match encoding.shape() {
         Encoding::Raw => {
             if body.len() != 4 * out.len() {
                 return Err(length(format!(
@@ -247,7 +317,7 @@ pub fn decode(bytes: &[u8], width: usize, out: &mut [f32]) -> Result<(), DecodeE
             let (voids, rest) = voids::read(body[8], &body[9..], n, width).map_err(length)?;
             let voids = voids.as_deref();
             with_scratch(n, |k: &mut [i64]| {
-                pco_decode(rest, k)?;
+                residuals::read_lattice(coder, rest, k)?;
                 if lattice_from_residuals(k, voids, width, q, out) {
                     let (i, ki) = k
                         .iter()
@@ -269,25 +339,22 @@ pub fn decode(bytes: &[u8], width: usize, out: &mut [f32]) -> Result<(), DecodeE
             }
         }
         Encoding::FloatPco => pco_decode(body, out)?,
-        Encoding::LatticeFromParent
-        | Encoding::FloatFromParent
-        | Encoding::LatticePlanarFromParent
-        | Encoding::FloatPlanarFromParent => {
+        Encoding::FloatPredicted => with_scratch(out.len(), |u: &mut [u32]| {
+            residuals::read_float(coder, body, u)?;
+            float_from_residuals(u, width, out);
+            Ok::<(), DecodeError>(())
+        })?,
+        _ => {
             return Err(length(
                 "coded against a parent grid: decode with codec::parent".into(),
             ));
         }
-        Encoding::FloatPredicted => with_scratch(out.len(), |u: &mut [u32]| {
-            pco_decode(body, u)?;
-            float_from_residuals(u, width, out);
-            Ok::<(), DecodeError>(())
-        })?,
     }
     Ok(())
 }
 
 wide! {
-    /// Encoding 2's residuals `k` (decoded from pco) to heights in `out`, the voids of the
+    /// Encoding 2's residuals `k` (decoded from their stream) to heights in `out`, the voids of the
     /// bitmap `voids` left for the caller; says whether an index was out of range.
     fn lattice_from_residuals(
         k: &mut [i64],
@@ -312,7 +379,7 @@ wide! {
 }
 
 wide! {
-    /// Encoding 4's zigzag residuals `u` (decoded from pco) to heights in `out`.
+    /// Encoding 4's zigzag residuals `u` (decoded from their stream) to heights in `out`.
     fn float_from_residuals(u: &mut [u32], width: usize, out: &mut [f32]) {
         for r in u.iter_mut() {
             *r = unzigzag(*r);
@@ -458,7 +525,7 @@ fn unpredict<T: Wrapping>(k: &mut [T], width: usize) {
     }
 }
 
-fn lattice(samples: &[f32], width: usize, q: f64) -> Option<Vec<u8>> {
+fn lattice(samples: &[f32], width: usize, q: f64, coder: Coder) -> Option<Vec<u8>> {
     let n = samples.len();
     let mut k = vec![0i64; n];
     let mut residuals = vec![0i64; n];
@@ -476,10 +543,9 @@ fn lattice(samples: &[f32], width: usize, q: f64) -> Option<Vec<u8>> {
             residuals[i] = k[i].wrapping_sub(p);
         }
     }
-    let config = ChunkConfig::default().with_delta_spec(DeltaSpec::NoOp);
-    let coded = simple_compress(&residuals, &config).ok()?;
+    let (coder, coded) = residuals::code_lattice(coder, &residuals)?;
     let mut out = Vec::with_capacity(10 + bitmap.len() + coded.len());
-    out.push(Encoding::Lattice as u8);
+    out.push(Encoding::Lattice.coded_by(coder) as u8);
     out.extend_from_slice(&q.to_le_bytes());
     if any_void {
         voids::write(&bitmap, n, width, true, &mut out);
@@ -527,15 +593,14 @@ fn unzigzag(z: u32) -> u32 {
     ((z >> 1) as i32 ^ -((z & 1) as i32)) as u32
 }
 
-fn float_predicted(samples: &[f32], width: usize) -> Option<Vec<u8>> {
+fn float_predicted(samples: &[f32], width: usize, coder: Coder) -> Option<Vec<u8>> {
     let u: Vec<u32> = samples.iter().map(|&v| to_ordered(v)).collect();
     let residuals: Vec<u32> = (0..u.len())
         .map(|i| zigzag(u[i].wrapping_sub(predict(&u, i, width))))
         .collect();
-    let config = ChunkConfig::default().with_delta_spec(DeltaSpec::NoOp);
-    let coded = simple_compress(&residuals, &config).ok()?;
+    let coded = residuals::code_float(coder, &residuals)?;
     let mut out = Vec::with_capacity(1 + coded.len());
-    out.push(Encoding::FloatPredicted as u8);
+    out.push(Encoding::FloatPredicted.coded_by(coder) as u8);
     out.extend_from_slice(&coded);
     Some(out)
 }
@@ -635,7 +700,12 @@ mod tests {
     use super::*;
 
     fn round_trip(samples: &[f32], width: usize) -> Encoding {
-        let bytes = encode(samples, width);
+        round_trip_by(samples, width, Coder::Tans);
+        round_trip_by(samples, width, Coder::Pco)
+    }
+
+    fn round_trip_by(samples: &[f32], width: usize, coder: Coder) -> Encoding {
+        let bytes = encode_on(samples, width, None, coder);
         let mut out = vec![0.0f32; samples.len()];
         decode(&bytes, width, &mut out).expect("decodes");
         for (i, (a, b)) in samples.iter().zip(&out).enumerate() {
@@ -666,6 +736,56 @@ mod tests {
             round_trip(&smooth, w),
             Encoding::FloatPco | Encoding::FloatPredicted
         ));
+    }
+
+    #[test]
+    fn the_tans_encodings_are_chosen_where_they_fit() {
+        let w = 65;
+        let ints: Vec<f32> = (0..w * w)
+            .map(|i| ((i % w) * 3 + (i / w) * 2 + (i * 7919) % 5) as f32)
+            .collect();
+        assert_eq!(round_trip_by(&ints, w, Coder::Tans), Encoding::LatticeTans);
+        let smooth: Vec<f32> = (0..w * w)
+            .map(|i| ((i % w) as f32 * 0.0173).sin() * 100.0 + (i / w) as f32 * 0.311)
+            .collect();
+        assert!(matches!(
+            round_trip_by(&smooth, w, Coder::Tans),
+            Encoding::FloatPco | Encoding::FloatPredictedTans
+        ));
+        // A cliff of 2^33 steps among small residuals: past an `i32`, so pco.
+        let mut cliff = ints.clone();
+        cliff[100] = (1u64 << 33) as f32;
+        assert_eq!(round_trip_by(&cliff, w, Coder::Tans), Encoding::Lattice);
+        // On 25.6 m (Puget Sound 4k's step) coded on 0.1: a factor of 256, one byte more
+        // than the same block in whole steps, and smaller than pco's.
+        let coarse: Vec<f32> = ints.iter().map(|&v| (f64::from(v) * 25.6) as f32).collect();
+        let by_tans = encode_on(&coarse, w, None, Coder::Tans);
+        assert_eq!(round_trip_by(&coarse, w, Coder::Tans), Encoding::LatticeTans);
+        assert_eq!(f64::from_le_bytes(by_tans[1..9].try_into().expect("8 bytes")), 0.1);
+        assert_eq!(&by_tans[10..12], &[0x80, 0x02], "f = 256");
+        let whole = encode_on(&ints, w, None, Coder::Tans);
+        assert_eq!(by_tans.len(), whole.len() + 1);
+        assert!(by_tans.len() < encode_on(&coarse, w, None, Coder::Pco).len());
+    }
+
+    #[test]
+    fn every_id_names_its_shape_and_coder() {
+        for id in 0..=255u8 {
+            let Some(e) = Encoding::from_id(id) else {
+                assert!(id > 14, "id {id} has no encoding");
+                continue;
+            };
+            assert_eq!(e as u8, id);
+            let (shape, coder) = (e.shape(), e.coder());
+            assert_eq!(coder == Coder::Tans, (9..=14).contains(&id), "id {id}");
+            assert_eq!(shape.coder(), Coder::Pco);
+            assert_eq!(shape.coded_by(coder), e);
+            assert_eq!(e.coded_by(Coder::Pco), shape);
+        }
+        // Raw, constant and pco on floats have no tANS twin.
+        for e in [Encoding::Raw, Encoding::Constant, Encoding::FloatPco] {
+            assert_eq!(e.coded_by(Coder::Tans), e);
+        }
     }
 
     #[test]
@@ -704,6 +824,7 @@ mod tests {
         let mut out = vec![0.0f32; 81];
         let bad = |bytes: &[u8], out: &mut [f32]| decode(bytes, w, out).is_err();
         assert!(bad(&[], &mut out));
+        assert!(bad(&[15], &mut out));
         assert!(bad(&[9], &mut out));
         assert!(bad(&good[..good.len() - 1], &mut out));
         let mut longer = good.clone();
@@ -720,6 +841,29 @@ mod tests {
         }
         assert!(bad(&[1, 0, 0], &mut out));
         assert!(bad(&[0, 0, 0, 0], &mut out));
+        // The same with tANS; and its common factor zero, too large, or not a varint.
+        let good = encode_on(&v, w, None, Coder::Tans);
+        assert_eq!(Encoding::of(&good), Some(Encoding::LatticeTans));
+        assert!(decode(&good, w, &mut out).is_ok());
+        assert!(bad(&good[..good.len() - 1], &mut out));
+        let mut longer = good.clone();
+        longer.push(0);
+        assert!(bad(&longer, &mut out));
+        assert!(bad(&good, &mut vec![0.0; 72]));
+        let (head, factor_and_stream) = good.split_at(10);
+        assert_eq!(factor_and_stream[0], 1, "a factor of one");
+        for factor in [&[0u8][..], &[0x80, 0x80, 0x80, 0x80, 0x10], &[0x81, 0x00]] {
+            let mut b = head.to_vec();
+            b.extend_from_slice(factor);
+            b.extend_from_slice(&factor_and_stream[1..]);
+            assert_eq!(decode(&b, w, &mut out), Err(DecodeError::Factor));
+        }
+        // A parent's encodings are refused here whatever their coder.
+        for id in [5u8, 8, 11, 14] {
+            let mut b = good.clone();
+            b[0] = id;
+            assert!(bad(&b, &mut out), "id {id}");
+        }
     }
 
     proptest::proptest! {
@@ -736,12 +880,19 @@ mod tests {
                 .iter()
                 .map(|&b| if lattice { ((b % 2000) as f32 - 1000.0) * 0.25 } else { f32::from_bits(b) })
                 .collect();
+            // Both coders (round_trip runs each).
             round_trip(&samples, width);
         }
 
         /// A real encoding with any byte changed, or cut anywhere, decodes or fails.
         #[test]
-        fn damaged_encodings_decode_or_fail(at in 0usize..4000, value in proptest::prelude::any::<u8>(), cut in 0usize..4000, kind in 0usize..3) {
+        fn damaged_encodings_decode_or_fail(
+            at in 0usize..4000,
+            value in proptest::prelude::any::<u8>(),
+            cut in 0usize..4000,
+            kind in 0usize..3,
+            tans in proptest::bool::ANY,
+        ) {
             let w = 33;
             let samples: Vec<f32> = (0..w * w)
                 .map(|i| match kind {
@@ -750,7 +901,8 @@ mod tests {
                     _ => if i % 17 == 0 { f32::from_bits(VOID_BITS) } else { (i % 97) as f32 * 0.1 },
                 })
                 .collect();
-            let mut bytes = encode(&samples, w);
+            let coder = if tans { Coder::Tans } else { Coder::Pco };
+            let mut bytes = encode_on(&samples, w, None, coder);
             let at = at % bytes.len();
             bytes[at] = value;
             bytes.truncate(cut.max(1));
@@ -785,6 +937,7 @@ mod tests {
             width in 1usize..40,
             kind in 0usize..3,
             damage in proptest::option::of((proptest::prelude::any::<proptest::sample::Index>(), proptest::prelude::any::<u8>())),
+            tans in proptest::bool::ANY,
         ) {
             let n = bits.len() / width * width;
             proptest::prop_assume!(n > 0);
@@ -797,7 +950,8 @@ mod tests {
                     _ => f32::from_bits(b),
                 })
                 .collect();
-            let mut bytes = encode(&samples, width);
+            let coder = if tans { Coder::Tans } else { Coder::Pco };
+            let mut bytes = encode_on(&samples, width, None, coder);
             if let Some((i, v)) = damage {
                 let i = i.index(bytes.len());
                 bytes[i] = v;

@@ -16,6 +16,7 @@
 //! | 5 lattice from parent | `q: f64`, a void flag (and bitmap over all samples, as encoding 2), a pco stream of `i64` residuals `k − round(p · (1/q))` |
 //! | 6 float from parent | a void flag (and bitmap), a pco stream of `u32` zigzag residuals of the order-preserving bits against those of `p as f32` |
 //! | 7, 8 planar with parent | as 5, 6; the residuals against the planar predictor over the payload's own codes, the held ones known first |
+//! | 11–14 (format 7) | as 5–8, the residuals in a tANS stream ([`super::Coder`]; lattice ones behind their common factor) |
 //!
 //! `p` is the prediction, computed in `f64` in a fixed order, so encoder and decoder agree
 //! bit for bit. A void sample is coded by its bitmap bit alone. An encoding applies only
@@ -24,13 +25,11 @@
 
 mod rows;
 
-use pco::standalone::simple_compress;
-use pco::{ChunkConfig, DeltaSpec};
-
+use super::residuals::{self, Coder};
 use super::{
-    from_ordered, is_lattice_value, lattice_value, pco_decode, predict, to_ordered, unzigzag,
-    voids, with_scratch, zigzag, DecodeError, Encoding, Wrapping, LATTICE_STEPS,
-    MAX_LATTICE_INDEX, VOID_BITS,
+    from_ordered, is_lattice_value, lattice_value, predict, to_ordered, unzigzag, voids,
+    with_scratch, zigzag, DecodeError, Encoding, Wrapping, LATTICE_STEPS, MAX_LATTICE_INDEX,
+    VOID_BITS,
 };
 use rows::Rows;
 
@@ -374,7 +373,7 @@ fn void_bitmap(samples: &[f32]) -> Option<Vec<u8>> {
 /// lattice integers when every real sample lies on a lattice step (one of
 /// [`LATTICE_STEPS`] or `step`), else as float bits; of the two predictions (the parent's
 /// interpolation, encodings 5 and 6, or the planar predictor over the block's own samples,
-/// 7 and 8) the one that codes smaller. `None` when the child does not lie inside the
+/// 7 and 8) the one that codes smaller; residuals coded by `coder` (with tANS: 11 to 14). `None` when the child does not lie inside the
 /// parent, a held sample differs from the parent's height, or a sample is a NaN that is not
 /// the canonical void.
 pub fn encode_against(
@@ -382,8 +381,9 @@ pub fn encode_against(
     at: Axes<'_>,
     parent: Parent<'_>,
     step: Option<f64>,
+    coder: Coder,
 ) -> Option<Vec<u8>> {
-    let (interpolated, planar) = encode_both(samples, at, parent, step)?;
+    let (interpolated, planar) = encode_both(samples, at, parent, step, coder)?;
     Some(if planar.len() <= interpolated.len() {
         planar
     } else {
@@ -392,13 +392,14 @@ pub fn encode_against(
 }
 
 /// [`encode_against`] for a writer in a hurry (a commit): the prediction whose residuals
-/// have the fewer significant bits in all is the one coded, so pco runs once, not twice.
-/// The choice can differ from [`encode_against`]'s on a near tie; both decode the same.
+/// have the fewer significant bits in all is the one coded, so the coder runs once, not
+/// twice. The choice can differ from [`encode_against`]'s on a near tie; both decode the same.
 pub fn encode_against_quick(
     samples: &[f32],
     at: Axes<'_>,
     parent: Parent<'_>,
     step: Option<f64>,
+    coder: Coder,
 ) -> Option<Vec<u8>> {
     let s = streams(samples, at, parent, step)?;
     let bits = |r: &mut dyn Iterator<Item = u64>| -> u64 {
@@ -413,48 +414,8 @@ pub fn encode_against_quick(
             bits(&mut p.iter().map(|&z| u64::from(z))) <= bits(&mut i.iter().map(|&z| u64::from(z)))
         }
     };
-    s.code(!planar_first, planar_first)
+    s.code(coder, !planar_first, planar_first)
         .map(|(i, p)| if planar_first { p } else { i })
-}
-
-/// The residual streams of both predictions, before pco: (interpolated, planar).
-enum Residuals {
-    Lattice(Vec<i64>, Vec<i64>),
-    Float(Vec<u32>, Vec<u32>),
-}
-
-/// What both codings share: their headers and residuals.
-struct Streams {
-    interpolated: Vec<u8>,
-    planar: Vec<u8>,
-    residuals: Residuals,
-}
-
-impl Streams {
-    /// The codings asked for (the others left as their bare headers).
-    fn code(self, interp: bool, plan: bool) -> Option<(Vec<u8>, Vec<u8>)> {
-        let config = ChunkConfig::default().with_delta_spec(DeltaSpec::NoOp);
-        let (mut interpolated, mut planar) = (self.interpolated, self.planar);
-        match self.residuals {
-            Residuals::Lattice(i, p) => {
-                if interp {
-                    interpolated.extend_from_slice(&simple_compress(&i, &config).ok()?);
-                }
-                if plan {
-                    planar.extend_from_slice(&simple_compress(&p, &config).ok()?);
-                }
-            }
-            Residuals::Float(i, p) => {
-                if interp {
-                    interpolated.extend_from_slice(&simple_compress(&i, &config).ok()?);
-                }
-                if plan {
-                    planar.extend_from_slice(&simple_compress(&p, &config).ok()?);
-                }
-            }
-        }
-        Some((interpolated, planar))
-    }
 }
 
 /// Both codings [`encode_against`] chooses from: (interpolated, planar).
@@ -463,8 +424,52 @@ fn encode_both(
     at: Axes<'_>,
     parent: Parent<'_>,
     step: Option<f64>,
+    coder: Coder,
 ) -> Option<(Vec<u8>, Vec<u8>)> {
-    streams(samples, at, parent, step)?.code(true, true)
+    streams(samples, at, parent, step)?.code(coder, true, true)
+}
+
+/// The residuals of both predictions, before their coder: (interpolated, planar).
+enum Residuals {
+    Lattice(Vec<i64>, Vec<i64>),
+    Float(Vec<u32>, Vec<u32>),
+}
+
+/// What both codings share: the header after the id (a lattice's step, the void flag and
+/// bitmap) and the residuals.
+struct Streams {
+    head: Vec<u8>,
+    residuals: Residuals,
+}
+
+impl Streams {
+    /// The codings asked for, residuals coded by `coder` (the others left empty).
+    fn code(self, coder: Coder, interp: bool, plan: bool) -> Option<(Vec<u8>, Vec<u8>)> {
+        let head = &self.head;
+        let whole = |id: Encoding, coder: Coder, stream: Vec<u8>| {
+            let mut out = Vec::with_capacity(1 + head.len() + stream.len());
+            out.push(id.coded_by(coder) as u8);
+            out.extend_from_slice(head);
+            out.extend_from_slice(&stream);
+            out
+        };
+        let lattice = |id: Encoding, r: &[i64]| {
+            residuals::code_lattice(coder, r).map(|(used, stream)| whole(id, used, stream))
+        };
+        let float = |id: Encoding, r: &[u32]| {
+            residuals::code_float(coder, r).map(|stream| whole(id, coder, stream))
+        };
+        Some(match &self.residuals {
+            Residuals::Lattice(i, p) => (
+                if interp { lattice(Encoding::LatticeFromParent, i)? } else { Vec::new() },
+                if plan { lattice(Encoding::LatticePlanarFromParent, p)? } else { Vec::new() },
+            ),
+            Residuals::Float(i, p) => (
+                if interp { float(Encoding::FloatFromParent, i)? } else { Vec::new() },
+                if plan { float(Encoding::FloatPlanarFromParent, p)? } else { Vec::new() },
+            ),
+        })
+    }
 }
 
 /// The headers and residual streams of both codings of `samples` against `parent`.
@@ -546,27 +551,19 @@ fn streams(
             },
         ),
     }
-    let header = |id: Encoding| {
-        let mut out = vec![id as u8];
-        if let Some(q) = lattice {
-            out.extend_from_slice(&q.to_le_bytes());
-        }
-        match void_bitmap(samples) {
-            Some(bitmap) => voids::write(&bitmap, samples.len(), w, true, &mut out),
-            None => out.push(voids::NONE),
-        }
-        out
-    };
-    Some(match lattice {
-        Some(_) => Streams {
-            interpolated: header(Encoding::LatticeFromParent),
-            planar: header(Encoding::LatticePlanarFromParent),
-            residuals: Residuals::Lattice(interp_ints, planar_ints),
-        },
-        None => Streams {
-            interpolated: header(Encoding::FloatFromParent),
-            planar: header(Encoding::FloatPlanarFromParent),
-            residuals: Residuals::Float(interp_bits, planar_bits),
+    let mut head = Vec::new();
+    if let Some(q) = lattice {
+        head.extend_from_slice(&q.to_le_bytes());
+    }
+    match void_bitmap(samples) {
+        Some(bitmap) => voids::write(&bitmap, samples.len(), w, true, &mut head),
+        None => head.push(voids::NONE),
+    }
+    Some(Streams {
+        head,
+        residuals: match lattice {
+            Some(_) => Residuals::Lattice(interp_ints, planar_ints),
+            None => Residuals::Float(interp_bits, planar_bits),
         },
     })
 }
@@ -605,7 +602,7 @@ fn residuals_in<T: Wrapping + Copy + Default>(
     }
 }
 
-/// Decodes `bytes` (encoding 5 or 6) at `at` against `parent` into `out` (`at`'s samples,
+/// Decodes `bytes` (encodings 5 to 8, or 11 to 14) at `at` against `parent` into `out` (`at`'s samples,
 /// row-major). Hostile bytes, a parent that does not fit, or a count that does not match
 /// are errors; nothing panics, and nothing is allocated past `out`'s size.
 pub fn decode_against(
@@ -643,11 +640,13 @@ fn decode_with(
         )));
     }
     let mut body = &bytes[1..];
+    let coder = encoding.coder();
+    let shape = encoding.shape();
     let planar = matches!(
-        encoding,
+        shape,
         Encoding::LatticePlanarFromParent | Encoding::FloatPlanarFromParent
     );
-    let q = match encoding {
+    let q = match shape {
         Encoding::LatticeFromParent | Encoding::LatticePlanarFromParent => {
             let (q, rest) = body
                 .split_first_chunk::<8>()
@@ -722,22 +721,22 @@ fn decode_with(
         };
         return match (planar, q) {
             (true, Some(q)) => with_scratch(coded, |r: &mut [i64]| {
-                pco_decode(rest, r)?;
+                residuals::read_lattice(coder, rest, r)?;
                 rows::planar_lattice(&grid, q, r, out)
             }),
             (true, None) => with_scratch(coded, |r: &mut [u32]| {
-                pco_decode(rest, r)?;
+                residuals::read_float(coder, rest, r)?;
                 rows::planar_float(&grid, r, out)
             }),
             (false, q) => {
                 let predictor = Predictor::new(&cols, &rows, &parent);
                 match q {
                     Some(q) => with_scratch(coded, |r: &mut [i64]| {
-                        pco_decode(rest, r)?;
+                        residuals::read_lattice(coder, rest, r)?;
                         rows::interpolated_lattice(&grid, &predictor, q, r, out)
                     }),
                     None => with_scratch(coded, |r: &mut [u32]| {
-                        pco_decode(rest, r)?;
+                        residuals::read_float(coder, rest, r)?;
                         rows::interpolated_float(&grid, &predictor, r, out)
                     }),
                 }
@@ -745,7 +744,7 @@ fn decode_with(
         };
     }
     if planar {
-        return decode_planar(rest, (&cols, &rows), parent, q, voids, coded, out);
+        return decode_planar((coder, rest), (&cols, &rows), parent, q, voids, coded, out);
     }
     let predictor = Predictor::new(&cols, &rows, &parent);
     // Row by row: a sample is a void, held (the parent's height), or coded (its prediction
@@ -769,7 +768,7 @@ fn decode_with(
             // The prediction's index: `p · (1/q)`, one division a block (container.md §7).
             let inv_q = 1.0 / q;
             let mut r = vec![0i64; coded];
-            pco_decode(rest, &mut r)?;
+            residuals::read_lattice(coder, rest, &mut r)?;
             let mut next = r.into_iter();
             let mut out_of_range = false;
             fill(out, &mut |p| {
@@ -783,7 +782,7 @@ fn decode_with(
         }
         None => {
             let mut r = vec![0u32; coded];
-            pco_decode(rest, &mut r)?;
+            residuals::read_float(coder, rest, &mut r)?;
             let mut next = r.into_iter();
             fill(out, &mut |p| {
                 let d = unzigzag(next.next().unwrap_or(0));
@@ -794,11 +793,12 @@ fn decode_with(
     Ok(())
 }
 
-/// Decodes the residual stream `stream` of encodings 7 (`q`: lattice) and 8 (float): in
+/// Decodes the residual stream `stream` (written by `coder`) of encodings 7 and 13 (`q`:
+/// lattice) and 8 and 14 (float): in
 /// raster order, a void takes the planar prediction, a held sample the parent's height (and
 /// its code), a coded sample the prediction plus the next residual.
 fn decode_planar(
-    stream: &[u8],
+    (coder, stream): (Coder, &[u8]),
     (cols, rows): (&[Along], &[Along]),
     parent: Parent<'_>,
     q: Option<f64>,
@@ -809,7 +809,7 @@ fn decode_planar(
     match q {
         Some(q) => {
             let mut r = vec![0i64; coded];
-            pco_decode(stream, &mut r)?;
+            residuals::read_lattice(coder, stream, &mut r)?;
             let mut next = r.into_iter();
             let mut k = vec![0i64; out.len()];
             let mut out_of_range = false;
@@ -832,7 +832,7 @@ fn decode_planar(
         }
         None => {
             let mut r = vec![0u32; coded];
-            pco_decode(stream, &mut r)?;
+            residuals::read_float(coder, stream, &mut r)?;
             let mut next = r.into_iter();
             let mut u = vec![0u32; out.len()];
             planar_fill((cols, rows), parent, voids, out, &mut u, to_ordered, |p| {
@@ -1063,18 +1063,20 @@ mod tests {
             seed in 0u64..1000,
             lattice in any::<bool>(),
             voids in any::<bool>(),
+            coder in prop::sample::select(vec![Coder::Pco, Coder::Tans]),
         ) {
             let case = child_of_parent(grid, raster, seed, lattice, voids);
             prop_assume!(case.is_some());
             let Some((pc, pr, heights, cc, cr, samples)) = case else { return Ok(()) };
             let parent = Parent { at: Axes { cols: &pc, rows: &pr }, heights: &heights };
             let at = Axes { cols: &cc, rows: &cr };
-            let (interpolated, planar) = encode_both(&samples, at, parent, None).expect("a child of its parent encodes");
-            let chosen = encode_against(&samples, at, parent, None).expect("encodes");
+            let (interpolated, planar) = encode_both(&samples, at, parent, None, coder).expect("a child of its parent encodes");
+            let chosen = encode_against(&samples, at, parent, None, coder).expect("encodes");
             prop_assert_eq!(chosen.len(), interpolated.len().min(planar.len()));
+            // The test's heights' residuals fit an `i32`: tANS codes them all.
             let (lattice_ids, float_ids) = (
-                [Encoding::LatticeFromParent, Encoding::LatticePlanarFromParent],
-                [Encoding::FloatFromParent, Encoding::FloatPlanarFromParent],
+                [Encoding::LatticeFromParent, Encoding::LatticePlanarFromParent].map(|e| e.coded_by(coder)),
+                [Encoding::FloatFromParent, Encoding::FloatPlanarFromParent].map(|e| e.coded_by(coder)),
             );
             // Both codings decode to the child's bits; the plain decoder refuses them.
             for (bytes, k) in [(&interpolated, 0), (&planar, 1)] {
@@ -1171,20 +1173,22 @@ mod tests {
 
         /// The row kernels (no voids) decode exactly as the general per-sample loops do:
         /// the same bits, or both an error, for valid payloads of every encoding 5 to 8 and
-        /// for the same payloads with a byte changed (residuals out of range included).
+        /// 11 to 14 and for the same payloads with a byte changed (residuals out of range
+        /// included).
         #[test]
         fn the_row_kernels_decode_as_the_general_loops(
             (grid, raster) in placements(),
             seed in 0u64..1000,
             lattice in any::<bool>(),
             damage in prop::option::of((any::<prop::sample::Index>(), any::<u8>())),
+            coder in prop::sample::select(vec![Coder::Pco, Coder::Tans]),
         ) {
             let case = child_of_parent(grid, raster, seed, lattice, false);
             prop_assume!(case.is_some());
             let Some((pc, pr, heights, cc, cr, samples)) = case else { return Ok(()) };
             let parent = Parent { at: Axes { cols: &pc, rows: &pr }, heights: &heights };
             let at = Axes { cols: &cc, rows: &cr };
-            let (interpolated, planar) = encode_both(&samples, at, parent, None).expect("encodes");
+            let (interpolated, planar) = encode_both(&samples, at, parent, None, coder).expect("encodes");
             for mut bytes in [interpolated, planar] {
                 if let Some((i, v)) = damage {
                     let i = i.index(bytes.len());
@@ -1217,7 +1221,13 @@ mod tests {
         /// Damaged bytes, a wrong parent or a wrong placement decode or fail; nothing
         /// panics.
         #[test]
-        fn damaged_bytes_decode_or_fail(at_byte in 0usize..400, value in any::<u8>(), cut in 0usize..400, shift in 0u64..3) {
+        fn damaged_bytes_decode_or_fail(
+            at_byte in 0usize..400,
+            value in any::<u8>(),
+            cut in 0usize..400,
+            shift in 0u64..3,
+            coder in prop::sample::select(vec![Coder::Pco, Coder::Tans]),
+        ) {
             let pc: Vec<u64> = (0..9).map(|i| i * 2).collect();
             let heights: Vec<f32> = (0..81).map(|i| (i % 9 * 3 + i / 9) as f32).collect();
             let cc: Vec<u64> = (0..9).collect();
@@ -1226,7 +1236,7 @@ mod tests {
                 if c % 2 == 0 && r % 2 == 0 { heights[(r / 2) * 9 + c / 2] } else { (c * 3 + r) as f32 + 0.5 }
             }).collect();
             let parent = Parent { at: Axes { cols: &pc, rows: &pc }, heights: &heights };
-            let (interpolated, planar) = encode_both(&samples, Axes { cols: &cc, rows: &cc }, parent, None).unwrap();
+            let (interpolated, planar) = encode_both(&samples, Axes { cols: &cc, rows: &cc }, parent, None, coder).unwrap();
             let mut bytes = if at_byte % 2 == 0 { interpolated } else { planar };
             let i = at_byte % bytes.len();
             bytes[i] = value;
@@ -1254,15 +1264,17 @@ mod tests {
             cols: &cc,
             rows: &cc,
         };
-        assert!(encode_against(&samples, at, parent, None).is_some());
+        for coder in [Coder::Pco, Coder::Tans] {
+            assert!(encode_against(&samples, at, parent, None, coder).is_some());
+        }
         samples[0] = 2.0; // (0, 0) is held
-        assert!(encode_against(&samples, at, parent, None).is_none());
+        assert!(encode_against(&samples, at, parent, None, Coder::Tans).is_none());
         // Outside the parent: not its child.
         let far = [5u64, 6, 7];
         let outside = Axes {
             cols: &far,
             rows: &cc,
         };
-        assert!(encode_against(&[1.0; 9], outside, parent, None).is_none());
+        assert!(encode_against(&[1.0; 9], outside, parent, None, Coder::Tans).is_none());
     }
 }

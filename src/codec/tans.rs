@@ -1,7 +1,7 @@
 //! The binned tANS stream: a block's residual codes (`u32`, small for small residuals) to
-//! bytes and back, for format 7's encodings 9 to 14 (`docs/format-7-plan.md`). No format
-//! reads it yet: until format 7 does, it is built for the tests and the benches (the
-//! `testing` feature), where the coder study of `benches/decode.rs` measures it beside pco.
+//! bytes and back, for format 7's encodings 9 to 14 (`docs/format-7-plan.md`; the codec
+//! reaches it through `residuals`). The coder study of `benches/decode.rs` measures it
+//! beside pco.
 //!
 //! **Why a coder of our own.** pco coded every residual stream of formats 2 to 6, and was
 //! about half of every encoding's decoding time once the kernels around it were fast. Its
@@ -184,19 +184,24 @@ fn normalize(counts: &[u64], n: u64, log: u32) -> Vec<u32> {
     w
 }
 
-/// The count at the start of `stream` and the bytes it took.
-fn read_count(stream: &[u8]) -> Result<(u64, usize), StreamError> {
+/// The LEB128 varint at the start of `bytes` (at most five bytes, no byte of zeros after the
+/// first) and the bytes it took; `None` for anything else.
+pub(super) fn read_varint(bytes: &[u8]) -> Option<(u64, usize)> {
     let mut v = 0u64;
-    for (i, &b) in stream.iter().take(5).enumerate() {
+    for (i, &b) in bytes.iter().take(5).enumerate() {
         v |= u64::from(b & 0x7f) << (7 * i);
         if b & 0x80 == 0 {
-            if b == 0 && i > 0 {
-                return Err(StreamError::Count("a count with a byte of zeros last".into()));
-            }
-            return Ok((v, i + 1));
+            return (b != 0 || i == 0).then_some((v, i + 1));
         }
     }
-    Err(StreamError::Count("no count of at most five bytes".into()))
+    None
+}
+
+/// The count at the start of `stream` and the bytes it took.
+fn read_count(stream: &[u8]) -> Result<(u64, usize), StreamError> {
+    read_varint(stream).ok_or_else(|| {
+        StreamError::Count("no count of at most five bytes, none of zeros last".into())
+    })
 }
 
 /// Appends the stream of `codes` to `out`.

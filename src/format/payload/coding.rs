@@ -109,6 +109,8 @@ pub struct Coding {
     /// ([`codec::parent::encode_against_quick`]): what a commit does, where coding is most
     /// of its time. A build codes both and keeps the smaller.
     pub quick: bool,
+    /// The coder of the residual streams: pco (encodings 2, 4–8) or tANS (9–14, format 7).
+    pub coder: codec::Coder,
 }
 
 impl Coding {
@@ -118,9 +120,9 @@ impl Coding {
         if self.raw {
             None
         } else if self.quick {
-            codec::parent::encode_against_quick(samples, at, parent, self.step)
+            codec::parent::encode_against_quick(samples, at, parent, self.step, self.coder)
         } else {
-            codec::parent::encode_against(samples, at, parent, self.step)
+            codec::parent::encode_against(samples, at, parent, self.step, self.coder)
         }
     }
 
@@ -128,7 +130,7 @@ impl Coding {
         if self.raw {
             codec::encode_raw(samples)
         } else {
-            codec::encode_on(samples, width, self.step)
+            codec::encode_on(samples, width, self.step, self.coder)
         }
     }
 }
@@ -367,43 +369,50 @@ mod stored_tests {
         );
     }
 
+    /// Blocks and grids, voids among them, stored by either coder, decode to their layout.
     #[test]
     fn stored_forms_round_trip() {
-        let samples: Vec<(f32, bool)> = (0..9 * 7)
-            .map(|i| ((i % 9) as f32 * 0.5 + (i / 9) as f32, i % 11 != 3))
-            .collect();
-        let voids = u32::try_from(samples.iter().filter(|s| !s.1).count()).expect("63 at most");
-        let raw = encode_block(samples.into_iter(), 63);
-        let at = block(9, 7, voids);
-        let stored = encode(&raw, &at, Coding::default(), None).expect("codes");
-        assert!(stored.len() < raw.len());
-        assert_eq!(decode(&stored, &at, None).expect("decodes"), raw);
-        let (gw, gh) = grid(true, true).dims();
-        assert_eq!((gw, gh), (5, 9));
-        let n = (gw * gh) as usize;
-        let heights: Vec<f32> = (0..n).map(|i| i as f32).collect();
-        let void: Vec<bool> = (0..n).map(|i| i % 7 == 0).collect();
-        let raw = encode_grid(&heights, &void, true);
-        let stored = encode(&raw, &grid(true, true), Coding::default(), None).expect("codes");
-        assert_eq!(
-            decode(&stored, &grid(true, true), None).expect("decodes"),
-            raw
-        );
-        assert!(
-            decode(&stored, &grid(false, true), None).is_err(),
-            "the bitmap is not expected"
-        );
-        let mut longer = stored.clone();
-        longer.push(0);
-        assert!(decode(&longer, &grid(true, true), None).is_err());
-        // Before format 5 the bitmap followed raw, with no flag.
-        let a = u32::from_le_bytes(stored[..4].try_into().expect("a length")) as usize;
-        let mut old = stored[..4 + a].to_vec();
-        old.extend_from_slice(&raw[4 * n..]);
-        assert_eq!(
-            decode(&old, &grid(true, false), None).expect("decodes"),
-            raw
-        );
-        assert!(decode(&old, &grid(true, true), None).is_err());
+        for coder in [codec::Coder::Pco, codec::Coder::Tans] {
+            let coding = Coding {
+                coder,
+                ..Coding::default()
+            };
+            let samples: Vec<(f32, bool)> = (0..9 * 7)
+                .map(|i| ((i % 9) as f32 * 0.5 + (i / 9) as f32, i % 11 != 3))
+                .collect();
+            let voids = u32::try_from(samples.iter().filter(|s| !s.1).count()).expect("63 at most");
+            let raw = encode_block(samples.into_iter(), 63);
+            let at = block(9, 7, voids);
+            let stored = encode(&raw, &at, coding, None).expect("codes");
+            assert!(stored.len() < raw.len());
+            assert_eq!(decode(&stored, &at, None).expect("decodes"), raw);
+            let (gw, gh) = grid(true, true).dims();
+            assert_eq!((gw, gh), (5, 9));
+            let n = (gw * gh) as usize;
+            let heights: Vec<f32> = (0..n).map(|i| i as f32).collect();
+            let void: Vec<bool> = (0..n).map(|i| i % 7 == 0).collect();
+            let raw = encode_grid(&heights, &void, true);
+            let stored = encode(&raw, &grid(true, true), coding, None).expect("codes");
+            assert_eq!(
+                decode(&stored, &grid(true, true), None).expect("decodes"),
+                raw
+            );
+            assert!(
+                decode(&stored, &grid(false, true), None).is_err(),
+                "the bitmap is not expected"
+            );
+            let mut longer = stored.clone();
+            longer.push(0);
+            assert!(decode(&longer, &grid(true, true), None).is_err());
+            // Before format 5 the bitmap followed raw, with no flag.
+            let a = u32::from_le_bytes(stored[..4].try_into().expect("a length")) as usize;
+            let mut old = stored[..4 + a].to_vec();
+            old.extend_from_slice(&raw[4 * n..]);
+            assert_eq!(
+                decode(&old, &grid(true, false), None).expect("decodes"),
+                raw
+            );
+            assert!(decode(&old, &grid(true, true), None).is_err());
+        }
     }
 }

@@ -493,6 +493,8 @@ fn coding(model: &Model, raw: bool, quick: bool) -> payload::Coding {
         step: model.precision().map(Precision::step),
         raw,
         quick,
+        // Format 6's coder until the writer writes format 7 (docs/format-7-plan.md).
+        coder: crate::codec::Coder::Pco,
     }
 }
 
