@@ -15,6 +15,7 @@
 //! | 5, 6 | lattice or float, against a parent grid ([`parent`]): the held samples free, the others predicted from the grid | a block (format 4) or grid (format 5) whose parent's grid holds a quarter of its samples |
 //! | 7, 8 | lattice or float, the held samples free, the others 2D-predicted as in 2 and 4 | the same, where the block's own neighbours predict better |
 //! | 9–14 | 2, 4, 5, 6, 7 and 8 with their residuals in the binned tANS stream ([`tans`]) rather than pco | a writer of format 7 (lattice ones: where the residuals over their common factor fit an `i32`) |
+//! | 15 | lattice against a parent grid, predicted from the parent's lattice codes in integers, tANS | a writer of format 7, in place of 11 where every parent code is within ±2^22 |
 //!
 //! Encodings 5 to 8 code a block *against its parent's grid*: the samples the parent holds
 //! cost nothing, the others are residuals against an interpolation of the parent (5, 6) or
@@ -110,6 +111,10 @@ pub enum Encoding {
     LatticePlanarFromParentTans = 13,
     /// [`Encoding::FloatPlanarFromParent`] with its residuals in a tANS stream.
     FloatPlanarFromParentTans = 14,
+    /// Lattice integers of the samples the parent's grid does not hold, predicted from the
+    /// parent's lattice codes in integers (`parent`'s `codes`), residuals in a tANS stream
+    /// (format 7).
+    LatticeFromParentCodes = 15,
 }
 
 /// The pco encodings with a tANS twin, and their twins, in pairs.
@@ -141,6 +146,7 @@ impl Encoding {
             12 => Encoding::FloatFromParentTans,
             13 => Encoding::LatticePlanarFromParentTans,
             14 => Encoding::FloatPlanarFromParentTans,
+            15 => Encoding::LatticeFromParentCodes,
             _ => return None,
         })
     }
@@ -154,9 +160,9 @@ impl Encoding {
             .map_or(self, |&(p, _)| p)
     }
 
-    /// The coder of this encoding's residuals.
+    /// The coder of this encoding's residuals: tANS from id 9 on (format 7).
     pub fn coder(self) -> Coder {
-        if self.shape() == self {
+        if (self as u8) < 9 {
             Coder::Pco
         } else {
             Coder::Tans
@@ -772,12 +778,17 @@ mod tests {
     fn every_id_names_its_shape_and_coder() {
         for id in 0..=255u8 {
             let Some(e) = Encoding::from_id(id) else {
-                assert!(id > 14, "id {id} has no encoding");
+                assert!(id > 15, "id {id} has no encoding");
                 continue;
             };
             assert_eq!(e as u8, id);
             let (shape, coder) = (e.shape(), e.coder());
-            assert_eq!(coder == Coder::Tans, (9..=14).contains(&id), "id {id}");
+            assert_eq!(coder == Coder::Tans, (9..=15).contains(&id), "id {id}");
+            if e == Encoding::LatticeFromParentCodes {
+                // A shape of its own, tANS only.
+                assert_eq!(shape, e);
+                continue;
+            }
             assert_eq!(shape.coder(), Coder::Pco);
             assert_eq!(shape.coded_by(coder), e);
             assert_eq!(e.coded_by(Coder::Pco), shape);
@@ -824,7 +835,7 @@ mod tests {
         let mut out = vec![0.0f32; 81];
         let bad = |bytes: &[u8], out: &mut [f32]| decode(bytes, w, out).is_err();
         assert!(bad(&[], &mut out));
-        assert!(bad(&[15], &mut out));
+        assert!(bad(&[16], &mut out));
         assert!(bad(&[9], &mut out));
         assert!(bad(&good[..good.len() - 1], &mut out));
         let mut longer = good.clone();
@@ -859,7 +870,7 @@ mod tests {
             assert_eq!(decode(&b, w, &mut out), Err(DecodeError::Factor));
         }
         // A parent's encodings are refused here whatever their coder.
-        for id in [5u8, 8, 11, 14] {
+        for id in [5u8, 8, 11, 14, 15] {
             let mut b = good.clone();
             b[0] = id;
             assert!(bad(&b, &mut out), "id {id}");

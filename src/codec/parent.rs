@@ -17,12 +17,14 @@
 //! | 6 float from parent | a void flag (and bitmap), a pco stream of `u32` zigzag residuals of the order-preserving bits against those of `p as f32` |
 //! | 7, 8 planar with parent | as 5, 6; the residuals against the planar predictor over the payload's own codes, the held ones known first |
 //! | 11–14 (format 7) | as 5–8, the residuals in a tANS stream ([`super::Coder`]; lattice ones behind their common factor) |
+//! | 15 (format 7) | as 11, predicted from the parent's lattice codes in 32-bit integers (`codes`) rather than its heights in `f64` |
 //!
 //! `p` is the prediction, computed in `f64` in a fixed order, so encoder and decoder agree
 //! bit for bit. A void sample is coded by its bitmap bit alone. An encoding applies only
 //! when every held sample that is not a void equals the parent's height bit for bit (a
 //! coarse grid is a decimation of the same mended heights, so it does in a valid tree).
 
+mod codes;
 mod rows;
 
 use super::residuals::{self, Coder};
@@ -31,6 +33,7 @@ use super::{
     with_scratch, zigzag, DecodeError, Encoding, Wrapping, LATTICE_STEPS, MAX_LATTICE_INDEX,
     VOID_BITS,
 };
+use codes::CodePredictor;
 use rows::Rows;
 
 /// Where a grid's samples lie: sample columns and rows, each non-decreasing.
@@ -63,8 +66,9 @@ pub struct Parent<'a> {
 #[derive(Clone, Debug, PartialEq)]
 enum Along {
     Held(usize),
-    /// Up to four `(parent index, weight)` terms; the count used.
-    Mixed([(usize, f64); 4], usize),
+    /// Up to four `(parent index, weight)` terms; the count used; the same weights in
+    /// sixteenths (encoding 15's: exact for the cubic midpoint's, a linear one rounded).
+    Mixed([(usize, f64); 4], usize, [i32; 4]),
 }
 
 impl Along {
@@ -75,7 +79,15 @@ impl Along {
                 one[0] = (*i, 1.0);
                 &one[..]
             }
-            Along::Mixed(v, n) => &v[..*n],
+            Along::Mixed(v, n, _) => &v[..*n],
+        }
+    }
+
+    /// Its terms with their weights in sixteenths (held: 16), and their count.
+    fn sixteenths(&self) -> ([(usize, i32); 4], usize) {
+        match self {
+            Along::Held(i) => ([(*i, 16), (0, 0), (0, 0), (0, 0)], 1),
+            Along::Mixed(v, n, w) => ([0, 1, 2, 3].map(|t| (v[t].0, w[t])), *n),
         }
     }
 }
@@ -83,6 +95,9 @@ impl Along {
 /// The weights of the cubic midpoint interpolation (container.md §7), in the order of their
 /// parent indexes `lo - 1, lo, lo + 1, lo + 2`.
 const CUBIC: [f64; 4] = [-1.0 / 16.0, 9.0 / 16.0, 9.0 / 16.0, -1.0 / 16.0];
+
+/// [`CUBIC`] in sixteenths.
+const CUBIC_16: [i32; 4] = [-1, 9, 9, -1];
 
 /// The interpolation at `x` from `xs` (the parent's coordinates, non-decreasing).
 /// `hi` is the number of `xs` below `x` ([`plan_axis`] finds it).
@@ -107,11 +122,15 @@ fn along(xs: &[u64], x: u64, hi: usize) -> Option<Along> {
                 (hi + 1, CUBIC[3]),
             ],
             4,
+            CUBIC_16,
         ));
     }
+    // `t` in sixteenths, rounded half up, in integers: `⌊(32 (x − a) + step) / (2 step)⌋`.
+    let t16 = ((32 * u128::from(x - a) + u128::from(step)) / (2 * u128::from(step))) as i32;
     Some(Along::Mixed(
         [(lo, 1.0 - t), (hi, t), (0, 0.0), (0, 0.0)],
         2,
+        [16 - t16, t16, 0, 0],
     ))
 }
 
@@ -181,8 +200,8 @@ wide! {
         for (c, along) in cols.iter().enumerate() {
             match along {
                 Along::Held(i) => ones.push((c, *i)),
-                Along::Mixed(t, 2) => twos.push((c, [t[0], t[1]])),
-                Along::Mixed(t, 4) if *t == [0, 1, 2, 3].map(|d| (t[0].0 + d, CUBIC[d])) => {
+                Along::Mixed(t, 2, _) => twos.push((c, [t[0], t[1]])),
+                Along::Mixed(t, 4, _) if *t == [0, 1, 2, 3].map(|d| (t[0].0 + d, CUBIC[d])) => {
                     cubics.push((c, t[0].0))
                 }
                 Along::Mixed(..) => others.push((c, along)),
@@ -373,9 +392,11 @@ fn void_bitmap(samples: &[f32]) -> Option<Vec<u8>> {
 /// lattice integers when every real sample lies on a lattice step (one of
 /// [`LATTICE_STEPS`] or `step`), else as float bits; of the two predictions (the parent's
 /// interpolation, encodings 5 and 6, or the planar predictor over the block's own samples,
-/// 7 and 8) the one that codes smaller; residuals coded by `coder` (with tANS: 11 to 14). `None` when the child does not lie inside the
-/// parent, a held sample differs from the parent's height, or a sample is a NaN that is not
-/// the canonical void.
+/// 7 and 8) the one that codes smaller. With `coder` tANS, the same as 11 to 14, and the
+/// interpolation of lattice integers as encoding 15 (from the parent's codes, in integers)
+/// wherever every parent code lies within ±2^22 and its residuals fit the stream. `None`
+/// when the child does not lie inside the parent, a held sample differs from the parent's
+/// height, or a sample is a NaN that is not the canonical void.
 pub fn encode_against(
     samples: &[f32],
     at: Axes<'_>,
@@ -383,12 +404,10 @@ pub fn encode_against(
     step: Option<f64>,
     coder: Coder,
 ) -> Option<Vec<u8>> {
-    let (interpolated, planar) = encode_both(samples, at, parent, step, coder)?;
-    Some(if planar.len() <= interpolated.len() {
-        planar
-    } else {
-        interpolated
-    })
+    match streams(samples, at, parent, step, coder)?.code(coder, true, true) {
+        (Some(i), Some(p)) => Some(if p.len() <= i.len() { p } else { i }),
+        (i, p) => p.or(i),
+    }
 }
 
 /// [`encode_against`] for a writer in a hurry (a commit): the prediction whose residuals
@@ -401,7 +420,7 @@ pub fn encode_against_quick(
     step: Option<f64>,
     coder: Coder,
 ) -> Option<Vec<u8>> {
-    let s = streams(samples, at, parent, step)?;
+    let s = streams(samples, at, parent, step, coder)?;
     let bits = |r: &mut dyn Iterator<Item = u64>| -> u64 {
         r.map(|z| u64::from(64 - z.leading_zeros())).sum()
     };
@@ -414,11 +433,13 @@ pub fn encode_against_quick(
             bits(&mut p.iter().map(|&z| u64::from(z))) <= bits(&mut i.iter().map(|&z| u64::from(z)))
         }
     };
-    s.code(coder, !planar_first, planar_first)
-        .map(|(i, p)| if planar_first { p } else { i })
+    // Encoding 15's residuals may not fit its stream (a cliff of 2^31 steps): then planar.
+    let (i, p) = s.code(coder, !planar_first, planar_first);
+    p.or(i).or_else(|| s.code(coder, false, true).1)
 }
 
 /// Both codings [`encode_against`] chooses from: (interpolated, planar).
+#[cfg(test)]
 fn encode_both(
     samples: &[f32],
     at: Axes<'_>,
@@ -426,7 +447,10 @@ fn encode_both(
     step: Option<f64>,
     coder: Coder,
 ) -> Option<(Vec<u8>, Vec<u8>)> {
-    streams(samples, at, parent, step)?.code(coder, true, true)
+    match streams(samples, at, parent, step, coder)?.code(coder, true, true) {
+        (Some(i), Some(p)) => Some((i, p)),
+        _ => None,
+    }
 }
 
 /// The residuals of both predictions, before their coder: (interpolated, planar).
@@ -436,48 +460,52 @@ enum Residuals {
 }
 
 /// What both codings share: the header after the id (a lattice's step, the void flag and
-/// bitmap) and the residuals.
+/// bitmap) and the residuals, and the interpolated coding's encoding (5, 6 or 15).
 struct Streams {
     head: Vec<u8>,
     residuals: Residuals,
+    interpolated: Encoding,
 }
 
 impl Streams {
-    /// The codings asked for, residuals coded by `coder` (the others left empty).
-    fn code(self, coder: Coder, interp: bool, plan: bool) -> Option<(Vec<u8>, Vec<u8>)> {
+    /// The codings asked for, residuals coded by `coder` (`None`: not asked for, or
+    /// encoding 15's residuals do not fit its stream).
+    fn code(&self, coder: Coder, interp: bool, plan: bool) -> (Option<Vec<u8>>, Option<Vec<u8>>) {
         let head = &self.head;
-        let whole = |id: Encoding, coder: Coder, stream: Vec<u8>| {
+        let whole = |id: Encoding, stream: Vec<u8>| {
             let mut out = Vec::with_capacity(1 + head.len() + stream.len());
-            out.push(id.coded_by(coder) as u8);
+            out.push(id as u8);
             out.extend_from_slice(head);
             out.extend_from_slice(&stream);
             out
         };
-        let lattice = |id: Encoding, r: &[i64]| {
-            residuals::code_lattice(coder, r).map(|(used, stream)| whole(id, used, stream))
+        let lattice = |id: Encoding, r: &[i64]| match residuals::code_lattice(coder, r)? {
+            (Coder::Pco, _) if id == Encoding::LatticeFromParentCodes => None,
+            (used, stream) => Some(whole(id.coded_by(used), stream)),
         };
-        let float = |id: Encoding, r: &[u32]| {
-            residuals::code_float(coder, r).map(|stream| whole(id, coder, stream))
-        };
-        Some(match &self.residuals {
+        let float =
+            |id: Encoding, r: &[u32]| residuals::code_float(coder, r).map(|s| whole(id.coded_by(coder), s));
+        match &self.residuals {
             Residuals::Lattice(i, p) => (
-                if interp { lattice(Encoding::LatticeFromParent, i)? } else { Vec::new() },
-                if plan { lattice(Encoding::LatticePlanarFromParent, p)? } else { Vec::new() },
+                interp.then(|| lattice(self.interpolated, i)).flatten(),
+                plan.then(|| lattice(Encoding::LatticePlanarFromParent, p)).flatten(),
             ),
             Residuals::Float(i, p) => (
-                if interp { float(Encoding::FloatFromParent, i)? } else { Vec::new() },
-                if plan { float(Encoding::FloatPlanarFromParent, p)? } else { Vec::new() },
+                interp.then(|| float(self.interpolated, i)).flatten(),
+                plan.then(|| float(Encoding::FloatPlanarFromParent, p)).flatten(),
             ),
-        })
+        }
     }
 }
 
-/// The headers and residual streams of both codings of `samples` against `parent`.
+/// The headers and residuals of both codings of `samples` against `parent` (the
+/// interpolated one as encoding 15 where `coder` is tANS and the parent's codes allow).
 fn streams(
     samples: &[f32],
     at: Axes<'_>,
     parent: Parent<'_>,
     step: Option<f64>,
+    coder: Coder,
 ) -> Option<Streams> {
     if samples.len() != at.len() || parent.heights.len() != parent.at.len() {
         return None;
@@ -516,41 +544,62 @@ fn streams(
             }
         }
     }
-    let predictor = Predictor::new(&cols, &rows, &parent);
     let held_col: Vec<bool> = cols.iter().map(|c| matches!(c, Along::Held(_))).collect();
+    let layout = (w, &rows[..], &held_col[..]);
     let mut interp_ints: Vec<i64> = Vec::new();
     let mut interp_bits: Vec<u32> = Vec::new();
     let mut planar_ints: Vec<i64> = Vec::new();
     let mut planar_bits: Vec<u32> = Vec::new();
     // The codes of the samples in the coding's space (lattice indexes or ordered bits), in
     // row-major order; a void takes its planar prediction, as the plain encodings do. One
-    // loop per space, the row's prediction resolved once (this is most of a commit's
-    // coding time).
-    match lattice {
+    // loop per space, a row's predictions made at once (this is most of a commit's coding
+    // time).
+    let interpolated = match lattice {
         Some(q) => {
-            let inv = 1.0 / q;
+            let code = |v: f32| round_to_i64(f64::from(v) / q);
+            let codes = (coder == Coder::Tans)
+                .then(|| CodePredictor::new(&cols, &rows, &parent, q))
+                .filter(CodePredictor::fits);
+            match codes {
+                Some(codes) => {
+                    residuals_in(samples, layout, |j, p| codes.row(j, p), code, |k, planar, p| {
+                        interp_ints.push(k.wrapping_sub(i64::from(p)));
+                        planar_ints.push(k.wrapping_sub(planar));
+                    });
+                    Encoding::LatticeFromParentCodes
+                }
+                None => {
+                    let predictor = Predictor::new(&cols, &rows, &parent);
+                    let inv = 1.0 / q;
+                    residuals_in(
+                        samples,
+                        layout,
+                        |j, p| rows::predictions(&predictor, j, p, |x| x * inv),
+                        code,
+                        |k, planar, p| {
+                            interp_ints.push(k.wrapping_sub(round_to_i64(p)));
+                            planar_ints.push(k.wrapping_sub(planar));
+                        },
+                    );
+                    Encoding::LatticeFromParent
+                }
+            }
+        }
+        None => {
+            let predictor = Predictor::new(&cols, &rows, &parent);
             residuals_in(
                 samples,
-                (w, &rows, &held_col),
-                &predictor,
-                |v| round_to_i64(f64::from(v) / q),
-                |code, planar, p| {
-                    interp_ints.push(code.wrapping_sub(round_to_i64(p * inv)));
-                    planar_ints.push(code.wrapping_sub(planar));
+                layout,
+                |j, p| rows::predictions(&predictor, j, p, |x| x),
+                to_ordered,
+                |u, planar, p| {
+                    interp_bits.push(zigzag(u.wrapping_sub(to_ordered(p as f32))));
+                    planar_bits.push(zigzag(u.wrapping_sub(planar)));
                 },
             );
+            Encoding::FloatFromParent
         }
-        None => residuals_in(
-            samples,
-            (w, &rows, &held_col),
-            &predictor,
-            to_ordered,
-            |code, planar, p| {
-                interp_bits.push(zigzag(code.wrapping_sub(to_ordered(p as f32))));
-                planar_bits.push(zigzag(code.wrapping_sub(planar)));
-            },
-        ),
-    }
+    };
     let mut head = Vec::new();
     if let Some(q) = lattice {
         head.extend_from_slice(&q.to_le_bytes());
@@ -565,25 +614,27 @@ fn streams(
             Some(_) => Residuals::Lattice(interp_ints, planar_ints),
             None => Residuals::Float(interp_bits, planar_bits),
         },
+        interpolated,
     })
 }
 
 /// Walks `samples` (rows of `w`, placed by `rows` and `held_col`) in row-major order with
 /// their codes in one coding space (`code`: lattice indexes or ordered bits): a void takes
 /// its planar prediction, as the plain encodings do, and for each sample neither void nor
-/// held `push` gets its code, its planar prediction over the codes before it and the
-/// interpolated prediction. The row's interpolation is resolved once (this loop is most of
-/// a commit's coding time).
-fn residuals_in<T: Wrapping + Copy + Default>(
+/// held `push` gets its code, its planar prediction over the codes before it and its
+/// interpolated prediction, which `predict_row` makes for a whole row at once (this loop is
+/// most of a commit's coding time).
+fn residuals_in<T: Wrapping + Copy + Default, P: Copy + Default>(
     samples: &[f32],
     (w, rows, held_col): (usize, &[Along], &[bool]),
-    predictor: &Predictor<'_>,
+    mut predict_row: impl FnMut(usize, &mut [P]),
     code: impl Fn(f32) -> T,
-    mut push: impl FnMut(T, T, f64),
+    mut push: impl FnMut(T, T, P),
 ) {
     let mut k = vec![T::default(); samples.len()];
+    let mut row = vec![P::default(); w];
     for (j, r) in rows.iter().enumerate() {
-        let row = predictor.row(j);
+        predict_row(j, &mut row);
         let held_row = matches!(r, Along::Held(_));
         for (i, &held_c) in held_col.iter().enumerate() {
             let idx = j * w + i;
@@ -596,7 +647,7 @@ fn residuals_in<T: Wrapping + Copy + Default>(
             let c = code(v);
             k[idx] = c;
             if !(held_row && held_c) {
-                push(c, planar, row.at(i));
+                push(c, planar, row[i]);
             }
         }
     }
@@ -646,8 +697,11 @@ fn decode_with(
         shape,
         Encoding::LatticePlanarFromParent | Encoding::FloatPlanarFromParent
     );
+    let codes = shape == Encoding::LatticeFromParentCodes;
     let q = match shape {
-        Encoding::LatticeFromParent | Encoding::LatticePlanarFromParent => {
+        Encoding::LatticeFromParent
+        | Encoding::LatticePlanarFromParent
+        | Encoding::LatticeFromParentCodes => {
             let (q, rest) = body
                 .split_first_chunk::<8>()
                 .ok_or_else(|| length("shorter than its step".into()))?;
@@ -728,6 +782,13 @@ fn decode_with(
                 residuals::read_float(coder, rest, r)?;
                 rows::planar_float(&grid, r, out)
             }),
+            (false, Some(q)) if codes => {
+                let predictor = CodePredictor::new(&cols, &rows, &parent, q);
+                with_scratch(coded, |r: &mut [i64]| {
+                    residuals::read_lattice(coder, rest, r)?;
+                    rows::interpolated_codes(&grid, &predictor, q, r, out)
+                })
+            }
             (false, q) => {
                 let predictor = Predictor::new(&cols, &rows, &parent);
                 match q {
@@ -745,6 +806,32 @@ fn decode_with(
     }
     if planar {
         return decode_planar((coder, rest), (&cols, &rows), parent, q, voids, coded, out);
+    }
+    if let (true, Some(q)) = (codes, q) {
+        let predictor = CodePredictor::new(&cols, &rows, &parent, q);
+        let mut r = vec![0i64; coded];
+        residuals::read_lattice(coder, rest, &mut r)?;
+        let mut next = r.into_iter();
+        let mut p = vec![0i32; w];
+        let mut out_of_range = false;
+        for (j, (ry, row)) in rows.iter().zip(out.chunks_exact_mut(w.max(1))).enumerate() {
+            predictor.row(j, &mut p);
+            for (i, (cx, o)) in cols.iter().zip(row.iter_mut()).enumerate() {
+                *o = if void(j * w + i) {
+                    f32::from_bits(VOID_BITS)
+                } else if let (Along::Held(pi), Along::Held(pj)) = (cx, ry) {
+                    parent.heights[pj * pw + pi]
+                } else {
+                    let k = i64::from(p[i]).wrapping_add(next.next().unwrap_or(0));
+                    out_of_range |= k.unsigned_abs() > MAX_LATTICE_INDEX as u64;
+                    lattice_value(k as f64, q)
+                };
+            }
+        }
+        if out_of_range {
+            return Err(DecodeError::Pco("a lattice index is out of range".into()));
+        }
+        return Ok(());
     }
     let predictor = Predictor::new(&cols, &rows, &parent);
     // Row by row: a sample is a void, held (the parent's height), or coded (its prediction
@@ -1073,11 +1160,18 @@ mod tests {
             let (interpolated, planar) = encode_both(&samples, at, parent, None, coder).expect("a child of its parent encodes");
             let chosen = encode_against(&samples, at, parent, None, coder).expect("encodes");
             prop_assert_eq!(chosen.len(), interpolated.len().min(planar.len()));
-            // The test's heights' residuals fit an `i32`: tANS codes them all.
-            let (lattice_ids, float_ids) = (
-                [Encoding::LatticeFromParent, Encoding::LatticePlanarFromParent].map(|e| e.coded_by(coder)),
-                [Encoding::FloatFromParent, Encoding::FloatPlanarFromParent].map(|e| e.coded_by(coder)),
-            );
+            // The test's heights and residuals are small: tANS codes them all, and lattice
+            // ones are interpolated from the parent's codes (encoding 15).
+            let (lattice_ids, float_ids) = match coder {
+                Coder::Pco => (
+                    [Encoding::LatticeFromParent, Encoding::LatticePlanarFromParent],
+                    [Encoding::FloatFromParent, Encoding::FloatPlanarFromParent],
+                ),
+                Coder::Tans => (
+                    [Encoding::LatticeFromParentCodes, Encoding::LatticePlanarFromParentTans],
+                    [Encoding::FloatFromParentTans, Encoding::FloatPlanarFromParentTans],
+                ),
+            };
             // Both codings decode to the child's bits; the plain decoder refuses them.
             for (bytes, k) in [(&interpolated, 0), (&planar, 1)] {
                 let id = Encoding::of(bytes).expect("an id");
@@ -1171,9 +1265,128 @@ mod tests {
             }
         }
 
+        /// Encoding 15's predictions are the format's formula: the parent's codes
+        /// `round(G/q)` taken as `i32`, each axis's weights in sixteenths (the cubic
+        /// midpoint's `(−1, 9, 9, −1)`, a linear `t` rounded half up to a sixteenth), and
+        /// `(Σ + 128) >> 8` in wrapping 32-bit arithmetic, for any parent heights (hostile
+        /// ones wrap alike); where every code is within ±2^22 ([`CodePredictor::fits`]) no
+        /// sum wraps.
+        #[test]
+        fn the_integer_predictor_is_the_formula_of_the_format(
+            (grid, raster) in placements(),
+            bits in proptest::collection::vec(any::<u32>(), 1..64),
+            hostile in any::<bool>(),
+            q in prop::sample::select(vec![1.0f64, 0.25, 0.1, 1e-4]),
+        ) {
+            let case = child_of_parent(grid, raster, 7, true, false);
+            prop_assume!(case.is_some());
+            let Some((pc, pr, mut heights, cc, cr, _)) = case else { return Ok(()) };
+            for (i, h) in heights.iter_mut().enumerate() {
+                let x = bits[i % bits.len()];
+                *h = if hostile {
+                    f32::from_bits(x)
+                } else {
+                    (x % 20_001) as f32 - 10_000.0
+                };
+            }
+            let parent = Parent { at: Axes { cols: &pc, rows: &pr }, heights: &heights };
+            let at = Axes { cols: &cc, rows: &cr };
+            let (cols, rows) = plan(at, parent.at).expect("a child of its parent");
+            let predictor = CodePredictor::new(&cols, &rows, &parent, q);
+            let pw = pc.len();
+            let code = |pi: usize, pj: usize| round_to_i64(f64::from(heights[pj * pw + pi]) / q);
+            // An axis's terms in sixteenths, from its `f64` weights: exact for the cubic
+            // midpoint; a linear pair's `t` rounded half up, the other weight `16 − t16`.
+            let sixteenths = |a: &Along| -> Vec<(usize, i64)> {
+                let mut one = [(0, 0.0)];
+                match a.terms(&mut one) {
+                    [(i, _)] => vec![(*i, 16)],
+                    [(lo, _), (hi, t)] => {
+                        let t16 = (t * 16.0 + 0.5).floor() as i64;
+                        vec![(*lo, 16 - t16), (*hi, t16)]
+                    }
+                    terms => terms.iter().map(|&(i, w)| (i, (w * 16.0) as i64)).collect(),
+                }
+            };
+            let fits = (0..pr.len()).all(|pj| (0..pw).all(|pi| code(pi, pj).unsigned_abs() < 1 << 22));
+            let mut row = vec![0i32; cols.len()];
+            for (j, ry) in rows.iter().enumerate() {
+                predictor.row(j, &mut row);
+                for (i, cx) in cols.iter().enumerate() {
+                    // The sum exactly (codes wrapped to `i32` first, as the format reads them).
+                    let mut sum = 0i64;
+                    for (pj, wy) in sixteenths(ry) {
+                        for (pi, wx) in sixteenths(cx) {
+                            sum += wy * wx * i64::from(code(pi, pj) as i32);
+                        }
+                    }
+                    let want = ((sum + 128) as i32) >> 8;
+                    prop_assert_eq!(row[i], want, "column {} row {}", i, j);
+                    if fits {
+                        prop_assert!(sum.unsigned_abs() < 1 << 31, "a sum of small codes wrapped");
+                        prop_assert_eq!(i64::from(row[i]), (sum + 128).div_euclid(256));
+                    }
+                }
+            }
+            if fits {
+                prop_assert!(predictor.fits());
+            }
+        }
+
+        /// Encoding 15 is written only where the parent's codes are within ±2^22 (else
+        /// 11), and the integer prediction decodes any hostile parent without a panic.
+        #[test]
+        fn encoding_15_only_where_the_parent_codes_are_small(
+            (grid, raster) in placements(),
+            seed in 0u64..1000,
+            big in any::<bool>(),
+            scale in prop::sample::select(vec![1.0f32, -1.0, 3e6, f32::MAX]),
+        ) {
+            let case = child_of_parent(grid, raster, seed, true, false);
+            prop_assume!(case.is_some());
+            let Some((pc, pr, mut heights, cc, cr, mut samples)) = case else { return Ok(()) };
+            if big {
+                // One parent height past 2^22 steps, and the child samples it holds with it
+                // (more than one where the axes are clamped at the data edge).
+                let (cols, rows) = plan(Axes { cols: &cc, rows: &cr }, Axes { cols: &pc, rows: &pr }).expect("a child");
+                let held: Vec<(usize, usize)> = rows
+                    .iter()
+                    .enumerate()
+                    .flat_map(|(j, r)| cols.iter().enumerate().map(move |(i, c)| (j, r, i, c)))
+                    .filter_map(|(j, r, i, c)| match (r, c) {
+                        (Along::Held(pj), Along::Held(pi)) => Some((j * cc.len() + i, pj * pc.len() + pi)),
+                        _ => None,
+                    })
+                    .collect();
+                prop_assume!(!held.is_empty());
+                let p = held[0].1;
+                heights[p] = 5_000_000.0;
+                for &(child, _) in held.iter().filter(|&&(_, at)| at == p) {
+                    samples[child] = 5_000_000.0;
+                }
+            }
+            let parent = Parent { at: Axes { cols: &pc, rows: &pr }, heights: &heights };
+            let at = Axes { cols: &cc, rows: &cr };
+            let (interpolated, _) = encode_both(&samples, at, parent, None, Coder::Tans).expect("encodes");
+            let id = Encoding::of(&interpolated).expect("an id");
+            prop_assert_eq!(id, if big { Encoding::LatticeFromParentTans } else { Encoding::LatticeFromParentCodes });
+            let mut out = vec![0.0f32; samples.len()];
+            decode_against(&interpolated, at, parent, &mut out).expect("decodes");
+            for (a, b) in samples.iter().zip(&out) {
+                prop_assert_eq!(a.to_bits(), b.to_bits());
+            }
+            // Encoding 15's bytes against a parent of any magnitude: decoded, or an error.
+            if !big {
+                let hostile: Vec<f32> = heights.iter().map(|h| h * scale).collect();
+                let other = Parent { at: parent.at, heights: &hostile };
+                let _ = decode_against(&interpolated, at, other, &mut out);
+                let _ = decode_with(&interpolated, at, other, &mut out, false);
+            }
+        }
+
         /// The row kernels (no voids) decode exactly as the general per-sample loops do:
         /// the same bits, or both an error, for valid payloads of every encoding 5 to 8 and
-        /// 11 to 14 and for the same payloads with a byte changed (residuals out of range
+        /// 11 to 15 and for the same payloads with a byte changed (residuals out of range
         /// included).
         #[test]
         fn the_row_kernels_decode_as_the_general_loops(

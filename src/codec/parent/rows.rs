@@ -1,4 +1,5 @@
-//! The decoders' inner loops for payloads coded against a parent (encodings 5 to 8) with no
+//! The decoders' inner loops for payloads coded against a parent (encodings 5 to 8, their
+//! tANS twins 11 to 14, and 15) with no
 //! voids, row by row: what a scene spends most of its decoding time in.
 //!
 //! The general decoder ([`super::decode_against`]'s other paths) asks, for every sample,
@@ -17,7 +18,7 @@
 //! through checked slices: a count that does not match is an error, never a panic.
 
 use super::super::{from_ordered, lattice_heights, to_ordered, unzigzag, DecodeError, Wrapping};
-use super::{held_indexes, round_row, Along, Parent, Predictor};
+use super::{held_indexes, round_row, Along, CodePredictor, Parent, Predictor};
 
 /// What the kernels need to know of a payload's placement against its parent.
 pub(super) struct Rows<'a> {
@@ -282,6 +283,46 @@ wide! {
                 Along::Held(pj) => {
                     for (&c, &d) in g.coded.iter().zip(take(r, &mut next, g.coded.len())?) {
                         k[c] = k[c].wrapping_add(d);
+                    }
+                    bad |= lattice_heights(&k, orow, q, Some(g.held_cols));
+                    g.held_heights(pj, orow);
+                }
+            }
+        }
+        if bad {
+            return Err(out_of_range());
+        }
+        Ok(())
+    }
+}
+
+wide! {
+    /// Encoding 15 without voids: per row, the predictions from the parent's codes in
+    /// integers a row at a time, the residuals added, the indexes converted a row at a time.
+    pub(super) fn interpolated_codes(
+        g: &Rows<'_>,
+        predictor: &CodePredictor<'_>,
+        q: f64,
+        r: &[i64],
+        out: &mut [f32],
+    ) -> Result<(), DecodeError> {
+        let w = g.w;
+        let mut p = vec![0i32; w];
+        let mut k = vec![0i64; w];
+        let mut next = 0usize;
+        let mut bad = false;
+        for (j, (ry, orow)) in g.rows.iter().zip(out.chunks_exact_mut(w.max(1))).enumerate() {
+            predictor.row(j, &mut p);
+            match *ry {
+                Along::Mixed(..) => {
+                    for ((k, &p), &d) in k.iter_mut().zip(&p).zip(take(r, &mut next, w)?) {
+                        *k = i64::from(p).wrapping_add(d);
+                    }
+                    bad |= lattice_heights(&k, orow, q, None);
+                }
+                Along::Held(pj) => {
+                    for (&c, &d) in g.coded.iter().zip(take(r, &mut next, g.coded.len())?) {
+                        k[c] = i64::from(p[c]).wrapping_add(d);
                     }
                     bad |= lattice_heights(&k, orow, q, Some(g.held_cols));
                     g.held_heights(pj, orow);

@@ -1,0 +1,195 @@
+//! Encoding 15's prediction (format 7): the parent's heights as lattice codes, interpolated
+//! in 32-bit integers.
+//!
+//! Encoding 5 interpolates the parent's heights in `f64` and rounds each prediction to the
+//! lattice: four multiply-adds, a scaling and a rounding a sample, about 0.4 of its
+//! decoding time once the residuals decoded fast (`docs/benchmarks.md`, "Encoding 5
+//! predicted in integers"). On a lattice the parent's heights are codes already: `round(G/q)`
+//! of each is exact, the cubic midpoint's weights `(−1, 9, 9, −1)/16` are whole sixteenths,
+//! and a linear weight rounded to a sixteenth predicts as well as the exact one. So the
+//! prediction is `(Σ_j wy_j Σ_i wx_i c(i, j) + 128) >> 8` over the codes `c`, the weights in
+//! sixteenths: integer multiply-adds that vectorise eight to a register, and no rounding.
+//!
+//! The arithmetic is 32-bit two's complement, wrapping, and the shift arithmetic: every
+//! reader computes the same prediction from any parent, so a payload cannot decode two ways.
+//! A writer uses encoding 15 only where every parent code lies within ±2^22 ([`CodePredictor::fits`]):
+//! the weights' magnitudes sum to at most 20 an axis, so no sum then wraps and the
+//! prediction is the rounded interpolation of the codes.
+
+use super::{round_row, round_to_i64, Along, Parent};
+
+/// The largest parent code magnitude a writer predicts from in integers: below it no sum of
+/// at most `20 × 20` weighted codes reaches `2^31`.
+const SMALL_CODE: u64 = 1 << 22;
+
+/// The parent's rows a child needs, each interpolated in integers at every child column
+/// (`Σ_i wx_i · c(i, j)`), once; then a child row's predictions from them.
+pub(super) struct CodePredictor<'a> {
+    rows: &'a [Along],
+    /// `inner[(j - first) * w + c]` for parent rows `first..first + n`.
+    inner: Vec<i32>,
+    first: usize,
+    w: usize,
+    /// Whether every parent code read lies within ±2^22.
+    fits: bool,
+}
+
+wide! {
+    /// [`CodePredictor::new`]'s work: the needed parent rows' codes, interpolated at every
+    /// child column.
+    fn code_predictor<'a>(
+        cols: &[Along],
+        rows: &'a [Along],
+        parent: &Parent<'_>,
+        q: f64,
+    ) -> CodePredictor<'a> {
+        let pw = parent.at.cols.len();
+        let (mut first, mut last) = (usize::MAX, 0);
+        for r in rows {
+            let (terms, n) = r.sixteenths();
+            for &(j, _) in &terms[..n] {
+                first = first.min(j);
+                last = last.max(j);
+            }
+        }
+        let w = cols.len();
+        let n = if first <= last { last - first + 1 } else { 0 };
+        // The cubic midpoints (almost every interpolated column) are computed along the
+        // parent's row at once, a loop the compiler vectorises, then placed; the other
+        // columns term by term.
+        let mut cubics = Vec::new();
+        let mut ones = Vec::new();
+        let mut others = Vec::new();
+        for (c, along) in cols.iter().enumerate() {
+            let (terms, m) = along.sixteenths();
+            let start = terms[0].0;
+            if m == 4 && terms == [0, 1, 2, 3].map(|d| (start + d, [-1, 9, 9, -1][d])) {
+                cubics.push((c, start));
+            } else if m == 1 {
+                ones.push((c, start, terms[0].1));
+            } else {
+                others.push((c, terms, m));
+            }
+        }
+        let lo = cubics.iter().map(|&(_, i)| i).min().unwrap_or(0);
+        let hi = cubics.iter().map(|&(_, i)| i + 1).max().unwrap_or(0);
+        let mut run = vec![0i32; hi.saturating_sub(lo)];
+        let (mut x, mut wide_codes, mut codes) = (vec![0.0f64; pw], vec![0i64; pw], vec![0i32; pw]);
+        let mut inner = vec![0i32; n * w];
+        let mut spread = 0u64;
+        for (k, chunk) in inner.chunks_exact_mut(w.max(1)).enumerate().take(n) {
+            let j = first + k;
+            parent_codes(&parent.heights[j * pw..(j + 1) * pw], q, &mut x, &mut wide_codes);
+            for (c, &k) in codes.iter_mut().zip(&wide_codes) {
+                // `k ^ (k >> 63)` is `k` or `-k - 1`: below 2^22 for all when all fit.
+                spread |= (k ^ (k >> 63)) as u64;
+                *c = k as i32;
+            }
+            if !run.is_empty() {
+                let m = run.len();
+                let (c0, c1, c2, c3) = (&codes[lo..], &codes[lo + 1..], &codes[lo + 2..], &codes[lo + 3..]);
+                let terms = c0[..m].iter().zip(&c1[..m]).zip(&c2[..m]).zip(&c3[..m]);
+                for (x, (((&a, &b), &c), &d)) in run.iter_mut().zip(terms) {
+                    *x = b.wrapping_add(c).wrapping_mul(9).wrapping_sub(a).wrapping_sub(d);
+                }
+                for &(c, i) in &cubics {
+                    chunk[c] = run[i - lo];
+                }
+            }
+            for &(c, i, wt) in &ones {
+                chunk[c] = wt.wrapping_mul(codes[i]);
+            }
+            for &(c, terms, m) in &others {
+                chunk[c] = terms[..m]
+                    .iter()
+                    .fold(0i32, |s, &(i, wt)| s.wrapping_add(wt.wrapping_mul(codes[i])));
+            }
+        }
+        CodePredictor {
+            rows,
+            inner,
+            first,
+            w,
+            fits: spread < SMALL_CODE,
+        }
+    }
+}
+
+/// `round(h / q)` of each of `heights` into `codes` (`x`: scratch of as many): as
+/// `h · (1/q)` rounded, in loops the compiler vectorises, where that is the same index (a
+/// row within ±2^30 and no product within 2^-20 of a half: `super::held_indexes` says why);
+/// else divided.
+#[inline(always)]
+fn parent_codes(heights: &[f32], q: f64, x: &mut [f64], codes: &mut [i64]) {
+    const SMALL: f64 = (1u64 << 30) as f64;
+    const MARGIN: f64 = 1.0 / (1u64 << 20) as f64;
+    let inv_q = 1.0 / q;
+    for (x, &h) in x.iter_mut().zip(heights) {
+        *x = f64::from(h) * inv_q;
+    }
+    let safe = x.iter().fold(true, |ok, &v| {
+        ok & (v.abs() < SMALL) & (((v - v.trunc()).abs() - 0.5).abs() > MARGIN)
+    });
+    if safe {
+        round_row(x, codes);
+    } else {
+        for (c, &h) in codes.iter_mut().zip(heights) {
+            *c = round_to_i64(f64::from(h) / q);
+        }
+    }
+}
+
+impl<'a> CodePredictor<'a> {
+    /// The predictor of a child at `cols` × `rows` from `parent`'s heights on step `q`.
+    pub(super) fn new(cols: &[Along], rows: &'a [Along], parent: &Parent<'_>, q: f64) -> Self {
+        code_predictor(cols, rows, parent, q)
+    }
+
+    /// Whether every parent code lies within ±2^22: a writer's condition for encoding 15.
+    pub(super) fn fits(&self) -> bool {
+        self.fits
+    }
+
+    /// Child row `j`'s predictions at every column, into `p` (of the child's width).
+    #[inline(always)]
+    pub(super) fn row(&self, j: usize, p: &mut [i32]) {
+        let (terms, n) = self.rows[j].sixteenths();
+        let w = self.w;
+        let row = |i: usize| &self.inner[(i - self.first) * w..(i - self.first + 1) * w];
+        match terms[..n] {
+            [(i0, w0)] => {
+                for (x, &a) in p.iter_mut().zip(row(i0)) {
+                    *x = w0.wrapping_mul(a).wrapping_add(128) >> 8;
+                }
+            }
+            [(i0, w0), (i1, w1)] => {
+                for ((x, &a), &b) in p.iter_mut().zip(row(i0)).zip(row(i1)) {
+                    *x = w0.wrapping_mul(a).wrapping_add(w1.wrapping_mul(b)).wrapping_add(128) >> 8;
+                }
+            }
+            [(i0, w0), (i1, w1), (i2, w2), (i3, w3)] => {
+                let rows = row(i0).iter().zip(row(i1)).zip(row(i2)).zip(row(i3));
+                for (x, (((&a, &b), &c), &d)) in p.iter_mut().zip(rows) {
+                    *x = w0
+                        .wrapping_mul(a)
+                        .wrapping_add(w1.wrapping_mul(b))
+                        .wrapping_add(w2.wrapping_mul(c))
+                        .wrapping_add(w3.wrapping_mul(d))
+                        .wrapping_add(128)
+                        >> 8;
+                }
+            }
+            ref terms => {
+                p.fill(0);
+                for &(i, wt) in terms {
+                    for (x, &a) in p.iter_mut().zip(row(i)) {
+                        *x = x.wrapping_add(wt.wrapping_mul(a));
+                    }
+                }
+                for x in p.iter_mut() {
+                    *x = x.wrapping_add(128) >> 8;
+                }
+            }
+        }
+    }
+}
