@@ -287,6 +287,14 @@ struct RowPredictor<'a> {
 }
 
 impl RowPredictor<'_> {
+    /// The predictions at every child column into `p`, one [`RowPredictor::at`] each (the
+    /// general loops' reference, which the row kernels' [`rows::predictions`] is held to).
+    fn fill(&self, p: &mut [f64]) {
+        for (c, x) in p.iter_mut().enumerate() {
+            *x = self.at(c);
+        }
+    }
+
     /// The prediction at child column `c`: `Σ_j wy_j · inner(j, c)`, in the order of `j`.
     #[inline]
     fn at(&self, c: usize) -> f64 {
@@ -433,9 +441,13 @@ pub fn encode_against_quick(
             bits(&mut p.iter().map(|&z| u64::from(z))) <= bits(&mut i.iter().map(|&z| u64::from(z)))
         }
     };
-    // Encoding 15's residuals may not fit its stream (a cliff of 2^31 steps): then planar.
-    let (i, p) = s.code(coder, !planar_first, planar_first);
-    p.or(i).or_else(|| s.code(coder, false, true).1)
+    let (interpolated, planar) = s.code(coder, !planar_first, planar_first);
+    if planar_first {
+        planar
+    } else {
+        // Encoding 15's residuals may not fit its stream (a cliff of 2^31 steps): then planar.
+        interpolated.or_else(|| s.code(coder, false, true).1)
+    }
 }
 
 /// Both codings [`encode_against`] chooses from: (interpolated, planar).
@@ -746,7 +758,6 @@ fn decode_with(
             .sum()
     };
     let coded = n - voids_total - (held_cols * held_rows - held_voids);
-    let pw = parent.at.cols.len();
     if voids_total == 0 && fast {
         // No voids: the row kernels, which need no per-sample test of a bitmap.
         let held_cols: Vec<Option<u32>> = cols
@@ -807,62 +818,34 @@ fn decode_with(
     if planar {
         return decode_planar((coder, rest), (&cols, &rows), parent, q, voids, coded, out);
     }
-    if let (true, Some(q)) = (codes, q) {
-        let predictor = CodePredictor::new(&cols, &rows, &parent, q);
-        let mut r = vec![0i64; coded];
-        residuals::read_lattice(coder, rest, &mut r)?;
-        let mut next = r.into_iter();
-        let mut p = vec![0i32; w];
-        let mut out_of_range = false;
-        for (j, (ry, row)) in rows.iter().zip(out.chunks_exact_mut(w.max(1))).enumerate() {
-            predictor.row(j, &mut p);
-            for (i, (cx, o)) in cols.iter().zip(row.iter_mut()).enumerate() {
-                *o = if void(j * w + i) {
-                    f32::from_bits(VOID_BITS)
-                } else if let (Along::Held(pi), Along::Held(pj)) = (cx, ry) {
-                    parent.heights[pj * pw + pi]
-                } else {
-                    let k = i64::from(p[i]).wrapping_add(next.next().unwrap_or(0));
-                    out_of_range |= k.unsigned_abs() > MAX_LATTICE_INDEX as u64;
-                    lattice_value(k as f64, q)
-                };
-            }
-        }
-        if out_of_range {
-            return Err(DecodeError::Pco("a lattice index is out of range".into()));
-        }
-        return Ok(());
-    }
-    let predictor = Predictor::new(&cols, &rows, &parent);
     // Row by row: a sample is a void, held (the parent's height), or coded (its prediction
     // and the next residual).
-    let fill = |out: &mut [f32], coded_value: &mut dyn FnMut(f64) -> f32| {
-        for (j, (ry, row)) in rows.iter().zip(out.chunks_exact_mut(w.max(1))).enumerate() {
-            let along = predictor.row(j);
-            for (i, (cx, o)) in cols.iter().zip(row.iter_mut()).enumerate() {
-                *o = if void(j * w + i) {
-                    f32::from_bits(VOID_BITS)
-                } else if let (Along::Held(pi), Along::Held(pj)) = (cx, ry) {
-                    parent.heights[pj * pw + pi]
-                } else {
-                    coded_value(along.at(i))
-                };
-            }
-        }
-    };
+    let layout = (&cols[..], &rows[..]);
     match q {
         Some(q) => {
-            // The prediction's index: `p · (1/q)`, one division a block (container.md §7).
-            let inv_q = 1.0 / q;
             let mut r = vec![0i64; coded];
             residuals::read_lattice(coder, rest, &mut r)?;
             let mut next = r.into_iter();
             let mut out_of_range = false;
-            fill(out, &mut |p| {
-                let k = round_to_i64(p * inv_q).wrapping_add(next.next().unwrap_or(0));
+            // The index a prediction gives, plus the next residual, to a height.
+            let mut height = |predicted: i64| {
+                let k = predicted.wrapping_add(next.next().unwrap_or(0));
                 out_of_range |= k.unsigned_abs() > MAX_LATTICE_INDEX as u64;
                 lattice_value(k as f64, q)
-            });
+            };
+            if codes {
+                let predictor = CodePredictor::new(&cols, &rows, &parent, q);
+                fill(layout, parent, &void, out, |j, p| predictor.row(j, p), |p: i32| {
+                    height(i64::from(p))
+                });
+            } else {
+                // The prediction's index: `p · (1/q)`, one division a block (container.md §7).
+                let inv_q = 1.0 / q;
+                let predictor = Predictor::new(&cols, &rows, &parent);
+                fill(layout, parent, &void, out, |j, p| predictor.row(j).fill(p), |p| {
+                    height(round_to_i64(p * inv_q))
+                });
+            }
             if out_of_range {
                 return Err(DecodeError::Pco("a lattice index is out of range".into()));
             }
@@ -871,13 +854,42 @@ fn decode_with(
             let mut r = vec![0u32; coded];
             residuals::read_float(coder, rest, &mut r)?;
             let mut next = r.into_iter();
-            fill(out, &mut |p| {
+            let predictor = Predictor::new(&cols, &rows, &parent);
+            fill(layout, parent, &void, out, |j, p| predictor.row(j).fill(p), |p| {
                 let d = unzigzag(next.next().unwrap_or(0));
                 from_ordered(to_ordered(p as f32).wrapping_add(d))
             });
         }
     }
     Ok(())
+}
+
+/// The general loop of the interpolated encodings (5, 6, 11, 12, 15), row by row: a sample
+/// is a void, held (the parent's height), or coded: `coded_value` of its prediction, which
+/// `predict_row` makes for the whole row.
+fn fill<P: Copy + Default>(
+    (cols, rows): (&[Along], &[Along]),
+    parent: Parent<'_>,
+    void: &dyn Fn(usize) -> bool,
+    out: &mut [f32],
+    mut predict_row: impl FnMut(usize, &mut [P]),
+    mut coded_value: impl FnMut(P) -> f32,
+) {
+    let w = cols.len();
+    let pw = parent.at.cols.len();
+    let mut p = vec![P::default(); w];
+    for (j, (ry, row)) in rows.iter().zip(out.chunks_exact_mut(w.max(1))).enumerate() {
+        predict_row(j, &mut p);
+        for (i, (cx, o)) in cols.iter().zip(row.iter_mut()).enumerate() {
+            *o = if void(j * w + i) {
+                f32::from_bits(VOID_BITS)
+            } else if let (Along::Held(pi), Along::Held(pj)) = (cx, ry) {
+                parent.heights[pj * pw + pi]
+            } else {
+                coded_value(p[i])
+            };
+        }
+    }
 }
 
 /// Decodes the residual stream `stream` (written by `coder`) of encodings 7 and 13 (`q`:
