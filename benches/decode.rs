@@ -18,8 +18,9 @@
 //! - **codec, baseline kernels**: the same with the decoders' row kernels forced to their
 //!   baseline x86-64 build (`codec::with_baseline_kernels`) where the CPU would run their AVX2
 //!   build, the passes alternated with the previous column's;
-//! - **pco alone**: only the pco stream inside that code, decoded by pco into a new vector
-//!   (the floor under encodings 2 to 8 as long as pco codes their residuals);
+//! - **coder alone**: only the residual stream inside that code, decoded by its coder: pco
+//!   (encodings 2 to 8, into a new vector) or format 7's tANS stream (9 to 15, into a
+//!   reused buffer), the floor under the encoding;
 //! - **inflate**: the same samples as raw little-endian `f32`, DEFLATE-coded (flate2,
 //!   default level), inflated: a COG tile's decoder without its predictor.
 //!
@@ -34,11 +35,13 @@
 //! its lattice codes in `i32` (a candidate for format 7), ns a sample, passes alternated,
 //! beside the codec's own decoding of the same payloads (`common/predict.rs`).
 //!
-//! `FMRH_RECODE_STUDY=1` prints instead, per DEM and stored encoding, the same payloads
-//! coded again as format 7's writer codes them (residuals in the tANS stream, encodings 9 to
-//! 14, pco where they do not fit; alone or against the same grid, the smaller, as the writer
+//! `FMRH_RECODE_STUDY=tans` (or `=pco`) prints instead, per DEM and stored encoding, the
+//! same payloads coded again with that coder (`tans`: as format 7's writer codes them,
+//! residuals in the tANS stream, encodings 9 to 15, pco where they do not fit; `pco`: as
+//! format 6's did, encodings 2 to 8; alone or against the same grid, the smaller, as the writer
 //! keeps), beside the stored ones: bytes a sample, the encodings they became, and ns a decoded
-//! sample for the codec and the whole payload, the two codings' passes alternated.
+//! sample for the codec and the whole payload, the two codings' passes alternated. Since the
+//! writer writes format 7, `=pco` is the comparison with format 6.
 //!
 //! Every payload is checked bit for bit against its first decoding before it is timed.
 //! Times are ns per decoded sample; on a noisy machine read the ratios within a row.
@@ -61,6 +64,10 @@ use fmrh::codec::tans::{self as coder, Decoder};
 use fmrh::codec::{self, voids, Encoding};
 use fmrh::format::payload::{self, ParentGrid, Placement};
 use fmrh::store::Store;
+
+/// The codes the bench's payloads are decoded with: every one (it reads files of every
+/// version this reader writes or has written, and recodes them as format 7).
+const ALL_CODES: payload::Codes = payload::Codes::PcoOrTans;
 
 /// One stored payload and all it decodes with.
 #[derive(Clone)]
@@ -134,6 +141,49 @@ impl Sample {
             _ => None,
         }
     }
+
+    /// The tANS stream inside the samples' code (format 7's encodings 9 to 15), after a
+    /// lattice code's common factor: `None` for the others.
+    fn tans_stream(&self) -> Option<&[u8]> {
+        let code = self.code();
+        let body = &code[1..];
+        let (n, w) = (self.coded, self.width);
+        fn after_voids(b: &[u8], n: usize, w: usize) -> &[u8] {
+            voids::read(b[0], &b[1..], n, w).expect("voids").1
+        }
+        fn after_factor(b: &[u8]) -> &[u8] {
+            let len = b.iter().position(|&x| x & 0x80 == 0).expect("a factor") + 1;
+            &b[len..]
+        }
+        match self.encoding() {
+            Encoding::FloatPredictedTans => Some(body),
+            Encoding::LatticeTans
+            | Encoding::LatticeFromParentTans
+            | Encoding::LatticePlanarFromParentTans
+            | Encoding::LatticeFromParentCodes => Some(after_factor(after_voids(&body[8..], n, w))),
+            Encoding::FloatFromParentTans | Encoding::FloatPlanarFromParentTans => {
+                Some(after_voids(body, n, w))
+            }
+            _ => None,
+        }
+    }
+}
+
+/// Decodes the tANS stream `stream` alone (its codes, no residual rebuilt) into `out`,
+/// which is at least as long as its count; the count of codes.
+fn tans_alone(decoder: &mut Decoder, stream: &[u8], out: &mut [u32]) -> usize {
+    let (mut count, mut shift) = (0usize, 0);
+    for &b in stream.iter().take(5) {
+        count |= usize::from(b & 0x7f) << shift;
+        shift += 7;
+        if b & 0x80 == 0 {
+            break;
+        }
+    }
+    decoder
+        .decode(stream, &mut out[..count], |v| v)
+        .expect("a stored stream decodes");
+    count
 }
 
 fn pco_alone(stream: &[u8], kind: char) -> usize {
@@ -445,8 +495,8 @@ fn payloads(store: &Store) -> Vec<Sample> {
     let finest = domain.finest_level();
     let mut out = Vec::new();
     let mut push = |stored: Vec<u8>, placement: Placement, parent: Option<Arc<ParentGrid>>| {
-        let layout =
-            payload::decode(&stored, &placement, parent.as_deref()).expect("a payload decodes");
+        let layout = payload::decode(&stored, &placement, parent.as_deref(), ALL_CODES)
+            .expect("a payload decodes");
         let (cols, rows) = placement.axes();
         out.push(Sample {
             stored,
@@ -508,7 +558,8 @@ fn recoded(s: &Sample, coder: codec::Coder) -> Sample {
         Some(a) if a.len() < alone.len() => (a, s.parent.clone()),
         _ => (alone, None),
     };
-    let again = payload::decode(&stored, &s.placement, parent.as_deref()).expect("decodes");
+    let again =
+        payload::decode(&stored, &s.placement, parent.as_deref(), ALL_CODES).expect("decodes");
     assert_eq!(again, s.layout, "a recoded payload decoded differently");
     Sample {
         stored,
@@ -529,20 +580,18 @@ fn codecs<'a>(all: impl Iterator<Item = &'a Sample>, buf: &mut [f32]) {
 fn payloads_decoded<'a>(all: impl Iterator<Item = &'a Sample>) {
     for s in all {
         std::hint::black_box(
-            payload::decode(&s.stored, &s.placement, s.parent.as_deref()).expect("decodes"),
+            payload::decode(&s.stored, &s.placement, s.parent.as_deref(), ALL_CODES)
+                .expect("decodes"),
         );
     }
 }
 
-/// `FMRH_RECODE_STUDY=1`: each stored encoding's payloads beside the same coded by format
-/// 7's writer (tANS residuals), passes alternated.
-fn recode_study(dem: &str, by: &BTreeMap<u8, Vec<&Sample>>) {
+/// `FMRH_RECODE_STUDY=CODER`: each stored encoding's payloads beside the same coded again
+/// with `coder` (tANS: format 7's writer; pco: format 6's), passes alternated.
+fn recode_study(dem: &str, by: &BTreeMap<u8, Vec<&Sample>>, coder: codec::Coder) {
     let (mut bytes, mut t, mut samples) = ([0usize; 2], [0.0f64; 4], 0usize);
     for (id, group) in by {
-        let tans: Vec<Sample> = group
-            .iter()
-            .map(|s| recoded(s, codec::Coder::Tans))
-            .collect();
+        let tans: Vec<Sample> = group.iter().map(|s| recoded(s, coder)).collect();
         let mut became: BTreeMap<u8, usize> = BTreeMap::new();
         for s in &tans {
             *became.entry(s.encoding() as u8).or_default() += 1;
@@ -731,8 +780,13 @@ fn codec_loop(group: &[&Sample]) -> (f64, f64) {
 fn main() {
     let dir = tempfile::tempdir().expect("temp dir");
     let study = std::env::var_os("FMRH_CODER_STUDY").is_some();
-    let recode = std::env::var_os("FMRH_RECODE_STUDY").is_some();
-    if recode {
+    let recode = std::env::var("FMRH_RECODE_STUDY")
+        .ok()
+        .map(|c| match c.as_str() {
+            "pco" => codec::Coder::Pco,
+            _ => codec::Coder::Tans,
+        });
+    if recode.is_some() {
         println!(
             "| DEM | stored encoding | payloads | samples | bytes/sample | recoded bytes/sample | recoded encodings (payloads) | codec ns | recoded codec ns | recoded / stored | payload ns | recoded payload ns | recoded / stored |"
         );
@@ -744,7 +798,7 @@ fn main() {
         println!("|---|---|---|---|---|---|---|---|---|---|");
     } else {
         println!(
-        "| DEM | encoding | payloads | samples | bytes/sample | payload ns | codec ns | codec ns, baseline kernels | pco alone ns | inflate ns | payload / inflate |"
+        "| DEM | encoding | payloads | samples | bytes/sample | payload ns | codec ns | codec ns, baseline kernels | coder alone ns | inflate ns | payload / inflate |"
     );
         println!("|---|---|---|---|---|---|---|---|---|---|---|");
     }
@@ -782,8 +836,8 @@ fn main() {
             coder_study(dem.name, &by, &mut fusion);
             continue;
         }
-        if recode {
-            recode_study(dem.name, &by);
+        if let Some(coder) = recode {
+            recode_study(dem.name, &by, coder);
             continue;
         }
         if std::env::var_os("FMRH_PREDICT_STUDY").is_some() {
@@ -808,7 +862,8 @@ fn main() {
             // Checked once, bit for bit, against the first decoding.
             for s in group {
                 let again =
-                    payload::decode(&s.stored, &s.placement, s.parent.as_deref()).expect("decodes");
+                    payload::decode(&s.stored, &s.placement, s.parent.as_deref(), ALL_CODES)
+                        .expect("decodes");
                 assert_eq!(
                     again, s.layout,
                     "{}: a payload decoded differently",
@@ -818,7 +873,7 @@ fn main() {
             let payload_t = timed(|| {
                 for s in group {
                     std::hint::black_box(
-                        payload::decode(&s.stored, &s.placement, s.parent.as_deref())
+                        payload::decode(&s.stored, &s.placement, s.parent.as_deref(), ALL_CODES)
                             .expect("decodes"),
                     );
                 }
@@ -835,9 +890,14 @@ fn main() {
                 || codec::with_baseline_kernels(|| decode_all(&mut buf2)),
             );
             let streams: Vec<(&[u8], char)> = group.iter().filter_map(|s| s.pco_stream()).collect();
+            let tans_streams: Vec<&[u8]> = group.iter().filter_map(|s| s.tans_stream()).collect();
+            let (mut decoder, mut codes) = (Decoder::default(), vec![0u32; 1 << 16]);
             let pco_t = timed(|| {
                 for (stream, kind) in &streams {
                     std::hint::black_box(pco_alone(stream, *kind));
+                }
+                for stream in &tans_streams {
+                    std::hint::black_box(tans_alone(&mut decoder, stream, &mut codes));
                 }
             });
             let deflated: Vec<(Vec<u8>, usize)> = group
@@ -878,7 +938,7 @@ fn main() {
                 ns(payload_t),
                 ns(codec_t),
                 ns(codec_baseline_t),
-                if streams.is_empty() {
+                if streams.is_empty() && tans_streams.is_empty() {
                     "-".to_string()
                 } else {
                     format!("{:.2}", ns(pco_t))

@@ -31,6 +31,12 @@
 //! warm time is kept as its own column. Two tables follow the per-scene one: the ratios of
 //! fmrh's time to GDAL's, median and worst, warm and cold.
 //!
+//! **Before** (optional): with `FMRH_SCENES_BEFORE=DIR`, each DEM's container as an older
+//! fmrh built it (`DIR/<dem>.fmrh`, the same model and options, e.g. a 6.2 file whose
+//! residuals pco codes) is read by this fmrh beside today's build, the two runs alternated
+//! within each best of 5, warm and cold; a table of today's time and bytes over the older
+//! file's follows, with the two files' sizes.
+//!
 //! `cargo bench --bench scenes_vs_cog` (needs gdal-bin and python3-gdal; the large DEMs need
 //! `../shared/data`).
 
@@ -70,6 +76,46 @@ fn best_us(mut before: impl FnMut(), mut run: impl FnMut()) -> f64 {
             t.elapsed().as_secs_f64() * 1e6
         })
         .fold(f64::INFINITY, f64::min)
+}
+
+/// The best of 5 runs of `a` and of `b`, in microseconds, the two alternated, each run after
+/// its `before`.
+fn best_pair_us(
+    mut before: impl FnMut(usize),
+    mut a: impl FnMut(),
+    mut b: impl FnMut(),
+) -> (f64, f64) {
+    let mut best = [f64::INFINITY; 2];
+    for _ in 0..5 {
+        for (i, slot) in best.iter_mut().enumerate() {
+            before(i);
+            let t = Instant::now();
+            if i == 0 {
+                a();
+            } else {
+                b();
+            }
+            *slot = slot.min(t.elapsed().as_secs_f64() * 1e6);
+        }
+    }
+    (best[0], best[1])
+}
+
+/// The scene of `cam` at `tau` from the container at `path`, opened fresh (lean), its blocks
+/// loaded and decoded: (blocks, reads, bytes, max screen error).
+fn fmrh_scene(path: &Path, cam: &fmrh::scene::Camera, tau: f64) -> (usize, u64, u64, f64) {
+    let store = Store::open(path).expect("opens");
+    let terrain = Terrain::new(&store).expect("terrain");
+    let scene = terrain.scene(cam, &SceneOptions::new(tau)).expect("scene");
+    load_blocks(&store, &scene.blocks, 0).expect("loads");
+    let r = store.open_reads();
+    let all = store.read_stats();
+    (
+        scene.blocks.len(),
+        r.reads() + all.reads(),
+        r.bytes() + all.bytes(),
+        scene.stats.max_screen_error,
+    )
 }
 
 /// GDAL's (warm, cold) microseconds for each scene's tiles of `cog`.
@@ -129,45 +175,84 @@ fn main() {
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     let mut ratios = Vec::new();
     let (mut warm_ratios, mut cold_ratios) = (Vec::new(), Vec::new());
+    let before_dir = std::env::var_os("FMRH_SCENES_BEFORE").map(std::path::PathBuf::from);
+    // Per scene against the older file: the line, and (warm, cold, bytes) ratios.
+    let mut against_before: Vec<(String, [f64; 3])> = Vec::new();
+    let mut sizes: Vec<String> = Vec::new();
     for dem in dems::dems() {
         let name = dem.name;
         let Some(cog) = make_cog(dir.path(), name, &dem.source) else {
             continue;
         };
         let path = dem.build(dir.path());
+        let before = before_dir
+            .as_ref()
+            .map(|d| d.join(format!("{name}.fmrh")))
+            .filter(|p| p.is_file());
+        if let Some(old) = &before {
+            let len = |p: &Path| std::fs::metadata(p).expect("a file").len();
+            sizes.push(format!(
+                "| {name} | {} | {} | {:.3} |",
+                len(&path),
+                len(old),
+                len(&path) as f64 / len(old) as f64
+            ));
+        }
         let frame = WorldFrame::new(Some(dem.spacing));
         let mut rows: Vec<Row> = Vec::new();
         let mut scenes: Vec<Vec<(usize, usize)>> = Vec::new();
         for (cam_name, cam) in dem.cameras() {
             let view = cam.view().expect("camera");
             for tau in TAUS {
-                let fmrh_run = || {
-                    let store = Store::open(&path).expect("opens");
-                    let terrain = Terrain::new(&store).expect("terrain");
-                    let scene = terrain.scene(&cam, &SceneOptions::new(tau)).expect("scene");
-                    load_blocks(&store, &scene.blocks, 0).expect("loads");
-                    let r = store.open_reads();
-                    let all = store.read_stats();
-                    (
-                        scene.blocks.len(),
-                        r.reads() + all.reads(),
-                        r.bytes() + all.bytes(),
-                        scene.stats.max_screen_error,
-                    )
-                };
+                let fmrh_run = || fmrh_scene(&path, &cam, tau);
                 let (blocks, reads, bytes, px) = fmrh_run();
-                let fmrh_warm = best_us(
-                    || {},
-                    || {
-                        fmrh_run();
-                    },
-                );
-                let fmrh_cold = best_us(
-                    || evict(&path),
-                    || {
-                        fmrh_run();
-                    },
-                );
+                let (fmrh_warm, fmrh_cold) = match &before {
+                    None => (
+                        best_us(
+                            || {},
+                            || {
+                                fmrh_run();
+                            },
+                        ),
+                        best_us(
+                            || evict(&path),
+                            || {
+                                fmrh_run();
+                            },
+                        ),
+                    ),
+                    Some(old) => {
+                        let old_run = || fmrh_scene(old, &cam, tau);
+                        let (old_blocks, _, old_bytes, old_px) = old_run();
+                        let (w, old_w) = best_pair_us(
+                            |_| {},
+                            || {
+                                fmrh_run();
+                            },
+                            || {
+                                old_run();
+                            },
+                        );
+                        let (c, old_c) = best_pair_us(
+                            |i| evict(if i == 0 { &path } else { old }),
+                            || {
+                                fmrh_run();
+                            },
+                            || {
+                                old_run();
+                            },
+                        );
+                        let r = [w / old_w, c / old_c, bytes as f64 / old_bytes as f64];
+                        against_before.push((
+                            format!(
+                                "| {name} | {cam_name} | {tau} | {blocks} / {old_blocks} | {px:.2} / {old_px:.2} | {bytes} | {old_bytes} | {:.3} | {w:.0} | {old_w:.0} | {:.3} | {c:.0} | {old_c:.0} | {:.3} |",
+                                r[2], r[0], r[1]
+                            ),
+                            r,
+                        ));
+                        (w, c)
+                    }
+                };
                 let (tiles, cog_px) = cog_scene(&cog, TerrainFrame::Flat(frame), &view, tau);
                 let (cog_bytes, cog_calls) = cog_reads(&cog, &tiles);
                 let cog_us = best_us(
@@ -219,6 +304,29 @@ fn main() {
                 r.iter().filter(|&&x| x <= 0.5).count(),
                 r.len()
             );
+        }
+    }
+    if !against_before.is_empty() {
+        println!(
+            "\n| dataset | camera | tau | blocks now / before | max px now / before | bytes now | bytes before | bytes ratio | us warm now | us warm before | warm ratio | us cold now | us cold before | cold ratio |"
+        );
+        println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+        for (line, _) in &against_before {
+            println!("{line}");
+        }
+        println!("\n| now / before | median | worst | best | scenes |");
+        println!("|---|---|---|---|---|");
+        for (k, what) in ["warm time", "cold time", "bytes read"].iter().enumerate() {
+            let (m, w, b) = quantiles(against_before.iter().map(|(_, r)| r[k]).collect());
+            println!(
+                "| {what} | {m:.3} | {w:.3} | {b:.3} | {} |",
+                against_before.len()
+            );
+        }
+        println!("\n| dataset | file bytes now | file bytes before | now / before |");
+        println!("|---|---|---|---|");
+        for line in &sizes {
+            println!("{line}");
         }
     }
     ratios.sort_by(f64::total_cmp);

@@ -6,9 +6,9 @@
 //! regenerate with `FMRH_BLESS=1 cargo test --release --test golden_vectors`.
 //!
 //! Files of older versions stay readable: `format-spec/vectors/v1.1/`, `v1.2/`, `v2.0/`,
-//! `v2.1/`, `v3.0/`, `v4.0/`, `v5.0/`, `v6.0/` and `v6.1/` keep the same vectors as those
-//! versions wrote them. They must read and verify exactly as the current ones do; 2.x to
-//! 6.1 files accept a transaction (which makes them 6.2), 1.x files refuse one. The polar vector (format 6.0: a
+//! `v2.1/`, `v3.0/`, `v4.0/`, `v5.0/`, `v6.0/`, `v6.1/` and `v6.2/` keep the same vectors as
+//! those versions wrote them. They must read and verify exactly as the current ones do; 2.x
+//! to 6.2 files accept a transaction (which makes them 7.0), 1.x files refuse one. The polar vector (format 6.0: a
 //! longitude-latitude grid at 80° N whose coarse grids are thinned by area) has no older copy.
 //!
 //! Three more pins: a crafted vector (`slot-1-beside-invalid-slot-0.fmrh`: where slot 1 lies
@@ -20,6 +20,7 @@ use std::io::Cursor;
 use std::path::PathBuf;
 use std::process::Command;
 
+use fmrh::codec::Encoding;
 use fmrh::heightfield::{Georeference, Metadata};
 use fmrh::model::{BuildOptions, Model, Thresholds};
 use fmrh::store::{write_to, WriteOptions};
@@ -189,6 +190,16 @@ fn build(v: &Vector) -> Vec<u8> {
     out.into_inner()
 }
 
+/// The ids of the checks `report` failed, by name.
+fn failed_checks(report: &fmrh::store::VerifyReport) -> Vec<String> {
+    report
+        .checks
+        .iter()
+        .filter(|c| c.status == fmrh::store::CheckStatus::Failed)
+        .map(|c| format!("{:?}", c.id))
+        .collect()
+}
+
 fn dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("format-spec/vectors")
 }
@@ -238,9 +249,21 @@ fn vectors_are_byte_exact_and_read_as_recorded() {
     }
 }
 
+/// Whether a code's id is one of the encodings against a parent (§7): 5 to 8, their tANS
+/// twins 11 to 14 (format 7), and 15.
+fn against_parent(id: u8) -> bool {
+    (5..=8).contains(&id) || (11..=15).contains(&id)
+}
+
+/// Whether a code against a parent predicts by interpolating the parent's grid (5, 6, 11,
+/// 12, 15) rather than by the planar predictor (7, 8, 13, 14).
+fn interpolated(id: u8) -> bool {
+    matches!(id, 5 | 6 | 11 | 12 | 15)
+}
+
 /// The vectors pin format 4's blocks coded against their parent's grid: the voids vectors
-/// have such blocks (encodings 5 to 8, the block record naming the parent), and a block
-/// whose record names no parent is coded alone.
+/// have such blocks (encodings 5 to 8, from format 7 their tANS twins 11 to 14 and 15, the
+/// block record naming the parent), and a block whose record names no parent is coded alone.
 #[test]
 fn vectors_pin_blocks_coded_against_their_parents() {
     let mut seen = std::collections::BTreeSet::new();
@@ -256,7 +279,7 @@ fn vectors_pin_blocks_coded_against_their_parents() {
                 let encoding = bytes[4];
                 if let Some(n) = b.against {
                     against += 1;
-                    assert!((5..=8).contains(&encoding), "{} ({x}, {y})", v.name);
+                    assert!(against_parent(encoding), "{} ({x}, {y})", v.name);
                     seen.insert(encoding);
                     let parent = store.node(n).unwrap();
                     assert_eq!(
@@ -264,7 +287,7 @@ fn vectors_pin_blocks_coded_against_their_parents() {
                         (d.finest_level() - 1, x / 2, y / 2)
                     );
                 } else {
-                    assert!(encoding < 5, "{} ({x}, {y})", v.name);
+                    assert!(!against_parent(encoding), "{} ({x}, {y})", v.name);
                 }
             }
         }
@@ -272,16 +295,16 @@ fn vectors_pin_blocks_coded_against_their_parents() {
             assert!(against > 0, "{}: no block coded against its parent", v.name);
         }
     }
-    // Both predictions against a parent are pinned: the grid's interpolation (5 or 6) and
-    // the planar predictor over the block's own samples (7 or 8).
+    // Both predictions against a parent are pinned: the grid's interpolation (5, 6, 11, 12
+    // or 15) and the planar predictor over the block's own samples (7, 8, 13 or 14).
     assert!(
-        seen.iter().any(|e| (5..=6).contains(e)) && seen.iter().any(|e| (7..=8).contains(e)),
+        seen.iter().any(|&e| interpolated(e)) && seen.iter().any(|&e| !interpolated(e)),
         "encodings seen: {seen:?}"
     );
 }
 
 /// The vectors pin format 5's grids: some grid is coded against its parent's (flag bit 1,
-/// encodings 5 to 8), every grid with a bitmap keeps it behind a void flag (bit 2), and some
+/// encodings 5 to 8 and, from format 7, 11 to 15), every grid with a bitmap keeps it behind a void flag (bit 2), and some
 /// void bitmap is stored as runs (void flag 2).
 #[test]
 fn vectors_pin_grids_coded_against_their_parents_and_flagged_bitmaps() {
@@ -295,7 +318,7 @@ fn vectors_pin_grids_coded_against_their_parents_and_flagged_bitmaps() {
             let encoding = bytes[4];
             assert_eq!(
                 n.grid_against_parent,
-                (5..=8).contains(&encoding),
+                against_parent(encoding),
                 "{}",
                 v.name
             );
@@ -356,8 +379,8 @@ fn vector_commit_record_fields_sit_where_the_spec_says() {
     // Spot checks against the byte table of format-spec/container.md §3.
     let bytes = build(&vectors()[1]);
     assert_eq!(&bytes[0..8], b"FMRH\r\n\x1a\n");
-    assert_eq!(u16::from_le_bytes([bytes[8], bytes[9]]), 6); // major
-    assert_eq!(u16::from_le_bytes([bytes[10], bytes[11]]), 2); // minor
+    assert_eq!(u16::from_le_bytes([bytes[8], bytes[9]]), 7); // major
+    assert_eq!(u16::from_le_bytes([bytes[10], bytes[11]]), 0); // minor
     assert_eq!(u32::from_le_bytes(bytes[12..16].try_into().unwrap()), 1024); // page size
     assert_eq!(u64::from_le_bytes(bytes[16..24].try_into().unwrap()), 1); // txn id
     assert_eq!(
@@ -454,13 +477,14 @@ fn format_1_vectors_read_verify_and_refuse_writes() {
     }
 }
 
-/// Format 2.x to 5.x files (the vectors as 2.0 and 2.1 wrote them, every table in pages of
+/// Format 2.x to 6.x files (the vectors as 2.0 and 2.1 wrote them, every table in pages of
 /// its own, in 2.0 the dataset header's precision field still reserved and zero; as 3.0 wrote
 /// them, every block coded alone; as 4.0 wrote them, every grid coded alone; as 5.0 wrote
-/// them, no grid thinned) read sample for sample, pass `verify --full`, and accept a
-/// transaction, whose commit makes them 6.0 (format §8) with their metadata in a bundle.
+/// them, no grid thinned; as 6.x wrote them, every residual by pco) read sample for sample,
+/// pass `verify --full`, and accept a transaction, whose commit makes them 7.0 (format §8)
+/// with their metadata in a bundle.
 #[test]
-fn format_2_to_6_1_vectors_read_verify_and_take_a_transaction() {
+fn format_2_to_6_2_vectors_read_verify_and_take_a_transaction() {
     let old_vectors = lossless_vectors()
         .into_iter()
         .map(|v| ((2u16, 0u16), v))
@@ -474,7 +498,8 @@ fn format_2_to_6_1_vectors_read_verify_and_take_a_transaction() {
         .chain(old_vectors().into_iter().map(|v| ((4, 0), v)))
         .chain(old_vectors().into_iter().map(|v| ((5, 0), v)))
         .chain(vectors().into_iter().map(|v| ((6, 0), v)))
-        .chain(vectors().into_iter().map(|v| ((6, 1), v)));
+        .chain(vectors().into_iter().map(|v| ((6, 1), v)))
+        .chain(vectors().into_iter().map(|v| ((6, 2), v)));
     for ((major, minor), v) in old_vectors {
         let old = dir()
             .join(format!("v{major}.{minor}"))
@@ -830,8 +855,8 @@ fn the_paged_vector_pins_the_top_of_the_tree() {
     let directory = u64_at(56) as usize;
     assert_eq!(header, pages - 1);
     assert!(root < first && first < directory && directory < header);
-    // A 6.1 reader's view: bytes 200..216 were reserved, and the file's minor is newer.
-    assert_eq!(u16_at(10), 2);
+    // Format 7.0: the top is a 6.2 structure, kept in major 7.
+    assert_eq!((u16_at(8), u16_at(10)), (7, 0));
 }
 
 /// A top of the tree whose record differs from the node table's (its page's CRC made
@@ -854,19 +879,14 @@ fn a_top_that_differs_from_the_table_fails_verify() {
     let report =
         fmrh::store::verify(fmrh::store::Bytes(bytes), fmrh::store::VerifyMode::Fast).unwrap();
     assert!(!report.valid);
-    let failed: Vec<String> = report
-        .checks
-        .iter()
-        .filter(|c| c.status == fmrh::store::CheckStatus::Failed)
-        .map(|c| format!("{:?}", c.id))
-        .collect();
+    let failed = failed_checks(&report);
     assert_eq!(failed, ["NodeTable"], "{report:?}");
 }
 
 /// Pages reached only through a structure this validator does not know: the paged vector
-/// with its top's reference cleared leaves the top's pages owned by nothing. In a 6.2 file
-/// that is I-8 damage; in a file of a newer minor (6.3, record resealed) those pages may
-/// belong to a structure 6.3 added through the record's reserved bytes (§8), so the
+/// with its top's reference cleared leaves the top's pages owned by nothing. In a 7.0 file
+/// that is I-8 damage; in a file of a newer minor (7.1, record resealed) those pages may
+/// belong to a structure 7.1 added through the record's reserved bytes (§8), so the
 /// validator does not call them damage. (A 6.1 validator reports a 6.2 file's top pages
 /// so, as §8 says.)
 #[test]
@@ -881,15 +901,10 @@ fn pages_a_newer_minor_may_own_are_not_damage() {
         bytes[252..256].copy_from_slice(&crc.to_le_bytes());
         let report =
             fmrh::store::verify(fmrh::store::Bytes(bytes), fmrh::store::VerifyMode::Full).unwrap();
-        report
-            .checks
-            .iter()
-            .filter(|c| c.status == fmrh::store::CheckStatus::Failed)
-            .map(|c| format!("{:?}", c.id))
-            .collect::<Vec<_>>()
+        failed_checks(&report)
     };
-    assert_eq!(with(2), ["PageOwnership"]);
-    assert!(with(3).is_empty(), "{:?}", with(3));
+    assert_eq!(with(0), ["PageOwnership"]);
+    assert!(with(1).is_empty(), "{:?}", with(1));
 }
 
 #[test]
@@ -950,9 +965,9 @@ fn every_vectors_info_json_is_what_info_prints() {
         }
     }
     infos.sort();
-    // 6 current, 28 of older versions (v1.1 to v5.0), the crafted slot vector and the
+    // 6 current, 46 of older versions (v1.1 to v6.2), the crafted slot vector and the
     // dataset: none may be missed.
-    assert!(infos.len() >= 36, "{} info files", infos.len());
+    assert!(infos.len() >= 54, "{} info files", infos.len());
     for info in infos {
         let name = info.file_name().unwrap().to_string_lossy().into_owned();
         // `X.info.json` describes `X.fmrh`; a dataset's `info.json` describes its folder.
@@ -987,7 +1002,7 @@ fn every_vectors_info_json_is_what_info_prints() {
 fn the_spec_states_the_codes_format_version() {
     use fmrh::format::{
         FORMAT_MAJOR, FORMAT_MINOR, LAST_MINOR_OF_1, LAST_MINOR_OF_2, LAST_MINOR_OF_3,
-        LAST_MINOR_OF_4, LAST_MINOR_OF_5,
+        LAST_MINOR_OF_4, LAST_MINOR_OF_5, LAST_MINOR_OF_6,
     };
     let spec = std::fs::read_to_string(
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("format-spec/container.md"),
@@ -1020,6 +1035,7 @@ fn the_spec_states_the_codes_format_version() {
         (3, LAST_MINOR_OF_3),
         (4, LAST_MINOR_OF_4),
         (5, LAST_MINOR_OF_5),
+        (6, LAST_MINOR_OF_6),
     ] {
         let stated = format!("`LAST_MINOR_OF_{major}` = {last}");
         assert!(
@@ -1087,4 +1103,145 @@ fn the_voids_vector_pins_a_void_at_a_held_position() {
         .unwrap()
         .get();
     assert_eq!(got.to_bits(), 0x7FC0_0000, "the void wins");
+}
+
+/// Every code id of a stored file's payloads: each block's samples' and stand-ins' codes and
+/// each coarse grid's heights' code, by the stored form of §7 (a `u32` length, the code, then
+/// what follows).
+fn code_ids(store: &fmrh::store::Store) -> Vec<u8> {
+    let d = *store.domain();
+    let (cols, rows) = d.nodes_across(d.finest_level());
+    let mut ids = Vec::new();
+    for y in 0..rows {
+        for x in 0..cols {
+            let b = store.stored_block(x, y).unwrap();
+            let bytes = store.payload(b.payload).unwrap();
+            let a = u32::from_le_bytes(bytes[..4].try_into().unwrap()) as usize;
+            ids.push(bytes[4]);
+            if b.void_count > 0 {
+                ids.push(bytes[4 + a]);
+            }
+        }
+    }
+    for n in store
+        .nodes()
+        .unwrap()
+        .iter()
+        .filter(|n| n.level < d.finest_level())
+    {
+        ids.push(store.payload(n.payload).unwrap()[4]);
+    }
+    ids
+}
+
+/// Format 7 (§7, §8): the vectors code their residuals with tANS (some code of every vector
+/// with a residual stream is 9 to 15, none of 6.2's is), and a 6.2 file (the voids vector as
+/// 6.2 wrote it) committed on becomes 7.0 with its untouched payloads still in their pco
+/// codes beside the commit's new tANS ones: the ids mix, the file verifies, and every sample
+/// reads as before but the patch.
+#[test]
+fn a_commit_on_a_6_2_file_mixes_pco_and_tans_codes() {
+    for v in vectors() {
+        let now = fmrh::store::Store::open(&dir().join(format!("{}.fmrh", v.name))).unwrap();
+        let old =
+            fmrh::store::Store::open(&dir().join("v6.2").join(format!("{}.fmrh", v.name))).unwrap();
+        assert!(
+            code_ids(&old).iter().all(|&id| id < 9),
+            "{}: a 6.2 file holds pco codes only",
+            v.name
+        );
+        let ids = code_ids(&now);
+        // Encodings 0, 1 and 3 have no tANS twin: a vector of constant or raw codes only
+        // would hold none, but each of these has residuals somewhere.
+        assert!(
+            ids.iter().any(|&id| id >= 9),
+            "{}: no tANS code in {ids:?}",
+            v.name
+        );
+        assert!(
+            ids.iter().all(|&id| Encoding::from_id(id).is_some()),
+            "{}: {ids:?}",
+            v.name
+        );
+    }
+    let v = vectors()
+        .into_iter()
+        .find(|v| v.name == "hills-20x13-voids")
+        .unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let copy = dir.path().join("old.fmrh");
+    std::fs::copy(
+        self::dir().join("v6.2").join("hills-20x13-voids.fmrh"),
+        &copy,
+    )
+    .unwrap();
+    let patch = Heightfield::from_fn(4, 3, |x, y| 1000.25 + (x * y) as f32 * 0.5).unwrap();
+    let c = fmrh::store::Container::open(&copy).unwrap();
+    let mut txn = c.begin_write().unwrap();
+    txn.replace_region(2, 2, &patch).unwrap();
+    txn.commit().unwrap();
+    drop(c);
+    let store = fmrh::store::Store::open(&copy).unwrap();
+    assert_eq!(store.state().format_version, (7, 0));
+    let ids = code_ids(&store);
+    assert!(
+        ids.iter().any(|&id| id >= 9) && ids.iter().any(|&id| (2..9).contains(&id)),
+        "pco and tANS codes side by side: {ids:?}"
+    );
+    let got = store.read_window(store.domain().data_rect()).unwrap();
+    for (i, (a, b)) in got.samples().iter().zip(v.field.samples()).enumerate() {
+        let (x, y) = (i % 20, i / 20);
+        let want = if (2..6).contains(&x) && (2..5).contains(&y) {
+            patch.get(x as u32 - 2, y as u32 - 2).unwrap()
+        } else {
+            *b
+        };
+        assert!(
+            a.to_bits() == want.to_bits() || (a.is_nan() && want.is_nan()),
+            "({x}, {y}): {a} vs {want}"
+        );
+    }
+    let report = fmrh::store::verify(
+        fmrh::store::FileSource::open(&copy).unwrap(),
+        fmrh::store::VerifyMode::Full,
+    )
+    .unwrap();
+    assert!(report.valid, "{report:?}");
+}
+
+/// A tANS code in a file older than format 7 is damage (§7: a 6.x file's codes are 0 to 8),
+/// though this reader could decode it: the voids vector, its commit record relabelled 6.2
+/// and resealed (its layout is 6.2's in every other byte), fails `verify` on the payloads
+/// alone, and reading a block with a tANS code is a corrupt-file error naming I-9.
+#[test]
+fn a_tans_code_in_a_6_2_file_is_corrupt() {
+    let mut bytes = std::fs::read(dir().join("hills-20x13-voids.fmrh")).unwrap();
+    let store = fmrh::store::Store::from_bytes(bytes.clone()).unwrap();
+    let d = *store.domain();
+    let (cols, rows) = d.nodes_across(d.finest_level());
+    let tans = (0..rows)
+        .flat_map(|y| (0..cols).map(move |x| (x, y)))
+        .find(|&(x, y)| {
+            let b = store.stored_block(x, y).unwrap();
+            store.payload(b.payload).unwrap()[4] >= 9
+        })
+        .expect("a block with a tANS code");
+    assert!(store.block(tans.0, tans.1).is_ok());
+    drop(store);
+    bytes[8..10].copy_from_slice(&6u16.to_le_bytes());
+    bytes[10..12].copy_from_slice(&2u16.to_le_bytes());
+    let crc = crc32fast::hash(&bytes[..252]);
+    bytes[252..256].copy_from_slice(&crc.to_le_bytes());
+    let store = fmrh::store::Store::from_bytes(bytes.clone()).unwrap();
+    assert_eq!(store.state().format_version, (6, 2));
+    let err = store.block(tans.0, tans.1).expect_err("refused");
+    assert!(
+        matches!(err, fmrh::Error::Corrupt { .. })
+            && err.to_string().contains("older than format 7"),
+        "{err}"
+    );
+    let report =
+        fmrh::store::verify(fmrh::store::Bytes(bytes), fmrh::store::VerifyMode::Full).unwrap();
+    let failed = failed_checks(&report);
+    assert_eq!(failed, ["Payload"], "{report:?}");
 }

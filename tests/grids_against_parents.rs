@@ -280,11 +280,13 @@ fn commits_on(field: Heightfield) -> usize {
                 let parent_rect = d.footprint(level - 1, x / 2, y / 2);
                 if parent_rect.intersect(&patch_rect).is_some() {
                     let encoding = store.payload(now.payload).unwrap()[4];
-                    if !matches!(encoding, 7 | 8) && now.payload.len <= 256 {
+                    // The planar codings: 7 and 8, their tANS twins 13 and 14 (format 7).
+                    let planar = matches!(encoding, 7 | 8 | 13 | 14);
+                    if !planar && now.payload.len <= 256 {
                         continue;
                     }
                     assert!(
-                        matches!(encoding, 7 | 8),
+                        planar,
                         "{:?} kept with encoding {encoding} over changed heights",
                         now.at
                     );
@@ -470,7 +472,13 @@ fn voids_on_a_sheets_edges_cost_a_few_bytes_each_block() {
             // bytes, where a raw bitmap would take up to 528.
             let bytes = b.payload(sb.payload).unwrap();
             let encoding = bytes[4];
-            let flag_at = if matches!(encoding, 2 | 5 | 7) { 13 } else { 5 };
+            // The lattice codings put their step before the flag: 2, 5, 7 and (format 7)
+            // their tANS twins 9, 11, 13, and 15.
+            let flag_at = if matches!(encoding, 2 | 5 | 7 | 9 | 11 | 13 | 15) {
+                13
+            } else {
+                5
+            };
             assert_eq!(bytes[flag_at], fmrh::codec::voids::RUNS, "block ({x}, {y})");
             let after = &bytes[flag_at + 1..];
             let n = (sb.width * sb.height) as usize;

@@ -6,7 +6,7 @@
 //!
 //! **fmrh** opens the container by URL (one round: the commit slots and the file's last
 //! 36 KiB, which hold the header, the directory, the top of the tree and the tables' roots in
-//! a fresh 6.2 file), schedules the view-dependent scene and loads its blocks, cold (a fresh
+//! a fresh file, 6.2 and later), schedules the view-dependent scene and loads its blocks, cold (a fresh
 //! open each run). Its request plan (requests, bytes, rounds) comes from the source's
 //! counters; nginx's access log confirms the requests and bytes.
 //!
@@ -19,8 +19,8 @@
 //! and `$body_bytes_sent`.
 //!
 //! **Before** (optional): with `FMRH_REMOTE_BEFORE=DIR`, each DEM's container as an older
-//! fmrh built it (`DIR/<dem>.fmrh`, e.g. a 6.1 file, whose tables are fetched whole) is read
-//! the same way in the same run, in rows marked `6.1`.
+//! fmrh built it (`DIR/<dem>.fmrh`, e.g. a 6.2 file, whose residuals pco codes) is read the
+//! same way in the same run, in rows marked `before` (today's build: `now`).
 //!
 //! Times are wall-clock, cold, the median of three runs, open included.
 //!
@@ -290,13 +290,13 @@ fn main() {
             continue;
         };
         let path = dem.build(served.path());
-        let mut files = vec![("6.2", path)];
+        let mut files = vec![("now", path)];
         if let Some(dir) = &before {
             let old = dir.join(format!("{}.fmrh", dem.name));
             if old.is_file() {
                 let name = format!("{}-before.fmrh", dem.name);
                 std::fs::copy(&old, served.path().join(&name)).expect("copies");
-                files.push(("6.1", served.path().join(name)));
+                files.push(("before", served.path().join(name)));
             } else {
                 eprintln!("(no {}: no before row for {})", old.display(), dem.name);
             }

@@ -1,7 +1,8 @@
 //! Fuzz target: block codecs. The first two bytes give a block's width and rows (1..=64).
 //! Then, by the third byte's low bit, either the rest is an encoded block (and a stored block
 //! and grid payload, and a block coded against a parent grid), which must decode or fail with
-//! an error (never panic, never write past the block), or the rest is samples
+//! an error (never panic, never write past the block; the stored forms with the codes of a
+//! format 7 file, or by bit 6 of an older one's), or the rest is samples
 //! (`f32` bits, or lattice values), which must encode and decode back bit for bit, alone and
 //! against a parent grid holding every other sample (format 4), their residuals coded by pco
 //! or, by the third byte's bit 2, by format 7's tANS stream (encodings 9 to 14). Both ways,
@@ -72,7 +73,9 @@ fuzz_target!(|data: &[u8]| {
             row1: u64::from(h) - 1,
         };
         let block = Placement::block(rect, voids);
-        let _ = payload::decode(rest, &block, None);
+        // Bit 6: the codes of a file older than format 7 (tANS codes refused), else 7's.
+        let codes = if mode & 64 != 0 { payload::Codes::Pco } else { payload::Codes::PcoOrTans };
+        let _ = payload::decode(rest, &block, None, codes);
         // Format 6: grids thinned by up to 2^7 (the decoder refuses what a grid cannot hold):
         // the root of a w x h grid in blocks of 65.
         let thin = (mode >> 3) & 7;
@@ -86,7 +89,7 @@ fuzz_target!(|data: &[u8]| {
                 flagged_bitmap: mode & 4 != 0,
                 thin,
             };
-            let _ = payload::decode(rest, &grid, None);
+            let _ = payload::decode(rest, &grid, None, codes);
         }
         let (cols, rows_at): (Vec<u64>, Vec<u64>) =
             ((0..width as u64).collect(), (0..rows as u64).collect());
@@ -98,7 +101,7 @@ fuzz_target!(|data: &[u8]| {
         let parent = Parent { at: Axes { cols: &pc, rows: &pr }, heights: &heights };
         let _ = decode_against(rest, at, parent, &mut out);
         if let Some(p) = ParentGrid::from_parts(pc.clone(), pr.clone(), heights.clone()) {
-            let _ = payload::decode(rest, &block, Some(&p));
+            let _ = payload::decode(rest, &block, Some(&p), codes);
         }
         let mut codes = vec![0u32; width * rows];
         if tans::Decoder::default().decode(rest, &mut codes, |v| v).is_ok() {

@@ -27,8 +27,9 @@
 //! (pcodec, a pure-Rust codec for numeric columns) then codes the residuals with binning and
 //! tANS. Measured on 65² blocks (`cargo bench --bench codecs`), this keeps 29 % of Puget
 //! Sound 1k's bytes where zstd keeps 57 % and plain pco 33 %, and decodes at about 1 GB/s.
-//! Format 7 codes them with a binned tANS stream of our own instead ([`tans`], [`Coder`]):
-//! the same idea without pco's generality, smaller and faster to decode (`docs/format-7-plan.md`).
+//! Format 7 codes them with a binned tANS stream of our own instead ([`tans`], [`Coder`];
+//! encodings 9 to 15, `format-spec/container.md` §7): the same idea without pco's generality,
+//! smaller and faster to decode (`docs/format-7-plan.md` records why and how it was measured).
 //!
 //! **Voids** are the canonical NaN (`0x7FC00000`). The lattice encoding lists them in a
 //! bitmap ([`voids`]: raw, or since format 5 as runs of the row-to-row changes) and predicts

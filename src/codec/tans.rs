@@ -1,6 +1,6 @@
 //! The binned tANS stream: a block's residual codes (`u32`, small for small residuals) to
-//! bytes and back, for format 7's encodings 9 to 14 (`docs/format-7-plan.md`; the codec
-//! reaches it through `residuals`). The coder study of `benches/decode.rs` measures it
+//! bytes and back, for format 7's encodings 9 to 15 (`format-spec/container.md` §7, "The
+//! tANS stream"; the codec reaches it through `residuals`). The coder study of `benches/decode.rs` measures it
 //! beside pco.
 //!
 //! **Why a coder of our own.** pco coded every residual stream of formats 2 to 6, and was

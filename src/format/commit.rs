@@ -30,7 +30,8 @@ use super::bundle::BundleRef;
 use super::tree::TreeRef;
 use super::{
     crc32, is_zero, page_size_is_valid, Invariant, Violation, FORMAT_MAJOR, FORMAT_MINOR,
-    LAST_MINOR_OF_1, LAST_MINOR_OF_2, LAST_MINOR_OF_3, LAST_MINOR_OF_4, LAST_MINOR_OF_5, MAGIC,
+    LAST_MINOR_OF_1, LAST_MINOR_OF_2, LAST_MINOR_OF_3, LAST_MINOR_OF_4, LAST_MINOR_OF_5,
+    LAST_MINOR_OF_6, MAGIC,
     MAX_PAGE_SIZE, MIN_PAGE_SIZE,
 };
 
@@ -177,9 +178,9 @@ impl CommitRecord {
         (self.has_top_field() && self.top.length.get() != 0).then_some(self.top)
     }
 
-    /// Whether the record's version has the `top` field (6.2 and later minors of 6).
+    /// Whether the record's version has the `top` field (6.2 and later).
     fn has_top_field(&self) -> bool {
-        self.major.get() == FORMAT_MAJOR && self.minor.get() >= 2
+        (self.major.get(), self.minor.get()) >= (6, 2)
     }
 
     /// The same state under another txn id and flags, sealed: what a writer publishes to mark
@@ -223,6 +224,13 @@ impl CommitRecord {
     /// record's flag bits 3 to 6 were reserved, zero.
     pub fn grids_thinned(&self) -> bool {
         self.major.get() >= 6
+    }
+
+    /// The codes its payloads may use (format 2.x and later): from 7.0 on, encodings 9 to 15
+    /// (residuals by tANS) too; before, a code's id is 0 to 8, and a larger one is a corrupt
+    /// payload.
+    pub fn payload_codes(&self) -> super::payload::Codes {
+        super::payload::Codes::of_major(self.major.get())
     }
 
     /// Whether its metadata bundle is stored a frame per page, read page by page (5.x), not
@@ -393,6 +401,7 @@ pub fn is_newer_minor(major: u16, minor: u16) -> bool {
     minor
         > match major {
             FORMAT_MAJOR => FORMAT_MINOR,
+            6 => LAST_MINOR_OF_6,
             5 => LAST_MINOR_OF_5,
             4 => LAST_MINOR_OF_4,
             3 => LAST_MINOR_OF_3,

@@ -115,7 +115,14 @@ pub use tree::{TreeRef, TreeSpec, MAX_TREE_DEPTH};
 /// transfers, as PNG's signature does.
 pub const MAGIC: [u8; 8] = *b"FMRH\r\n\x1a\n";
 
-/// Incompatible revisions of the format. Writers write 6; readers read 1 to 6.
+/// Incompatible revisions of the format. Writers write 7; readers read 1 to 7.
+///
+/// 7.0 may code a payload's residuals with fmrh's own tANS stream rather than pco (payload
+/// encodings 9 to 14, the tANS twins of 2 and 4 to 8) and may predict a lattice payload
+/// against its parent from the parent's lattice codes in integers (encoding 15): a 6.x
+/// reader would take such a payload for a corrupt one. Everything else is as in 6.2, so a
+/// 6.x file is read as it is (and a reader refuses encodings 9 and up in it, as corrupt) and a
+/// transaction on it writes a 7.0 state whose old payloads keep their pco codes.
 ///
 /// 6.0 may store a node's coarse grid *thinned by area* (the node record's flag bits 3 to 6,
 /// `NODE_GRID_THIN_MASK`): only every `k`-th column and the last, which a reader
@@ -138,14 +145,18 @@ pub const MAGIC: [u8; 8] = *b"FMRH\r\n\x1a\n";
 /// Everything else is as in 2.1, so a 2.x file is read as it is and a transaction on it
 /// writes a 3.0 state. 2.0 stored payloads coded (§7) where 1.x stored raw `f32`: a 1.x file is read as it is, and refused
 /// for writing (it would mix raw and coded payloads): rebuild it with `fmrh build`.
-pub const FORMAT_MAJOR: u16 = 6;
+pub const FORMAT_MAJOR: u16 = 7;
 
-/// Compatible additions within [`FORMAT_MAJOR`]: 1 records the heights' vertical datum in
-/// the dataset header (byte 156, formerly reserved); a 6.0 reader ignores it. 2 adds the
-/// top of the tree (commit record bytes 200..216, formerly reserved: `format::top`), a copy of
-/// the coarsest levels' node records that lets a remote reader start a scene without
-/// reading the node table; a 6.1 reader ignores it.
-pub const FORMAT_MINOR: u16 = 2;
+/// Compatible additions within [`FORMAT_MAJOR`]: none yet (7.0 is the first release of
+/// major 7).
+pub const FORMAT_MINOR: u16 = 0;
+
+/// The last minor version of major 6. 6.1 records the heights' vertical datum in the
+/// dataset header (byte 156, formerly reserved); 6.2 adds the top of the tree (commit record
+/// bytes 200..216, formerly reserved: `format::top`), a copy of the coarsest levels' node
+/// records that lets a remote reader start a scene without reading the node table. Both
+/// stay in major 7.
+pub const LAST_MINOR_OF_6: u16 = 2;
 
 /// The last minor version of major 5.
 pub const LAST_MINOR_OF_5: u16 = 0;

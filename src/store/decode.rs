@@ -305,8 +305,13 @@ impl<S: Source> Store<S> {
                 }
             };
             let decoded =
-                payload::decode(&bytes, &Placement::block(rect, info.void_count), against)
-                    .map_err(|e| self.corrupt(Violation::new(Invariant::Payload, at(), e)))?;
+                payload::decode(
+                    &bytes,
+                    &Placement::block(rect, info.void_count),
+                    against,
+                    self.commit.payload_codes(),
+                )
+                .map_err(|e| self.corrupt(Violation::new(Invariant::Payload, at(), e)))?;
             Cow::Owned(decoded)
         } else {
             bytes
@@ -337,6 +342,9 @@ impl<S: Source> Store<S> {
     /// parent's (format 5) decodes with that grid, read (or taken from the store's cache of
     /// ancestors) as [`Store::parent_grid`] does.
     pub fn grid_from<'a>(&self, node: &StoredNode, bytes: Cow<'a, [u8]>) -> Result<Grid<'a>> {
+        // The record first: a grid its file's version cannot hold is refused as what it is,
+        // before its ancestors are decoded (whose damage would hide it).
+        self.check_grid_record(node)?;
         let parent = match self.grid_against_node(node)? {
             Some((index, p)) => Some(self.parent_grid(index, &p)?),
             None => None,
@@ -344,20 +352,10 @@ impl<S: Source> Store<S> {
         self.grid_with(node, bytes, parent.as_deref())
     }
 
-    /// [`Store::grid_from`] with the grid `node`'s is coded against, if it is, already
-    /// decoded (`parent`, for the node [`Store::grid_against_node`] names).
-    pub fn grid_with<'a>(
-        &self,
-        node: &StoredNode,
-        bytes: Cow<'a, [u8]>,
-        parent: Option<&ParentGrid>,
-    ) -> Result<Grid<'a>> {
+    /// Refuses a grid record that no grid of this file can have: a node outside the domain,
+    /// or thinned where the file's version, its header or its grid size does not allow it.
+    fn check_grid_record(&self, node: &StoredNode) -> Result<()> {
         let d = self.domain();
-        if node.level >= d.finest_level() {
-            return Err(Error::InvalidArgument(
-                "finest-level nodes have physical blocks, not grids".into(),
-            ));
-        }
         let size = d.block_size();
         let at = || format!("node at level {} ({}, {})", node.level, node.x, node.y);
         if !d.exists(node.level, node.x, node.y) {
@@ -367,8 +365,6 @@ impl<S: Source> Store<S> {
                 "not a node of the domain",
             )));
         }
-        let dims = d.grid_dims(node.level, node.x, node.y);
-        let has_voids = node.grid_has_voids;
         let thin = node.grid_thin;
         if thin > 0
             && (!self.commit.grids_thinned()
@@ -391,6 +387,28 @@ impl<S: Source> Store<S> {
                 ),
             )));
         }
+        Ok(())
+    }
+
+    /// [`Store::grid_from`] with the grid `node`'s is coded against, if it is, already
+    /// decoded (`parent`, for the node [`Store::grid_against_node`] names).
+    pub fn grid_with<'a>(
+        &self,
+        node: &StoredNode,
+        bytes: Cow<'a, [u8]>,
+        parent: Option<&ParentGrid>,
+    ) -> Result<Grid<'a>> {
+        let d = self.domain();
+        if node.level >= d.finest_level() {
+            return Err(Error::InvalidArgument(
+                "finest-level nodes have physical blocks, not grids".into(),
+            ));
+        }
+        self.check_grid_record(node)?;
+        let size = d.block_size();
+        let at = || format!("node at level {} ({}, {})", node.level, node.x, node.y);
+        let dims = d.grid_dims(node.level, node.x, node.y);
+        let has_voids = node.grid_has_voids;
         let bytes = if self.commit.payloads_coded() {
             let against = if node.grid_against_parent {
                 match parent {
@@ -406,7 +424,13 @@ impl<S: Source> Store<S> {
                 None
             };
             let decoded =
-                payload::decode(&bytes, &Placement::grid(d, node), against).map_err(|e| {
+                payload::decode(
+                    &bytes,
+                    &Placement::grid(d, node),
+                    against,
+                    self.commit.payload_codes(),
+                )
+                .map_err(|e| {
                     self.corrupt(Violation::new(
                         Invariant::Payload,
                         format!("grid at byte {}", node.payload.offset),

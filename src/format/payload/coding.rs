@@ -54,17 +54,54 @@ pub fn encode(
     }
 }
 
+/// The codes a file's version admits (§7, §8). A code outside them is a corrupt payload,
+/// even one this reader could decode: a file of an older major was written before the code
+/// existed, so it cannot hold one undamaged.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Codes {
+    /// Formats 2.0 to 6.x: encodings 0 to 8, every residual stream by pco.
+    Pco,
+    /// Format 7.0 and later: encodings 0 to 15, residual streams by pco or tANS.
+    PcoOrTans,
+}
+
+impl Codes {
+    /// The codes a file of major version `major` (2 or later) admits.
+    pub fn of_major(major: u16) -> Codes {
+        if major >= 7 {
+            Codes::PcoOrTans
+        } else {
+            Codes::Pco
+        }
+    }
+
+    /// Refuses `code` (a code: its id byte, then its body) when its id is not one of these.
+    /// An id no version has is left to the codec, which refuses it too.
+    fn admit(self, code: &[u8]) -> Result<(), String> {
+        match (self, codec::Encoding::of(code)) {
+            (Codes::Pco, Some(e)) if e.coder() == codec::Coder::Tans => Err(format!(
+                "encoding {} in a file older than format 7, whose codes are 0 to 8",
+                e as u8
+            )),
+            _ => Ok(()),
+        }
+    }
+}
+
 /// The layout of the payload placed by `placement` from its stored bytes `stored`, decoded
 /// against `against` when it is coded against a grid (the caller knows from its record), or
-/// why it does not decode. Hostile bytes are an error, never a panic, and nothing is sized
-/// from them: the shapes come from `placement`, checked against a block's largest.
+/// why it does not decode; a code that `codes` (from the file's version) does not admit is
+/// refused. Hostile bytes are an error, never a panic, and nothing is sized from them: the
+/// shapes come from `placement`, checked against a block's largest.
 pub fn decode(
     stored: &[u8],
     placement: &Placement,
     against: Option<&ParentGrid>,
+    codes: Codes,
 ) -> Result<Vec<u8>, String> {
     let (w, h) = placement.dims();
     let values = |a: &[u8], out: &mut [f32], width: u32| -> Result<(), String> {
+        codes.admit(a)?;
         match against {
             None => codec::decode(a, width.max(1) as usize, out).map_err(|e| e.to_string()),
             Some(p) => {
@@ -84,7 +121,7 @@ pub fn decode(
     };
     match *placement {
         Placement::Block { void_count, .. } => {
-            load_block_with(stored, w, h, void_count, |a, s| values(a, s, w))
+            load_block_with(stored, (w, h, void_count), codes, |a, s| values(a, s, w))
         }
         Placement::Grid {
             has_voids,
@@ -159,12 +196,12 @@ fn store_block_with(
     Some(out)
 }
 
-/// A block's layout from its stored form, its samples decoded by `samples_from`.
+/// A block's layout from its stored form, its samples decoded by `samples_from`, its
+/// stand-ins alone (a code `codes` admits).
 fn load_block_with(
     stored: &[u8],
-    width: u32,
-    height: u32,
-    void_count: u32,
+    (width, height, void_count): (u32, u32, u32),
+    codes: Codes,
     samples_from: impl FnOnce(&[u8], &mut [f32]) -> Result<(), String>,
 ) -> Result<Vec<u8>, String> {
     check_shape(width, height)?;
@@ -177,7 +214,12 @@ fn load_block_with(
     let (samples, stand_ins) = floats.split_at_mut(n);
     samples_from(a, samples).map_err(|e| format!("samples: {e}"))?;
     if void_count > 0 {
-        codec::decode(b, void_count as usize, stand_ins).map_err(|e| format!("stand-ins: {e}"))?;
+        codes
+            .admit(b)
+            .and_then(|()| {
+                codec::decode(b, void_count as usize, stand_ins).map_err(|e| e.to_string())
+            })
+            .map_err(|e| format!("stand-ins: {e}"))?;
     } else if !b.is_empty() {
         return Err(format!(
             "{} bytes after the samples of a block without voids",
@@ -318,6 +360,8 @@ mod stored_tests {
     use super::*;
     use crate::model::{Domain, SampleRect};
 
+    const ALL: Codes = Codes::PcoOrTans;
+
     fn block(w: u64, h: u64, void_count: u32) -> Placement {
         Placement::block(
             SampleRect {
@@ -351,18 +395,18 @@ mod stored_tests {
         let raw = encode_block((0..81).map(|i| (i as f32, true)), 81);
         let stored = encode(&raw, &block(9, 9, 0), Coding::default(), None).expect("codes");
         assert_eq!(
-            decode(&stored, &block(9, 9, 0), None).expect("decodes"),
+            decode(&stored, &block(9, 9, 0), None, ALL).expect("decodes"),
             raw
         );
         // Refused by the shape check itself, not later by a decoder that had allocated.
         let refused = |r: Result<Vec<u8>, String>, why: &str| {
             assert!(r.as_ref().is_err_and(|e| e.contains(why)), "{r:?}")
         };
-        refused(decode(&stored, &block(9, 9, u32::MAX), None), "voids in");
-        refused(decode(&stored, &block(9, 9, 82), None), "voids in");
-        refused(decode(&stored, &block(1 << 20, 9, 0), None), "a side");
+        refused(decode(&stored, &block(9, 9, u32::MAX), None, ALL), "voids in");
+        refused(decode(&stored, &block(9, 9, 82), None, ALL), "voids in");
+        refused(decode(&stored, &block(1 << 20, 9, 0), None, ALL), "a side");
         let never = |_: &[u8], _: &mut [f32]| -> Result<(), String> { unreachable!() };
-        refused(load_block_with(&stored, 0, 9, 0, never), "a side");
+        refused(load_block_with(&stored, (0, 9, 0), ALL, never), "a side");
         refused(
             load_grid_with(&stored, (u32::MAX, u32::MAX), (true, true), 0, never),
             "a side",
@@ -385,7 +429,7 @@ mod stored_tests {
             let at = block(9, 7, voids);
             let stored = encode(&raw, &at, coding, None).expect("codes");
             assert!(stored.len() < raw.len());
-            assert_eq!(decode(&stored, &at, None).expect("decodes"), raw);
+            assert_eq!(decode(&stored, &at, None, ALL).expect("decodes"), raw);
             let (gw, gh) = grid(true, true).dims();
             assert_eq!((gw, gh), (5, 9));
             let n = (gw * gh) as usize;
@@ -394,25 +438,97 @@ mod stored_tests {
             let raw = encode_grid(&heights, &void, true);
             let stored = encode(&raw, &grid(true, true), coding, None).expect("codes");
             assert_eq!(
-                decode(&stored, &grid(true, true), None).expect("decodes"),
+                decode(&stored, &grid(true, true), None, ALL).expect("decodes"),
                 raw
             );
             assert!(
-                decode(&stored, &grid(false, true), None).is_err(),
+                decode(&stored, &grid(false, true), None, ALL).is_err(),
                 "the bitmap is not expected"
             );
             let mut longer = stored.clone();
             longer.push(0);
-            assert!(decode(&longer, &grid(true, true), None).is_err());
+            assert!(decode(&longer, &grid(true, true), None, ALL).is_err());
             // Before format 5 the bitmap followed raw, with no flag.
             let a = u32::from_le_bytes(stored[..4].try_into().expect("a length")) as usize;
             let mut old = stored[..4 + a].to_vec();
             old.extend_from_slice(&raw[4 * n..]);
             assert_eq!(
-                decode(&old, &grid(true, false), None).expect("decodes"),
+                decode(&old, &grid(true, false), None, ALL).expect("decodes"),
                 raw
             );
-            assert!(decode(&old, &grid(true, true), None).is_err());
+            assert!(decode(&old, &grid(true, true), None, ALL).is_err());
         }
+    }
+
+    /// A file older than format 7 admits codes 0 to 8 only: a tANS code in it (samples,
+    /// stand-ins or a grid's heights) is a corrupt payload, even though this reader could
+    /// decode it; the same bytes decode in a 7.x file, and pco codes decode in both.
+    #[test]
+    fn a_tans_code_in_an_older_file_is_refused() {
+        let samples: Vec<(f32, bool)> = (0..9 * 9)
+            .map(|i| ((i % 9) as f32 * 0.25 + (i / 9) as f32, i % 13 != 5))
+            .collect();
+        let voids = u32::try_from(samples.iter().filter(|s| !s.1).count()).expect("81 at most");
+        let raw = encode_block(samples.into_iter(), 81);
+        let at = block(9, 9, voids);
+        let (gw, gh) = grid(false, false).dims();
+        let heights: Vec<f32> = (0..gw * gh).map(|i| (i % 5) as f32 * 0.5).collect();
+        let raw_grid = encode_grid(&heights, &vec![false; heights.len()], false);
+        for coder in [codec::Coder::Pco, codec::Coder::Tans] {
+            let coding = Coding {
+                coder,
+                ..Coding::default()
+            };
+            let stored = encode(&raw, &at, coding, None).expect("codes");
+            let stored_grid = encode(&raw_grid, &grid(false, false), coding, None).expect("codes");
+            let a = u32::from_le_bytes(stored[..4].try_into().expect("a length")) as usize;
+            let ids = [stored[4], stored[4 + a], stored_grid[4]];
+            let tans = ids.map(|id| id >= 9);
+            assert_eq!(tans, [coder == codec::Coder::Tans; 3], "ids {ids:?}");
+            assert_eq!(decode(&stored, &at, None, ALL).expect("decodes"), raw);
+            assert_eq!(
+                decode(&stored_grid, &grid(false, false), None, ALL).expect("decodes"),
+                raw_grid
+            );
+            for (r, what) in [
+                (decode(&stored, &at, None, Codes::Pco), "samples"),
+                (decode(&stored_grid, &grid(false, false), None, Codes::Pco), "heights"),
+            ] {
+                match coder {
+                    codec::Coder::Pco => assert!(r.is_ok(), "{r:?}"),
+                    codec::Coder::Tans => assert!(
+                        r.as_ref()
+                            .is_err_and(|e| e.starts_with(what) && e.contains("older than format 7")),
+                        "{r:?}"
+                    ),
+                }
+            }
+        }
+        // Pco samples beside tANS stand-ins: the stand-ins alone are refused.
+        let pco = encode(&raw, &at, Coding::default(), None).expect("codes");
+        let tans = encode(
+            &raw,
+            &at,
+            Coding {
+                coder: codec::Coder::Tans,
+                ..Coding::default()
+            },
+            None,
+        )
+        .expect("codes");
+        let (pa, ta) = (
+            u32::from_le_bytes(pco[..4].try_into().expect("a length")) as usize,
+            u32::from_le_bytes(tans[..4].try_into().expect("a length")) as usize,
+        );
+        let mut mixed = pco[..4 + pa].to_vec();
+        mixed.extend_from_slice(&tans[4 + ta..]);
+        assert_eq!(decode(&mixed, &at, None, ALL).expect("decodes"), raw);
+        let r = decode(&mixed, &at, None, Codes::Pco);
+        assert!(
+            r.as_ref().is_err_and(|e| e.starts_with("stand-ins")),
+            "{r:?}"
+        );
+        assert_eq!(Codes::of_major(6), Codes::Pco);
+        assert_eq!(Codes::of_major(7), Codes::PcoOrTans);
     }
 }

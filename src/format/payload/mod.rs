@@ -37,7 +37,7 @@ use serde::Serialize;
 use zerocopy::byteorder::little_endian::F32;
 use zerocopy::FromBytes;
 
-pub use coding::{decode, encode, max_stored_len, Coding};
+pub use coding::{decode, encode, max_stored_len, Codes, Coding};
 pub use place::{ParentGrid, Placement};
 #[cfg(any(test, feature = "testing"))]
 pub use place::{block_axes, grid_axes, kept_heights, kept_width};

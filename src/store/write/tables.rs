@@ -493,8 +493,9 @@ fn coding(model: &Model, raw: bool, quick: bool) -> payload::Coding {
         step: model.precision().map(Precision::step),
         raw,
         quick,
-        // Format 6's coder until the writer writes format 7 (docs/format-7-plan.md).
-        coder: crate::codec::Coder::Pco,
+        // Format 7: tANS wherever it applies (the codec falls back to pco per stream where
+        // a residual over the common factor does not fit an i32).
+        coder: crate::codec::Coder::Tans,
     }
 }
 
