@@ -1245,3 +1245,254 @@ fn a_tans_code_in_a_6_2_file_is_corrupt() {
     let failed = failed_checks(&report);
     assert_eq!(failed, ["Payload"], "{report:?}");
 }
+
+/// Bits of a byte run as container §7's tANS stream reads them: bit `i` is bit `i mod 8` of
+/// byte `⌊i/8⌋`, a field of `m` bits is read low first; `None` past the last byte.
+struct SpecBits<'a> {
+    bytes: &'a [u8],
+    pos: usize,
+}
+
+impl SpecBits<'_> {
+    fn read(&mut self, m: u32) -> Option<u64> {
+        let mut v = 0u64;
+        for j in 0..m {
+            let byte = *self.bytes.get(self.pos / 8)?;
+            v |= u64::from((byte >> (self.pos % 8)) & 1) << j;
+            self.pos += 1;
+        }
+        Some(v)
+    }
+}
+
+/// A LEB128 varint as §7 allows it (at most 5 bytes, no byte of zeros last but a lone one)
+/// and the bytes it took.
+fn spec_varint(bytes: &[u8]) -> Option<(u64, usize)> {
+    let mut v = 0u64;
+    for (i, &b) in bytes.iter().take(5).enumerate() {
+        v |= u64::from(b & 0x7f) << (7 * i);
+        if b & 0x80 == 0 {
+            return (b != 0 || i == 0).then_some((v, i + 1));
+        }
+    }
+    None
+}
+
+/// The codes of the tANS stream `stream` (the whole of it), read by container.md §7 alone
+/// (written from the spec's text, sharing nothing with `src/codec/tans.rs`): `None` where
+/// the spec calls the stream corrupt. `n` is the count the layout gives, or `None` to take
+/// the stream's own.
+fn spec_tans(stream: &[u8], n: Option<u64>) -> Option<Vec<u32>> {
+    let (count, at) = spec_varint(stream)?;
+    if n.is_some_and(|n| n != count) {
+        return None;
+    }
+    let body = &stream[at..];
+    if count == 0 {
+        return body.is_empty().then(Vec::new);
+    }
+    let mut r = SpecBits {
+        bytes: body,
+        pos: 0,
+    };
+    let l = r.read(3)? as u32 + 5;
+    let symbols = r.read(7)? as usize + 1;
+    let size = 1u64 << l;
+    let mut weights = vec![0u64; symbols];
+    let mut sum = 0;
+    for w in weights.iter_mut().take(symbols - 1) {
+        let mut z = 0;
+        while r.read(1)? == 0 {
+            z += 1;
+        }
+        *w = (1u64 << z) + r.read(z)? - 1;
+        sum += *w;
+        if sum >= size {
+            return None;
+        }
+    }
+    weights[symbols - 1] = size - sum;
+    // The spread: position p gets symbol s as its number k.
+    let step = size / 2 + size / 8 + 3;
+    let mut table = vec![(0usize, 0u64); size as usize];
+    let mut p = 0u64;
+    for (s, &w) in weights.iter().enumerate() {
+        for k in w..2 * w {
+            table[p as usize] = (s, k);
+            p = (p + step) % size;
+        }
+    }
+    let mut states = [0u64; 4];
+    for state in &mut states {
+        *state = r.read(l)?;
+    }
+    // A symbol's first code and its extra bits.
+    let first = |s: usize| -> (u64, u32) {
+        if s < 16 {
+            (s as u64, 0)
+        } else {
+            let b = 4 + (s as u32 - 16) / 4;
+            let m = (s as u64 - 16) % 4;
+            ((4 + m) << (b - 2), b - 2)
+        }
+    };
+    let mut codes = Vec::new();
+    for i in 0..count as usize {
+        let state = &mut states[i % 4];
+        let (s, k) = table[*state as usize];
+        let (base, extra) = first(s);
+        codes.push(u32::try_from(base + r.read(extra)?).ok()?);
+        let bits = l - (63 - k.leading_zeros());
+        *state = (k << bits) - size + r.read(bits)?;
+    }
+    let ends = states.iter().all(|&s| s == 0)
+        && r.pos.div_ceil(8) == body.len()
+        && (r.pos.is_multiple_of(8) || body[body.len() - 1] >> (r.pos % 8) == 0);
+    ends.then_some(codes)
+}
+
+/// A void flag and bitmap (§7) of `n` values in rows of `w`: the void bits and what follows.
+fn spec_voids(bytes: &[u8], n: usize, w: usize) -> Option<(Vec<bool>, &[u8])> {
+    let (&flag, rest) = bytes.split_first()?;
+    match flag {
+        0 => Some((vec![false; n], rest)),
+        1 => {
+            let len = n.div_ceil(8);
+            let m = (0..n).map(|i| rest[i / 8] >> (i % 8) & 1 == 1).collect();
+            Some((m, rest.get(len..)?))
+        }
+        2 => {
+            // Runs of t[i] = m[i] XOR m[i - w], zeros first, summing to n.
+            let (mut t, mut at, mut bit) = (Vec::with_capacity(n), 0, false);
+            while t.len() < n {
+                let (run, len) = spec_varint(&rest[at..])?;
+                at += len;
+                t.extend(std::iter::repeat_n(bit, run as usize));
+                bit = !bit;
+            }
+            let mut m = vec![false; n];
+            for i in 0..n {
+                m[i] = t[i] ^ (i >= w && m[i - w]);
+            }
+            Some((m, &rest[at..]))
+        }
+        _ => None,
+    }
+}
+
+/// The tANS stream of a code of encoding 9 to 15 (§7) of `n` values in rows of `w`, after
+/// its step, void flag and factor: (stream, factor, voids); `None` for the other ids.
+fn spec_stream_of(code: &[u8], n: usize, w: usize) -> Option<(&[u8], u64, Vec<bool>)> {
+    let body = &code[1..];
+    match code[0] {
+        9 | 11 | 13 | 15 => {
+            let (voids, rest) = spec_voids(&body[8..], n, w)?;
+            let (f, len) = spec_varint(rest)?;
+            Some((&rest[len..], f, voids))
+        }
+        10 => Some((body, 1, vec![false; n])),
+        12 | 14 => {
+            let (voids, rest) = spec_voids(body, n, w)?;
+            Some((rest, 1, voids))
+        }
+        _ => None,
+    }
+}
+
+/// A code of a vector: its bytes, its values, its row width, and the values the reader
+/// returns for it when it is coded alone.
+type SpecCode = (Vec<u8>, usize, usize, Option<Vec<f32>>);
+
+/// Format 7's tANS streams, read by container.md §7 alone (`spec_tans` above): every tANS
+/// stream of every vector (block samples, stand-ins, grid heights) decodes by the spec, its
+/// end conditions hold, and its codes are the codec's; encoding 9's and 10's counts are
+/// their layouts'; and every encoding 9 code (alone, planar predictor over `k`, the common
+/// factor, voids at their prediction) rebuilds its values bit for bit as the reader returns
+/// them. A second reader of the stream, written from the spec's text, agrees with the
+/// writer on every byte of the vectors.
+#[test]
+fn the_vectors_tans_streams_decode_by_the_spec_alone() {
+    let (mut streams, mut rebuilt) = (0, 0);
+    for v in vectors() {
+        let store = fmrh::store::Store::open(&dir().join(format!("{}.fmrh", v.name))).unwrap();
+        let d = *store.domain();
+        let (cols, rows) = d.nodes_across(d.finest_level());
+        let mut codes: Vec<SpecCode> = Vec::new();
+        for y in 0..rows {
+            for x in 0..cols {
+                let b = store.stored_block(x, y).unwrap();
+                let bytes = store.payload(b.payload).unwrap();
+                let a = u32::from_le_bytes(bytes[..4].try_into().unwrap()) as usize;
+                let block = store.block(x, y).unwrap();
+                let view = block.view();
+                let (w, h) = (b.width as usize, b.height as usize);
+                let samples: Vec<f32> = view.samples().iter().map(|s| s.get()).collect();
+                let alone = b.against.is_none().then_some(samples);
+                codes.push((bytes[4..4 + a].to_vec(), w * h, w, alone));
+                if b.void_count > 0 {
+                    let stand_ins: Vec<f32> = view.stand_ins().iter().map(|s| s.get()).collect();
+                    let n = b.void_count as usize;
+                    codes.push((bytes[4 + a..].to_vec(), n, n, Some(stand_ins)));
+                }
+            }
+        }
+        for n in store
+            .nodes()
+            .unwrap()
+            .iter()
+            .filter(|n| n.level < d.finest_level())
+        {
+            let bytes = store.payload(n.payload).unwrap();
+            let a = u32::from_le_bytes(bytes[..4].try_into().unwrap()) as usize;
+            let (gw, gh) = d.grid_dims(n.level, n.x, n.y);
+            let kw = fmrh::format::payload::kept_width(gw, n.grid_thin) as usize;
+            codes.push((bytes[4..4 + a].to_vec(), kw * gh as usize, kw, None));
+        }
+        for (code, n, w, alone) in codes {
+            let Some((stream, f, voids)) = spec_stream_of(&code, n, w) else {
+                continue;
+            };
+            streams += 1;
+            let count = matches!(code[0], 9 | 10).then_some(n as u64);
+            let ours = spec_tans(stream, count).unwrap_or_else(|| {
+                panic!(
+                    "{}: a stream of encoding {} the spec refuses",
+                    v.name, code[0]
+                )
+            });
+            let mut theirs = vec![0u32; ours.len()];
+            fmrh::codec::tans::Decoder::default()
+                .decode(stream, &mut theirs, |c| c)
+                .unwrap();
+            assert_eq!(ours, theirs, "{}", v.name);
+            if let (9, Some(values)) = (code[0], alone) {
+                let q = f64::from_le_bytes(code[1..9].try_into().unwrap());
+                let mut k = vec![0i64; n];
+                for i in 0..n {
+                    let (c, r) = (i % w, i / w);
+                    let p = match (c, r) {
+                        (0, 0) => 0,
+                        (_, 0) => k[i - 1],
+                        (0, _) => k[i - w],
+                        _ => k[i - 1] + k[i - w] - k[i - w - 1],
+                    };
+                    let z = ours[i];
+                    let residual =
+                        i64::from(((z >> 1) ^ 0u32.wrapping_sub(z & 1)) as i32) * f as i64;
+                    k[i] = if voids[i] { p } else { p + residual };
+                    let want = if voids[i] {
+                        f32::from_bits(0x7FC0_0000)
+                    } else {
+                        (k[i] as f64 * q) as f32
+                    };
+                    assert_eq!(values[i].to_bits(), want.to_bits(), "{} value {i}", v.name);
+                }
+                rebuilt += 1;
+            }
+        }
+    }
+    assert!(
+        streams > 0 && rebuilt > 0,
+        "{streams} streams, {rebuilt} rebuilt"
+    );
+}
