@@ -794,7 +794,7 @@ fn decode_with(
                 rows::planar_float(&grid, r, out)
             }),
             (false, Some(q)) if codes => {
-                let predictor = CodePredictor::new(&cols, &rows, &parent, q);
+                let predictor = CodePredictor::for_reading(&cols, &rows, &parent, q);
                 with_scratch(coded, |r: &mut [i64]| {
                     residuals::read_lattice(coder, rest, r)?;
                     rows::interpolated_codes(&grid, &predictor, q, r, out)
@@ -834,7 +834,7 @@ fn decode_with(
                 lattice_value(k as f64, q)
             };
             if codes {
-                let predictor = CodePredictor::new(&cols, &rows, &parent, q);
+                let predictor = CodePredictor::for_reading(&cols, &rows, &parent, q);
                 fill(layout, parent, &void, out, |j, p| predictor.row(j, p), |p: i32| {
                     height(i64::from(p))
                 });
@@ -1282,7 +1282,7 @@ mod tests {
         /// midpoint's `(−1, 9, 9, −1)`, a linear `t` rounded half up to a sixteenth), and
         /// `(Σ + 128) >> 8` in wrapping 32-bit arithmetic, for any parent heights (hostile
         /// ones wrap alike); where every code is within ±2^22 ([`CodePredictor::fits`]) no
-        /// sum wraps.
+        /// sum wraps. A reader's predictor (the parent columns read only) predicts the same.
         #[test]
         fn the_integer_predictor_is_the_formula_of_the_format(
             (grid, raster) in placements(),
@@ -1305,6 +1305,7 @@ mod tests {
             let at = Axes { cols: &cc, rows: &cr };
             let (cols, rows) = plan(at, parent.at).expect("a child of its parent");
             let predictor = CodePredictor::new(&cols, &rows, &parent, q);
+            let reading = CodePredictor::for_reading(&cols, &rows, &parent, q);
             let pw = pc.len();
             let code = |pi: usize, pj: usize| round_to_i64(f64::from(heights[pj * pw + pi]) / q);
             // An axis's terms in sixteenths, from its `f64` weights: exact for the cubic
@@ -1321,9 +1322,11 @@ mod tests {
                 }
             };
             let fits = (0..pr.len()).all(|pj| (0..pw).all(|pi| code(pi, pj).unsigned_abs() < 1 << 22));
-            let mut row = vec![0i32; cols.len()];
+            let (mut row, mut read) = (vec![0i32; cols.len()], vec![0i32; cols.len()]);
             for (j, ry) in rows.iter().enumerate() {
                 predictor.row(j, &mut row);
+                reading.row(j, &mut read);
+                prop_assert_eq!(&read, &row, "row {}", j);
                 for (i, cx) in cols.iter().enumerate() {
                     // The sum exactly (codes wrapped to `i32` first, as the format reads them).
                     let mut sum = 0i64;
