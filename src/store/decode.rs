@@ -328,13 +328,9 @@ impl<S: Source> Store<S> {
 
     /// The coarse grid of `node` (a node above the finest level), checked against its CRC.
     pub fn grid(&self, node: &StoredNode) -> Result<Grid<'_>> {
-        if node.level >= self.domain().finest_level() {
-            return Err(Error::InvalidArgument(
-                "finest-level nodes have physical blocks, not grids".into(),
-            ));
-        }
+        self.check_grid_record(node)?;
         let bytes = self.payload(node.payload)?;
-        self.grid_from(node, bytes)
+        self.grid_with_ancestors(node, bytes)
     }
 
     /// The coarse grid of `node` from its stored payload `bytes` (already checked against
@@ -345,17 +341,32 @@ impl<S: Source> Store<S> {
         // The record first: a grid its file's version cannot hold is refused as what it is,
         // before its ancestors are decoded (whose damage would hide it).
         self.check_grid_record(node)?;
+        self.grid_with_ancestors(node, bytes)
+    }
+
+    /// [`Store::grid_from`] for a record [`Store::check_grid_record`] has passed.
+    fn grid_with_ancestors<'a>(
+        &self,
+        node: &StoredNode,
+        bytes: Cow<'a, [u8]>,
+    ) -> Result<Grid<'a>> {
         let parent = match self.grid_against_node(node)? {
             Some((index, p)) => Some(self.parent_grid(index, &p)?),
             None => None,
         };
-        self.grid_with(node, bytes, parent.as_deref())
+        self.decode_grid(node, bytes, parent.as_deref())
     }
 
-    /// Refuses a grid record that no grid of this file can have: a node outside the domain,
-    /// or thinned where the file's version, its header or its grid size does not allow it.
+    /// Refuses a node that has no grid (a finest-level one: an invalid argument) and a grid
+    /// record that no grid of this file can have: a node outside the domain, or thinned where
+    /// the file's version, its header or its grid size does not allow it.
     fn check_grid_record(&self, node: &StoredNode) -> Result<()> {
         let d = self.domain();
+        if node.level >= d.finest_level() {
+            return Err(Error::InvalidArgument(
+                "finest-level nodes have physical blocks, not grids".into(),
+            ));
+        }
         let size = d.block_size();
         let at = || format!("node at level {} ({}, {})", node.level, node.x, node.y);
         if !d.exists(node.level, node.x, node.y) {
@@ -398,13 +409,18 @@ impl<S: Source> Store<S> {
         bytes: Cow<'a, [u8]>,
         parent: Option<&ParentGrid>,
     ) -> Result<Grid<'a>> {
-        let d = self.domain();
-        if node.level >= d.finest_level() {
-            return Err(Error::InvalidArgument(
-                "finest-level nodes have physical blocks, not grids".into(),
-            ));
-        }
         self.check_grid_record(node)?;
+        self.decode_grid(node, bytes, parent)
+    }
+
+    /// [`Store::grid_with`] for a record [`Store::check_grid_record`] has passed.
+    fn decode_grid<'a>(
+        &self,
+        node: &StoredNode,
+        bytes: Cow<'a, [u8]>,
+        parent: Option<&ParentGrid>,
+    ) -> Result<Grid<'a>> {
+        let d = self.domain();
         let size = d.block_size();
         let at = || format!("node at level {} ({}, {})", node.level, node.x, node.y);
         let dims = d.grid_dims(node.level, node.x, node.y);
