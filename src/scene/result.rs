@@ -144,6 +144,10 @@ pub struct SceneStats {
     pub index_pages: u64,
     /// Node records read.
     pub node_reads: u64,
+    /// Of `node_reads`, the records the top of the tree (format 6.2) answered from memory,
+    /// which cost no page; the rest came from the node table's pages (or, for physical
+    /// blocks, the block table's).
+    pub top_reads: u64,
     /// Wall time of the selection, in nanoseconds.
     pub schedule_ns: u64,
     /// Uniform mode: the chosen cluster's threshold in metres (0 for physical blocks).
@@ -179,6 +183,7 @@ impl SceneStats {
         self.ranges += other.ranges;
         self.index_pages += other.index_pages;
         self.node_reads += other.node_reads;
+        self.top_reads += other.top_reads;
     }
 
     /// Adds another selection (a tile's) whole: every count summed, the largest errors and

@@ -24,6 +24,16 @@ pub(super) struct Search<'t, 's, S: Source> {
 }
 
 impl<S: Source> Search<'_, '_, S> {
+    /// Counts a read of node `index`'s record, and whether the top of the tree held it.
+    fn count_node_read(&mut self, index: u32) {
+        self.stats.node_reads += 1;
+        if let Some(top) = self.terrain.store().top() {
+            if top.get(index).is_some() {
+                self.stats.top_reads += 1;
+            }
+        }
+    }
+
     /// Emits node `index` as a scene block.
     pub fn emit(&mut self, index: u32, n: &StoredNode) {
         let block = self.terrain.node_block(self.view, index, n);
@@ -94,7 +104,7 @@ impl<S: Source> Search<'_, '_, S> {
         }
         let mut out = Vec::with_capacity(entries.len());
         for (e, r) in entries {
-            self.stats.node_reads += 1;
+            self.count_node_read(e.node);
             out.push((e.node, store.node_of(cluster, &e)?, r));
         }
         Ok(out)
@@ -155,7 +165,7 @@ impl<S: Source> Search<'_, '_, S> {
         for (i, n, r) in split {
             for child in self.terrain.store().children(i, &n) {
                 let (c, child) = child?;
-                self.stats.node_reads += 1;
+                self.count_node_read(c);
                 if runs[r].meets(&KeyRange::of_node(child.key, child.level, finest)) {
                     next.push((c, child, r));
                 }

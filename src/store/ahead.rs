@@ -62,14 +62,25 @@ impl Ahead {
     /// is not complete (a domain not a power of two a side, pruned subtrees) a guess misses
     /// and its lookup reads the page when it is made.
     pub fn ancestors(&mut self, node: &StoredNode, finest: u8) -> &mut Ahead {
+        self.ancestors_below(node, finest, 0)
+    }
+
+    /// [`Ahead::ancestors`] at levels `held` and finer only: the reader holds every node of
+    /// the levels above (the top of the tree, format 6.2). A guess there would be pointless
+    /// where it hits and, where it misses, would name a node below the top whose pages the
+    /// load never reads.
+    pub fn ancestors_below(&mut self, node: &StoredNode, finest: u8, held: u8) -> &mut Ahead {
         let Some(mut at) = node.parent else {
             return self;
         };
-        self.nodes(at, at);
-        let key = node.key.0;
         // The parent is at the level above the node; walk up from it.
         let mut level = node.level.saturating_sub(1);
-        while level > 0 {
+        if level < held {
+            return self;
+        }
+        self.nodes(at, at);
+        let key = node.key.0;
+        while level > held {
             let shift = 2 * u32::from(finest - level.min(finest));
             let digit = key.checked_shr(shift).map_or(0, |k| k & 3);
             let Some(subtree) = complete_subtree(finest, level) else {

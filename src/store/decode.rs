@@ -503,6 +503,7 @@ impl<S: Source> Store<S> {
             }
             store.fetch_ahead(&a)?;
             let mut a = Ahead::new();
+            let held = store.top().map_or(0, |t| t.levels);
             for block in blocks {
                 if block.level == finest {
                     a.block(block.x, block.y);
@@ -510,7 +511,7 @@ impl<S: Source> Store<S> {
                 if let Some(i) = block.node {
                     let node = store.node(i)?;
                     if block.level == finest || node.grid_against_parent {
-                        a.ancestors(&node, finest);
+                        a.ancestors_below(&node, finest, held);
                     }
                 }
             }

@@ -129,8 +129,8 @@ fn print_text(scene: &Scene, uncovered: Option<u64>, reads: &Reads) {
     }
     match scene.window {
         Some(w) => println!(
-            "  window {},{},{},{} ({} quadrants, {} range scans, {} index pages, {} node reads)",
-            w.col0, w.row0, w.col1, w.row1, s.quadrants, s.ranges, s.index_pages, s.node_reads
+            "  window {},{},{},{} ({} quadrants, {} range scans, {} index pages, {} node reads, {} from the top)",
+            w.col0, w.row0, w.col1, w.row1, s.quadrants, s.ranges, s.index_pages, s.node_reads, s.top_reads
         ),
         None => println!("  the camera sees no terrain"),
     }

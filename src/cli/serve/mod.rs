@@ -676,6 +676,7 @@ fn scene(q: &ViewQuery<'_>) -> Result<Value, Error> {
         "samples": stats.samples,
         "index_pages": stats.index_pages,
         "node_reads": stats.node_reads,
+        "top_reads": stats.top_reads,
         "schedule_us": stats.schedule_ns as f64 / 1e3,
         "max_error_m": stats.max_error,
         "max_screen_error_px": stats.max_screen_error,
