@@ -783,6 +783,7 @@ fn decode_with(
             coded: &coded_cols,
             rows: &rows,
             parent,
+            alternation: rows::Alternation::of(&cols, &held, &coded_cols),
         };
         return match (planar, q) {
             (true, Some(q)) => with_scratch(coded, |r: &mut [i64]| {
