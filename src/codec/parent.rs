@@ -160,6 +160,29 @@ fn plan_axis(child: &[u64], parent: &[u64]) -> Option<Vec<Along>> {
     Some(out)
 }
 
+/// The longest run of pairs among `len` child columns, as `(c0, i0, pairs)`: `pair_at(c)` is
+/// `Some(i)` when columns `c` and `c + 1` make a pair at parent column `i`, and a run is
+/// pairs at columns `c0, c0 + 2, …` with parent columns `i0, i0 + 1, …`; `(0, 0, 0)` when no
+/// pair. A child on its parent's grid is one run across (the kernels fill a run in order).
+fn longest_pair_run(len: usize, pair_at: impl Fn(usize) -> Option<usize>) -> (usize, usize, usize) {
+    let (mut best, mut c) = ((0, 0, 0), 0);
+    while c < len {
+        let Some(i0) = pair_at(c) else {
+            c += 1;
+            continue;
+        };
+        let mut pairs = 1;
+        while pair_at(c + 2 * pairs) == Some(i0 + pairs) {
+            pairs += 1;
+        }
+        if pairs > best.2 {
+            best = (c, i0, pairs);
+        }
+        c += 2 * pairs;
+    }
+    best
+}
+
 /// The predictions of a child from its parent's heights, evaluated separably: for every
 /// parent row a child row needs, the interpolation along it at every child column
 /// (`Σ_i wx_i · G(i, j)`, the inner sum of container.md §7), once; then a child sample's

@@ -16,7 +16,7 @@
 //! the weights' magnitudes sum to at most 20 an axis, so no sum then wraps and the
 //! prediction is the rounded interpolation of the codes.
 
-use super::{round_row, round_to_i64, Along, Parent};
+use super::{longest_pair_run, round_row, round_to_i64, Along, Parent};
 
 /// The largest parent code magnitude a writer predicts from in integers: below it no sum of
 /// at most `20 × 20` weighted codes reaches `2^31`.
@@ -140,23 +140,7 @@ impl ColumnLayout {
             let want = [(i.wrapping_sub(1), -1), (i, 9), (i + 1, 9), (i + 2, -1)];
             (m == 1 && weight == 16 && i >= 1 && n == 4 && cubic == want).then_some(i)
         };
-        // The longest run of consecutive pairs.
-        let mut stretch = (0, 0, 0);
-        let mut c = 0;
-        while c < cols.len() {
-            let Some(i0) = pair_at(c) else {
-                c += 1;
-                continue;
-            };
-            let mut pairs = 1;
-            while pair_at(c + 2 * pairs) == Some(i0 + pairs) {
-                pairs += 1;
-            }
-            if pairs > stretch.2 {
-                stretch = (c, i0, pairs);
-            }
-            c += 2 * pairs;
-        }
+        let stretch = longest_pair_run(cols.len(), pair_at);
         let (c0, _, pairs) = stretch;
         let others = (0..cols.len())
             .filter(|c| !(c0..c0 + 2 * pairs).contains(c))

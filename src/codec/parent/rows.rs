@@ -18,7 +18,7 @@
 //! through checked slices: a count that does not match is an error, never a panic.
 
 use super::super::{from_ordered, lattice_heights, to_ordered, unzigzag, DecodeError, Wrapping};
-use super::{held_indexes, round_row, Along, CodePredictor, Parent, Predictor};
+use super::{held_indexes, longest_pair_run, round_row, Along, CodePredictor, Parent, Predictor};
 
 /// What the kernels need to know of a payload's placement against its parent.
 pub(super) struct Rows<'a> {
@@ -61,22 +61,7 @@ impl Alternation {
             (Some(Along::Held(pi)), Some(Along::Mixed(..))) => Some(*pi),
             _ => None,
         };
-        let (mut best, mut c) = ((0, 0, 0), 0);
-        while c < cols.len() {
-            let Some(pi0) = pair_at(c) else {
-                c += 1;
-                continue;
-            };
-            let mut pairs = 1;
-            while pair_at(c + 2 * pairs) == Some(pi0 + pairs) {
-                pairs += 1;
-            }
-            if pairs > best.2 {
-                best = (c, pi0, pairs);
-            }
-            c += 2 * pairs;
-        }
-        let (c0, pi0, pairs) = best;
+        let (c0, pi0, pairs) = longest_pair_run(cols.len(), pair_at);
         Alternation {
             c0,
             pi0,
