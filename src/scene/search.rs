@@ -24,13 +24,12 @@ pub(super) struct Search<'t, 's, S: Source> {
 }
 
 impl<S: Source> Search<'_, '_, S> {
-    /// Counts a read of node `index`'s record, and whether the top of the tree held it.
-    fn count_node_read(&mut self, index: u32) {
+    /// Counts a read of the record of a node at `level`, and whether the top of the tree
+    /// held it (it holds every node of its levels: a test of the level, not a search).
+    fn count_node_read(&mut self, level: u8) {
         self.stats.node_reads += 1;
-        if let Some(top) = self.terrain.store().top() {
-            if top.get(index).is_some() {
-                self.stats.top_reads += 1;
-            }
+        if self.terrain.store().top().is_some_and(|t| t.holds_level(level)) {
+            self.stats.top_reads += 1;
         }
     }
 
@@ -104,7 +103,7 @@ impl<S: Source> Search<'_, '_, S> {
         }
         let mut out = Vec::with_capacity(entries.len());
         for (e, r) in entries {
-            self.count_node_read(e.node);
+            self.count_node_read(e.level);
             out.push((e.node, store.node_of(cluster, &e)?, r));
         }
         Ok(out)
@@ -165,7 +164,7 @@ impl<S: Source> Search<'_, '_, S> {
         for (i, n, r) in split {
             for child in self.terrain.store().children(i, &n) {
                 let (c, child) = child?;
-                self.count_node_read(c);
+                self.count_node_read(child.level);
                 if runs[r].meets(&KeyRange::of_node(child.key, child.level, finest)) {
                     next.push((c, child, r));
                 }
