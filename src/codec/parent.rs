@@ -111,7 +111,6 @@ fn along(xs: &[u64], x: u64, hi: usize) -> Option<Along> {
     let lo = hi - 1;
     let (a, b) = (xs[lo], xs[hi]);
     let step = b - a;
-    let t = (x - a) as f64 / step as f64;
     let even = |i: usize, j: usize| xs[j] - xs[i] == step;
     if 2 * (x - a) == step && lo >= 1 && hi + 1 < xs.len() && even(lo - 1, lo) && even(hi, hi + 1) {
         return Some(Along::Mixed(
@@ -125,8 +124,15 @@ fn along(xs: &[u64], x: u64, hi: usize) -> Option<Along> {
             CUBIC_16,
         ));
     }
-    // `t` in sixteenths, rounded half up, in integers: `⌊(32 (x − a) + step) / (2 step)⌋`.
-    let t16 = ((32 * u128::from(x - a) + u128::from(step)) / (2 * u128::from(step))) as i32;
+    // The cubic midpoint above is the usual case: the division for `t` only here.
+    let t = (x - a) as f64 / step as f64;
+    // `t` in sixteenths, rounded half up, in integers: `⌊(32 (x − a) + step) / (2 step)⌋`
+    // (in `u64` where that cannot overflow: a `u128` division is a call).
+    let t16 = if step < 1 << 57 {
+        ((32 * (x - a) + step) / (2 * step)) as i32
+    } else {
+        ((32 * u128::from(x - a) + u128::from(step)) / (2 * u128::from(step))) as i32
+    };
     Some(Along::Mixed(
         [(lo, 1.0 - t), (hi, t), (0, 0.0), (0, 0.0)],
         2,
@@ -183,6 +189,23 @@ fn longest_pair_run(len: usize, pair_at: impl Fn(usize) -> Option<usize>) -> (us
     best
 }
 
+/// The longest run of `cols` alternating a held parent column `i` and the cubic midpoint
+/// of `i` and `i + 1` after it, as [`longest_pair_run`] gives it: a child lying on its
+/// parent's grid is one such run across, which the predictors fill in order, two columns a
+/// parent column (placing each column by an index of its own was half of a predictor's
+/// setup, measured on Puget 1k's encoding 15).
+fn cubic_pairs(cols: &[Along]) -> (usize, usize, usize) {
+    let pair_at = |c: usize| match (cols.get(c), cols.get(c + 1)) {
+        (Some(&Along::Held(i)), Some(Along::Mixed(t, 4, _)))
+            if i >= 1 && *t == [0, 1, 2, 3].map(|d| (i - 1 + d, CUBIC[d])) =>
+        {
+            Some(i)
+        }
+        _ => None,
+    };
+    longest_pair_run(cols.len(), pair_at)
+}
+
 /// The predictions of a child from its parent's heights, evaluated separably: for every
 /// parent row a child row needs, the interpolation along it at every child column
 /// (`Σ_i wx_i · G(i, j)`, the inner sum of container.md §7), once; then a child sample's
@@ -210,17 +233,20 @@ wide! {
         }
         let w = cols.len();
         let n = if first <= last { last - first + 1 } else { 0 };
-        // The columns grouped by their number of terms (held: one, interpolated: two, or
-        // the four of a cubic midpoint; any other, term by term), so that each group's loop
-        // is straight; each sum runs from `0.0` term by
-        // term as before, so the bits are the same. The cubic midpoints (almost every
-        // interpolated column) are computed along a run of the parent's row at once, a loop
-        // over contiguous heights the compiler vectorises, and then placed.
+        // The stretch of held columns and cubic midpoints ([`cubic_pairs`]) filled in order,
+        // a loop over contiguous heights the compiler vectorises; the other columns grouped
+        // by their number of terms (held: one, interpolated: two, or the four of a cubic
+        // midpoint; any other, term by term), so that each group's loop is straight. Each
+        // sum runs from `0.0` term by term as the format's formula does, so the bits are the
+        // same whichever loop computes it. The cubic midpoints outside the stretch are
+        // computed along a run of the parent's row at once, and then placed.
+        let (c0, i0, pairs) = cubic_pairs(cols);
         let mut ones = Vec::new();
         let mut twos = Vec::new();
         let mut cubics = Vec::new();
         let mut others = Vec::new();
-        for (c, along) in cols.iter().enumerate() {
+        let outside = |&(c, _): &(usize, &Along)| !(c0..c0 + 2 * pairs).contains(&c);
+        for (c, along) in cols.iter().enumerate().filter(outside) {
             match along {
                 Along::Held(i) => ones.push((c, *i)),
                 Along::Mixed(t, 2, _) => twos.push((c, [t[0], t[1]])),
@@ -239,6 +265,18 @@ wide! {
             let j = first + k;
             let g = &parent.heights[j * pw..(j + 1) * pw];
             let h = |i: usize| f64::from(g[i]);
+            if pairs > 0 {
+                let terms = g[i0 - 1..].iter().zip(&g[i0..]).zip(&g[i0 + 1..]).zip(&g[i0 + 2..]);
+                let stretch = chunk[c0..c0 + 2 * pairs].chunks_exact_mut(2).zip(terms);
+                for (pair, (((&h0, &h1), &h2), &h3)) in stretch {
+                    pair[0] = 0.0 + 1.0 * f64::from(h1);
+                    pair[1] = 0.0
+                        + CUBIC[0] * f64::from(h0)
+                        + CUBIC[1] * f64::from(h1)
+                        + CUBIC[2] * f64::from(h2)
+                        + CUBIC[3] * f64::from(h3);
+                }
+            }
             if !run.is_empty() {
                 let m = run.len();
                 let (g0, g1, g2, g3) = (&g[lo..], &g[lo + 1..], &g[lo + 2..], &g[lo + 3..]);
@@ -700,8 +738,8 @@ pub fn decode_against(
     decode_with(bytes, at, parent, out, true)
 }
 
-/// [`decode_against`], through the row kernels ([`rows`]) where a payload has no voids when
-/// `fast`, else through the general per-sample loops (which the tests hold the kernels to).
+/// [`decode_against`], through the row kernels ([`rows`]) when `fast`, else through the
+/// general per-sample loops (which the tests hold the kernels to).
 fn decode_with(
     bytes: &[u8],
     at: Axes<'_>,
@@ -756,33 +794,33 @@ fn decode_with(
         None => return Err(length("no void flag".into())),
     };
     let voids = voids.as_deref();
-    let void = |i: usize| voids.is_some_and(|m| m[i / 8] >> (i % 8) & 1 == 1);
+    let void = |i: usize| voids.is_some_and(|m| voids::is_void(m, i));
     let (cols, rows) = plan(at, parent.at)
         .ok_or_else(|| length("the placement is not inside the parent".into()))?;
     let w = at.cols.len();
     let held_cols = cols.iter().filter(|c| matches!(c, Along::Held(_))).count();
     let held_rows = rows.iter().filter(|r| matches!(r, Along::Held(_))).count();
-    let voids_total = voids.map_or(0, |m| {
-        (0..n).filter(|&i| m[i / 8] >> (i % 8) & 1 == 1).count()
-    });
-    // Voids among the held samples are neither held nor coded: count them back.
-    let held_voids = if voids_total == 0 {
-        0
-    } else {
-        rows.iter()
+    let voids_total = voids.map_or(0, |m| voids::count(m, 0, n));
+    // Voids among the held samples are neither held nor coded: count them back (in the held
+    // rows that have voids).
+    let held_voids = match voids {
+        Some(m) if voids_total > 0 => rows
+            .iter()
             .enumerate()
-            .filter(|(_, r)| matches!(r, Along::Held(_)))
+            .filter(|&(j, r)| matches!(r, Along::Held(_)) && voids::count(m, j * w, (j + 1) * w) > 0)
             .map(|(j, _)| {
                 cols.iter()
                     .enumerate()
                     .filter(|&(i, c)| matches!(c, Along::Held(_)) && void(j * w + i))
                     .count()
             })
-            .sum()
+            .sum(),
+        _ => 0,
     };
     let coded = n - voids_total - (held_cols * held_rows - held_voids);
-    if voids_total == 0 && fast {
-        // No voids: the row kernels, which need no per-sample test of a bitmap.
+    if fast {
+        // The row kernels, which test the bitmap once a row (and go sample by sample in a
+        // row with voids).
         let held_cols: Vec<Option<u32>> = cols
             .iter()
             .map(|c| match c {
@@ -807,6 +845,7 @@ fn decode_with(
             rows: &rows,
             parent,
             alternation: rows::Alternation::of(&cols, &held, &coded_cols),
+            voids: voids.filter(|_| voids_total > 0),
         };
         return match (planar, q) {
             (true, Some(q)) => with_scratch(coded, |r: &mut [i64]| {
@@ -1124,7 +1163,7 @@ mod tests {
     }
 
     /// A parent grid (columns, rows, heights) and its child in quadrant `q` (columns,
-    /// rows, samples, voids among them when `voids`), placed as format §7 places them in a
+    /// rows, samples, voids among them as `voids` says: [`Voids`]), placed as format §7 places them in a
     /// `width × height` raster with grids of side `b` at child stride `s`; `None` when that
     /// quadrant lies outside the raster.
     #[allow(clippy::type_complexity)]
@@ -1133,7 +1172,7 @@ mod tests {
         (width, height): (u64, u64),
         seed: u64,
         lattice: bool,
-        voids: bool,
+        voids: Voids,
     ) -> Option<(Vec<u64>, Vec<u64>, Vec<f32>, Vec<u64>, Vec<u64>, Vec<f32>)> {
         let (dx, dy) = (q & 1, q >> 1);
         let cells = (b - 1) * s; // a child's span; the parent's is twice it
@@ -1152,7 +1191,14 @@ mod tests {
             .iter()
             .flat_map(|&r| {
                 cc.iter().map(move |&c| {
-                    if voids && (c * 3 + r * 5 + seed).is_multiple_of(11) {
+                    let void = match voids {
+                        Voids::None => false,
+                        Voids::Scattered => (c * 3 + r * 5 + seed).is_multiple_of(11),
+                        // A patch in a few rows (a lake, a sheet's edge), the other rows
+                        // without.
+                        Voids::InSomeRows => (r + seed) % 5 < 2 && (c + seed) % 9 < 4,
+                    };
+                    if void {
                         f32::from_bits(VOID_BITS)
                     } else {
                         field(c, r, seed, lattice)
@@ -1161,6 +1207,20 @@ mod tests {
             })
             .collect();
         Some((pc, pr, heights, cc, cr, samples))
+    }
+
+    /// Where a test child has voids.
+    #[derive(Clone, Copy, Debug)]
+    enum Voids {
+        None,
+        /// About one sample in eleven, in most rows.
+        Scattered,
+        /// Patches in two rows of five, the others without.
+        InSomeRows,
+    }
+
+    fn any_voids() -> impl Strategy<Value = Voids> {
+        prop::sample::select(vec![Voids::None, Voids::Scattered, Voids::InSomeRows])
     }
 
     /// The placements the parent-codec tests draw from: a grid side `b`, a child stride `s`
@@ -1185,7 +1245,7 @@ mod tests {
             (grid, raster) in placements(),
             seed in 0u64..1000,
             lattice in any::<bool>(),
-            voids in any::<bool>(),
+            voids in any_voids(),
             coder in prop::sample::select(vec![Coder::Pco, Coder::Tans]),
         ) {
             let case = child_of_parent(grid, raster, seed, lattice, voids);
@@ -1255,7 +1315,7 @@ mod tests {
             bits in proptest::collection::vec(any::<u32>(), 1..64),
             hostile in any::<bool>(),
         ) {
-            let case = child_of_parent(grid, raster, 7, false, false);
+            let case = child_of_parent(grid, raster, 7, false, Voids::None);
             prop_assume!(case.is_some());
             let Some((pc, pr, mut heights, cc, cr, _)) = case else { return Ok(()) };
             // Heights whose sums round differently in another order: any bits, or values
@@ -1314,7 +1374,7 @@ mod tests {
             hostile in any::<bool>(),
             q in prop::sample::select(vec![1.0f64, 0.25, 0.1, 1e-4]),
         ) {
-            let case = child_of_parent(grid, raster, 7, true, false);
+            let case = child_of_parent(grid, raster, 7, true, Voids::None);
             prop_assume!(case.is_some());
             let Some((pc, pr, mut heights, cc, cr, _)) = case else { return Ok(()) };
             for (i, h) in heights.iter_mut().enumerate() {
@@ -1381,7 +1441,7 @@ mod tests {
             big in any::<bool>(),
             scale in prop::sample::select(vec![1.0f32, -1.0, 3e6, f32::MAX]),
         ) {
-            let case = child_of_parent(grid, raster, seed, true, false);
+            let case = child_of_parent(grid, raster, seed, true, Voids::None);
             prop_assume!(case.is_some());
             let Some((pc, pr, mut heights, cc, cr, mut samples)) = case else { return Ok(()) };
             if big {
@@ -1423,19 +1483,20 @@ mod tests {
             }
         }
 
-        /// The row kernels (no voids) decode exactly as the general per-sample loops do:
-        /// the same bits, or both an error, for valid payloads of every encoding 5 to 8 and
-        /// 11 to 15 and for the same payloads with a byte changed (residuals out of range
-        /// included).
+        /// The row kernels decode exactly as the general per-sample loops do: the same bits,
+        /// or both an error, for valid payloads of every encoding 5 to 8 and 11 to 15, with
+        /// and without voids (rows with voids go sample by sample within the kernels), and
+        /// for the same payloads with a byte changed (residuals out of range included).
         #[test]
         fn the_row_kernels_decode_as_the_general_loops(
             (grid, raster) in placements(),
             seed in 0u64..1000,
             lattice in any::<bool>(),
+            voids in any_voids(),
             damage in prop::option::of((any::<prop::sample::Index>(), any::<u8>())),
             coder in prop::sample::select(vec![Coder::Pco, Coder::Tans]),
         ) {
-            let case = child_of_parent(grid, raster, seed, lattice, false);
+            let case = child_of_parent(grid, raster, seed, lattice, voids);
             prop_assume!(case.is_some());
             let Some((pc, pr, heights, cc, cr, samples)) = case else { return Ok(()) };
             let parent = Parent { at: Axes { cols: &pc, rows: &pr }, heights: &heights };

@@ -16,7 +16,7 @@
 //! the weights' magnitudes sum to at most 20 an axis, so no sum then wraps and the
 //! prediction is the rounded interpolation of the codes.
 
-use super::{longest_pair_run, round_row, round_to_i64, Along, Parent};
+use super::{cubic_pairs, round_row, round_to_i64, Along, Parent};
 
 /// The largest parent code magnitude a writer predicts from in integers: below it no sum of
 /// at most `20 × 20` weighted codes reaches `2^31`.
@@ -131,16 +131,7 @@ type Sixteenths = ([(usize, i32); 4], usize);
 
 impl ColumnLayout {
     fn of(cols: &[Along]) -> ColumnLayout {
-        // Whether columns `c` and `c + 1` are a held parent column `i` and the cubic
-        // midpoint after it: `Some(i)`.
-        let pair_at = |c: usize| -> Option<usize> {
-            let (held, m) = cols.get(c)?.sixteenths();
-            let (i, weight) = held[0];
-            let (cubic, n) = cols.get(c + 1)?.sixteenths();
-            let want = [(i.wrapping_sub(1), -1), (i, 9), (i + 1, 9), (i + 2, -1)];
-            (m == 1 && weight == 16 && i >= 1 && n == 4 && cubic == want).then_some(i)
-        };
-        let stretch = longest_pair_run(cols.len(), pair_at);
+        let stretch = cubic_pairs(cols);
         let (c0, _, pairs) = stretch;
         let others = (0..cols.len())
             .filter(|c| !(c0..c0 + 2 * pairs).contains(c))

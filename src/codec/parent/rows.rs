@@ -1,12 +1,15 @@
 //! The decoders' inner loops for payloads coded against a parent (encodings 5 to 8, their
-//! tANS twins 11 to 14, and 15) with no
-//! voids, row by row: what a scene spends most of its decoding time in.
+//! tANS twins 11 to 14, and 15), row by row: what a scene spends most of its decoding time
+//! in.
 //!
 //! The general decoder ([`super::decode_against`]'s other paths) asks, for every sample,
 //! whether the bitmap marks it void, whether its column and row are both held, and calls
-//! back for its value. Without voids a row is one of two kinds, known before it starts: a
+//! back for its value. A row without voids is one of two kinds, known before it starts: a
 //! row the parent does not hold, where every sample is coded, and a held row, where the held
-//! columns take the parent's heights and the others are coded. So each row runs as a
+//! columns take the parent's heights and the others are coded. (A row with voids, found by a
+//! count of its bits in the bitmap, goes sample by sample as the general decoder does: voids
+//! lie in a few rows of a few blocks, and the rows around them keep the fast loops.) So each
+//! row without voids runs as a
 //! straight loop over slices: the residuals of the row taken as one slice, the planar
 //! prediction carried in registers (`left + up - up_left`, the row above kept apart), the
 //! interpolated predictions of a row computed for all its columns first (the same terms in
@@ -17,8 +20,14 @@
 //! not (a property test in `parent.rs` holds them to it), and reads the residuals only
 //! through checked slices: a count that does not match is an error, never a panic.
 
-use super::super::{from_ordered, lattice_heights, to_ordered, unzigzag, DecodeError, Wrapping};
-use super::{held_indexes, longest_pair_run, round_row, Along, CodePredictor, Parent, Predictor};
+use super::super::{
+    from_ordered, lattice_heights, lattice_value, to_ordered, unzigzag, voids, DecodeError,
+    Wrapping, MAX_LATTICE_INDEX, VOID_BITS,
+};
+use super::{
+    held_indexes, longest_pair_run, round_row, round_to_i64, Along, CodePredictor, Parent,
+    Predictor,
+};
 
 /// What the kernels need to know of a payload's placement against its parent.
 pub(super) struct Rows<'a> {
@@ -37,6 +46,8 @@ pub(super) struct Rows<'a> {
     pub parent: Parent<'a>,
     /// The longest stretch of a held row where held and coded columns alternate.
     pub alternation: Alternation,
+    /// The payload's void bitmap, when it has voids.
+    pub voids: Option<&'a [u8]>,
 }
 
 /// Where a held row's columns alternate between held and coded, as they do across a child
@@ -72,7 +83,51 @@ impl Alternation {
     }
 }
 
-impl Rows<'_> {
+impl<'a> Rows<'a> {
+    /// The void bitmap, when row `j` has a void: its samples then go one by one.
+    #[inline(always)]
+    fn row_voids(&self, j: usize) -> Option<&'a [u8]> {
+        self.voids
+            .filter(|m| voids::count(m, j * self.w, (j + 1) * self.w) > 0)
+    }
+
+    /// The parent's heights along row `ry` when the parent holds it.
+    #[inline(always)]
+    fn held_row(&self, ry: &Along) -> Option<&[f32]> {
+        match *ry {
+            Along::Held(pj) => Some(self.parent_row(pj)),
+            Along::Mixed(..) => None,
+        }
+    }
+
+    /// Row `j` (`ry`, into `orow`) of an interpolated encoding, with voids among it (`m`, the
+    /// bitmap), sample by sample as the general loop decodes it: a void takes the void's
+    /// bits, a sample of a held row and column the parent's height, any other `coded(i, d)`
+    /// of the next residual `d` of `r`.
+    fn voided_row<T: Copy>(
+        &self,
+        (m, j, ry): (&[u8], usize, &Along),
+        r: &[T],
+        next: &mut usize,
+        orow: &mut [f32],
+        mut coded: impl FnMut(usize, T) -> f32,
+    ) -> Result<(), DecodeError> {
+        let heights = self.held_row(ry);
+        let row = j * self.w;
+        for (i, o) in orow.iter_mut().enumerate() {
+            *o = if voids::is_void(m, row + i) {
+                f32::from_bits(VOID_BITS)
+            } else if let (Some(h), Some(pi)) = (heights, self.held_cols[i]) {
+                h[pi as usize]
+            } else {
+                let d = *r.get(*next).ok_or_else(short)?;
+                *next += 1;
+                coded(i, d)
+            };
+        }
+        Ok(())
+    }
+
     /// The parent's heights along its row `pj`.
     #[inline(always)]
     fn parent_row(&self, pj: usize) -> &[f32] {
@@ -145,6 +200,11 @@ trait CodeSpace {
     /// then the parent's and whose codes it must not judge); whether any coded one was out
     /// of range.
     fn emit(&self, codes: &[Self::Code], out: &mut [f32], held: Option<&[Option<u32>]>) -> bool;
+    /// One held sample's code (in a row with voids).
+    fn code_of(&self, height: f32) -> Self::Code;
+    /// One coded sample's height, and whether its code is out of range (in a row with
+    /// voids).
+    fn value_of(&self, code: Self::Code) -> (f32, bool);
 }
 
 /// Encoding 7's codes: lattice indexes on step `q` (`x`: scratch of a row).
@@ -162,6 +222,17 @@ impl CodeSpace for LatticeCodes {
     #[inline(always)]
     fn emit(&self, codes: &[i64], out: &mut [f32], held: Option<&[Option<u32>]>) -> bool {
         lattice_heights(codes, out, self.q, held)
+    }
+    #[inline(always)]
+    fn code_of(&self, height: f32) -> i64 {
+        round_to_i64(f64::from(height) / self.q)
+    }
+    #[inline(always)]
+    fn value_of(&self, k: i64) -> (f32, bool) {
+        (
+            lattice_value(k as f64, self.q),
+            k.unsigned_abs() > MAX_LATTICE_INDEX as u64,
+        )
     }
 }
 
@@ -183,10 +254,18 @@ impl CodeSpace for FloatCodes {
         }
         false
     }
+    #[inline(always)]
+    fn code_of(&self, height: f32) -> u32 {
+        to_ordered(height)
+    }
+    #[inline(always)]
+    fn value_of(&self, u: u32) -> (f32, bool) {
+        (from_ordered(u), false)
+    }
 }
 
-/// Encodings 7 and 8 without voids: codes in `space`, the planar predictor over them;
-/// whether any coded sample's code was out of range.
+/// Encodings 7 and 8: codes in `space`, the planar predictor over them; whether any coded
+/// sample's code was out of range.
 #[inline(always)]
 fn planar<S: CodeSpace>(
     g: &Rows<'_>,
@@ -203,8 +282,35 @@ fn planar<S: CodeSpace>(
     let mut bad = false;
     // The chain from sample to sample is one addition: `left + ((up - up_left) + r)`, the
     // same wrapping sum as `left + up - up_left + r` in another order.
-    for (ry, orow) in g.rows.iter().zip(out.chunks_exact_mut(w.max(1))) {
+    for (j, (ry, orow)) in g.rows.iter().zip(out.chunks_exact_mut(w.max(1))).enumerate() {
         let (mut left, mut up_left) = (S::Code::default(), S::Code::default());
+        if let Some(m) = g.row_voids(j) {
+            // Sample by sample: a void's code is its prediction, a held sample's its
+            // height's, a coded sample's the prediction plus the next residual.
+            let heights = g.held_row(ry);
+            let samples = cur.iter_mut().zip(&up).zip(orow.iter_mut()).enumerate();
+            for (i, ((c, &u), o)) in samples {
+                let p = left.plus(u).minus(up_left);
+                *c = if voids::is_void(m, j * w + i) {
+                    *o = f32::from_bits(VOID_BITS);
+                    p
+                } else if let (Some(h), Some(pi)) = (heights, g.held_cols[i]) {
+                    *o = h[pi as usize];
+                    space.code_of(*o)
+                } else {
+                    let d = *r.get(next).ok_or_else(short)?;
+                    next += 1;
+                    let code = p.plus(d);
+                    let (value, far) = space.value_of(code);
+                    bad |= far;
+                    *o = value;
+                    code
+                };
+                (left, up_left) = (*c, u);
+            }
+            std::mem::swap(&mut up, &mut cur);
+            continue;
+        }
         let held = match *ry {
             Along::Mixed(..) => {
                 let rr = take(r, &mut next, w)?;
@@ -239,7 +345,7 @@ fn planar<S: CodeSpace>(
 }
 
 wide! {
-    /// Encoding 7 without voids: lattice indexes on step `q`.
+    /// Encoding 7: lattice indexes on step `q`.
     pub(super) fn planar_lattice(
         g: &Rows<'_>,
         q: f64,
@@ -255,7 +361,7 @@ wide! {
 }
 
 wide! {
-    /// Encoding 8 without voids: order-preserving bits, zigzag residuals.
+    /// Encoding 8: order-preserving bits, zigzag residuals.
     pub(super) fn planar_float(
         g: &Rows<'_>,
         r: &mut [u32],
@@ -315,7 +421,7 @@ pub(super) fn predictions(
 }
 
 wide! {
-    /// Encoding 5 without voids: per row, the predictions' indexes `round(p · (1/q))` a row at
+    /// Encoding 5: per row, the predictions' indexes `round(p · (1/q))` a row at
     /// a time, the residuals added, the indexes converted a row at a time.
     pub(super) fn interpolated_lattice(
         g: &Rows<'_>,
@@ -336,6 +442,14 @@ wide! {
         for (j, (ry, orow)) in g.rows.iter().zip(out.chunks_exact_mut(w.max(1))).enumerate() {
             predictions(predictor, j, &mut p, |x| x * inv_q);
             round_row(&p, &mut k);
+            if let Some(m) = g.row_voids(j) {
+                g.voided_row((m, j, ry), r, &mut next, orow, |i, d| {
+                    let k = k[i].wrapping_add(d);
+                    bad |= k.unsigned_abs() > MAX_LATTICE_INDEX as u64;
+                    lattice_value(k as f64, q)
+                })?;
+                continue;
+            }
             match *ry {
                 Along::Mixed(..) => {
                     for (k, &d) in k.iter_mut().zip(take(r, &mut next, w)?) {
@@ -361,7 +475,7 @@ wide! {
 }
 
 wide! {
-    /// Encoding 15 without voids: per row, the predictions from the parent's codes in
+    /// Encoding 15: per row, the predictions from the parent's codes in
     /// integers a row at a time, the residuals added, the indexes converted a row at a time.
     pub(super) fn interpolated_codes(
         g: &Rows<'_>,
@@ -379,6 +493,14 @@ wide! {
         let mut bad = false;
         for (j, (ry, orow)) in g.rows.iter().zip(out.chunks_exact_mut(w.max(1))).enumerate() {
             predictor.row(j, &mut p);
+            if let Some(m) = g.row_voids(j) {
+                g.voided_row((m, j, ry), r, &mut next, orow, |i, d| {
+                    let k = i64::from(p[i]).wrapping_add(d);
+                    bad |= k.unsigned_abs() > MAX_LATTICE_INDEX as u64;
+                    lattice_value(k as f64, q)
+                })?;
+                continue;
+            }
             match *ry {
                 Along::Mixed(..) => {
                     for ((k, &p), &d) in k.iter_mut().zip(&p).zip(take(r, &mut next, w)?) {
@@ -404,7 +526,7 @@ wide! {
 }
 
 wide! {
-    /// Encoding 6 without voids: a coded sample's height is its interpolated prediction's
+    /// Encoding 6: a coded sample's height is its interpolated prediction's
     /// order-preserving bits plus its residual, a held one the parent's.
     pub(super) fn interpolated_float(
         g: &Rows<'_>,
@@ -423,6 +545,10 @@ wide! {
         }
         for (j, (ry, orow)) in g.rows.iter().zip(out.chunks_exact_mut(w.max(1))).enumerate() {
             predictions(predictor, j, &mut p, |x| x);
+            if let Some(m) = g.row_voids(j) {
+                g.voided_row((m, j, ry), r, &mut next, orow, |i, z| value(p[i], z))?;
+                continue;
+            }
             match *ry {
                 Along::Mixed(..) => {
                     for ((o, &x), &z) in orow.iter_mut().zip(&p).zip(take(r, &mut next, w)?) {
