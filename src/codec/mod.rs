@@ -339,7 +339,7 @@ pub fn decode(bytes: &[u8], width: usize, out: &mut [f32]) -> Result<(), DecodeE
             })?;
             if let Some(m) = voids {
                 for (i, o) in out.iter_mut().enumerate() {
-                    if m[i / 8] >> (i % 8) & 1 == 1 {
+                    if voids::is_void(m, i) {
                         *o = f32::from_bits(VOID_BITS);
                     }
                 }
@@ -375,7 +375,7 @@ wide! {
         // (written 0).
         if let Some(m) = voids {
             for (i, r) in k.iter_mut().enumerate() {
-                if m[i / 8] >> (i % 8) & 1 == 1 {
+                if voids::is_void(m, i) {
                     *r = 0;
                 }
             }

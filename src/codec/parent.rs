@@ -1030,7 +1030,7 @@ fn planar_fill<T: super::Wrapping>(
                 (0, _) => k[idx - w],
                 _ => k[idx - 1].plus(k[idx - w]).minus(k[idx - w - 1]),
             };
-            if voids.is_some_and(|m| m[idx / 8] >> (idx % 8) & 1 == 1) {
+            if voids.is_some_and(|m| voids::is_void(m, idx)) {
                 k[idx] = p;
                 out[idx] = f32::from_bits(VOID_BITS);
             } else if let (Along::Held(pi), Along::Held(pj)) = (cx, ry) {

@@ -164,21 +164,28 @@ fn word(m: &[u8], bit: usize) -> u64 {
     u64::from_le_bytes(b)
 }
 
+/// Bits `from .. to` (`from < to`) as bytes: the first and last byte and the masks of their
+/// bits in the range (one byte: both masks are its own).
+fn span(from: usize, to: usize) -> (usize, usize, u8, u8) {
+    let (first, last) = (from / 8, (to - 1) / 8);
+    let (head, tail) = (0xffu8 << (from % 8), 0xffu8 >> (7 - (to - 1) % 8));
+    match first == last {
+        true => (first, last, head & tail, head & tail),
+        false => (first, last, head, tail),
+    }
+}
+
 /// Sets bits `from .. to` of `m`, a byte at a time.
 fn set_bits(m: &mut [u8], from: usize, to: usize) {
     if from >= to {
         return;
     }
-    let (first, last) = (from / 8, (to - 1) / 8);
-    let head = 0xffu8 << (from % 8);
-    let tail = 0xffu8 >> (7 - (to - 1) % 8);
-    if first == last {
-        m[first] |= head & tail;
-        return;
-    }
+    let (first, last, head, tail) = span(from, to);
     m[first] |= head;
-    m[first + 1..last].fill(0xff);
-    m[last] |= tail;
+    if last > first {
+        m[first + 1..last].fill(0xff);
+        m[last] |= tail;
+    }
 }
 
 /// How many of bits `from .. to` of bitmap `m` are set (voids among those samples).
@@ -186,24 +193,13 @@ pub(crate) fn count(m: &[u8], from: usize, to: usize) -> usize {
     if from >= to {
         return 0;
     }
-    let (first, last) = (from / 8, (to - 1) / 8);
-    let head = 0xffu8 << (from % 8);
-    let tail = 0xffu8 >> (7 - (to - 1) % 8);
-    if first == last {
-        return (m[first] & head & tail).count_ones() as usize;
+    let (first, last, head, tail) = span(from, to);
+    let mut total = (m[first] & head).count_ones();
+    if last > first {
+        total += m[first + 1..last].iter().map(|b| b.count_ones()).sum::<u32>();
+        total += (m[last] & tail).count_ones();
     }
-    let inner = &m[first + 1..last];
-    let mut words = inner.chunks_exact(8);
-    let mut total: usize = words
-        .by_ref()
-        .map(|c| {
-            let mut b = [0u8; 8];
-            b.copy_from_slice(c);
-            u64::from_le_bytes(b).count_ones() as usize
-        })
-        .sum();
-    total += words.remainder().iter().map(|b| b.count_ones() as usize).sum::<usize>();
-    total + (m[first] & head).count_ones() as usize + (m[last] & tail).count_ones() as usize
+    total as usize
 }
 
 /// Whether sample `i` is a void in bitmap `m`.

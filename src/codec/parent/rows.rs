@@ -229,11 +229,15 @@ impl CodeSpace for LatticeCodes {
     }
     #[inline(always)]
     fn value_of(&self, k: i64) -> (f32, bool) {
-        (
-            lattice_value(k as f64, self.q),
-            k.unsigned_abs() > MAX_LATTICE_INDEX as u64,
-        )
+        lattice_sample(k, self.q)
     }
+}
+
+/// A coded sample's height from its lattice index `k` on step `q`, and whether `k` is out of
+/// range (as the general loop judges a coded sample: in a row with voids).
+#[inline(always)]
+fn lattice_sample(k: i64, q: f64) -> (f32, bool) {
+    (lattice_value(k as f64, q), k.unsigned_abs() > MAX_LATTICE_INDEX as u64)
 }
 
 /// Encoding 8's codes: order-preserving bits.
@@ -444,9 +448,9 @@ wide! {
             round_row(&p, &mut k);
             if let Some(m) = g.row_voids(j) {
                 g.voided_row((m, j, ry), r, &mut next, orow, |i, d| {
-                    let k = k[i].wrapping_add(d);
-                    bad |= k.unsigned_abs() > MAX_LATTICE_INDEX as u64;
-                    lattice_value(k as f64, q)
+                    let (value, far) = lattice_sample(k[i].wrapping_add(d), q);
+                    bad |= far;
+                    value
                 })?;
                 continue;
             }
@@ -495,9 +499,9 @@ wide! {
             predictor.row(j, &mut p);
             if let Some(m) = g.row_voids(j) {
                 g.voided_row((m, j, ry), r, &mut next, orow, |i, d| {
-                    let k = i64::from(p[i]).wrapping_add(d);
-                    bad |= k.unsigned_abs() > MAX_LATTICE_INDEX as u64;
-                    lattice_value(k as f64, q)
+                    let (value, far) = lattice_sample(i64::from(p[i]).wrapping_add(d), q);
+                    bad |= far;
+                    value
                 })?;
                 continue;
             }
