@@ -1268,10 +1268,18 @@ mod tests {
                     [Encoding::FloatFromParentTans, Encoding::FloatPlanarFromParentTans],
                 ),
             };
+            // Lattice coding wherever every real sample lies on one of the lattice steps
+            // (§7): always for the lattice field, and for the float field only by chance (a
+            // child of one point, its axes clamped at the data edge, whose height happens to
+            // be on a step).
+            let on_a_step = LATTICE_STEPS.iter().any(|&q| {
+                samples.iter().all(|&v| v.is_nan() || (is_lattice_value(v, q) && v.is_finite()))
+            });
+            prop_assert!(on_a_step || !lattice);
             // Both codings decode to the child's bits; the plain decoder refuses them.
             for (bytes, k) in [(&interpolated, 0), (&planar, 1)] {
                 let id = Encoding::of(bytes).expect("an id");
-                prop_assert_eq!(id, if lattice { lattice_ids[k] } else { float_ids[k] });
+                prop_assert_eq!(id, if on_a_step { lattice_ids[k] } else { float_ids[k] });
                 let mut out = vec![0.0f32; samples.len()];
                 decode_against(bytes, at, parent, &mut out).expect("decodes");
                 for (a, b) in samples.iter().zip(&out) {
@@ -1558,6 +1566,29 @@ mod tests {
             let mut out = vec![0.0f32; 81];
             let _ = decode_against(&bytes, Axes { cols: &moved, rows: &cc }, parent, &mut out);
         }
+    }
+
+    /// A regression case of `a_child_round_trips_against_its_parent`: the float field's
+    /// child of a single point (the corner of a 9 × 9 raster, held from the parent, its
+    /// axes clamped at the data edge) whose height happens to lie on a lattice step is coded
+    /// as a lattice, as the format's rule says; the test had expected a float coding from
+    /// the field's kind.
+    #[test]
+    fn a_float_child_on_a_lattice_step_is_coded_as_a_lattice() {
+        let case = child_of_parent((9, 1, 3), (9, 9), 856, false, Voids::None);
+        let Some((pc, pr, heights, cc, cr, samples)) = case else {
+            panic!("the corner quadrant lies in the raster");
+        };
+        // The corner (8, 8) four times over: the axes clamped at the data edge.
+        assert!(cc.iter().chain(&cr).all(|&x| x == 8) && samples.len() == 4);
+        assert!(LATTICE_STEPS.iter().any(|&q| is_lattice_value(samples[0], q)));
+        let parent = Parent { at: Axes { cols: &pc, rows: &pr }, heights: &heights };
+        let at = Axes { cols: &cc, rows: &cr };
+        let (interpolated, _) = encode_both(&samples, at, parent, None, Coder::Pco).expect("encodes");
+        assert_eq!(Encoding::of(&interpolated), Some(Encoding::LatticeFromParent));
+        let mut out = [0.0f32; 4];
+        decode_against(&interpolated, at, parent, &mut out).expect("decodes");
+        assert!(out.iter().all(|o| o.to_bits() == samples[0].to_bits()));
     }
 
     #[test]
