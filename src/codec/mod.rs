@@ -474,18 +474,22 @@ trait Wrapping: Copy + Default {
 }
 
 impl Wrapping for i64 {
+    #[inline(always)]
     fn plus(self, other: i64) -> i64 {
         self.wrapping_add(other)
     }
+    #[inline(always)]
     fn minus(self, other: i64) -> i64 {
         self.wrapping_sub(other)
     }
 }
 
 impl Wrapping for u32 {
+    #[inline(always)]
     fn plus(self, other: u32) -> u32 {
         self.wrapping_add(other)
     }
+    #[inline(always)]
     fn minus(self, other: u32) -> u32 {
         self.wrapping_sub(other)
     }
@@ -594,6 +598,7 @@ fn zigzag(d: u32) -> u32 {
 }
 
 /// The inverse of [`zigzag`].
+#[inline(always)]
 fn unzigzag(z: u32) -> u32 {
     ((z >> 1) as i32 ^ -((z & 1) as i32)) as u32
 }

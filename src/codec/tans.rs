@@ -311,8 +311,9 @@ struct Entry {
     next: u16,
     /// Extra bits of the code.
     extra: u8,
-    /// Bits of the next state.
-    bits: u8,
+    /// Bits the code reads in all: its extra bits and its next state's (one addition a code
+    /// moves the bit position by).
+    len: u8,
 }
 
 /// A decoder's table, kept by the caller from stream to stream so that decoding allocates
@@ -354,7 +355,29 @@ fn step(table: &[Entry], buf: &[u8], pos: &mut usize, state: &mut usize) -> u32 
     let e = table[*state];
     let word = peek(buf, *pos);
     *state = usize::from(e.next) + ((word >> e.extra) as u32 & e.bits_mask) as usize;
-    *pos += usize::from(e.extra) + usize::from(e.bits);
+    *pos += usize::from(e.len);
+    e.base + (word as u32 & e.extra_mask)
+}
+
+/// [`step`] without its two bounds checks, for the main loop of [`groups`], where they were
+/// a fifth of a code's instructions (the loop is bound by how many it issues, not by its
+/// chains of loads: measured in `docs/benchmarks.md`).
+///
+/// # Safety
+/// `*state < table.len()`, `table` is a table [`Decoder::start`] built (every entry's next
+/// state is below its length, so the lane's state stays so), and the 8 bytes from bit `pos`
+/// lie in `buf`.
+#[inline(always)]
+unsafe fn step_unchecked(table: &[Entry], buf: &[u8], pos: &mut usize, state: &mut usize) -> u32 {
+    debug_assert!(*state < table.len() && (*pos >> 3) + 8 <= buf.len());
+    // SAFETY: the caller's contract: the state indexes the table.
+    let e = unsafe { *table.get_unchecked(*state) };
+    // SAFETY: the caller's contract: bytes `pos/8 .. pos/8 + 8` are in `buf`; an unaligned
+    // read of them as a `u64` (any bits are a `u64`).
+    let word = unsafe { buf.as_ptr().add(*pos >> 3).cast::<u64>().read_unaligned() };
+    let word = u64::from_le(word) >> (*pos & 7);
+    *state = usize::from(e.next) + ((word >> e.extra) as u32 & e.bits_mask) as usize;
+    *pos += usize::from(e.len);
     e.base + (word as u32 & e.extra_mask)
 }
 
@@ -384,7 +407,13 @@ fn groups<T>(
         for four in out[i..i + count * LANES].chunks_exact_mut(LANES) {
             // The lanes' states stay in registers: an array zipped, not indexed.
             for (o, state) in four.iter_mut().zip(states.iter_mut()) {
-                *o = map(step(table, buf, pos, state));
+                // SAFETY: every state is below the table's length (the first ones are
+                // masked by it in `start`, every next one is by the table's making: see
+                // `start`; the spread writes every entry of `table`, its step being odd and
+                // the weights summing to its length), and the group's loads lie in `buf`: the group starts at
+                // most `count - 1` groups of at most `group` bytes past the first, its
+                // codes move at most `group` bytes on, and `room` leaves 8 more.
+                *o = map(unsafe { step_unchecked(table, buf, pos, state) });
             }
         }
         i += count * LANES;
@@ -439,26 +468,50 @@ impl Decoder {
             self.table.resize(size as usize, Entry::default());
         }
         let (step, mask) = (spread_step(size as usize), size as usize - 1);
+        let table = &mut self.table[..size as usize];
         let mut p = 0usize;
         // The most bits a code reads: its symbol's extra bits and, at its first state
         // (`k = w`), the most state bits.
         let mut most = 0u32;
         for (s, &w) in weights[..symbols].iter().enumerate() {
-            let (base, extra) = symbol_range(s);
-            if w > 0 {
-                most = most.max(extra + log - (31 - w.leading_zeros()));
+            if w == 0 {
+                continue;
             }
-            for k in w..2 * w {
-                let bits = log - (31 - k.leading_zeros());
-                self.table[p] = Entry {
+            let (base, extra) = symbol_range(s);
+            // States `k = w .. 2w − 1` read `L − ⌊log₂ k⌋` bits: `L − b` up to `2^(b+1)`
+            // (`b = ⌊log₂ w⌋`), one fewer from there on. So two runs of entries alike but
+            // for their next state, which grows by `2^bits` a state (the table's build was
+            // a tenth of a short stream's decoding when each entry worked out its bits).
+            let b = 31 - w.leading_zeros();
+            most = most.max(extra + log - b);
+            let split = 2u32 << b;
+            // (`w = 2^L`, one symbol in all, has no second run: `b = L`.)
+            for (ks, bits) in [(w..split, log - b), (split..2 * w, (log - b).saturating_sub(1))] {
+                if ks.is_empty() {
+                    continue;
+                }
+                // `2^⌊log₂ k⌋ ≤ k < 2^(⌊log₂ k⌋ + 1)`, so the next states
+                // `k · 2^bits − 2^L + (0 .. 2^bits)` lie in `0 .. 2^L`: every state a lane
+                // reaches indexes the table ([`step_unchecked`] relies on it), and a code
+                // reads at most `most` bits ([`groups`] does).
+                debug_assert!(ks.end << bits <= 2 * size && extra + bits <= most);
+                let entry = Entry {
                     base,
                     extra_mask: ((1u64 << extra) - 1) as u32,
                     bits_mask: (1 << bits) - 1,
-                    next: ((k << bits) - size) as u16,
+                    next: 0,
                     extra: extra as u8,
-                    bits: bits as u8,
+                    len: (extra + bits) as u8,
                 };
-                p = (p + step) & mask;
+                let mut next = (ks.start << bits) - size;
+                for _ in ks {
+                    table[p] = Entry {
+                        next: next as u16,
+                        ..entry
+                    };
+                    next += 1 << bits;
+                    p = (p + step) & mask;
+                }
             }
         }
         let mut states = [0usize; LANES];

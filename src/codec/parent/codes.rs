@@ -16,7 +16,7 @@
 //! the weights' magnitudes sum to at most 20 an axis, so no sum then wraps and the
 //! prediction is the rounded interpolation of the codes.
 
-use super::{cubic_pairs, round_row, round_to_i64, Along, Parent};
+use super::{cubic_pairs, parent_codes, Along, Parent};
 
 /// The largest parent code magnitude a writer predicts from in integers: below it no sum of
 /// at most `20 × 20` weighted codes reaches `2^31`.
@@ -138,30 +138,6 @@ impl ColumnLayout {
             .map(|c| (c, cols[c].sixteenths()))
             .collect();
         ColumnLayout { stretch, others }
-    }
-}
-
-/// `round(h / q)` of each of `heights` into `codes` (`x`: scratch of as many): as
-/// `h · (1/q)` rounded, in loops the compiler vectorises, where that is the same index (a
-/// row within ±2^30 and no product within 2^-20 of a half: `super::held_indexes` says why);
-/// else divided.
-#[inline(always)]
-fn parent_codes(heights: &[f32], q: f64, x: &mut [f64], codes: &mut [i64]) {
-    const SMALL: f64 = (1u64 << 30) as f64;
-    const MARGIN: f64 = 1.0 / (1u64 << 20) as f64;
-    let inv_q = 1.0 / q;
-    for (x, &h) in x.iter_mut().zip(heights) {
-        *x = f64::from(h) * inv_q;
-    }
-    let safe = x.iter().fold(true, |ok, &v| {
-        ok & (v.abs() < SMALL) & (((v - v.trunc()).abs() - 0.5).abs() > MARGIN)
-    });
-    if safe {
-        round_row(x, codes);
-    } else {
-        for (c, &h) in codes.iter_mut().zip(heights) {
-            *c = round_to_i64(f64::from(h) / q);
-        }
     }
 }
 
