@@ -177,35 +177,46 @@ impl<'a> Rows<'a> {
             };
             cur[c] = left.plus(up[c].minus(up_left).plus(d));
         };
-        let a = &self.alternation;
-        let (r0, rest) = rr.split_at(a.coded_before.min(rr.len()));
-        let (r1, r2) = rest.split_at(a.pairs.min(rest.len()));
-        for (&c, &d) in self.coded[..a.coded_before].iter().zip(r0) {
+        let ((before, r0), r1, (after, r2)) = self.coded_parts(rr);
+        for (&c, &d) in before.iter().zip(r0) {
             one(c, d, cur);
         }
+        let a = &self.alternation;
         if a.pairs > 0 {
             let pairs = cur[a.c0..].chunks_exact_mut(2).zip(up[a.c0..].chunks_exact(2));
             for ((c, u), &d) in pairs.zip(r1) {
                 c[1] = c[0].plus(u[1].minus(u[0]).plus(d));
             }
         }
-        let after = self.coded.get(a.coded_before + a.pairs..).unwrap_or_default();
         for (&c, &d) in after.iter().zip(r2) {
             one(c, d, cur);
         }
+    }
+
+    /// A held row's residuals `rr` (one a coded column, in order) split as the alternating
+    /// stretch splits the coded columns: those before it with their columns, the
+    /// stretch's (column `c0 + 2k + 1` each), those after it with their columns.
+    #[inline(always)]
+    fn coded_parts<'r, T>(
+        &self,
+        rr: &'r [T],
+    ) -> (Coded<'_, 'r, T>, &'r [T], Coded<'_, 'r, T>) {
+        let a = &self.alternation;
+        let (r0, rest) = rr.split_at(a.coded_before.min(rr.len()));
+        let (r1, r2) = rest.split_at(a.pairs.min(rest.len()));
+        let after = self.coded.get(a.coded_before + a.pairs..).unwrap_or_default();
+        ((&self.coded[..a.coded_before], r0), r1, (after, r2))
     }
 
     /// Writes the residuals `rr` of a held row (one a coded column, in order) at their
     /// columns of `row`, leaving the held columns as they are.
     #[inline(always)]
     fn spread_coded<T: Copy>(&self, rr: &[T], row: &mut [T]) {
-        let a = &self.alternation;
-        let (r0, rest) = rr.split_at(a.coded_before.min(rr.len()));
-        let (r1, r2) = rest.split_at(a.pairs.min(rest.len()));
-        let after = self.coded.get(a.coded_before + a.pairs..).unwrap_or_default();
-        for (&c, &d) in self.coded[..a.coded_before].iter().chain(after).zip(r0.iter().chain(r2)) {
+        let ((before, r0), r1, (after, r2)) = self.coded_parts(rr);
+        for (&c, &d) in before.iter().chain(after).zip(r0.iter().chain(r2)) {
             row[c] = d;
         }
+        let a = &self.alternation;
         if a.pairs > 0 {
             for (x, &d) in row[a.c0 + 1..].iter_mut().step_by(2).zip(r1) {
                 *x = d;
@@ -213,6 +224,9 @@ impl<'a> Rows<'a> {
         }
     }
 }
+
+/// Coded columns of a held row and their residuals ([`Rows::coded_parts`]).
+type Coded<'c, 'r, T> = (&'c [usize], &'r [T]);
 
 /// The parent's columns from the first held (`held`: [`Rows::held`]) to the last, when the
 /// held ones are at least one in two of them: a child on its parent's grid holds every
